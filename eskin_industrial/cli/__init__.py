@@ -1,0 +1,41 @@
+"""``eskin-bus``: a thin click shell; each subcommand lives in its own module and only
+wires a source, the pipeline and a sink from a profile and options."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from ..errors import EskinError
+from .detect_cmd import detect
+from .profile_cmd import profile
+
+
+class _Group(click.Group):
+    """Turn expected errors into one line on stderr and an exit code, never a traceback."""
+
+    def invoke(self, ctx: click.Context):  # type: ignore[override]
+        try:
+            return super().invoke(ctx)
+        except EskinError as exc:
+            if ctx.obj and ctx.obj.get("debug"):
+                raise
+            click.echo(f"eskin-bus: error: {exc}", err=True)
+            sys.exit(exc.exit_code)
+        except BrokenPipeError:
+            sys.exit(0)  # `eskin-bus detect ... | head` is not an error
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
+@click.version_option(package_name="eskin-industrial")
+@click.pass_context
+def main(ctx: click.Context, debug: bool) -> None:
+    """Electronic-skin tactile arrays on industrial grippers: decode, detect slip, tell the PLC."""
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+
+
+main.add_command(detect)
+main.add_command(profile)

@@ -1,0 +1,68 @@
+"""``eskin-bus detect``: run a detector over a recording, offline."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+import numpy as np
+
+from ..calibration import Calibrator
+from ..detect.methods import METHODS, get_method
+from ..detect.state import GraspState
+from ..detect.updates import UpdateTable
+from ..errors import InputFormatError
+from ..frames import FrameFlag
+from ..recording import read_recording, write_updates
+from .common import open_profile, profile_option
+
+
+@click.command()
+@profile_option()
+@click.argument("input_path", metavar="INPUT.csv", type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("-o", "--output", default="-", type=click.Path(dir_okay=False, allow_dash=True), show_default=True,
+              help="Output CSV, one row per detector update ('-' for stdout).")
+@click.option("--method", type=click.Choice(sorted(METHODS)), default=None,
+              help="Detection method (default: the profile's).")
+@click.option("--rate", "rate_hz", type=float, default=None,
+              help="Sample rate in Hz (default: from the timestamps; the profile's if there are too few).")
+@click.option("--engine", type=click.Choice(["batch", "stream"]), default="batch", show_default=True,
+              help="Vectorized over the whole file, or frame by frame as the bridge runs (same output).")
+@click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
+def detect(profile_path: str, input_path: str, output: str, method: str | None, rate_hz: float | None,
+           engine: str, quiet: bool) -> None:
+    """Detect grasp states in a recording CSV (header t,f0,...,f{n-1} in newtons,
+    or t,raw0,... in the profile's raw unit)."""
+    prof = open_profile(profile_path)
+    rec = read_recording(input_path, prof.taxels)
+    flags = None
+    values = rec.values
+    if rec.unit == "raw":
+        values, flags = Calibrator.from_section(prof.calibration, prof.taxels).to_newtons(values)
+    rate = rate_hz if rate_hz is not None else rec.rate_hz(prof.sensor.rate_hz)
+    if not (rate > 0 and np.isfinite(rate)):
+        raise InputFormatError(f"--rate: expected a positive sample rate, got {rate}")
+    settings = prof.detector
+    geo = settings.geometry(rate)
+    chosen = get_method(method or settings.method)
+    x, y = prof.coordinates_mm
+    if engine == "batch":
+        table = chosen.batch(settings, x, y, rate, rec.t, values, flags)
+    else:
+        det = chosen.stream(settings, x, y, rate)
+        table = UpdateTable.from_updates(det.feed(rec.t, values, flags))
+    write_updates(output, table)
+    if not quiet:
+        _summary(rec.name, len(rec.t), rate, geo.window, table)
+
+
+def _summary(name: str, frames: int, rate: float, window: int, table: UpdateTable) -> None:
+    counts = {s.label: int(np.sum(table.state == s)) for s in GraspState}
+    flagged = int(np.sum(table.flags & ~int(FrameFlag.WARMUP) != 0))
+    states = ", ".join(f"{k} {v}" for k, v in counts.items())
+    click.echo(
+        f"{name}: {frames} frames at {rate:.1f} Hz (window {window} samples) -> {len(table)} updates "
+        f"({int(table.valid.sum())} valid, {flagged} with flagged frames); {states}",
+        err=True,
+    )
+    sys.stderr.flush()

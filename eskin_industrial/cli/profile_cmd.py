@@ -1,0 +1,65 @@
+"""``eskin-bus profile check|show``."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from ..errors import ProfileError
+from ..profile import Profile, load_profile
+from .toml_out import dumps
+
+
+@click.group()
+def profile() -> None:
+    """Validate and inspect sensor profiles."""
+
+
+@profile.command()
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
+def check(files: tuple[str, ...]) -> None:
+    """Validate profiles; one line each, exit 2 if any is refused."""
+    failed = False
+    for path in files:
+        try:
+            p = load_profile(path)
+        except ProfileError as exc:
+            click.echo(f"eskin-bus: error: {exc}", err=True)
+            failed = True
+            continue
+        click.echo(f"{path}: ok ({_brief(p)})")
+    if failed:
+        raise SystemExit(2)
+
+
+@profile.command()
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--format", "fmt", type=click.Choice(["toml", "json"]), default="toml", show_default=True)
+def show(file: str, fmt: str) -> None:
+    """Print the profile as loaded: every key with its default filled in, plus the
+    values derived from it (taxel coordinates, detector sizes in samples)."""
+    p = load_profile(file)
+    table = p.to_table()
+    geo = p.detector.geometry(p.sensor.rate_hz)
+    x, y = p.coordinates_mm
+    table["derived"] = {
+        "taxels": p.taxels,
+        "x_mm": x.tolist(),
+        "y_mm": y.tolist(),
+        "at_rate_hz": p.sensor.rate_hz,
+        "window_samples": geo.window,
+        "hop_samples": geo.hop,
+        "lag_samples": geo.lag,
+        "wavelet_filter_len": geo.filter_len,
+    }
+    if fmt == "json":
+        click.echo(json.dumps(table, indent=2))
+    else:
+        click.echo(f"# {file}: {_brief(p)}")
+        click.echo(dumps(table), nl=False)
+
+
+def _brief(p: Profile) -> str:
+    return (f"{p.name}, {p.layout.rows}x{p.layout.cols} taxels, {p.sensor.rate_hz:g} Hz, "
+            f"{p.calibration.raw_unit}, method {p.detector.method}")

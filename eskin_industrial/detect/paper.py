@@ -1,0 +1,84 @@
+"""The paper's method, end to end: indicators, then the state machine.
+
+:class:`PaperDetector` is the streaming form (frames in, updates out);
+:func:`paper_batch` the vectorized form over a recording.  They give the same updates.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..frames import Frame
+from .indicators import segment_indicators
+from .regularize import regularize
+from .settings import DetectorSettings
+from .state import StateMachine
+from .stream import IndicatorStream
+from .updates import COLUMNS, Update, UpdateTable
+
+
+class PaperDetector:
+    """Streaming detector: :meth:`push` one frame, get the updates it completes."""
+
+    name = "paper"
+
+    def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float) -> None:
+        self.settings = settings
+        self.indicators = IndicatorStream(settings, x_mm, y_mm, rate_hz)
+        self.machine = StateMachine(settings)
+
+    @property
+    def dropped(self) -> int:
+        return self.indicators.dropped
+
+    def push(self, t: float, forces: np.ndarray, flags: int = 0) -> list[Update]:
+        raw = self.indicators.push(t, forces, flags)
+        if not raw:
+            return []
+        step = self.machine.step
+        return [
+            Update(te, rc, rd, step(te, rc, rd, contact, valid), valid, s, xc, yc, fl)
+            for te, rc, rd, valid, fl, s, xc, yc, contact in raw
+        ]
+
+    def push_frame(self, frame: Frame) -> list[Update]:
+        return self.push(frame.t, frame.forces, frame.flags)
+
+    def feed(self, t: np.ndarray, forces: np.ndarray, flags: np.ndarray | None = None) -> list[Update]:
+        """Push a chunk of frames in order; returns all updates they complete."""
+        out: list[Update] = []
+        fl = np.zeros(len(t), np.int64) if flags is None else flags
+        for i in range(len(t)):
+            out.extend(self.push(float(t[i]), forces[i], int(fl[i])))
+        return out
+
+
+def paper_batch(
+    settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
+    t: np.ndarray, forces: np.ndarray, flags: np.ndarray | None = None,
+) -> UpdateTable:
+    """All updates of a recording at once; equal to feeding it to :class:`PaperDetector`."""
+    geo = settings.geometry(rate_hz)
+    reg = regularize(t, forces, rate_hz, geo.max_fill, flags)
+    mat = np.column_stack([np.ones(len(x_mm)), x_mm, y_mm]).astype(np.float64)
+    parts: list[dict[str, np.ndarray]] = []
+    for a, b in reg.segments:
+        cols, sums, cof = segment_indicators(reg.forces[a:b], reg.flags[a:b], mat, settings, geo)
+        end = cols.end
+        s = sums[end, 0]
+        parts.append({
+            "t": reg.t[a:b][end], "r_coe": cols.r_coe, "r_dw": cols.r_dw, "valid": cols.valid,
+            "f_sum": s, "xc": cof[end, 0], "yc": cof[end, 1], "flags": cols.flags,
+            "contact": (s >= settings.contact_threshold_n) & (s > 0),
+        })
+    if not parts:
+        return UpdateTable(**{c: np.zeros(0, np.int64 if c in ("state", "flags") else bool if c == "valid" else float) for c in COLUMNS})
+    cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    machine = StateMachine(settings)
+    state = np.fromiter(
+        (machine.step(te, rc, rd, bool(c), bool(v)) for te, rc, rd, c, v in zip(
+            cols["t"].tolist(), cols["r_coe"].tolist(), cols["r_dw"].tolist(), cols["contact"].tolist(), cols["valid"].tolist())),
+        dtype=np.int64, count=len(cols["t"]),
+    )
+    del cols["contact"]
+    return UpdateTable(state=state, **cols)

@@ -1,0 +1,107 @@
+"""Detector settings: every gap the reference paper leaves open is one field here.
+
+Times are in seconds; the detector turns them into sample counts for the stream's
+rate with :meth:`DetectorSettings.geometry`.  See ``docs/method.md`` for the
+equations each setting enters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Literal
+
+import numpy as np
+import pywt
+
+from ..schema import in_range, non_negative, positive
+
+#: Methods known to the registry (``detect.methods``); validated at profile load.
+MethodName = str
+
+
+@dataclass(frozen=True)
+class DetectorSettings:
+    method: MethodName = "paper"
+    #: Length of the analysis window (the paper's 400 ms).
+    window_s: float = field(default=0.4, metadata=positive())
+    #: Time between two detector updates (the paper's 100 ms); the window must be a
+    #: whole number of hops.
+    hop_s: float = field(default=0.1, metadata=positive())
+    #: Distance between the two distributions that are correlated (t1 = t0 + 100 ms).
+    lag_s: float = field(default=0.1, metadata=positive())
+    #: Daubechies (or any orthogonal PyWavelets) wavelet for the one-level DWT.
+    wavelet: str = "db2"
+    #: Paper decision: slip when both R_coe and R_dw exceed these.
+    slip_r_coe: float = field(default=2.5, metadata=positive())
+    slip_r_dw: float = field(default=2.5, metadata=positive())
+    #: Varying force (no slip) when either exceeds its threshold here.
+    variable_r_coe: float = field(default=0.5, metadata=positive())
+    variable_r_dw: float = field(default=0.5, metadata=positive())
+    #: How R is formed from the ratio of the two window sums (gap 3 of the method).
+    ratio_mode: Literal["symmetric", "rise"] = "symmetric"
+    #: A state is left only when its indicators fall below threshold x (1 - hysteresis).
+    hysteresis: float = field(default=0.2, metadata=in_range(0.0, 0.95))
+    #: Consecutive updates a slip candidate must persist before it is reported.
+    slip_confirm_updates: int = field(default=1, metadata=positive("an integer >= 1"))
+    #: A reported slip or varying-force state is held at least this long.
+    hold_s: float = field(default=0.2, metadata=non_negative())
+    #: Noise floor added to each decorrelation window sum, per sample in the window.
+    coe_floor: float = field(default=2e-3, metadata=non_negative())
+    #: Noise floor added to each CoF detail-energy window sum, per coefficient (mm^2).
+    dw_floor_mm2: float = field(default=2e-4, metadata=non_negative())
+    #: Total force below which the array is "not in contact" (F_dis, CoF undefined).
+    contact_threshold_n: float = field(default=0.2, metadata=non_negative())
+    #: A timestamp gap longer than this restarts the detector (shorter gaps are
+    #: filled by holding the last frame, so that lags stay in time, not in samples).
+    max_gap_s: float = field(default=0.4, metadata=positive())
+
+    def __post_init__(self) -> None:
+        hops = self.window_s / self.hop_s
+        if abs(hops - round(hops)) > 1e-6 or round(hops) < 1:
+            raise ValueError(
+                f"window_s: expected a whole multiple of hop_s ({self.hop_s:g} s), got {self.window_s:g}"
+            )
+        try:
+            w = pywt.Wavelet(self.wavelet)
+        except ValueError:
+            raise ValueError(
+                f"wavelet: expected a discrete PyWavelets wavelet such as 'db2', got {self.wavelet!r}"
+            ) from None
+        if not w.orthogonal:
+            raise ValueError(f"wavelet: expected an orthogonal wavelet, got {self.wavelet!r}")
+        if self.variable_r_coe > self.slip_r_coe or self.variable_r_dw > self.slip_r_dw:
+            raise ValueError("variable_r_coe: expected the varying-force thresholds below the slip thresholds")
+
+    def geometry(self, rate_hz: float) -> "Geometry":
+        return _geometry(self.window_s, self.hop_s, self.lag_s, self.wavelet, self.max_gap_s, rate_hz)
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """The settings in samples, for one stream rate."""
+
+    rate_hz: float
+    hop: int  #: samples per hop (and per block of the running sums)
+    blocks: int  #: hops per window
+    window: int  #: samples per window (= hop * blocks)
+    lag: int  #: samples between the two correlated distributions
+    max_fill: int  #: longest gap, in missing samples, that is filled rather than reset
+    dec_hi: np.ndarray  #: the wavelet's decomposition high-pass filter
+
+    @property
+    def filter_len(self) -> int:
+        return len(self.dec_hi)
+
+
+@lru_cache(maxsize=64)
+def _geometry(window_s: float, hop_s: float, lag_s: float, wavelet: str, max_gap_s: float, rate_hz: float) -> Geometry:
+    if not rate_hz > 0 or not np.isfinite(rate_hz):
+        raise ValueError(f"rate_hz: expected a positive sample rate, got {rate_hz!r}")
+    hop = max(1, round(hop_s * rate_hz))
+    blocks = round(window_s / hop_s)
+    lag = max(1, round(lag_s * rate_hz))
+    max_fill = max(0, round(max_gap_s * rate_hz) - 1)
+    dec_hi = np.asarray(pywt.Wavelet(wavelet).dec_hi, dtype=np.float64)
+    dec_hi.setflags(write=False)
+    return Geometry(rate_hz, hop, blocks, hop * blocks, lag, max_fill, dec_hi)

@@ -1,0 +1,223 @@
+"""The paper's indicators, one frame at a time, with explicit bounded state.
+
+Cost per frame does not depend on the window length: three dot products of n
+taxels, a K-tap FIR step (the one-level DWT detail is the high-pass filter at stride
+2, so each coefficient is known as soon as its last sample arrives), and running
+block sums; a window sum is B block sums added when a hop completes.  Memory: ``lag``
+frames, ``W`` energies, ``B`` block sums.
+
+Frame handling (duplicates, NaN, negative values, gaps) is the per-frame form of
+:func:`~eskin_industrial.detect.regularize.regularize`; a test proves the two agree.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from ..frames import FrameFlag
+from .indicators import _EPS, _ZERO_VAR, odd_offsets
+from .settings import DetectorSettings, Geometry
+
+_DUP = int(FrameFlag.DUPLICATE)
+_INVALID = int(FrameFlag.INVALID)
+_NEG = int(FrameFlag.NEGATIVE)
+_GAP = int(FrameFlag.GAP_BEFORE)
+_FILLED = int(FrameFlag.FILLED)
+_RESET = int(FrameFlag.RESET)
+_WARMUP = int(FrameFlag.WARMUP)
+_SHORT = int(FrameFlag.SHORT_WINDOW)
+
+#: What :meth:`IndicatorStream.push` returns for each completed hop.
+#: (end_time, r_coe, r_dw, valid, flags, f_sum, xc, yc, contact)
+RawUpdate = tuple[float, float, float, bool, int, float, float, float, bool]
+
+
+class IndicatorStream:
+    """Streaming R_coe / R_dw for one sensor array at a fixed sample rate."""
+
+    def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float) -> None:
+        self.cfg = settings
+        self.geo: Geometry = settings.geometry(rate_hz)
+        self.n = int(len(x_mm))
+        self._mat = np.column_stack([np.ones(self.n), x_mm, y_mm]).astype(np.float64)
+        self._centre = (float(np.mean(x_mm)), float(np.mean(y_mm)))
+        self._h = [float(v) for v in self.geo.dec_hi]
+        self._c_floor = settings.coe_floor * self.geo.window
+        self._e_floor = settings.dw_floor_mm2 * odd_offsets(self.geo.window, len(self._h))
+        self._symmetric = settings.ratio_mode == "symmetric"
+        self._thr = settings.contact_threshold_n
+        self._inv_rate = 1.0 / rate_hz
+        self._rate = rate_hz
+        # sensor-level memory, kept across resets
+        self._last_t = -math.inf
+        self._last_good = np.zeros(self.n)
+        self._pending = 0
+        self._prev_frame: np.ndarray | None = None
+        self.dropped = 0
+        self._reset(0)
+
+    def _reset(self, flags: int) -> None:
+        geo = self.geo
+        self._k = 0
+        self._ring_f = np.zeros((geo.lag, self.n))
+        self._ring_s = [0.0] * geo.lag
+        self._ring_ss = [0.0] * geo.lag
+        self._ring_c = [False] * geo.lag
+        self._xs: list[float] = []
+        self._ys: list[float] = []
+        self._cof = self._centre
+        self._energy = [0.0] * max(geo.window, 1)
+        self._cur_c = 0.0
+        self._cur_e = [0.0, 0.0]
+        self._cur_flags = flags
+        self._carry_flags = 0
+        self._blocks: deque[tuple[float, float, float]] = deque(maxlen=geo.blocks)
+        self._prev_sums: tuple[float, float] | None = None
+
+    # -- public -------------------------------------------------------------------
+    def push(self, t: float, forces: np.ndarray, flags: int = 0) -> list[RawUpdate]:
+        """Feed one frame; returns the updates it completes (usually none or one;
+        more only when a gap was filled)."""
+        if not t > self._last_t:  # duplicate, out of order, or NaN time
+            self.dropped += 1
+            self._pending |= _DUP
+            return []
+        flags |= self._pending
+        self._pending = 0
+        f = np.asarray(forces, dtype=np.float64)
+        if f.shape != (self.n,):
+            raise ValueError(f"expected {self.n} taxel forces, got shape {f.shape}")
+        if not np.isfinite(f).all():
+            f = np.where(np.isfinite(f), f, self._last_good)
+            flags |= _INVALID
+        self._last_good = f
+        if f.min() < 0.0:
+            f = np.maximum(f, 0.0)
+            flags |= _NEG
+        out: list[RawUpdate] = []
+        last_t = self._last_t
+        self._last_t = t
+        if self._prev_frame is not None:
+            missing = max(int(np.rint((t - last_t) * self._rate)) - 1, 0)
+            if missing > self.geo.max_fill:
+                self._reset(0)
+                flags |= _GAP | _RESET
+            elif missing:
+                flags |= _GAP
+                prev = self._prev_frame
+                for m in range(1, missing + 1):
+                    self._step(last_t + m / self._rate, prev, _FILLED, out)
+        self._prev_frame = f
+        self._step(t, f, flags, out)
+        return out
+
+    # -- the per-frame core --------------------------------------------------------
+    def _step(self, t: float, f: np.ndarray, flags: int, out: list[RawUpdate]) -> None:
+        geo = self.geo
+        k = self._k
+        s, sx, sy = (f @ self._mat).tolist()
+        ss = float(f @ f)
+        contact = s >= self._thr and s > 0.0
+        if contact:
+            self._cof = (sx / s, sy / s)
+        xc, yc = self._cof
+
+        lag = geo.lag
+        slot = k % lag
+        d = 0.0
+        if k >= lag:
+            d = self._decorrelation(s, ss, contact, float(f @ self._ring_f[slot]), slot)
+        self._ring_f[slot] = f
+        self._ring_s[slot] = s
+        self._ring_ss[slot] = ss
+        self._ring_c[slot] = contact
+
+        h = self._h
+        flen = len(h)
+        xs, ys = self._xs, self._ys
+        xs.append(xc)
+        ys.append(yc)
+        energy = 0.0
+        if len(xs) > flen:
+            del xs[0], ys[0]
+        if len(xs) == flen:
+            # ending at k: sum_j h[j] x[k - j]
+            dx = dy = 0.0
+            for j in range(flen):
+                dx += h[j] * xs[flen - 1 - j]
+                dy += h[j] * ys[flen - 1 - j]
+            energy = dx * dx + dy * dy
+        self._energy[k % len(self._energy)] = energy
+
+        self._cur_c += d
+        self._cur_e[k & 1] += energy
+        self._cur_flags |= flags
+        self._k = k = k + 1
+        if k % geo.hop:
+            return
+        self._blocks.append((self._cur_c, self._cur_e[0], self._cur_e[1]))
+        block_flags = self._cur_flags
+        self._cur_c = 0.0
+        self._cur_e = [0.0, 0.0]
+        self._cur_flags = 0
+        if len(self._blocks) < geo.blocks:
+            self._carry_flags |= block_flags  # reported with the first update (RESET)
+            return
+        block_flags |= self._carry_flags
+        self._carry_flags = 0
+        out.append(self._update(t, block_flags, s, xc, yc, contact))
+
+    def _decorrelation(self, s: float, ss: float, contact: bool, sab: float, slot: int) -> float:
+        c_b = self._ring_c[slot]
+        if not (contact and c_b):
+            return 1.0 if (contact or c_b) else 0.0
+        n = self.n
+        s_b, ss_b = self._ring_s[slot], self._ring_ss[slot]
+        var_a = n * ss - s * s
+        var_b = n * ss_b - s_b * s_b
+        flat_a = var_a <= _ZERO_VAR * s * s
+        flat_b = var_b <= _ZERO_VAR * s_b * s_b
+        if flat_a or flat_b:
+            return 0.0 if (flat_a and flat_b) else 1.0
+        d = 1.0 - (n * sab - s * s_b) / math.sqrt(var_a * var_b)
+        return 0.0 if d < 0.0 else 2.0 if d > 2.0 else d
+
+    def _update(self, t: float, block_flags: int, s: float, xc: float, yc: float, contact: bool) -> RawUpdate:
+        geo = self.geo
+        c_win = e0 = e1 = 0.0
+        for c, a, b in self._blocks:
+            c_win += c
+            e0 += a
+            e1 += b
+        start = self._k - geo.window
+        p = (start + 1) & 1
+        dw = e1 if p else e0
+        flen = len(self._h)
+        short = geo.window < flen
+        if short:
+            dw = 0.0
+        else:
+            partial = 0.0
+            for o in range(flen - 1):
+                e = start + o
+                partial += self._energy[e % len(self._energy)] if (e & 1) == p else 0.0
+            dw = max(dw - partial, 0.0)
+        c_win += self._c_floor
+        dw += self._e_floor
+        r_coe = r_dw = 0.0
+        if self._prev_sums is not None:
+            r_coe = self._r(c_win, self._prev_sums[0])
+            r_dw = 0.0 if short else self._r(dw, self._prev_sums[1])
+        self._prev_sums = (c_win, dw)
+        warm = start - geo.hop < geo.lag
+        flags = block_flags | (_WARMUP if warm else 0) | (_SHORT if short else 0)
+        return (t, r_coe, r_dw, not warm and not short, flags, s, xc, yc, contact)
+
+    def _r(self, now: float, before: float) -> float:
+        ratio = (now + _EPS) / (before + _EPS)
+        if self._symmetric:
+            return (ratio if ratio >= 1.0 else 1.0 / ratio) - 1.0
+        return ratio - 1.0 if ratio > 1.0 else 0.0

@@ -1,0 +1,57 @@
+"""Detector output: one :class:`Update` per hop (streaming), or an :class:`UpdateTable`
+of the same columns for a whole recording (batch)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+#: Output columns, in file order; the first four are fixed by the CSV contract.
+COLUMNS: tuple[str, ...] = ("t", "r_coe", "r_dw", "state", "valid", "f_sum", "xc", "yc", "flags")
+
+
+@dataclass(frozen=True, slots=True)
+class Update:
+    t: float  #: time of the newest frame the update used (s)
+    r_coe: float  #: correlation indicator (0 when stable)
+    r_dw: float  #: wavelet indicator (0 when stable)
+    state: int  #: :class:`~eskin_industrial.detect.state.GraspState` code
+    valid: bool  #: False while the indicators are not defined (warm-up, short window)
+    f_sum: float  #: total force of the newest frame (N)
+    xc: float  #: centre of force of the newest frame (mm; held while out of contact)
+    yc: float
+    flags: int  #: OR of the hop's frame flags plus WARMUP / SHORT_WINDOW / RESET
+
+
+@dataclass(frozen=True)
+class UpdateTable:
+    """Columns of updates; ``len()`` is the number of updates."""
+
+    t: np.ndarray
+    r_coe: np.ndarray
+    r_dw: np.ndarray
+    state: np.ndarray
+    valid: np.ndarray
+    f_sum: np.ndarray
+    xc: np.ndarray
+    yc: np.ndarray
+    flags: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @classmethod
+    def from_updates(cls, updates: list[Update]) -> "UpdateTable":
+        cols = {}
+        for f in fields(Update):
+            dtype = np.int64 if f.name in ("state", "flags") else bool if f.name == "valid" else np.float64
+            cols[f.name] = np.array([getattr(u, f.name) for u in updates], dtype=dtype)
+        return cls(**cols)
+
+    @classmethod
+    def concat(cls, tables: list["UpdateTable"]) -> "UpdateTable":
+        return cls(**{c: np.concatenate([getattr(t, c) for t in tables]) for c in COLUMNS})
+
+    def row(self, i: int) -> Update:
+        return Update(*(getattr(self, c)[i].item() for c in COLUMNS))

@@ -1,0 +1,47 @@
+"""Frames: one calibrated scan of the taxel array, and what is wrong with it.
+
+A :class:`Frame` is what every source produces and every detector consumes: a scan
+sequence number, a timestamp in seconds, the taxel forces in newtons in the layout's
+row-major order, and :class:`FrameFlag` bits.  Flags are plain ints on the hot path
+(an ``IntFlag`` costs microseconds per operation); :class:`FrameFlag` names them.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class FrameFlag(enum.IntFlag):
+    """What is wrong with a frame, or with a detector update (OR of its frames)."""
+
+    SATURATED = 1  #: a taxel at or beyond full scale, or the raw reading at a rail
+    INVALID = 2  #: a non-finite or out-of-range value, replaced by that taxel's last good one
+    GAP_BEFORE = 4  #: frames were missing before this one (timestamps jump)
+    NEGATIVE = 8  #: a negative force, clipped to 0 N
+    FILLED = 16  #: synthesized by holding the previous frame across a short gap
+    DUPLICATE = 32  #: a timestamp not after the previous frame's: the frame was dropped
+    RESET = 64  #: the detector restarted here (a gap longer than ``max_gap_s``)
+    SHORT_WINDOW = 128  #: the window is shorter than the wavelet filter: R_dw not computed
+    WARMUP = 256  #: not enough history yet since start or reset: indicators not valid
+
+    @classmethod
+    def describe(cls, value: int) -> str:
+        """``"SATURATED|GAP_BEFORE"`` for the bits set, ``""`` for none."""
+        return "|".join(f.name for f in cls if value & f and f.name)
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    """One scan, calibrated: forces in newtons, row-major taxel order."""
+
+    seq: int
+    t: float
+    forces: np.ndarray
+    flags: int = 0
+
+    @property
+    def total_n(self) -> float:
+        return float(self.forces.sum())

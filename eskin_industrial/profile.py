@@ -1,0 +1,233 @@
+"""Profiles: one TOML file describes one sensor installation; loaded here, once.
+
+Loading validates everything into frozen dataclasses before anything starts.  A bad
+file is refused with one line: ``FILE: [section] key: what was expected``.  The
+sections, in the order of the data flow: ``[sensor]``, ``[layout]``,
+``[calibration]``, ``[detector]``, and the transports ``[can]`` and ``[modbus]``.
+See ``docs/profiles.md`` for every key.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from .detect.settings import DetectorSettings
+from .errors import ProfileError
+from .schema import SchemaError, build, in_range, non_negative, positive, to_table
+
+
+@dataclass(frozen=True)
+class SensorSection:
+    name: str
+    description: str = ""
+    #: Nominal scan rate; offline input takes its rate from the timestamps instead.
+    rate_hz: float = field(default=100.0, metadata=positive())
+
+
+@dataclass(frozen=True)
+class LayoutSection:
+    rows: int = field(metadata=positive("an integer >= 1"))
+    cols: int = field(metadata=positive("an integer >= 1"))
+    #: Distance between neighbouring taxels along a row (x) and, unless
+    #: ``row_pitch_mm`` is given, between rows (y).
+    pitch_mm: float = field(metadata=positive())
+    row_pitch_mm: float | None = field(default=None, metadata=positive())
+    #: Explicit taxel coordinates, row-major, one per taxel; default: the grid.
+    x_mm: tuple[float, ...] | None = None
+    y_mm: tuple[float, ...] | None = None
+    #: Names of the rows when each row is a separate strip (the hand's fingers).
+    row_names: tuple[str, ...] | None = None
+
+    def __post_init__(self) -> None:
+        n = self.rows * self.cols
+        for key in ("x_mm", "y_mm"):
+            value = getattr(self, key)
+            if value is not None and len(value) != n:
+                raise ValueError(f"{key}: expected {n} coordinates (rows x cols), got {len(value)}")
+        if self.row_names is not None and len(self.row_names) != self.rows:
+            raise ValueError(f"row_names: expected {self.rows} names (one per row), got {len(self.row_names)}")
+
+    @property
+    def taxels(self) -> int:
+        return self.rows * self.cols
+
+    def coordinates_mm(self) -> tuple[np.ndarray, np.ndarray]:
+        """x and y of each taxel in mm, row-major (row r, column c -> index r*cols+c)."""
+        rows, cols = np.divmod(np.arange(self.taxels), self.cols)
+        row_pitch = self.row_pitch_mm if self.row_pitch_mm is not None else self.pitch_mm
+        x = np.asarray(self.x_mm, dtype=np.float64) if self.x_mm is not None else cols * self.pitch_mm
+        y = np.asarray(self.y_mm, dtype=np.float64) if self.y_mm is not None else rows * row_pitch
+        return x.astype(np.float64), y.astype(np.float64)
+
+
+@dataclass(frozen=True)
+class TaxelCalibration:
+    zero: float | None = None
+    per_newton: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.per_newton == 0:
+            raise ValueError("per_newton: expected a non-zero slope, got 0")
+
+
+@dataclass(frozen=True)
+class CalibrationSection:
+    #: What the node reports: resistance, ADC counts, or forces already in newtons.
+    raw_unit: Literal["ohm", "adc_counts", "newton"]
+    #: Reading at 0 N in ``raw_unit``: one number, or one per taxel (row-major).
+    zero: float | tuple[float, ...]
+    #: Change of the reading per newton: one number, or one per taxel.
+    per_newton: float | tuple[float, ...]
+    #: raw value x raw_scale = reading in ``raw_unit`` (e.g. 0.1 ohm per LSB).
+    raw_scale: float = field(default=1.0, metadata=positive())
+    #: Readings outside [valid_min, valid_max] (after scaling) are invalid.
+    valid_min: float = -1e300
+    valid_max: float = 1e300
+    #: Forces at or above this are flagged saturated and clipped.
+    full_scale_n: float = field(default=1e300, metadata=positive())
+    #: Per-taxel corrections keyed by the taxel's row-major index: {"7" = {zero = ...}}.
+    overrides: dict[str, TaxelCalibration] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for key in ("zero", "per_newton"):
+            if isinstance(getattr(self, key), tuple) and len(getattr(self, key)) == 0:
+                raise ValueError(f"{key}: expected a number or one number per taxel, got an empty list")
+        slopes = self.per_newton if isinstance(self.per_newton, tuple) else (self.per_newton,)
+        if any(s == 0 for s in slopes):
+            raise ValueError("per_newton: expected non-zero slopes, got 0")
+        if self.valid_min >= self.valid_max:
+            raise ValueError("valid_min: expected valid_min < valid_max")
+        for index in self.overrides:
+            if not index.isdigit():
+                raise ValueError(f"overrides: expected taxel indices such as \"7\" as keys, got {index!r}")
+
+
+@dataclass(frozen=True)
+class CanSection:
+    """How the node's scans travel over CAN (frame layout in ``docs/can.md``)."""
+
+    node_id: int = field(default=1, metadata=in_range(0, 127))
+    #: First arbitration ID of the node's range; data segments, then status follow.
+    base_id: int = field(default=0x200, metadata=in_range(0, 0x7FF))
+    extended_id: bool = False
+    taxel_bits: Literal[12, 16] = 12
+    byte_order: Literal["little", "big"] = "little"
+    fd: bool = False
+    bitrate_bps: int = field(default=1_000_000, metadata=positive())
+    data_bitrate_bps: int = field(default=5_000_000, metadata=positive())
+    heartbeat_s: float = field(default=0.1, metadata=positive())
+
+
+@dataclass(frozen=True)
+class ModbusNodeSection:
+    """The sensor node as a Modbus RTU slave, polled by the bridge."""
+
+    unit_id: int = field(default=1, metadata=in_range(1, 247))
+    function: Literal[3, 4] = 4
+    start_address: int = field(default=0, metadata=in_range(0, 65535))
+    word_order: Literal["big", "little"] = "big"
+    baudrate: int = field(default=115200, metadata=positive())
+    parity: Literal["N", "E", "O"] = "N"
+    stopbits: Literal[1, 2] = 1
+    timeout_s: float = field(default=0.05, metadata=positive())
+    retries: int = field(default=1, metadata=non_negative())
+
+
+@dataclass(frozen=True)
+class ModbusPlcSection:
+    """The PLC register image written or served by the bridge."""
+
+    unit_id: int = field(default=1, metadata=in_range(0, 255))
+    base_address: int = field(default=0, metadata=in_range(0, 65000))
+    word_order: Literal["big", "little"] = "big"
+    refresh_s: float = field(default=0.05, metadata=positive())
+    r_scale: float = field(default=100.0, metadata=positive())
+
+
+@dataclass(frozen=True)
+class ModbusSection:
+    node: ModbusNodeSection = field(default_factory=ModbusNodeSection)
+    plc: ModbusPlcSection = field(default_factory=ModbusPlcSection)
+
+
+@dataclass(frozen=True)
+class Profile:
+    sensor: SensorSection
+    layout: LayoutSection
+    calibration: CalibrationSection
+    detector: DetectorSettings = field(default_factory=DetectorSettings)
+    can: CanSection = field(default_factory=CanSection)
+    modbus: ModbusSection = field(default_factory=ModbusSection)
+    #: The file it came from, for messages (not a TOML key).
+    source: str = field(default="<profile>", init=False, compare=False)
+
+    def __post_init__(self) -> None:
+        n = self.layout.taxels
+        cal = self.calibration
+        for key in ("zero", "per_newton"):
+            value = getattr(cal, key)
+            if isinstance(value, tuple) and len(value) != n:
+                raise SchemaError(
+                    f"calibration.{key}",
+                    f"expected 1 or {n} entries ({self.layout.rows}x{self.layout.cols} layout), got {len(value)}",
+                )
+        for index in cal.overrides:
+            if int(index) >= n:
+                raise SchemaError(f"calibration.overrides.{index}", f"expected a taxel index below {n}")
+        from .detect.methods import METHODS  # the registry imports detectors, not profiles
+
+        if self.detector.method not in METHODS:
+            raise SchemaError("detector.method", f"expected one of {', '.join(sorted(METHODS))}, got {self.detector.method!r}")
+        geo = self.detector.geometry(self.sensor.rate_hz)
+        if geo.window < geo.filter_len:
+            raise SchemaError(
+                "detector.window_s",
+                f"expected a window of at least {geo.filter_len} samples at {self.sensor.rate_hz:g} Hz "
+                f"(the {self.detector.wavelet} filter length), got {geo.window}",
+            )
+
+    @property
+    def name(self) -> str:
+        return self.sensor.name
+
+    @property
+    def taxels(self) -> int:
+        return self.layout.taxels
+
+    @cached_property
+    def coordinates_mm(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.layout.coordinates_mm()
+
+    def to_table(self) -> dict:
+        return to_table(self)
+
+
+def load_profile(path: str | Path) -> Profile:
+    """Read and validate a profile; :class:`ProfileError` names the file and the key."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ProfileError(f"{path}: cannot read profile: {exc.strerror or exc}") from None
+    return parse_profile(text, str(path))
+
+
+def parse_profile(text: str, source: str = "<profile>") -> Profile:
+    try:
+        table = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ProfileError(f"{source}: not valid TOML: {exc}") from None
+    try:
+        profile = build(Profile, table)
+    except SchemaError as exc:
+        section, _, key = exc.key.partition(".")
+        where = f"[{section}] {key}" if key else f"[{section}]"
+        raise ProfileError(f"{source}: {where}: {exc.message}") from None
+    object.__setattr__(profile, "source", source)
+    return profile

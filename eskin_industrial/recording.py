@@ -1,0 +1,155 @@
+"""Recording and result files: CSV in, CSV out, with one-line errors naming the line.
+
+A recording has the header ``t,f0,...,f{n-1}`` (seconds, then forces in newtons in
+the profile's row-major taxel order) or ``t,raw0,...,raw{n-1}`` (the node's raw
+unit, calibrated through the profile).  Cells may be ``nan``/``inf`` (the detector
+flags and replaces them); anything else that is not a number is an error.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Literal
+
+import numpy as np
+
+from .detect.state import GraspState
+from .detect.updates import COLUMNS, UpdateTable
+from .errors import InputFormatError
+
+Unit = Literal["newton", "raw"]
+
+
+@dataclass(frozen=True)
+class Recording:
+    t: np.ndarray  #: (K,) seconds
+    values: np.ndarray  #: (K, n) newtons or raw units, see ``unit``
+    unit: Unit
+    name: str  #: where it came from, for messages
+
+    @property
+    def taxels(self) -> int:
+        return self.values.shape[1]
+
+    def rate_hz(self, default: float) -> float:
+        """The sample rate the timestamps show (median positive step), else ``default``."""
+        steps = np.diff(self.t[: 100_001])
+        steps = steps[np.isfinite(steps) & (steps > 0)]
+        return float(1.0 / np.median(steps)) if steps.size else default
+
+
+def _read_text(source: str | Path) -> tuple[str, str]:
+    if str(source) == "-":
+        return sys.stdin.read(), "<stdin>"
+    path = Path(source)
+    try:
+        return path.read_text(encoding="utf-8"), str(path)
+    except UnicodeDecodeError:
+        raise InputFormatError(f"{path}: not a text (UTF-8) CSV file") from None
+    except OSError as exc:
+        raise InputFormatError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def parse_header(header: str, name: str) -> tuple[Unit, int]:
+    cells = [c.strip() for c in header.split(",")]
+    if not cells or cells[0] != "t":
+        raise InputFormatError(f"{name}: line 1: expected a header starting with 't', got {header[:60]!r}")
+    rest = cells[1:]
+    if not rest:
+        raise InputFormatError(f"{name}: line 1: expected taxel columns after 't' (f0, f1, ... or raw0, raw1, ...)")
+    prefix = "raw" if rest[0].startswith("raw") else "f"
+    for i, cell in enumerate(rest):
+        if cell != f"{prefix}{i}":
+            raise InputFormatError(f"{name}: line 1, column {i + 2}: expected '{prefix}{i}', got {cell!r}")
+    return ("raw" if prefix == "raw" else "newton"), len(rest)
+
+
+def read_recording(source: str | Path, taxels: int | None = None) -> Recording:
+    """Read a recording CSV; ``taxels`` (from the profile) is checked against the header."""
+    text, name = _read_text(source)
+    if not text.strip():
+        raise InputFormatError(f"{name}: empty file (expected a header 't,f0,...' and data rows)")
+    header, _, body = text.partition("\n")
+    unit, n = parse_header(header.strip().lstrip("\ufeff"), name)
+    if taxels is not None and n != taxels:
+        raise InputFormatError(f"{name}: line 1: {n} taxel columns, but the profile has {taxels} taxels")
+    if not body.strip():
+        raise InputFormatError(f"{name}: no data rows after the header")
+    try:
+        data = np.loadtxt(io.StringIO(body), delimiter=",", dtype=np.float64, ndmin=2, comments=None)
+    except ValueError:
+        raise _diagnose(body, n + 1, name) from None
+    if data.shape[1] != n + 1:
+        raise _diagnose(body, n + 1, name)
+    return Recording(data[:, 0].copy(), data[:, 1:].copy(), unit, name)
+
+
+def _diagnose(body: str, columns: int, name: str) -> InputFormatError:
+    """The slow path: find the first bad line for the message."""
+    for lineno, row in enumerate(csv.reader(io.StringIO(body)), start=2):
+        if not row or all(not c.strip() for c in row):
+            return InputFormatError(f"{name}: line {lineno}: empty line")
+        if len(row) != columns:
+            return InputFormatError(f"{name}: line {lineno}: {len(row)} cells, expected {columns}")
+        for col, cell in enumerate(row, start=1):
+            try:
+                float(cell)
+            except ValueError:
+                return InputFormatError(f"{name}: line {lineno}, column {col}: not a number: {cell.strip()[:30]!r}")
+    return InputFormatError(f"{name}: cannot parse as CSV numbers")
+
+
+def write_recording(dest: str | Path | IO[str], t: np.ndarray, values: np.ndarray, unit: Unit = "newton") -> None:
+    prefix = "f" if unit == "newton" else "raw"
+    header = "t," + ",".join(f"{prefix}{i}" for i in range(values.shape[1]))
+    _write(dest, header, np.column_stack([t, values]), ["%.6f"] + ["%.9g"] * values.shape[1])
+
+
+def write_updates(dest: str | Path | IO[str], table: UpdateTable) -> None:
+    """One row per update; ``state`` as its label, floats with 9 significant digits."""
+    labels = np.array([s.label for s in GraspState], dtype=object)
+    with _opened(dest) as out:
+        out.write(",".join(COLUMNS) + "\n")
+        t, rc, rd, st, va = table.t, table.r_coe, table.r_dw, labels[table.state], table.valid.astype(int)
+        for i in range(len(table)):
+            out.write(
+                f"{t[i]:.6f},{rc[i]:.9g},{rd[i]:.9g},{st[i]},{va[i]},{table.f_sum[i]:.9g},"
+                f"{table.xc[i]:.9g},{table.yc[i]:.9g},{table.flags[i]}\n"
+            )
+
+
+def read_updates(source: str | Path) -> dict[str, np.ndarray]:
+    """Read an output CSV back (for tests and plots): columns by name."""
+    text, name = _read_text(source)
+    rows = list(csv.reader(io.StringIO(text)))
+    if not rows or rows[0][:4] != list(COLUMNS[:4]):
+        raise InputFormatError(f"{name}: line 1: expected a header starting with {','.join(COLUMNS[:4])}")
+    head, data = rows[0], rows[1:]
+    out: dict[str, np.ndarray] = {}
+    for j, col in enumerate(head):
+        cells = [r[j] for r in data]
+        out[col] = np.array(cells, dtype=object if col == "state" else np.float64)
+    return out
+
+
+@contextlib.contextmanager
+def _opened(dest: str | Path | IO[str]) -> Iterator[IO[str]]:
+    """A stream to write to: an open stream as is, ``-`` for stdout, else a new file."""
+    if hasattr(dest, "write"):
+        yield dest  # type: ignore[misc]
+    elif str(dest) == "-":
+        yield sys.stdout
+    else:
+        with open(dest, "w", encoding="utf-8", newline="") as f:
+            yield f
+
+
+def _write(dest: str | Path | IO[str], header: str, data: np.ndarray, fmt: list[str]) -> None:
+    with _opened(dest) as out:
+        np.savetxt(out, data, delimiter=",", header=header, comments="", fmt=fmt)

@@ -1,0 +1,199 @@
+"""Turn parsed TOML tables into frozen, typed dataclasses, refusing anything else.
+
+The profile sections are plain frozen dataclasses; their type hints *are* the schema.
+Constraints that a type cannot say (a positive number, a range) sit in the field's
+metadata under ``"check"`` as ``(predicate, "what was expected")``.  Cross-field rules
+live in each class's ``__post_init__`` and raise :class:`ValueError`, which the loader
+turns into a one-line :class:`~eskin_industrial.errors.ProfileError` naming the file
+and key.
+
+No value is ever read as a string and guessed into a type: TOML already carries
+types, and a wrong one is an error, not a conversion.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import types
+import typing
+from typing import Any, Callable, Literal, Union, get_args, get_origin
+
+Check = tuple[Callable[[Any], bool], str]
+
+
+class SchemaError(ValueError):
+    """A value does not fit the schema; ``key`` is the dotted path to it."""
+
+    def __init__(self, key: str, message: str) -> None:
+        super().__init__(f"{key}: {message}" if key else message)
+        self.key = key
+        self.message = message
+
+
+def positive(what: str = "a number > 0") -> dict[str, Check]:
+    return {"check": (lambda v: v > 0, what)}
+
+
+def non_negative(what: str = "a number >= 0") -> dict[str, Check]:
+    return {"check": (lambda v: v >= 0, what)}
+
+
+def in_range(lo: float, hi: float) -> dict[str, Check]:
+    return {"check": (lambda v: lo <= v <= hi, f"a value in [{lo:g}, {hi:g}]")}
+
+
+def _describe(tp: Any) -> str:
+    origin = get_origin(tp)
+    if tp is float:
+        return "a number"
+    if tp is int:
+        return "an integer"
+    if tp is bool:
+        return "true or false"
+    if tp is str:
+        return "a string"
+    if origin is Literal:
+        return "one of " + ", ".join(repr(a) for a in get_args(tp))
+    if origin is tuple:
+        return f"a list of {_describe(get_args(tp)[0]).removeprefix('a ').removeprefix('an ')}s"
+    if origin in (Union, types.UnionType):
+        return " or ".join(_describe(a) for a in get_args(tp) if a is not type(None))
+    if origin is dict:
+        return "a table"
+    if dataclasses.is_dataclass(tp):
+        return "a table"
+    return str(tp)
+
+
+def _convert(tp: Any, value: Any, key: str) -> Any:
+    origin = get_origin(tp)
+    if origin in (Union, types.UnionType):
+        args = get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return _convert(arg, value, key)
+            except SchemaError as exc:
+                errors.append(exc)
+        # Prefer the error of a branch that got past the type check (a table with a
+        # bad key inside) over a generic "expected X or Y".
+        deep = [e for e in errors if e.key != key]
+        if deep:
+            raise deep[0]
+        raise SchemaError(key, f"expected {_describe(tp)}, got {_show(value)}")
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SchemaError(key, f"expected a number, got {_show(value)}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SchemaError(key, f"expected an integer, got {_show(value)}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise SchemaError(key, f"expected true or false, got {_show(value)}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise SchemaError(key, f"expected a string, got {_show(value)}")
+        return value
+    if origin is Literal:
+        choices = get_args(tp)
+        if value not in choices:
+            near = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise SchemaError(
+                key, f"expected one of {', '.join(repr(c) for c in choices)}, got {_show(value)}{hint}"
+            )
+        return value
+    if origin is tuple:
+        if not isinstance(value, list):
+            raise SchemaError(key, f"expected {_describe(tp)}, got {_show(value)}")
+        (item_tp, *_rest) = get_args(tp)
+        return tuple(_convert(item_tp, v, f"{key}[{i}]") for i, v in enumerate(value))
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise SchemaError(key, f"expected a table, got {_show(value)}")
+        _k_tp, v_tp = get_args(tp)
+        return {k: _convert(v_tp, v, f"{key}.{k}") for k, v in value.items()}
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise SchemaError(key, f"expected a table, got {_show(value)}")
+        return build(tp, value, key)
+    raise TypeError(f"schema type {tp!r} at {key} is not supported")  # a bug, not input
+
+
+def _show(value: Any) -> str:
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value)
+
+
+def build(cls: type, table: dict[str, Any], where: str = "") -> Any:
+    """Build dataclass ``cls`` from ``table``; every key is checked, none guessed.
+
+    ``where`` is the dotted path of ``table`` in the file, used in messages.
+    """
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    prefix = f"{where}." if where else ""
+    for name in table:
+        if name not in fields:
+            near = difflib.get_close_matches(name, list(fields), n=1, cutoff=0.6)
+            hint = f"; did you mean {near[0]!r}?" if near else f"; valid keys: {', '.join(fields)}"
+            raise SchemaError(f"{prefix}{name}", f"unknown key{hint}")
+    kwargs: dict[str, Any] = {}
+    for name, f in fields.items():
+        key = f"{prefix}{name}"
+        if name not in table:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                what = "section" if dataclasses.is_dataclass(hints[name]) else "key"
+                raise SchemaError(key, f"missing {what} (expected {_describe(hints[name])})")
+            continue
+        value = _convert(hints[name], table[name], key)
+        check = f.metadata.get("check")
+        if check is not None and value is not None:
+            predicate, expected = check
+            items = value if isinstance(value, tuple) else (value,)
+            for item in items:
+                if not predicate(item):
+                    raise SchemaError(key, f"expected {expected}, got {_show(item)}")
+        kwargs[name] = value
+    try:
+        return cls(**kwargs)
+    except SchemaError:
+        raise
+    except ValueError as exc:
+        # __post_init__ messages start with the offending field's name.
+        msg = str(exc)
+        field, _, rest = msg.partition(": ")
+        if field in fields and rest:
+            raise SchemaError(f"{prefix}{field}", rest) from None
+        raise SchemaError(where, msg) from None
+
+
+def to_table(obj: Any) -> Any:
+    """The inverse of :func:`build`, for ``profile show``: dataclasses to plain dicts."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        out = {}
+        for f in dataclasses.fields(obj):
+            if not f.init:
+                continue
+            value = to_table(getattr(obj, f.name))
+            if value is not None:
+                out[f.name] = value
+        return out
+    if isinstance(obj, tuple):
+        return [to_table(v) for v in obj]
+    if isinstance(obj, dict):
+        return {k: to_table(v) for k, v in obj.items()}
+    return obj
