@@ -62,6 +62,11 @@ class Calibrator:
         )
         return forces, flags.astype(np.int64)
 
+    def to_raw(self, forces: np.ndarray) -> np.ndarray:
+        """The inverse model: raw values a node would report for these forces (float;
+        a node rounds them to its integer unit)."""
+        return (self.zero + self.per_newton * np.asarray(forces, dtype=np.float64)) / self.raw_scale
+
     def tared(self, unloaded_raw: np.ndarray) -> "Calibrator":
         """A copy whose zero is each taxel's mean reading over an unloaded recording.
 

@@ -1,0 +1,88 @@
+"""The seam every live path shares: raw scans in, calibrated frames, detector updates
+out, with counters.  Sources (``bus/``) produce :class:`RawScan`; sinks (PLC register
+image, views) consume :class:`~eskin_industrial.detect.updates.Update`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .calibration import Calibrator
+from .detect.methods import get_method
+from .detect.updates import Update
+from .frames import Frame, FrameFlag
+from .profile import Profile
+
+
+@dataclass(frozen=True, slots=True)
+class RawScan:
+    """One scan as a transport delivered it, before calibration.
+
+    ``t`` is the scan's time on the node's clock when the transport carries one
+    (sequence counter x scan period), otherwise the receipt time; ``rx_time`` is
+    always the host's monotonic receipt time (for staleness and latency).
+    """
+
+    seq: int
+    t: float
+    raw: np.ndarray
+    flags: int = 0
+    rx_time: float = math.nan
+
+
+@dataclass
+class Counters:
+    scans: int = 0
+    updates: int = 0
+    invalid_scans: int = 0
+    saturated_scans: int = 0
+    lost_scans: int = 0  #: gaps in the sequence numbers
+    dropped_by_detector: int = 0  #: duplicate or out-of-order times
+    state_changes: int = 0
+    extra: dict[str, int] = field(default_factory=dict)  #: transport-specific counters
+
+
+class Pipeline:
+    """Calibrate and detect, one scan at a time; keeps the newest frame and update."""
+
+    def __init__(self, profile: Profile, rate_hz: float | None = None, method: str | None = None) -> None:
+        self.profile = profile
+        self.calibrator = Calibrator.from_section(profile.calibration, profile.taxels)
+        self.rate_hz = rate_hz or profile.sensor.rate_hz
+        x, y = profile.coordinates_mm
+        self.detector = get_method(method or profile.detector.method).stream(profile.detector, x, y, self.rate_hz)
+        self.counters = Counters()
+        self.last_frame: Frame | None = None
+        self.last_update: Update | None = None
+        self._last_seq: int | None = None
+        self._raw_is_newton = profile.calibration.raw_unit == "newton" and not profile.calibration.overrides
+
+    def calibrate(self, scan: RawScan) -> Frame:
+        forces, flags = self.calibrator.to_newtons(scan.raw)
+        return Frame(scan.seq, scan.t, forces, scan.flags | int(flags))
+
+    def push(self, scan: RawScan) -> list[Update]:
+        c = self.counters
+        c.scans += 1
+        if self._last_seq is not None and scan.seq > self._last_seq + 1:
+            c.lost_scans += scan.seq - self._last_seq - 1
+        if self._last_seq is None or scan.seq > self._last_seq:
+            self._last_seq = scan.seq
+        frame = self.calibrate(scan)
+        if frame.flags & FrameFlag.INVALID:
+            c.invalid_scans += 1
+        if frame.flags & FrameFlag.SATURATED:
+            c.saturated_scans += 1
+        self.last_frame = frame
+        before = self.detector.dropped
+        updates = self.detector.push(frame.t, frame.forces, frame.flags)
+        c.dropped_by_detector += self.detector.dropped - before
+        for u in updates:
+            if self.last_update is None or u.state != self.last_update.state:
+                c.state_changes += 1
+            self.last_update = u
+        c.updates += len(updates)
+        return updates
