@@ -126,28 +126,69 @@ class CanSection:
 
 @dataclass(frozen=True)
 class ModbusNodeSection:
-    """The sensor node as a Modbus RTU slave, polled by the bridge."""
+    """The sensor node as a Modbus RTU slave, polled by the bridge (``docs/plc.md``).
+
+    One read of ``taxels x words`` registers from ``start_address`` (0-based
+    protocol address) is one scan, row-major; each value is the calibration's raw
+    value (``[calibration] raw_scale`` turns it into the raw unit).
+    """
 
     unit_id: int = field(default=1, metadata=in_range(1, 247))
+    #: 4 = read input registers, 3 = read holding registers.
     function: Literal[3, 4] = 4
     start_address: int = field(default=0, metadata=in_range(0, 65535))
+    #: How one taxel is encoded: 16-bit, or 32-bit over two registers.
+    value_type: Literal["uint16", "int16", "uint32", "int32"] = "uint16"
+    #: For 32-bit values: which register holds the high word.
     word_order: Literal["big", "little"] = "big"
     baudrate: int = field(default=115200, metadata=positive())
     parity: Literal["N", "E", "O"] = "N"
     stopbits: Literal[1, 2] = 1
+    #: How long to wait for an answer before the poll counts as a timeout.
     timeout_s: float = field(default=0.05, metadata=positive())
+    #: Further attempts after a failed poll, within the same scan period.
     retries: int = field(default=1, metadata=non_negative())
+    #: Poll rate; default: the sensor's ``rate_hz``.
+    poll_hz: float | None = field(default=None, metadata=positive())
+    #: Consecutive failed polls after which the bus-fault bit is set.
+    fault_after_failures: int = field(default=3, metadata=positive("an integer >= 1"))
+
+    @property
+    def words_per_taxel(self) -> int:
+        return 2 if self.value_type.endswith("32") else 1
 
 
 @dataclass(frozen=True)
 class ModbusPlcSection:
-    """The PLC register image written or served by the bridge."""
+    """The PLC register image, written to the PLC (client) or served (server)."""
 
+    #: ``client``: the bridge writes into the PLC's holding registers;
+    #: ``server``: the bridge serves the registers and the PLC reads them.
+    mode: Literal["client", "server"] = "server"
     unit_id: int = field(default=1, metadata=in_range(0, 255))
+    #: 0-based protocol address of the first register (and of the first coil and
+    #: discrete input); 4xxxx number = base_address + offset + 40001.
     base_address: int = field(default=0, metadata=in_range(0, 65000))
+    #: For 32-bit values: which register holds the high word.
     word_order: Literal["big", "little"] = "big"
+    #: Client mode: the PLC's address, and how often the image is written when
+    #: nothing changes (a change is written at once).
+    host: str = "127.0.0.1"
+    port: int = field(default=502, metadata=in_range(1, 65535))
     refresh_s: float = field(default=0.05, metadata=positive())
+    #: Client mode: reconnection delay, doubled after each failure up to the maximum.
+    backoff_s: float = field(default=0.1, metadata=positive())
+    backoff_max_s: float = field(default=2.0, metadata=positive())
+    #: Server mode: the address to listen on (loopback unless told otherwise).
+    bind: str = "127.0.0.1"
+    #: R_coe and R_dw are sent as round(R x r_scale), saturated at 65535.
     r_scale: float = field(default=100.0, metadata=positive())
+    #: The newest frame older than this sets the sensor-stale bit (and clears data-valid).
+    stale_s: float = field(default=0.2, metadata=positive())
+
+    def __post_init__(self) -> None:
+        if self.backoff_max_s < self.backoff_s:
+            raise ValueError("backoff_max_s: expected at least backoff_s")
 
 
 @dataclass(frozen=True)

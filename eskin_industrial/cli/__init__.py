@@ -9,6 +9,9 @@ import click
 
 from ..errors import EskinError
 from .detect_cmd import detect
+from .modbus_cmd import modbus_bridge, modbus_node
+from .plc_cmd import plc
+from .plc_sim_cmd import plc_sim
 from .profile_cmd import profile
 
 
@@ -39,3 +42,7 @@ def main(ctx: click.Context, debug: bool) -> None:
 
 main.add_command(detect)
 main.add_command(profile)
+main.add_command(plc)
+main.add_command(plc_sim)
+main.add_command(modbus_node)
+main.add_command(modbus_bridge)

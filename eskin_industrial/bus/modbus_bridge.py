@@ -1,0 +1,161 @@
+"""The Modbus bridge loop: source -> pipeline -> register image -> PLC sink.
+
+The source is anything with ``poll() -> RawScan | None`` (the RTU poller; a
+recording replay), ``bus_fault``, ``frame_age()`` and bus-error counters.  The sink
+is a :class:`~eskin_industrial.bus.plc_server.PlcServer` or a
+:class:`~eskin_industrial.bus.plc_client.PlcWriter`; both take ``publish`` and hand
+back the PLC's commands.  A state change is published at once; otherwise every
+``refresh_s``.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from typing import Protocol
+
+import numpy as np
+
+from ..pipeline import Pipeline, RawScan
+from ..profile import Profile
+from .plc_image import Command, Health, PlcImage
+
+
+class Source(Protocol):
+    bus_fault: bool
+
+    def poll(self) -> RawScan | None: ...
+
+    def frame_age(self, now: float | None = None) -> float | None: ...
+
+
+class Sink(Protocol):
+    def publish(self, registers: list[int], image: PlcImage, urgent: bool = False,
+                t_event: float | None = None) -> None: ...
+
+    def take_commands(self) -> list[Command]: ...
+
+    def commands_done(self) -> None: ...
+
+
+class ModbusBridge:
+    #: Unloaded scans kept for a tare.
+    TARE_SCANS = 50
+
+    def __init__(self, profile: Profile, source, sink, *, rate_hz: float | None = None) -> None:
+        self.profile = profile
+        self.source = source
+        self.sink = sink
+        self.pipeline = Pipeline(profile, rate_hz=rate_hz)
+        self.image = PlcImage(profile.modbus.plc)
+        self.recent_raw: collections.deque[np.ndarray] = collections.deque(maxlen=self.TARE_SCANS)
+        self.tares = 0
+        self.publications = 0
+        self._last_pub = float("-inf")
+        self._stop = threading.Event()
+
+    def health(self, now: float | None = None) -> Health:
+        src = self.source
+        counters = getattr(src, "counters", None)
+        return Health(
+            frame_age_s=src.frame_age(now),
+            bus_fault=bool(src.bus_fault),
+            lost_scans=self.pipeline.counters.lost_scans,
+            bus_errors=int(getattr(counters, "bus_errors", 0)),
+        )
+
+    def step(self) -> bool:
+        """One poll, its updates, the PLC's commands and, when due, a publication.
+        Returns whether it published."""
+        t_event = time.perf_counter()
+        scan = self.source.poll()
+        urgent = False
+        if scan is not None:
+            t_event = time.perf_counter()
+            self.recent_raw.append(scan.raw)
+            for u in self.pipeline.push(scan):
+                urgent |= self.image.observe(u)
+        commands = self.sink.take_commands()
+        for cmd in commands:
+            if cmd.name == "tare":
+                self._tare()
+            else:
+                self.image.apply(cmd)
+            urgent = True
+        self.image.pending.clear()
+        if commands:
+            self.sink.commands_done()
+        return self.publish_if_due(urgent, t_event)
+
+    def publish_if_due(self, urgent: bool, t_event: float | None = None) -> bool:
+        now = time.monotonic()
+        if not urgent and now - self._last_pub < self.profile.modbus.plc.refresh_s:
+            return False
+        regs = self.image.render(self.health(now))
+        self.sink.publish(regs, self.image, urgent, t_event)
+        self._last_pub = now
+        self.publications += 1
+        return True
+
+    def _tare(self) -> None:
+        """Move each taxel's zero to its mean over the recent scans (gripper open)."""
+        if not self.recent_raw:
+            return
+        pipe = self.pipeline
+        pipe.calibrator = pipe.calibrator.tared(np.stack(list(self.recent_raw)))
+        self.tares += 1
+
+    def run(self, duration_s: float | None = None) -> None:
+        end = None if duration_s is None else time.monotonic() + duration_s
+        while not self._stop.is_set() and (end is None or time.monotonic() < end):
+            self.step()
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def counters(self) -> dict[str, int]:
+        c = self.pipeline.counters
+        out = {"scans": c.scans, "updates": c.updates, "lost_scans": c.lost_scans,
+               "state_changes": c.state_changes, "publications": self.publications, "tares": self.tares}
+        src_counters = getattr(self.source, "counters", None)
+        if src_counters is not None and hasattr(src_counters, "as_dict"):
+            out.update(src_counters.as_dict())
+        stats = getattr(self.sink, "stats_dict", None) or getattr(self.sink, "stats", None)
+        if callable(stats):
+            out.update(stats())
+        return out
+
+
+class ReplaySource:
+    """A recording played at its own pace, as if polled (raw values or newtons)."""
+
+    def __init__(self, profile: Profile, t: np.ndarray, raw: np.ndarray, rate_hz: float, *, loop: bool = False) -> None:
+        self.t, self.raw, self.rate_hz, self.loop = t, raw, rate_hz, loop
+        self.k = 0
+        self.bus_fault = False
+        self.last_rx: float | None = None
+        self._next = time.monotonic()
+        self.t0 = time.monotonic()
+
+    @property
+    def done(self) -> bool:
+        return not self.loop and self.k >= len(self.t)
+
+    def poll(self) -> RawScan | None:
+        now = time.monotonic()
+        if self._next > now:
+            time.sleep(self._next - now)
+        self._next = max(self._next, now) + 1.0 / self.rate_hz
+        if self.done:
+            return None
+        i = self.k % len(self.t)
+        self.k += 1
+        rx = time.monotonic()
+        self.last_rx = rx
+        return RawScan(self.k - 1, rx - self.t0, self.raw[i], 0, rx)
+
+    def frame_age(self, now: float | None = None) -> float | None:
+        if self.last_rx is None:
+            return None
+        return (time.monotonic() if now is None else now) - self.last_rx

@@ -1,0 +1,153 @@
+"""The sensor node's Modbus register layout, and a node simulator that serves a scene.
+
+The node keeps its newest scan in ``taxels x words`` registers from the profile's
+``[modbus.node] start_address`` (input registers for function 4, holding registers
+for function 3), row-major, each the calibration's raw value as ``value_type``.
+:func:`encode_scan` / :func:`decode_scans` are the pure codec; the poller
+(``modbus_source``) and the simulator here share them.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..calibration import Calibrator
+from ..profile import ModbusNodeSection, Profile
+from .modbus_io import ILLEGAL_ADDRESS, ILLEGAL_FUNCTION, RegisterServer, SerialSettings
+
+_LIMITS = {"uint16": (0, 0xFFFF), "int16": (-0x8000, 0x7FFF), "uint32": (0, 0xFFFFFFFF),
+           "int32": (-0x80000000, 0x7FFFFFFF)}
+
+
+def register_count(node: ModbusNodeSection, taxels: int) -> int:
+    return taxels * node.words_per_taxel
+
+
+def encode_scan(node: ModbusNodeSection, raw: np.ndarray) -> list[int]:
+    """Registers for one scan of raw values (rounded, clipped to the value type)."""
+    lo, hi = _LIMITS[node.value_type]
+    v = np.clip(np.rint(np.nan_to_num(np.asarray(raw, dtype=np.float64), nan=0.0)), lo, hi).astype(np.int64)
+    if node.words_per_taxel == 1:
+        return (v & 0xFFFF).tolist()
+    v &= 0xFFFFFFFF
+    hi_w, lo_w = v >> 16, v & 0xFFFF
+    pair = np.stack([hi_w, lo_w] if node.word_order == "big" else [lo_w, hi_w], axis=-1)
+    return pair.reshape(-1).tolist()
+
+
+def decode_scans(node: ModbusNodeSection, registers) -> np.ndarray:
+    """Raw values (float) from registers of one scan, shape ``(taxels,)``; or of many,
+    ``(..., registers)``."""
+    r = np.asarray(registers, dtype=np.int64)
+    if node.words_per_taxel == 2:
+        r = r.reshape(*r.shape[:-1], -1, 2)
+        hi, lo = (r[..., 0], r[..., 1]) if node.word_order == "big" else (r[..., 1], r[..., 0])
+        v = (hi << 16) | lo
+        if node.value_type == "int32":
+            v = np.where(v >= 1 << 31, v - (1 << 32), v)
+    else:
+        v = r
+        if node.value_type == "int16":
+            v = np.where(v >= 1 << 15, v - (1 << 16), v)
+    return v.astype(np.float64)
+
+
+@dataclass
+class NodeRegisters:
+    """The node's register file as a server handler; ``scan`` is swapped whole."""
+
+    node: ModbusNodeSection
+    count: int
+    scan: list[int] = field(default_factory=list)
+    reads: int = 0
+
+    def read(self, table, address, count):
+        wanted = "input" if self.node.function == 4 else "holding"
+        if table != wanted:
+            return ILLEGAL_FUNCTION if table in ("coils", "discrete") else ILLEGAL_ADDRESS
+        start = self.node.start_address
+        if address < start or address + count > start + self.count:
+            return ILLEGAL_ADDRESS
+        scan = self.scan or [0] * self.count
+        self.reads += 1
+        return scan[address - start: address - start + count]
+
+    def write(self, table, address, values):
+        return ILLEGAL_ADDRESS  # the node's registers are read-only
+
+
+class NodeSimulator:
+    """Serves a force sequence as the node would: a new scan every ``1/rate_hz``.
+
+    ``forces`` is ``(K, taxels)`` in newtons; the calibration's inverse turns them
+    into the node's raw unit.  The scene loops unless ``loop=False`` (then the
+    last scan stays)."""
+
+    def __init__(self, profile: Profile, port: str, forces: np.ndarray, rate_hz: float, *,
+                 baudrate: int | None = None, loop: bool = True) -> None:
+        node = profile.modbus.node
+        cal = Calibrator.from_section(profile.calibration, profile.taxels)
+        forces = np.asarray(forces, dtype=np.float64)
+        if forces.ndim != 2 or forces.shape[1] != profile.taxels:
+            raise ValueError(f"forces: expected (K, {profile.taxels}), got {forces.shape}")
+        self.scans = [encode_scan(node, row) for row in cal.to_raw(forces)]
+        self.rate_hz = rate_hz
+        self.loop = loop
+        self.registers = NodeRegisters(node, register_count(node, profile.taxels), list(self.scans[0]))
+        serial = SerialSettings(port, baudrate or node.baudrate, node.parity, node.stopbits)
+        self.server = RegisterServer(self.registers, serial=serial, unit_ids=[node.unit_id])
+        self.index = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> "NodeSimulator":
+        self.server.start()
+        self._thread = threading.Thread(target=self._step, name="node-scene", daemon=True)
+        self._thread.start()
+        return self
+
+    def _step(self) -> None:
+        period = 1.0 / self.rate_hz
+        t0 = time.monotonic()
+        k = 0
+        while not self._stop.is_set():
+            k += 1
+            delay = t0 + k * period - time.monotonic()
+            if delay > 0 and self._stop.wait(delay):
+                return
+            i = k % len(self.scans) if self.loop else min(k, len(self.scans) - 1)
+            self.index = i
+            self.registers.scan = self.scans[i]
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2)
+        self.server.stop()
+
+    def __enter__(self) -> "NodeSimulator":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def serve_scene_rtu(profile: Profile, port: str, t: np.ndarray, forces: np.ndarray, rate_hz: float | None = None,
+                    *, baudrate: int | None = None, loop: bool = True, duration_s: float | None = None,
+                    stop: threading.Event | None = None) -> NodeSimulator:
+    """Serve a scene as a Modbus RTU slave on ``port`` until ``stop`` is set or
+    ``duration_s`` has passed (forever when neither is given); returns the stopped
+    simulator (its ``registers.reads`` tells how often it was polled)."""
+    if rate_hz is None:
+        steps = np.diff(np.asarray(t, dtype=np.float64))
+        steps = steps[steps > 0]
+        rate_hz = float(1.0 / np.median(steps)) if steps.size else profile.sensor.rate_hz
+    sim = NodeSimulator(profile, port, forces, rate_hz, baudrate=baudrate, loop=loop)
+    stop = stop or threading.Event()
+    with sim:
+        stop.wait(duration_s)
+    return sim

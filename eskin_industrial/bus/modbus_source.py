@@ -1,0 +1,113 @@
+"""The Modbus RTU source: poll the node's registers, one scan per poll.
+
+Each successful read becomes a :class:`~eskin_industrial.pipeline.RawScan`
+timestamped on receipt.  A failed read is retried within the same scan period
+(``[modbus.node] retries``); a poll that still fails is a lost scan (its sequence
+number is skipped, so the pipeline counts it) and never blocks longer than
+``(retries + 1) x timeout_s``.  Timeouts, garbled frames (bad CRC) and exception
+responses are counted apart; ``bus_fault`` is set after ``fault_after_failures``
+consecutive failed polls and cleared by the next good one.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from ..pipeline import RawScan
+from ..profile import Profile
+from .modbus_io import ModbusFault, RtuMaster, SerialSettings
+from .modbus_node import decode_scans, register_count
+
+
+@dataclass
+class RtuCounters:
+    polls: int = 0
+    scans: int = 0
+    timeouts: int = 0
+    crc_errors: int = 0
+    exceptions: int = 0
+    retries: int = 0
+    failed_polls: int = 0
+
+    @property
+    def bus_errors(self) -> int:
+        return self.timeouts + self.crc_errors + self.exceptions
+
+    def as_dict(self) -> dict[str, int]:
+        return {f"rtu_{k}": v for k, v in vars(self).items()}
+
+
+class RtuPoller:
+    def __init__(self, profile: Profile, port: str, *, baudrate: int | None = None,
+                 poll_hz: float | None = None) -> None:
+        self.node = node = profile.modbus.node
+        self.settings = SerialSettings(port, baudrate or node.baudrate, node.parity, node.stopbits)
+        self.count = register_count(node, profile.taxels)
+        self.poll_hz = poll_hz or node.poll_hz or profile.sensor.rate_hz
+        self.master = RtuMaster(self.settings, node.unit_id, node.timeout_s)
+        self.counters = RtuCounters()
+        self.consecutive_failures = 0
+        self.last_rx: float | None = None  #: monotonic time of the newest good scan
+        self.t0 = time.monotonic()
+        self._seq = -1
+        self._next = time.monotonic()
+
+    def open(self) -> "RtuPoller":
+        self.master.connect()
+        return self
+
+    def close(self) -> None:
+        self.master.close()
+
+    @property
+    def bus_fault(self) -> bool:
+        return self.consecutive_failures >= self.node.fault_after_failures
+
+    def poll_once(self) -> RawScan | None:
+        """One poll (with retries), now; None when it failed (counted)."""
+        c = self.counters
+        c.polls += 1
+        self._seq += 1
+        for attempt in range(self.node.retries + 1):
+            if attempt:
+                c.retries += 1
+            try:
+                regs = self.master.read(self.node.function, self.node.start_address, self.count)
+            except ModbusFault as exc:
+                if exc.kind == "exception":
+                    c.exceptions += 1
+                elif exc.kind == "crc":
+                    c.crc_errors += 1
+                    self.master.reset_input()
+                else:
+                    c.timeouts += 1
+                continue
+            rx = time.monotonic()
+            if len(regs) != self.count:
+                c.crc_errors += 1
+                continue
+            c.scans += 1
+            self.consecutive_failures = 0
+            self.last_rx = rx
+            return RawScan(self._seq, rx - self.t0, decode_scans(self.node, regs), 0, rx)
+        c.failed_polls += 1
+        self.consecutive_failures += 1
+        return None
+
+    def poll(self) -> RawScan | None:
+        """Wait for the next poll time (``poll_hz``), then poll; a late poll does not
+        try to catch up."""
+        now = time.monotonic()
+        period = 1.0 / self.poll_hz
+        if self._next > now:
+            time.sleep(self._next - now)
+        else:
+            self._next = now
+        self._next += period
+        return self.poll_once()
+
+    def frame_age(self, now: float | None = None) -> float | None:
+        if self.last_rx is None:
+            return None
+        return (time.monotonic() if now is None else now) - self.last_rx

@@ -1,0 +1,179 @@
+"""Client mode: the bridge writes the register image into the PLC's holding registers.
+
+A writer thread owns the connection, so that a slow or absent PLC never stalls
+detection: the bridge hands it the newest image (:meth:`PlcWriter.offer`) and goes
+on.  The image is written at once when it is urgent (a state change), otherwise
+every ``refresh_s``; an older image not yet written is replaced by the newer one
+(the PLC wants the present; events survive in the latch and the counters).  After
+each refresh the writer reads COMMAND and ENABLE from the PLC, hands their commands
+to the bridge, and writes COMMAND back to 0 (the handshake).  A lost connection is
+retried with a delay doubling from ``backoff_s`` up to ``backoff_max_s``.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from ..profile import ModbusPlcSection
+from .modbus_io import ModbusFault, TcpMaster
+from .plc_image import REG, Command, PlcImage, Refused
+
+
+@dataclass
+class WriterStats:
+    writes: int = 0
+    urgent_writes: int = 0
+    failures: int = 0
+    connects: int = 0
+    superseded: int = 0  #: images replaced by a newer one before they were written
+    last_error: str = ""
+    latencies_s: list[float] = field(default_factory=list)  #: offer -> acknowledged write (urgent only)
+
+
+class PlcWriter:
+    def __init__(self, settings: ModbusPlcSection, host: str | None = None, port: int | None = None,
+                 *, timeout_s: float = 0.5, poll_commands: bool = True,
+                 on_written: Callable[[float, float], None] | None = None) -> None:
+        self.settings = settings
+        self.host = host or settings.host
+        self.port = port or settings.port
+        self.master = TcpMaster(self.host, self.port, settings.unit_id, timeout_s)
+        self.poll_commands = poll_commands
+        self.on_written = on_written
+        self.stats = WriterStats()
+        self.commands: queue.SimpleQueue[Command] = queue.SimpleQueue()
+        self._parser = PlcImage(settings)
+        self._cond = threading.Condition()
+        self._pending: tuple[list[int], bool, float] | None = None
+        self._last: list[int] | None = None
+        self._stop = False
+        self._thread: threading.Thread | None = None
+        self.connected = False
+
+    @property
+    def where(self) -> str:
+        return f"tcp {self.host}:{self.port} (client)"
+
+    def start(self) -> "PlcWriter":
+        self._thread = threading.Thread(target=self._run, name="plc-writer", daemon=True)
+        self._thread.start()
+        return self
+
+    def publish(self, registers: list[int], image: PlcImage | None = None, urgent: bool = False,
+                t_event: float | None = None) -> None:
+        self.offer(registers, urgent, t_event)
+
+    def offer(self, registers: list[int], urgent: bool = False, t_event: float | None = None) -> None:
+        """Hand over the newest image; ``t_event`` (perf_counter) dates an urgent one."""
+        with self._cond:
+            if self._pending is not None:
+                self.stats.superseded += 1
+                urgent = urgent or self._pending[1]
+                t_event = self._pending[2] if self._pending[1] else t_event
+            self._pending = (list(registers), urgent, t_event if t_event is not None else time.perf_counter())
+            if urgent:
+                self._cond.notify()
+
+    def take_commands(self) -> list[Command]:
+        out = []
+        while True:
+            try:
+                out.append(self.commands.get_nowait())
+            except queue.Empty:
+                return out
+
+    def commands_done(self) -> None:
+        pass  # COMMAND is cleared in the PLC by the writer itself
+
+    def _run(self) -> None:
+        s = self.settings
+        delay = s.backoff_s
+        next_refresh = time.monotonic()
+        while True:
+            with self._cond:
+                if self._stop:
+                    break
+                timeout = max(0.0, next_refresh - time.monotonic())
+                if not (self._pending is not None and self._pending[1]):
+                    self._cond.wait(timeout)
+                if self._stop:
+                    break
+                item, self._pending = self._pending, None
+            if not self.connected:
+                try:
+                    self.master.connect()
+                    self.connected = True
+                    self.stats.connects += 1
+                    delay = s.backoff_s
+                except ModbusFault as exc:
+                    self._fail(exc, item)
+                    self._sleep(delay)
+                    delay = min(delay * 2, s.backoff_max_s)
+                    continue
+            registers = item[0] if item is not None else self._last
+            urgent = item is not None and item[1]
+            try:
+                if registers is not None:
+                    self.master.write_registers(s.base_address, registers)
+                    t_ack = time.perf_counter()
+                    self._last = registers
+                    self.stats.writes += 1
+                    if urgent and item is not None:
+                        self.stats.urgent_writes += 1
+                        self.stats.latencies_s.append(t_ack - item[2])
+                        if self.on_written is not None:
+                            self.on_written(item[2], t_ack)
+                if time.monotonic() >= next_refresh:
+                    next_refresh = time.monotonic() + s.refresh_s
+                    if self.poll_commands:
+                        self._read_commands()
+            except ModbusFault as exc:
+                self._fail(exc, item)
+                if exc.kind != "exception":
+                    self.connected = False
+                    self.master.close()
+
+    def _fail(self, exc: ModbusFault, item) -> None:
+        self.stats.failures += 1
+        self.stats.last_error = str(exc)
+        if item is not None:
+            with self._cond:  # keep it: the next connection writes it first
+                if self._pending is None:
+                    self._pending = item
+
+    def _sleep(self, delay: float) -> None:
+        with self._cond:
+            if not self._stop:
+                self._cond.wait(delay)
+
+    def _read_commands(self) -> None:
+        s = self.settings
+        at = s.base_address + REG["COMMAND"].offset
+        command, enable = self.master.read_holding(at, 2)
+        try:
+            cmds = self._parser.parse_register_write(REG["ENABLE"].offset, [enable])
+            if command:
+                cmds = self._parser.parse_register_write(REG["COMMAND"].offset, [command]) + cmds
+        except Refused:
+            cmds = []
+        for c in cmds:
+            self.commands.put(c)
+        if command:
+            self.master.write_registers(at, [0])
+
+    def stop(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        self.master.close()
+
+    def stats_dict(self) -> dict[str, int]:
+        st = self.stats
+        return {"plc_writes": st.writes, "plc_write_failures": st.failures, "plc_connects": st.connects,
+                "plc_superseded": st.superseded}

@@ -1,0 +1,154 @@
+"""``eskin-bus modbus-node`` (a sensor node simulator, Modbus RTU slave) and
+``eskin-bus modbus-bridge`` (RTU node -> detector -> PLC registers, client or server)."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import click
+import numpy as np
+
+from ..calibration import Calibrator
+from ..errors import EskinError, InputFormatError
+from ..profile import Profile
+from ..recording import read_recording
+from .common import open_profile, profile_option
+
+
+def load_scene_forces(prof: Profile, scene: str | None, recording: str | None, rate_hz: float | None,
+                      seed: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+    """(t, forces in N, rate) from ``--scene`` or ``--recording``."""
+    if (scene is None) == (recording is None):
+        raise click.UsageError("give one of --scene NAME or --recording REC.csv")
+    if scene is not None:
+        try:
+            from ..scenes import render
+        except ImportError:
+            raise EskinError("--scene: the scene simulator is not available in this installation; "
+                             "use --recording REC.csv") from None
+        rendered = render(scene, rate_hz or prof.sensor.rate_hz, seed)
+        t, forces = np.asarray(rendered.t), np.asarray(rendered.forces)
+    else:
+        rec = read_recording(recording, prof.taxels)
+        t, forces = rec.t, rec.values
+        if rec.unit == "raw":
+            forces, _ = Calibrator.from_section(prof.calibration, prof.taxels).to_newtons(rec.values)
+    if forces.ndim != 2 or forces.shape[1] != prof.taxels:
+        raise InputFormatError(f"scene has {forces.shape[-1]} taxels, profile {prof.name} has {prof.taxels}")
+    if rate_hz is None:
+        steps = np.diff(t)
+        steps = steps[steps > 0]
+        rate_hz = float(1.0 / np.median(steps)) if steps.size else prof.sensor.rate_hz
+    return t, forces, rate_hz
+
+
+@click.command("modbus-node")
+@profile_option()
+@click.option("--port", "port", required=True, help="Serial port to serve on (e.g. one end of a socat pty pair).")
+@click.option("--scene", default=None, help="Built-in scene name or scene .toml.")
+@click.option("--recording", type=click.Path(dir_okay=False), default=None, help="Recording CSV (t,f0,... or t,raw0,...).")
+@click.option("--rate", "rate_hz", type=click.FloatRange(min=0.1), default=None,
+              help="Scan rate in Hz (default: the recording's, or the profile's for a scene).")
+@click.option("--baud", "baudrate", type=int, default=None, help="Baud rate (default: the profile's).")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--once", is_flag=True, help="Play the scene once and keep its last scan (default: loop).")
+@click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,
+              help="Stop after this many seconds (default: until interrupted).")
+def modbus_node(profile_path, port, scene, recording, rate_hz, baudrate, seed, once, duration_s) -> None:
+    """Serve a scene as the sensor node: a Modbus RTU slave with the profile's register map."""
+    from ..bus.modbus_node import serve_scene_rtu
+
+    prof = open_profile(profile_path)
+    t, forces, rate = load_scene_forces(prof, scene, recording, rate_hz, seed)
+    node = prof.modbus.node
+    click.echo(f"modbus-node: unit {node.unit_id} on {port} at {baudrate or node.baudrate} baud, "
+               f"{len(t)} scans at {rate:g} Hz, function {node.function} from address {node.start_address}",
+               err=True)
+    stop = threading.Event()
+    try:
+        sim = serve_scene_rtu(prof, port, t, forces, rate, baudrate=baudrate, loop=not once,
+                              duration_s=duration_s, stop=stop)
+    except KeyboardInterrupt:
+        stop.set()
+        return
+    click.echo(f"modbus-node: answered {sim.registers.reads} reads", err=True)
+
+
+def _host_port(text: str, what: str) -> tuple[str, int]:
+    host, sep, port = text.rpartition(":")
+    if not sep or not port.isdigit() or not 0 < int(port) < 65536:
+        raise click.BadParameter(f"expected HOST:PORT, got {text!r}", param_hint=what)
+    return host or "127.0.0.1", int(port)
+
+
+@click.command("modbus-bridge")
+@profile_option()
+@click.option("--rtu", "rtu_port", default=None, help="Serial port of the sensor node (Modbus RTU master).")
+@click.option("--recording", type=click.Path(dir_okay=False), default=None,
+              help="Replay a recording instead of polling a node.")
+@click.option("--baud", "baudrate", type=int, default=None, help="Node baud rate (default: the profile's).")
+@click.option("--plc-host", default=None, help="Client mode: the PLC's host (default: the profile's).")
+@click.option("--plc-port", type=int, default=None, help="Client mode: the PLC's port (default: the profile's).")
+@click.option("--serve", "serve", default=None, metavar="HOST:PORT",
+              help="Server mode over TCP (default host: the profile's bind, 127.0.0.1).")
+@click.option("--serve-rtu", default=None, metavar="PORT", help="Server mode over Modbus RTU on this serial port.")
+@click.option("--serve-baud", type=int, default=115200, show_default=True)
+@click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,
+              help="Stop after this many seconds (default: until interrupted).")
+@click.option("--status-every", type=click.FloatRange(min=0.0), default=0.0,
+              help="Print counters every N seconds (0: only at the end).")
+def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_port, serve, serve_rtu, serve_baud,
+                  duration_s, status_every) -> None:
+    """Poll the node over Modbus RTU, detect, and publish the PLC register image:
+    written to the PLC (client mode, the default when the profile says so) or served
+    (--serve / --serve-rtu)."""
+    from ..bus.modbus_bridge import ModbusBridge, ReplaySource
+    from ..bus.modbus_io import SerialSettings
+    from ..bus.modbus_source import RtuPoller
+    from ..bus.plc_client import PlcWriter
+    from ..bus.plc_server import PlcServer
+
+    prof = open_profile(profile_path)
+    plc = prof.modbus.plc
+    if (rtu_port is None) == (recording is None):
+        raise click.UsageError("give one of --rtu PORT or --recording REC.csv")
+    if serve and serve_rtu:
+        raise click.UsageError("--serve and --serve-rtu exclude each other")
+    server_mode = bool(serve or serve_rtu) or (plc.mode == "server" and plc_host is None and plc_port is None)
+    if rtu_port is not None:
+        source = RtuPoller(prof, rtu_port, baudrate=baudrate).open()
+    else:
+        t, forces, rate = load_scene_forces(prof, None, recording, None)
+        raw = Calibrator.from_section(prof.calibration, prof.taxels).to_raw(forces)
+        source = ReplaySource(prof, t, raw, rate, loop=True)
+    if server_mode:
+        if serve_rtu:
+            sink = PlcServer(plc, serial=SerialSettings(serve_rtu, serve_baud))
+        else:
+            sink = PlcServer(plc, tcp=_host_port(serve, "--serve") if serve else (plc.bind, plc.port))
+        sink.start()
+    else:
+        sink = PlcWriter(plc, plc_host, plc_port).start()
+    bridge = ModbusBridge(prof, source, sink)
+    click.echo(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {sink.where}, base address "
+               f"{plc.base_address}", err=True)
+    end = None if duration_s is None else time.monotonic() + duration_s
+    next_status = time.monotonic() + status_every if status_every else None
+    try:
+        while end is None or time.monotonic() < end:
+            bridge.step()
+            if next_status is not None and time.monotonic() >= next_status:
+                next_status += status_every
+                click.echo(_counters(bridge), err=True)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sink.stop()
+        if hasattr(source, "close"):
+            source.close()
+    click.echo(_counters(bridge), err=True)
+
+
+def _counters(bridge) -> str:
+    return "modbus-bridge: " + " ".join(f"{k}={v}" for k, v in bridge.counters().items())

@@ -1,0 +1,45 @@
+"""``eskin-bus plc-sim``: a PLC stand-in for commissioning without a PLC."""
+
+from __future__ import annotations
+
+import time
+
+import click
+
+from .common import open_profile, profile_option
+
+
+@click.command("plc-sim")
+@profile_option()
+@click.option("--host", default="127.0.0.1", show_default=True, help="Address to listen on.")
+@click.option("--port", type=int, default=None, help="TCP port (default: the profile's [modbus.plc] port).")
+@click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,
+              help="Stop after this many seconds (default: until interrupted).")
+@click.option("--grip-step", type=click.FloatRange(min=0.0), default=2.0, show_default=True,
+              help="Newtons added to the grip force at each slip.")
+def plc_sim(profile_path: str, host: str, port: int | None, duration_s: float | None, grip_step: float) -> None:
+    """Serve the PLC's receive registers over Modbus TCP (for `modbus-bridge` in client
+    mode), print every status change, and run the example gripper logic: raise the
+    grip force when the slip flag comes, acknowledge the latch, hold when the data
+    is not valid."""
+    from ..bus.plc_sim import Gripper, PlcSimulator
+
+    prof = open_profile(profile_path)
+    plc = prof.modbus.plc
+    sim = PlcSimulator(plc, host, port or plc.port, gripper=Gripper(step_n=grip_step),
+                       echo=lambda s: click.echo(s))
+    sim.start()
+    click.echo(f"plc-sim: listening on {host}:{port or plc.port}, registers from {plc.base_address} "
+               f"(40001 + {plc.base_address}), grip force {sim.gripper.force_n:g} N", err=True)
+    try:
+        if duration_s is None:
+            while True:
+                time.sleep(1.0)
+        else:
+            time.sleep(duration_s)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sim.stop()
+    click.echo(f"plc-sim: {sim.memory.writes} writes received, {sim.gripper.raises} slip reactions, "
+               f"grip force {sim.gripper.force_n:g} N", err=True)
