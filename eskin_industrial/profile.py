@@ -110,18 +110,38 @@ class CalibrationSection:
 
 @dataclass(frozen=True)
 class CanSection:
-    """How the node's scans travel over CAN (frame layout in ``docs/can.md``)."""
+    """How the node's scans travel over CAN (frame layout in ``docs/can.md``).
 
-    node_id: int = field(default=1, metadata=in_range(0, 127))
-    #: First arbitration ID of the node's range; data segments, then status follow.
-    base_id: int = field(default=0x200, metadata=in_range(0, 0x7FF))
+    A node owns 16 arbitration IDs from ``base_id``: its data segments from
+    ``base_id`` up, its heartbeat at ``base_id + 15``.
+    """
+
+    #: The node's number, carried in its heartbeat (and checked by the receiver).
+    node_id: int = field(default=1, metadata=in_range(0, 255))
+    #: First arbitration ID of the node's range.
+    base_id: int = field(default=0x200, metadata=in_range(0, 0x1FFFFFFF))
+    #: 29-bit identifiers instead of 11-bit ones.
     extended_id: bool = False
+    #: Bits per taxel on the wire; the raw values up to ``[calibration] valid_max``
+    #: (in raw units) must fit, or the layout is refused.
     taxel_bits: Literal[12, 16] = 12
+    #: Byte order of the header and the taxel values in each frame.
     byte_order: Literal["little", "big"] = "little"
+    #: One CAN FD frame per scan (with bit-rate switching) instead of classic segments.
     fd: bool = False
     bitrate_bps: int = field(default=1_000_000, metadata=positive())
+    #: Data-phase bit rate of CAN FD frames.
     data_bitrate_bps: int = field(default=5_000_000, metadata=positive())
+    #: Period of the node's heartbeat (status) frame.
     heartbeat_s: float = field(default=0.1, metadata=positive())
+
+    def __post_init__(self) -> None:
+        top = 0x1FFFFFFF if self.extended_id else 0x7FF
+        if self.base_id + 15 > top:
+            raise ValueError(f"base_id: expected at most {top - 15:#x} (the node uses base_id .. base_id + 15 "
+                             f"and {'29' if self.extended_id else '11'}-bit IDs end at {top:#x}), got {self.base_id:#x}")
+        if self.data_bitrate_bps < self.bitrate_bps:
+            raise ValueError("data_bitrate_bps: expected at least bitrate_bps")
 
 
 @dataclass(frozen=True)

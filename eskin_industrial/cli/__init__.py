@@ -10,9 +10,11 @@ import click
 from ..errors import EskinError
 from .detect_cmd import detect
 from .modbus_cmd import modbus_bridge, modbus_node
+from .node_cmd import node
 from .plc_cmd import plc
 from .plc_sim_cmd import plc_sim
 from .profile_cmd import profile
+from .receive_cmd import receive
 
 
 class _Group(click.Group):
@@ -46,3 +48,5 @@ main.add_command(plc)
 main.add_command(plc_sim)
 main.add_command(modbus_node)
 main.add_command(modbus_bridge)
+main.add_command(node)
+main.add_command(receive)

@@ -19,7 +19,9 @@ from .common import open_profile, profile_option
 
 @click.command()
 @profile_option()
-@click.argument("input_path", metavar="INPUT.csv", type=click.Path(dir_okay=False, allow_dash=True))
+@click.argument("input_path", metavar="INPUT.csv", required=False, type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("--can-log", default=None, type=click.Path(dir_okay=False),
+              help="Instead of INPUT.csv: a CAN log (.log candump, .blf, .asc, ...) of the profile's node.")
 @click.option("-o", "--output", default="-", type=click.Path(dir_okay=False, allow_dash=True), show_default=True,
               help="Output CSV, one row per detector update ('-' for stdout).")
 @click.option("--method", type=click.Choice(sorted(METHODS)), default=None,
@@ -29,11 +31,17 @@ from .common import open_profile, profile_option
 @click.option("--engine", type=click.Choice(["batch", "stream"]), default="batch", show_default=True,
               help="Vectorized over the whole file, or frame by frame as the bridge runs (same output).")
 @click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
-def detect(profile_path: str, input_path: str, output: str, method: str | None, rate_hz: float | None,
-           engine: str, quiet: bool) -> None:
+def detect(profile_path: str, input_path: str | None, can_log: str | None, output: str, method: str | None,
+           rate_hz: float | None, engine: str, quiet: bool) -> None:
     """Detect grasp states in a recording CSV (header t,f0,...,f{n-1} in newtons,
-    or t,raw0,... in the profile's raw unit)."""
+    or t,raw0,... in the profile's raw unit), or in a CAN log (--can-log)."""
     prof = open_profile(profile_path)
+    if (input_path is None) == (can_log is None):
+        raise click.UsageError("give exactly one of INPUT.csv or --can-log LOG")
+    if can_log is not None:  # the live receiver's path, on recorded traffic: same output
+        from ..bus.can_source import detect_log
+        write_updates(output, detect_log(prof, can_log, rate_hz, method, quiet))
+        return
     rec = read_recording(input_path, prof.taxels)
     flags = None
     values = rec.values

@@ -1,4 +1,4 @@
-"""``eskin-bus profile check|show``."""
+"""``eskin-bus profile check|show|dbc``."""
 
 from __future__ import annotations
 
@@ -58,6 +58,18 @@ def show(file: str, fmt: str) -> None:
     else:
         click.echo(f"# {file}: {_brief(p)}")
         click.echo(dumps(table), nl=False)
+
+
+@profile.command()
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--fd/--no-fd", "fd", default=None, help="Describe CAN FD frames (default: the profile's).")
+def dbc(file: str, fd: bool | None) -> None:
+    """Write a DBC describing the profile's CAN frames (taxels scaled to newtons)."""
+    from ..bus.can_dbc import dbc_text
+    from ..bus.can_layout import CanLayout
+
+    p = load_profile(file)
+    click.echo(dbc_text(p, CanLayout.from_profile(p, fd=fd)), nl=False)
 
 
 def _brief(p: Profile) -> str:

@@ -1,0 +1,371 @@
+"""The CAN frame layout of a sensor node: scans to frames and back, no bus involved.
+
+Everything here is pure: :class:`CanLayout` packs raw scans into frame payloads
+(vectorized over a whole recording) and unpacks them; :class:`ScanAssembler` takes
+frames one at a time, as a bus or a log delivers them, and hands out complete raw
+scans, counting everything it drops.  The tables are in ``docs/can.md``.
+
+Summary (node range ``base_id .. base_id + 15``):
+
+- classic CAN: segment ``s`` of a scan at ``base_id + s``; 2 header bytes (a 12-bit
+  scan counter and the 4-bit segment index) then whole taxels: 4 at 12 bits or 3 at 16
+  bits per frame.  A taxel never straddles two frames, so a DBC can describe it.
+- CAN FD: the whole scan in one frame at ``base_id`` (segment 0), same header,
+  padded to the next valid FD length.
+- heartbeat at ``base_id + 15``: node, state, error counters, scan rate, last counter.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ProfileError
+from ..pipeline import RawScan
+from ..profile import Profile
+
+SEQ_BITS = 12
+SEQ_MODULO = 1 << SEQ_BITS
+SEQ_MASK = SEQ_MODULO - 1
+HEADER_BYTES = 2
+#: Offset of the heartbeat frame from ``base_id``; a node owns 16 IDs.
+STATUS_OFFSET = 15
+ID_RANGE = 16
+STATUS_LENGTH = 8
+FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
+
+
+class NodeState(enum.IntEnum):
+    """Byte 1 of the heartbeat."""
+
+    BOOT = 0
+    RUNNING = 1
+    ERROR = 2  #: the node detected a fault (its scan data may be invalid)
+    STOPPED = 3
+
+
+@dataclass(frozen=True, slots=True)
+class NodeStatus:
+    """A decoded heartbeat."""
+
+    node_id: int
+    state: int
+    tx_errors: int  #: the node controller's transmit error counter (TEC)
+    rx_errors: int  #: its receive error counter (REC)
+    rate_hz: int  #: the node's scan rate
+    seq: int  #: 12-bit counter of the last scan sent
+    t: float = math.nan  #: receipt time
+
+
+def fd_length(n: int) -> int:
+    """The smallest valid CAN FD data length holding ``n`` bytes."""
+    for length in FD_LENGTHS:
+        if length >= n:
+            return length
+    raise ValueError(f"{n} bytes do not fit one CAN FD frame (64 bytes at most)")
+
+
+@dataclass(frozen=True)
+class CanLayout:
+    taxels: int
+    bits: int  #: 12 or 16 bits per taxel
+    byte_order: str  #: "little" or "big", for the header and the taxels
+    base_id: int
+    extended_id: bool = False
+    fd: bool = False
+    node_id: int = 1
+    per_segment: int = field(init=False)  #: taxels per data frame
+    segments: int = field(init=False)  #: data frames per scan
+
+    def __post_init__(self) -> None:
+        if self.bits not in (12, 16):
+            raise ValueError(f"taxel_bits: expected 12 or 16, got {self.bits}")
+        if self.fd:
+            per = self.taxels
+            if HEADER_BYTES + self.packed_bytes(per) > 64:
+                raise ValueError(f"taxel_bits: {per} taxels at {self.bits} bits do not fit one 64-byte CAN FD frame")
+        else:
+            per = 48 // self.bits  # 6 payload bytes after the header
+        segments = -(-self.taxels // per)
+        if segments > STATUS_OFFSET:
+            raise ValueError(f"{self.taxels} taxels need {segments} frames per scan; a node has {STATUS_OFFSET}")
+        object.__setattr__(self, "per_segment", per)
+        object.__setattr__(self, "segments", segments)
+
+    @classmethod
+    def from_profile(cls, profile: Profile, fd: bool | None = None) -> "CanLayout":
+        """The profile's layout; ``fd`` overrides ``[can] fd``.  Refuses a profile whose
+        raw values do not fit ``taxel_bits`` (they would be clipped silently)."""
+        can, cal = profile.can, profile.calibration
+        top = (1 << can.taxel_bits) - 1
+        raw_max = cal.valid_max / cal.raw_scale
+        if raw_max > top:
+            raise ProfileError(
+                f"{profile.source}: [can] taxel_bits: {can.taxel_bits} bits carry raw values up to {top}, but "
+                f"[calibration] valid_max is {raw_max:.6g} raw units; use taxel_bits = 16 or lower valid_max"
+            )
+        use_fd = can.fd if fd is None else fd
+        try:
+            return cls(profile.taxels, can.taxel_bits, can.byte_order, can.base_id, can.extended_id, use_fd, can.node_id)
+        except ValueError as exc:
+            raise ProfileError(f"{profile.source}: [can] {exc}") from None
+
+    # -- sizes and IDs -------------------------------------------------------------
+
+    @property
+    def max_raw(self) -> int:
+        return (1 << self.bits) - 1
+
+    @property
+    def status_id(self) -> int:
+        return self.base_id + STATUS_OFFSET
+
+    def data_id(self, segment: int) -> int:
+        return self.base_id + segment
+
+    def packed_bytes(self, count: int) -> int:
+        """Bytes that ``count`` taxels take (12-bit taxels go in pairs of 3 bytes; an
+        odd last one takes 2)."""
+        return -(-count * self.bits // 8)
+
+    def segment_taxels(self, segment: int) -> int:
+        return min(self.per_segment, self.taxels - segment * self.per_segment)
+
+    def frame_length(self, segment: int) -> int:
+        """The data length of segment ``segment``'s frame, header included."""
+        n = HEADER_BYTES + self.packed_bytes(self.segment_taxels(segment))
+        return fd_length(n) if self.fd else n
+
+    @property
+    def frames_per_scan(self) -> int:
+        return self.segments
+
+    @property
+    def bytes_per_scan(self) -> int:
+        return sum(self.frame_length(s) for s in range(self.segments))
+
+    # -- packing (vectorized over scans) -------------------------------------------
+
+    def pack(self, raw: np.ndarray) -> np.ndarray:
+        """Taxel values ``(K, taxels)`` (integers in [0, max_raw]) -> packed bytes
+        ``(K, packed_bytes(taxels))`` uint8, in the profile's byte order."""
+        raw = np.asarray(raw)
+        values = raw.astype(np.uint32)
+        k = values.shape[0]
+        big = self.byte_order == "big"
+        if self.bits == 16:
+            return values.astype(">u2" if big else "<u2").view(np.uint8).reshape(k, -1)
+        if self.taxels % 2:
+            values = np.concatenate([values, np.zeros((k, 1), np.uint32)], axis=1)
+        a, b = values[:, 0::2], values[:, 1::2]
+        v = (a << 12 | b) if big else (a | b << 12)  # 24 bits per pair
+        shifts = (16, 8, 0) if big else (0, 8, 16)
+        out = np.stack([(v >> s) & 0xFF for s in shifts], axis=2).astype(np.uint8).reshape(k, -1)
+        return out[:, : self.packed_bytes(self.taxels)]
+
+    def unpack(self, packed: np.ndarray) -> np.ndarray:
+        """The inverse of :meth:`pack`: ``(K, packed_bytes)`` uint8 -> ``(K, taxels)`` int64."""
+        packed = np.asarray(packed, dtype=np.uint8)
+        k = packed.shape[0]
+        big = self.byte_order == "big"
+        if self.bits == 16:
+            return np.ascontiguousarray(packed).view(">u2" if big else "<u2").astype(np.int64).reshape(k, -1)
+        pad = (-packed.shape[1]) % 3
+        if pad:
+            packed = np.concatenate([packed, np.zeros((k, pad), np.uint8)], axis=1)
+        t = packed.reshape(k, -1, 3).astype(np.int64)
+        b0, b1, b2 = t[..., 0], t[..., 1], t[..., 2]
+        if big:
+            a, b = b0 << 4 | b1 >> 4, (b1 & 0xF) << 8 | b2
+        else:
+            a, b = b0 | (b1 & 0xF) << 8, b1 >> 4 | b2 << 4
+        return np.stack([a, b], axis=2).reshape(k, -1)[:, : self.taxels]
+
+    def header(self, seq: int, segment: int) -> bytes:
+        return ((seq & SEQ_MASK) | segment << SEQ_BITS).to_bytes(2, self.byte_order)  # type: ignore[arg-type]
+
+    def encode(self, seqs: np.ndarray, raw: np.ndarray) -> list[list[tuple[int, bytes]]]:
+        """Scans -> frames: for each scan, its ``(arbitration_id, data)`` in segment order.
+
+        ``raw`` is clipped to [0, max_raw] and rounded (a node sends integers).
+        """
+        raw = np.clip(np.rint(np.asarray(raw, dtype=np.float64)), 0, self.max_raw)
+        packed = self.pack(raw)
+        bounds = []
+        for s in range(self.segments):
+            start = self.packed_bytes(s * self.per_segment)
+            bounds.append((self.data_id(s), s, start, start + self.packed_bytes(self.segment_taxels(s)),
+                           self.frame_length(s)))
+        out = []
+        for k, seq in enumerate(np.asarray(seqs, dtype=np.int64).tolist()):
+            row = packed[k].tobytes()
+            frames = []
+            for can_id, s, lo, hi, length in bounds:
+                data = self.header(seq, s) + row[lo:hi]
+                frames.append((can_id, data.ljust(length, b"\0")))
+            out.append(frames)
+        return out
+
+    def encode_status(self, status: NodeStatus) -> bytes:
+        o = self.byte_order
+        return bytes([status.node_id & 0xFF, status.state & 0xFF, min(status.tx_errors, 255),
+                      min(status.rx_errors, 255)]) + int(status.rate_hz & 0xFFFF).to_bytes(2, o) + \
+            int(status.seq & SEQ_MASK).to_bytes(2, o)  # type: ignore[arg-type]
+
+    def decode_status(self, data: bytes, t: float = math.nan) -> NodeStatus:
+        o = self.byte_order
+        return NodeStatus(data[0], data[1], data[2], data[3], int.from_bytes(data[4:6], o),  # type: ignore[arg-type]
+                          int.from_bytes(data[6:8], o) & SEQ_MASK, t)  # type: ignore[arg-type]
+
+
+#: Counters a :class:`ScanAssembler` keeps (all start at 0; names are stable, they
+#: appear in ``Counters.extra`` and on the command line).
+ASSEMBLER_COUNTERS = (
+    "frames",  #: frames seen in the node's ID range
+    "foreign_frames",  #: frames of other IDs (other nodes), ignored
+    "malformed_frames",  #: wrong length, unknown ID in our range, segment/ID mismatch, remote frames
+    "duplicate_frames",  #: a segment already received for its scan, or a repeat of the last scan
+    "late_frames",  #: a frame of a scan older than the one being assembled or delivered (reordered)
+    "torn_scans",  #: scans abandoned incomplete (a segment never came)
+    "error_frames",  #: error frames reported by the controller
+    "bus_off",  #: error frames reporting bus-off
+    "heartbeats",
+    "node_id_mismatch",  #: heartbeats naming another node number
+)
+
+_CAN_ERR_BUSOFF = 0x040  # linux/can/error.h: error class bit in the error frame's ID
+
+
+class ScanAssembler:
+    """Frames in, complete raw scans out, one frame at a time.
+
+    At most one scan is assembled at a time, so segments of two scans are never
+    mixed: a frame of a newer scan abandons the incomplete one (``torn_scans``); a
+    frame of an older scan is dropped (``late_frames``).  The 12-bit counter is
+    unwrapped into ``RawScan.seq``; ``RawScan.t = seq / rate_hz`` is the node's time,
+    so receipt jitter never looks like a gap, and lost scans show as jumps of ``seq``
+    (which the pipeline counts).  After a silence longer than half the counter's
+    period the unwrap uses the receipt times to count the wraps.
+
+    ``feed`` takes anything with python-can ``Message``'s attributes and never raises
+    for bad input: malformed frames are counted and dropped.
+    """
+
+    def __init__(self, layout: CanLayout, rate_hz: float) -> None:
+        self.layout = layout
+        self.rate_hz = float(rate_hz)
+        self.counters: dict[str, int] = dict.fromkeys(ASSEMBLER_COUNTERS, 0)
+        self.status: NodeStatus | None = None
+        self._expect = {layout.data_id(s): (s, layout.frame_length(s)) for s in range(layout.segments)}
+        self._lo, self._hi = layout.base_id, layout.base_id + ID_RANGE
+        self._full = (1 << layout.segments) - 1
+        self._order = layout.byte_order
+        self._cur: int | None = None  # 12-bit counter of the scan being assembled
+        self._have = 0
+        self._parts: list[bytes] = [b""] * layout.segments
+        self._last12: int | None = None  # counter of the last delivered scan
+        self._last_rx = math.nan
+        self._abs = 0
+        # half the counter's period, in seconds: beyond it, receipt times count wraps
+        self._horizon = (SEQ_MODULO / 2) / self.rate_hz
+
+    def feed(self, msg) -> RawScan | None:
+        c = self.counters
+        if msg.is_error_frame:
+            c["error_frames"] += 1
+            if msg.arbitration_id & _CAN_ERR_BUSOFF:
+                c["bus_off"] += 1
+            return None
+        can_id = msg.arbitration_id
+        if not (self._lo <= can_id < self._hi) or msg.is_extended_id != self.layout.extended_id:
+            c["foreign_frames"] += 1
+            return None
+        c["frames"] += 1
+        data = msg.data
+        if msg.is_remote_frame or data is None:
+            c["malformed_frames"] += 1
+            return None
+        if can_id == self.layout.status_id:
+            if len(data) != STATUS_LENGTH:
+                c["malformed_frames"] += 1
+                return None
+            c["heartbeats"] += 1
+            self.status = self.layout.decode_status(bytes(data), msg.timestamp)
+            if self.status.node_id != self.layout.node_id:
+                c["node_id_mismatch"] += 1
+            return None
+        expect = self._expect.get(can_id)
+        if expect is None or len(data) != expect[1]:
+            c["malformed_frames"] += 1
+            return None
+        header = int.from_bytes(data[:2], self._order)  # type: ignore[arg-type]
+        segment, seq = header >> SEQ_BITS, header & SEQ_MASK
+        if segment != expect[0]:
+            c["malformed_frames"] += 1
+            return None
+        rx = msg.timestamp
+        if self._cur is not None and seq != self._cur:
+            if (seq - self._cur) % SEQ_MODULO > SEQ_MODULO // 2:
+                c["late_frames"] += 1  # older than the scan under way
+                return None
+            c["torn_scans"] += 1
+            self._cur = None
+        if self._cur is None:
+            if self._last12 is not None and not (rx - self._last_rx > self._horizon):
+                d = (seq - self._last12) % SEQ_MODULO
+                if d == 0:
+                    c["duplicate_frames"] += 1
+                    return None
+                if d > SEQ_MODULO // 2:
+                    c["late_frames"] += 1
+                    return None
+            self._cur, self._have = seq, 0
+        bit = 1 << segment
+        if self._have & bit:
+            c["duplicate_frames"] += 1
+            return None
+        self._have |= bit
+        self._parts[segment] = bytes(data)
+        if self._have != self._full:
+            return None
+        return self._emit(seq, rx)
+
+    def _emit(self, seq: int, rx: float) -> RawScan:
+        lay = self.layout
+        if self._last12 is None:
+            self._abs = seq
+        else:
+            d = (seq - self._last12) % SEQ_MODULO
+            elapsed = rx - self._last_rx
+            if elapsed > self._horizon:  # long silence: count the wraps from the clock
+                d += SEQ_MODULO * max(0, round((elapsed * self.rate_hz - d) / SEQ_MODULO))
+            self._abs += d
+        self._last12, self._last_rx, self._cur = seq, rx, None
+        if lay.segments == 1:
+            payload = self._parts[0][HEADER_BYTES:HEADER_BYTES + lay.packed_bytes(lay.taxels)]
+        else:
+            payload = b"".join(p[HEADER_BYTES:] for p in self._parts)
+        raw = lay.unpack(np.frombuffer(payload, dtype=np.uint8)[None, :])[0].astype(np.float64)
+        return RawScan(self._abs, self._abs / self.rate_hz, raw, 0, rx)
+
+    def flush(self) -> None:
+        """End of traffic: a scan still incomplete is torn."""
+        if self._cur is not None:
+            self.counters["torn_scans"] += 1
+            self._cur = None
+
+
+def decode_messages(layout: CanLayout, messages, rate_hz: float) -> tuple[list[RawScan], ScanAssembler]:
+    """All complete scans in a sequence of messages (a log), and the assembler with its
+    counters."""
+    asm = ScanAssembler(layout, rate_hz)
+    scans = []
+    for msg in messages:
+        scan = asm.feed(msg)
+        if scan is not None:
+            scans.append(scan)
+    asm.flush()
+    return scans, asm

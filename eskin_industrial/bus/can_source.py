@@ -1,0 +1,277 @@
+"""Receive a sensor node's scans from any python-can bus, and replay CAN logs.
+
+The bus is opened by python-can itself (:func:`open_bus`), so its interface names,
+its configuration file and ``CAN_INTERFACE`` / ``CAN_CHANNEL`` all apply.  A reader
+thread (:class:`BusReader`) does nothing but ``recv`` into a bounded queue: it never
+waits on the detector.  When the queue is full the frame is dropped and counted.  A
+bus that fails (interface down, adapter unplugged) is counted, closed and reopened
+until it answers again.  The consumer (:class:`CanSource`) assembles scans with the
+pure :class:`~eskin_industrial.bus.can_layout.ScanAssembler` and runs them through the
+same :class:`~eskin_industrial.pipeline.Pipeline` as every other path; a log replayed
+with :func:`read_can_log` goes through the same two steps, so it gives the same output.
+"""
+
+from __future__ import annotations
+
+import collections
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import can
+
+from ..detect.updates import Update
+from ..errors import EskinError, InputFormatError
+from ..pipeline import Pipeline, RawScan
+from .can_layout import ScanAssembler
+
+#: Socket receive buffer asked for on SocketCAN (the kernel default holds a few
+#: hundred frames: a 1 Mbit/s bus fills it in tens of milliseconds).
+DEFAULT_RCVBUF_BYTES = 8 * 1024 * 1024
+DEFAULT_QUEUE_FRAMES = 200_000
+
+
+class CanBusError(EskinError):
+    """The CAN bus cannot be opened (unknown interface, missing channel, no driver)."""
+
+    exit_code = 3
+
+
+def open_bus(interface: str | None = None, channel: str | None = None, bitrate: int | None = None,
+             fd: bool = False, data_bitrate: int | None = None,
+             rcvbuf_bytes: int = DEFAULT_RCVBUF_BYTES) -> can.BusABC:
+    """``can.Bus`` with python-can's own option names; ``None`` leaves the value to
+    python-can's configuration (file, ``CAN_INTERFACE``, ``CAN_CHANNEL``)."""
+    kwargs: dict = {}
+    if bitrate is not None:
+        kwargs["bitrate"] = bitrate
+    if fd:
+        kwargs["fd"] = True
+        if data_bitrate is not None:
+            kwargs["data_bitrate"] = data_bitrate
+    try:
+        bus = can.Bus(interface=interface, channel=channel, **kwargs)
+    except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
+        where = f"interface {interface!r}" if interface else "the configured interface"
+        if channel:
+            where += f", channel {channel!r}"
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise CanBusError(f"cannot open CAN bus ({where}): {detail}; valid interfaces: "
+                          f"{', '.join(sorted(can.interfaces.VALID_INTERFACES))}") from exc
+    enlarge_rcvbuf(bus, rcvbuf_bytes)
+    return bus
+
+
+def enlarge_rcvbuf(bus: can.BusABC, size: int) -> int | None:
+    """Raise a SocketCAN socket's receive buffer to ``size`` bytes (past the system
+    limit when privileged); returns what the kernel granted, None for other buses."""
+    sock = getattr(bus, "socket", None)
+    if not isinstance(sock, socket.socket):
+        return None
+    force = getattr(socket, "SO_RCVBUFFORCE", 33)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, force, size)
+    except OSError:
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size)
+        except OSError:
+            pass
+    return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+
+
+class BusReader:
+    """A thread that reads a bus into a bounded queue and survives bus failures.
+
+    ``open`` is called to (re)open the bus.  Counters: ``rx_queue_drops`` (frames
+    dropped because the consumer fell behind), ``bus_errors`` (failed reads or
+    reopens), ``bus_reopens`` (successful reopens after a failure).
+    """
+
+    def __init__(self, open: Callable[[], can.BusABC], queue_frames: int = DEFAULT_QUEUE_FRAMES,
+                 retry_s: float = 0.2) -> None:
+        self._open = open
+        self.bus: can.BusABC | None = open()
+        self.queue: collections.deque[can.Message] = collections.deque()
+        self.max_frames = queue_frames
+        self.retry_s = retry_s
+        self.counters = {"rx_queue_drops": 0, "bus_errors": 0, "bus_reopens": 0}
+        self.bus_up = True
+        self.last_error = ""
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="can-reader", daemon=True)
+
+    def start(self) -> "BusReader":
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        q, limit, counters = self.queue, self.max_frames, self.counters
+        while not self._stop.is_set():
+            bus = self.bus
+            if bus is None:
+                if not self._reopen():
+                    self._stop.wait(self.retry_s)
+                continue
+            try:
+                msg = bus.recv(0.1)
+            except (can.CanError, OSError, ValueError) as exc:
+                self._fail(exc)
+                continue
+            if msg is None:
+                continue
+            if len(q) >= limit:
+                counters["rx_queue_drops"] += 1
+            else:
+                q.append(msg)
+
+    def _fail(self, exc: Exception) -> None:
+        self.counters["bus_errors"] += 1
+        self.bus_up = False
+        self.last_error = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        bus, self.bus = self.bus, None
+        if bus is not None:
+            try:
+                bus.shutdown()
+            except Exception:  # a broken driver must not stop the reader  # noqa: BLE001
+                pass
+        self._stop.wait(self.retry_s)
+
+    def _reopen(self) -> bool:
+        try:
+            self.bus = self._open()
+        except (EskinError, can.CanError, OSError, ValueError):
+            self.counters["bus_errors"] += 1
+            return False
+        self.counters["bus_reopens"] += 1
+        self.bus_up = True
+        return True
+
+    def stop(self) -> None:
+        """Stop reading and close the bus; safe to call twice."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=2.0)
+        bus, self.bus = self.bus, None
+        if bus is not None:
+            bus.shutdown()
+
+
+class CanSource:
+    """Frames from a :class:`BusReader` -> scans -> pipeline updates, with counters.
+
+    ``log`` (optional) is a python-can writer (``can.Logger(path)``: ``.log`` candump,
+    ``.blf``, ``.asc``, ...) that gets every frame the assembler sees, so replaying
+    it gives the same scans.
+    """
+
+    def __init__(self, reader: BusReader, assembler: ScanAssembler, pipeline: Pipeline,
+                 log: can.Listener | None = None) -> None:
+        self.reader = reader
+        self.assembler = assembler
+        self.pipeline = pipeline
+        self.log = log
+        self.updates: list[Update] = []
+
+    def counters(self) -> dict[str, int]:
+        extra = self.pipeline.counters.extra
+        extra.update(self.assembler.counters)
+        extra.update(self.reader.counters)
+        return extra
+
+    def poll(self) -> int:
+        """Process every queued frame; returns how many."""
+        q, asm, pipe, log = self.reader.queue, self.assembler, self.pipeline, self.log
+        n = 0
+        while q:
+            msg = q.popleft()
+            n += 1
+            if log is not None:
+                log.on_message_received(msg)
+            scan = asm.feed(msg)
+            if scan is not None:
+                self.updates += pipe.push(scan)
+        return n
+
+    def run(self, duration_s: float | None = None, idle_timeout_s: float | None = None,
+            max_scans: int | None = None, on_tick: Callable[["CanSource"], None] | None = None) -> None:
+        """Process until ``duration_s`` has passed, no frame came for ``idle_timeout_s``
+        (after the first one), ``max_scans`` scans were decoded, or Ctrl-C."""
+        start = last = time.monotonic()
+        seen = False
+        try:
+            while True:
+                n = self.poll()
+                now = time.monotonic()
+                if n:
+                    seen, last = True, now
+                    if on_tick is not None:
+                        on_tick(self)
+                else:
+                    time.sleep(0.001)
+                if duration_s is not None and now - start >= duration_s:
+                    break
+                if idle_timeout_s is not None and seen and now - last >= idle_timeout_s:
+                    break
+                if max_scans is not None and self.pipeline.counters.scans >= max_scans:
+                    break
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.reader.stop()
+            self.poll()
+            self.assembler.flush()
+            self.counters()
+
+
+def read_can_log(path: str | Path) -> Iterator[can.Message]:
+    """Messages of a CAN log in any format python-can reads (``.log``, ``.blf``,
+    ``.asc``, ``.trc``, ``.csv``, ...); a file that does not parse is one line."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputFormatError(f"{path}: cannot read CAN log: no such file")
+    try:
+        reader = can.LogReader(path)
+    except (ValueError, OSError) as exc:
+        raise InputFormatError(f"{path}: cannot read CAN log: {exc}") from None
+    count = 0
+    try:
+        with reader:
+            for msg in reader:
+                count += 1
+                yield msg
+    except (ValueError, IndexError, OSError, can.CanError) as exc:
+        raise InputFormatError(f"{path}: message {count + 1}: not a valid log entry: {exc}") from None
+
+
+def replay(scans: list[RawScan], pipeline: Pipeline) -> list[Update]:
+    updates: list[Update] = []
+    for scan in scans:
+        updates += pipeline.push(scan)
+    return updates
+
+
+def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: str | None = None,
+               quiet: bool = True):
+    """A CAN log through the live path's assembler and pipeline: the updates as a
+    table, and (unless ``quiet``) the counters on stderr."""
+    import json
+    import sys
+
+    from ..detect.updates import UpdateTable
+    from .can_layout import CanLayout, decode_messages
+
+    messages = list(read_can_log(path))
+    lo = profile.can.base_id
+    fd = any(m.is_fd for m in messages[:10_000] if lo <= m.arbitration_id < lo + 16)  # FD frames: the FD layout
+    layout = CanLayout.from_profile(profile, fd=fd or profile.can.fd)
+    rate = rate_hz or profile.sensor.rate_hz
+    scans, asm = decode_messages(layout, messages, rate)
+    pipeline = Pipeline(profile, rate_hz=rate, method=method)
+    table = UpdateTable.from_updates(replay(scans, pipeline))
+    if not quiet:
+        c = pipeline.counters
+        summary = {k: v for k, v in vars(c).items() if k != "extra"} | asm.counters
+        print(f"{path}: " + json.dumps(summary), file=sys.stderr)
+    return table

@@ -1,0 +1,93 @@
+"""``eskin-bus node``: play a scene or a recording onto a CAN bus as a sensor node would."""
+
+from __future__ import annotations
+
+import json
+
+import click
+import numpy as np
+
+from ..calibration import Calibrator
+from ..errors import EskinError, InputFormatError
+from ..recording import read_recording
+from .can_common import bus_kwargs, bus_options
+from .common import open_profile, profile_option
+
+
+def _scene_forces(name: str, rate_hz: float, seed: int, taxels: int):
+    try:
+        from .. import scenes  # built beside the sources; optional here
+    except ImportError:
+        raise EskinError("--scene: the scene simulator (eskin_industrial.scenes) is not installed; "
+                         "use --recording REC.csv") from None
+    try:
+        scene = scenes.render(name, rate_hz, seed)
+    except (KeyError, ValueError, FileNotFoundError) as exc:
+        known = ", ".join(scenes.list_scenes()) if hasattr(scenes, "list_scenes") else "?"
+        raise InputFormatError(f"--scene {name}: {exc} (known scenes: {known})") from None
+    forces = np.asarray(scene.forces, dtype=np.float64)
+    if forces.shape[1] != taxels:
+        raise InputFormatError(f"--scene {name}: {forces.shape[1]} taxels ({scene.profile_name}), "
+                               f"but the profile has {taxels}")
+    return forces
+
+
+@click.command()
+@profile_option()
+@bus_options
+@click.option("--scene", default=None, help="Scene to send (from the scene simulator).")
+@click.option("--recording", "recording", type=click.Path(dir_okay=False), default=None,
+              help="Recording CSV to send instead (t,f0,... newtons or t,raw0,... raw).")
+@click.option("--rate", "rate_hz", type=float, default=None,
+              help="Scan rate in Hz (default: the recording's, or the profile's for a scene).")
+@click.option("--burst", is_flag=True, help="Send as fast as the bus takes frames (no pacing).")
+@click.option("--repeat", type=int, default=1, show_default=True, help="Send the scans this many times.")
+@click.option("--duration", "duration_s", type=float, default=None,
+              help="Send for this long (node time, seconds), repeating the scans as needed.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed for scenes and fault injection.")
+@click.option("--drop", type=float, default=0.0, help="Fault: probability that a frame is not sent.")
+@click.option("--duplicate", type=float, default=0.0, help="Fault: probability that a frame is sent twice.")
+@click.option("--reorder", type=float, default=0.0, help="Fault: probability that a frame is held behind the next.")
+@click.option("--corrupt", type=float, default=0.0, help="Fault: probability that a frame is sent one byte short.")
+@click.option("--silent-at", "silent_at_s", type=float, default=None, help="Fault: fall silent at this node time (s)...")
+@click.option("--silent-for", "silent_for_s", type=float, default=0.0, help="...for this long (s).")
+@click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
+def node(profile_path, interface, channel, bitrate, fd, data_bitrate, scene, recording, rate_hz, burst, repeat,
+         duration_s, seed, drop, duplicate, reorder, corrupt, silent_at_s, silent_for_s, quiet) -> None:
+    """Send scans as the profile's sensor node: one scan every 1/rate seconds (absolute
+    deadlines, no drift), with the node's heartbeat and optional faults."""
+    from ..bus.can_layout import CanLayout
+    from ..bus.can_node import CanNode, Faults
+    from ..bus.can_source import open_bus
+
+    prof = open_profile(profile_path)
+    if (scene is None) == (recording is None):
+        raise click.UsageError("give exactly one of --scene NAME or --recording REC.csv")
+    for name, p in (("--drop", drop), ("--duplicate", duplicate), ("--reorder", reorder), ("--corrupt", corrupt)):
+        if not 0.0 <= p <= 1.0:
+            raise click.BadParameter(f"expected a probability in [0, 1], got {p}", param_hint=name)
+    if rate_hz is not None and not rate_hz > 0:
+        raise click.BadParameter(f"expected a positive rate, got {rate_hz}", param_hint="--rate")
+    cal = Calibrator.from_section(prof.calibration, prof.taxels)
+    if recording is not None:
+        rec = read_recording(recording, prof.taxels)
+        rate = rate_hz or rec.rate_hz(prof.sensor.rate_hz)
+        raw = rec.values if rec.unit == "raw" else cal.to_raw(rec.values)
+    else:
+        rate = rate_hz or prof.sensor.rate_hz
+        raw = cal.to_raw(_scene_forces(scene, rate, seed, prof.taxels))
+    kw = bus_kwargs(prof, interface, channel, bitrate, fd, data_bitrate)
+    layout = CanLayout.from_profile(prof, fd=kw["fd"])
+    faults = Faults(drop, duplicate, reorder, corrupt, silent_at_s, silent_for_s, seed)
+    bus = open_bus(**kw)
+    try:
+        sim = CanNode(layout, bus, raw, rate, prof.can.heartbeat_s, faults, burst, repeat, duration_s)
+        stats = sim.run()
+    finally:
+        bus.shutdown()
+    if not quiet:
+        fps = stats.frames_sent / stats.elapsed_s if stats.elapsed_s > 0 else float("nan")
+        click.echo(f"node: {stats.scans} scans, {stats.frames_sent} frames in {stats.elapsed_s:.3f} s "
+                   f"({fps:.0f} frames/s); " + json.dumps({k: v for k, v in vars(stats).items()
+                                                          if k not in ("scans", "frames_sent", "elapsed_s")}),
+                   err=True)
