@@ -9,7 +9,6 @@ See ``docs/profiles.md`` for every key.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -19,7 +18,7 @@ import numpy as np
 
 from .detect.settings import DetectorSettings
 from .errors import ProfileError
-from .schema import SchemaError, build, in_range, non_negative, positive, to_table
+from .schema import SchemaError, in_range, non_negative, parse_toml, positive, to_table
 
 
 @dataclass(frozen=True)
@@ -280,15 +279,6 @@ def load_profile(path: str | Path) -> Profile:
 
 
 def parse_profile(text: str, source: str = "<profile>") -> Profile:
-    try:
-        table = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ProfileError(f"{source}: not valid TOML: {exc}") from None
-    try:
-        profile = build(Profile, table)
-    except SchemaError as exc:
-        section, _, key = exc.key.partition(".")
-        where = f"[{section}] {key}" if key else f"[{section}]"
-        raise ProfileError(f"{source}: {where}: {exc.message}") from None
+    profile = parse_toml(Profile, text, source)
     object.__setattr__(profile, "source", source)
     return profile

@@ -15,9 +15,14 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import tomllib
 import types
 import typing
-from typing import Any, Callable, Literal, Union, get_args, get_origin
+from typing import Any, Callable, Literal, TypeVar, Union, get_args, get_origin
+
+from .errors import ProfileError
+
+T = TypeVar("T")
 
 Check = tuple[Callable[[Any], bool], str]
 
@@ -197,3 +202,18 @@ def to_table(obj: Any) -> Any:
     if isinstance(obj, dict):
         return {k: to_table(v) for k, v in obj.items()}
     return obj
+
+
+def parse_toml(cls: type[T], text: str, source: str) -> T:
+    """TOML text to ``cls``; any problem is one :class:`ProfileError` line:
+    ``SOURCE: [section] key: what was expected``."""
+    try:
+        table = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ProfileError(f"{source}: not valid TOML: {exc}") from None
+    try:
+        return build(cls, table)
+    except SchemaError as exc:
+        section, _, key = exc.key.partition(".")
+        where = f"[{section}] {key}" if key else f"[{section}]"
+        raise ProfileError(f"{source}: {where}: {exc.message}") from None

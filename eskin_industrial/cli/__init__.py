@@ -9,12 +9,13 @@ import click
 
 from ..errors import EskinError
 from .detect_cmd import detect
-from .modbus_cmd import modbus_bridge, modbus_node
 from .node_cmd import node
+from .modbus_cmd import modbus_bridge, modbus_node
 from .plc_cmd import plc
 from .plc_sim_cmd import plc_sim
 from .profile_cmd import profile
 from .receive_cmd import receive
+from .simulate_cmd import simulate
 
 
 class _Group(click.Group):
@@ -44,6 +45,7 @@ def main(ctx: click.Context, debug: bool) -> None:
 
 main.add_command(detect)
 main.add_command(profile)
+main.add_command(simulate)
 main.add_command(plc)
 main.add_command(plc_sim)
 main.add_command(modbus_node)

@@ -8,10 +8,15 @@ Each entry gives a streaming factory ``(settings, x_mm, y_mm, rate_hz) -> detect
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable
 
+import numpy as np
+
+from .cof_track import CofTrack
 from .paper import PaperDetector, paper_batch
+from .scored import CofVelocity, ForceRate, HfEnergy
+from .updates import UpdateTable
 
 
 @dataclass(frozen=True)
@@ -22,8 +27,35 @@ class Method:
     batch: Callable[..., Any]
 
 
+def batch_via_stream(factory: Callable[..., Any]) -> Callable[..., UpdateTable]:
+    """A batch function for a method that only streams: feed the whole recording."""
+
+    def batch(settings, x_mm, y_mm, rate_hz, t, forces, flags=None) -> UpdateTable:
+        det = factory(settings, x_mm, y_mm, rate_hz)
+        return UpdateTable.from_updates(det.feed(np.asarray(t, float), np.asarray(forces, float), flags))
+
+    return batch
+
+
+def _paper_rule(rule: str) -> Callable[..., Any]:
+    def make(settings, x_mm, y_mm, rate_hz):
+        return PaperDetector(replace(settings, slip_rule=rule), x_mm, y_mm, rate_hz)
+
+    return make
+
+
+def _method(name: str, summary: str, stream: Callable[..., Any]) -> Method:
+    return Method(name, summary, stream, batch_via_stream(stream))
+
+
 METHODS: dict[str, Method] = {
     "paper": Method("paper", "R_coe and R_dw both above their slip thresholds (the reference paper)", PaperDetector, paper_batch),
+    "paper-coe": _method("paper-coe", "the paper's R_coe alone above its slip threshold", _paper_rule("coe")),
+    "paper-dw": _method("paper-dw", "the paper's R_dw alone above its slip threshold", _paper_rule("dw")),
+    "force-rate": _method("force-rate", "rival: total-force derivative above a threshold", ForceRate),
+    "hf-energy": _method("hf-energy", "rival: high-frequency energy of the taxel signals over its baseline", HfEnergy),
+    "cof-velocity": _method("cof-velocity", "rival: centre-of-force speed above a threshold", CofVelocity),
+    "cof-track": _method("cof-track", "ours: centre-of-force displacement against its learnt noise", CofTrack),
 }
 
 

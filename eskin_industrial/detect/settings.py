@@ -21,8 +21,36 @@ MethodName = str
 
 
 @dataclass(frozen=True)
+class CofTrackSettings:
+    """Our method (``cof-track``): centre-of-force displacement against its noise."""
+
+    #: Centres of force are averaged over this long before they are compared.
+    smooth_s: float = field(default=0.03, metadata=positive())
+    #: Fast and slow horizons of the displacement.
+    fast_s: float = field(default=0.1, metadata=positive())
+    slow_s: float = field(default=0.8, metadata=positive())
+    #: Threshold in standard deviations of the displacement noise.
+    z: float = field(default=6.0, metadata=positive())
+    #: Smallest displacement that counts, whatever the noise (fast, slow horizon).
+    min_fast_mm: float = field(default=0.2, metadata=non_negative())
+    min_slow_mm: float = field(default=0.35, metadata=non_negative())
+    #: Varying force when |dS/dt| / S exceeds this (1/s).
+    force_rate_per_s: float = field(default=0.3, metadata=positive())
+    #: Time constant of the learnt CoF noise.
+    noise_s: float = field(default=3.0, metadata=positive())
+    #: Stick-slip: CoF step energy over this window, as a multiple of the noise, ...
+    vib_s: float = field(default=0.08, metadata=positive())
+    vib_ratio: float = field(default=3.0, metadata=positive())
+    #: ... counts when the fast displacement reaches this fraction of its threshold.
+    vib_support: float = field(default=0.5, metadata=non_negative())
+    #: Time between updates.
+    hop_s: float = field(default=0.01, metadata=positive())
+
+
+@dataclass(frozen=True)
 class DetectorSettings:
-    method: MethodName = "paper"
+    #: Detection method by name (``eskin-bus detect --help`` lists them).
+    method: MethodName = "cof-track"
     #: Length of the analysis window (the paper's 400 ms).
     window_s: float = field(default=0.4, metadata=positive())
     #: Time between two detector updates (the paper's 100 ms); the window must be a
@@ -35,6 +63,8 @@ class DetectorSettings:
     #: Paper decision: slip when both R_coe and R_dw exceed these.
     slip_r_coe: float = field(default=2.5, metadata=positive())
     slip_r_dw: float = field(default=2.5, metadata=positive())
+    #: Which indicators must exceed their slip threshold: both (the paper), or one alone.
+    slip_rule: Literal["both", "coe", "dw"] = "both"
     #: Varying force (no slip) when either exceeds its threshold here.
     variable_r_coe: float = field(default=0.5, metadata=positive())
     variable_r_dw: float = field(default=0.5, metadata=positive())
@@ -55,6 +85,8 @@ class DetectorSettings:
     #: A timestamp gap longer than this restarts the detector (shorter gaps are
     #: filled by holding the last frame, so that lags stay in time, not in samples).
     max_gap_s: float = field(default=0.4, metadata=positive())
+    #: Settings of our own method (the paper's keys above do not apply to it).
+    cof_track: CofTrackSettings = field(default_factory=CofTrackSettings)
 
     def __post_init__(self) -> None:
         hops = self.window_s / self.hop_s

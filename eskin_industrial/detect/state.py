@@ -72,7 +72,9 @@ class StateMachine:
         slip_d = cfg.slip_r_dw * (keep if cur == _SLIP else 1.0)
         var_c = cfg.variable_r_coe * (keep if cur >= _VARIABLE else 1.0)
         var_d = cfg.variable_r_dw * (keep if cur >= _VARIABLE else 1.0)
-        if r_coe > slip_c and r_dw > slip_d:
+        rule = cfg.slip_rule
+        over_c, over_d = r_coe > slip_c, r_dw > slip_d
+        if (over_c and over_d) if rule == "both" else over_c if rule == "coe" else over_d:
             self.slip_run += 1
             candidate = _SLIP if (self.slip_run >= cfg.slip_confirm_updates or cur == _SLIP) else _VARIABLE
         else:

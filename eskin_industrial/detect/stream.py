@@ -6,8 +6,9 @@ taxels, a K-tap FIR step (the one-level DWT detail is the high-pass filter at st
 block sums; a window sum is B block sums added when a hop completes.  Memory: ``lag``
 frames, ``W`` energies, ``B`` block sums.
 
-Frame handling (duplicates, NaN, negative values, gaps) is the per-frame form of
-:func:`~eskin_industrial.detect.regularize.regularize`; a test proves the two agree.
+Frame handling (duplicates, NaN, negative values, gaps) comes from
+:class:`~eskin_industrial.detect.hygiene.FrameHygiene`; a test proves the stream
+agrees with the batch code.
 """
 
 from __future__ import annotations
@@ -18,15 +19,10 @@ from collections import deque
 import numpy as np
 
 from ..frames import FrameFlag
+from .hygiene import FrameHygiene
 from .indicators import _EPS, _ZERO_VAR, odd_offsets
 from .settings import DetectorSettings, Geometry
 
-_DUP = int(FrameFlag.DUPLICATE)
-_INVALID = int(FrameFlag.INVALID)
-_NEG = int(FrameFlag.NEGATIVE)
-_GAP = int(FrameFlag.GAP_BEFORE)
-_FILLED = int(FrameFlag.FILLED)
-_RESET = int(FrameFlag.RESET)
 _WARMUP = int(FrameFlag.WARMUP)
 _SHORT = int(FrameFlag.SHORT_WINDOW)
 
@@ -35,13 +31,16 @@ _SHORT = int(FrameFlag.SHORT_WINDOW)
 RawUpdate = tuple[float, float, float, bool, int, float, float, float, bool]
 
 
-class IndicatorStream:
-    """Streaming R_coe / R_dw for one sensor array at a fixed sample rate."""
+class IndicatorStream(FrameHygiene):
+    """Streaming R_coe / R_dw for one sensor array at a fixed sample rate.
+
+    ``push(t, forces, flags)`` (from :class:`FrameHygiene`) returns the
+    :data:`RawUpdate` tuples the frame completes."""
 
     def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float) -> None:
         self.cfg = settings
         self.geo: Geometry = settings.geometry(rate_hz)
-        self.n = int(len(x_mm))
+        super().__init__(int(len(x_mm)), rate_hz, self.geo.max_fill)
         self._mat = np.column_stack([np.ones(self.n), x_mm, y_mm]).astype(np.float64)
         self._centre = (float(np.mean(x_mm)), float(np.mean(y_mm)))
         self._h = [float(v) for v in self.geo.dec_hi]
@@ -49,14 +48,6 @@ class IndicatorStream:
         self._e_floor = settings.dw_floor_mm2 * odd_offsets(self.geo.window, len(self._h))
         self._symmetric = settings.ratio_mode == "symmetric"
         self._thr = settings.contact_threshold_n
-        self._inv_rate = 1.0 / rate_hz
-        self._rate = rate_hz
-        # sensor-level memory, kept across resets
-        self._last_t = -math.inf
-        self._last_good = np.zeros(self.n)
-        self._pending = 0
-        self._prev_frame: np.ndarray | None = None
-        self.dropped = 0
         self._reset(0)
 
     def _reset(self, flags: int) -> None:
@@ -76,43 +67,6 @@ class IndicatorStream:
         self._carry_flags = 0
         self._blocks: deque[tuple[float, float, float]] = deque(maxlen=geo.blocks)
         self._prev_sums: tuple[float, float] | None = None
-
-    # -- public -------------------------------------------------------------------
-    def push(self, t: float, forces: np.ndarray, flags: int = 0) -> list[RawUpdate]:
-        """Feed one frame; returns the updates it completes (usually none or one;
-        more only when a gap was filled)."""
-        if not t > self._last_t:  # duplicate, out of order, or NaN time
-            self.dropped += 1
-            self._pending |= _DUP
-            return []
-        flags |= self._pending
-        self._pending = 0
-        f = np.asarray(forces, dtype=np.float64)
-        if f.shape != (self.n,):
-            raise ValueError(f"expected {self.n} taxel forces, got shape {f.shape}")
-        if not np.isfinite(f).all():
-            f = np.where(np.isfinite(f), f, self._last_good)
-            flags |= _INVALID
-        self._last_good = f
-        if f.min() < 0.0:
-            f = np.maximum(f, 0.0)
-            flags |= _NEG
-        out: list[RawUpdate] = []
-        last_t = self._last_t
-        self._last_t = t
-        if self._prev_frame is not None:
-            missing = max(int(np.rint((t - last_t) * self._rate)) - 1, 0)
-            if missing > self.geo.max_fill:
-                self._reset(0)
-                flags |= _GAP | _RESET
-            elif missing:
-                flags |= _GAP
-                prev = self._prev_frame
-                for m in range(1, missing + 1):
-                    self._step(last_t + m / self._rate, prev, _FILLED, out)
-        self._prev_frame = f
-        self._step(t, f, flags, out)
-        return out
 
     # -- the per-frame core --------------------------------------------------------
     def _step(self, t: float, f: np.ndarray, flags: int, out: list[RawUpdate]) -> None:

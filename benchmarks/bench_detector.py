@@ -1,0 +1,114 @@
+"""Detector speed: streaming cost per frame, batch throughput, and the ratio to a naive
+reference that recomputes every window from scratch (np.corrcoef + pywt.dwt).
+
+    .venv/bin/python benchmarks/bench_detector.py            # full run (about a minute)
+    .venv/bin/python benchmarks/bench_detector.py --quick    # smoke run
+
+The machine is shared and noisy: every figure is the median of several repeats.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from eskin_industrial.detect import PaperDetector, paper_batch
+from eskin_industrial.detect.reference import reference_window_sums
+from eskin_industrial.detect.settings import DetectorSettings
+
+RATE = 1000.0
+
+
+def grid(rows: int, cols: int) -> tuple[np.ndarray, np.ndarray]:
+    r, c = np.divmod(np.arange(rows * cols), cols)
+    return c * 5.0, r * 5.0
+
+
+def recording(k: int, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    base = rng.uniform(0.1, 0.5, n)
+    f = np.abs(base + 0.01 * rng.standard_normal((k, n)))
+    f[k // 2:k // 2 + k // 20] = np.roll(f[k // 2:k // 2 + k // 20], 1, axis=1)  # some movement
+    return np.arange(k) / RATE, f
+
+
+def stream_us_per_frame(cfg: DetectorSettings, rows: int, cols: int, frames: int, repeats: int) -> float:
+    x, y = grid(rows, cols)
+    t, f = recording(frames, rows * cols)
+    runs = []
+    for _ in range(repeats):
+        det = PaperDetector(cfg, x, y, RATE)
+        push = det.push
+        tl = t.tolist()
+        start = time.perf_counter()
+        for i in range(frames):
+            push(tl[i], f[i])
+        runs.append((time.perf_counter() - start) / frames * 1e6)
+    return statistics.median(runs)
+
+
+def batch_frames_per_s(cfg: DetectorSettings, frames: int, repeats: int) -> float:
+    x, y = grid(5, 5)
+    t, f = recording(frames, 25)
+    runs = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        paper_batch(cfg, x, y, RATE, t, f)
+        runs.append(frames / (time.perf_counter() - start))
+    return statistics.median(runs)
+
+
+def reference_us_per_frame(cfg: DetectorSettings, frames: int) -> float:
+    x, y = grid(5, 5)
+    _, f = recording(frames, 25)
+    start = time.perf_counter()
+    reference_window_sums(cfg, x, y, RATE, f)
+    return (time.perf_counter() - start) / frames * 1e6
+
+
+def machine() -> str:
+    cpu = "unknown CPU"
+    try:
+        with open("/proc/cpuinfo") as fh:
+            cpu = next(line.split(":", 1)[1].strip() for line in fh if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return f"{platform.machine()}, {os.cpu_count()} cores, {cpu}, Python {platform.python_version()}, numpy {np.__version__}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer frames and repeats")
+    args = ap.parse_args()
+    cfg = replace(DetectorSettings(), window_s=0.4, hop_s=0.1, lag_s=0.1)
+    frames, repeats = (5_000, 3) if args.quick else (30_000, 5)
+    batch_frames = 60_000 if args.quick else 600_000  # 10 minutes at 1 kHz
+    ref_frames = 1_000 if args.quick else 3_000
+
+    print(f"# {' '.join([os.path.basename(sys.executable), *sys.argv])}")
+    print(f"# {time.strftime('%Y-%m-%d')} on {machine()}")
+    print(f"# rate {RATE:g} Hz, window {cfg.window_s} s, hop {cfg.hop_s} s, lag {cfg.lag_s} s, {cfg.wavelet}")
+    print("| case | figure | ours | naive reference | ratio |")
+    print("|---|---|---|---|---|")
+    ref = reference_us_per_frame(cfg, ref_frames)
+    for name, rows, cols in (("5x5", 5, 5), ("4x5", 4, 5), ("16x16", 16, 16)):
+        us = stream_us_per_frame(cfg, rows, cols, frames, repeats)
+        ref_cell, ratio = (f"{ref:.1f} us/frame", f"{ref / us:.0f}x faster") if name == "5x5" else ("", "")
+        print(f"| stream {name} | median cost per frame | {us:.1f} us ({1e6 / us:,.0f} frames/s) | {ref_cell} | {ratio} |")
+    fps = batch_frames_per_s(cfg, batch_frames, max(1, repeats // 2))
+    print(f"| batch 5x5, {batch_frames / RATE / 60:g} min at 1 kHz | frames per second | {fps:,.0f} | "
+          f"{1e6 / ref:,.0f} | {fps / (1e6 / ref):,.0f}x faster |")
+    for window in (0.2, 0.8):
+        us = stream_us_per_frame(replace(cfg, window_s=window), 5, 5, frames, repeats)
+        print(f"| stream 5x5, window {window} s | median cost per frame | {us:.1f} us | | (independent of the window) |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,110 @@
+"""Our method: track the centre of force against its own noise.
+
+Why (see docs/evaluation.md for the measurements): the paper's indicators are
+ratios of two overlapping windows, so a slide whose onset is gradual, a slow creep,
+or sustained sliding keep the ratio near 1, while at a still grasp the ratio of two
+noise numbers jumps.  A slide, however, always *moves* the pressure distribution,
+and a varying normal force (a squeeze, a glass being moved) scales it in place.  So:
+
+    m_k  = mean of the last M centres of force                 (M = smooth_s x f_s)
+    D_f  = |m_k - m_{k-Lf}|,  D_s = min(|m_k - m_{k-Ls}|, 2 |m_k - m_{k-Ls/2}|)   (fast, slow)
+    q    = running mean of S_k^2 |c_k - c_{k-1}|^2 / 2, learnt while calm
+    s    = sqrt(q) / S_k                      (CoF noise: the force noise spread over S)
+    a    = D_f / max(z s sqrt(2/M), min_fast_mm),  b = D_s / max(z s sqrt(2/M), min_slow_mm)
+    slip when a > 1 or b > 1; varying force when |S_k - S_{k-Lf}| / (Lf/f_s) / S_k > force_rate
+
+The cost per frame is one 3-column matrix product and a few scalar operations: less
+than the paper's indicators.  The score columns hold a and b (1 = threshold).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+from .scored import ScoredDetector, _Lagged
+from .settings import DetectorSettings
+
+
+class CofTrack(ScoredDetector):
+    name = "cof-track"
+    columns = ("fast_score", "slow_score")
+    history_s = 0.15
+
+    def __init__(self, settings: DetectorSettings, x_mm, y_mm, rate_hz: float, **overrides) -> None:
+        """Settings from ``settings.cof_track``; keyword arguments override single
+        fields (for parameter sweeps)."""
+        c = replace(settings.cof_track, **overrides) if overrides else settings.cof_track
+        self.m = max(1, round(c.smooth_s * rate_hz))
+        self.lf = max(1, round(c.fast_s * rate_hz))
+        self.ls = max(self.lf + 1, round(c.slow_s * rate_hz))
+        self.z = c.z
+        self.min_fast, self.min_slow = c.min_fast_mm, c.min_slow_mm
+        self.force_rate = c.force_rate_per_s
+        self.fast_s = c.fast_s
+        self._a_noise = 1.0 / max(1.0, c.noise_s * rate_hz)
+        self.vib_n = max(2, round(c.vib_s * rate_hz))
+        self.vib_ratio, self.vib_support = c.vib_ratio, c.vib_support
+        self._noise: float | None = None  # learnt CoF noise, in force units (N^2 mm^2)
+        super().__init__(settings, x_mm, y_mm, rate_hz, hop_s=c.hop_s, confirm=1)
+
+    def reset_scores(self) -> None:
+        self._win = _Lagged(self.m, None)
+        self._sx = self._sy = 0.0
+        self._cnt = 0
+        self._fast = _Lagged(self.lf, None)
+        self._slow = _Lagged(self.ls, None)
+        self._half = _Lagged(self.ls // 2, None)
+        self._force = _Lagged(self.lf, None)
+        self._prev = None
+        self._seen = 0
+        self._vib = _Lagged(self.vib_n, None)
+        self._vib_sum = 0.0
+
+    def score(self, t, f, s, xc, yc):
+        # running mean of the last m centres
+        old = self._win.swap((xc, yc))
+        self._sx += xc
+        self._sy += yc
+        if old is None:
+            self._cnt += 1
+        else:
+            self._sx -= old[0]
+            self._sy -= old[1]
+        mx, my = self._sx / self._cnt, self._sy / self._cnt
+        prev = self._prev
+        self._prev = (xc, yc)
+        fast = self._fast.swap((mx, my))
+        slow = self._slow.swap((mx, my))
+        half = self._half.swap((mx, my))
+        old_s = self._force.swap(s)
+        varying = old_s is not None and abs(s - old_s) / self.fast_s > self.force_rate * s
+        if prev is None or self._cnt < self.m:
+            return 0.0, 0.0, False, varying
+        # CoF noise scales as 1 / S (sigma_F * spread / S): learn it in force units so
+        # that a grip that loosens (or tightens) keeps the right threshold
+        step2 = ((xc - prev[0]) ** 2 + (yc - prev[1]) ** 2) * 0.5 * s * s
+        self._seen += 1
+        if self._noise is None:
+            # nothing learnt yet: the first frames after a grab still settle, so
+            # vote nothing until a running mean over the settling time exists
+            if self._seen <= self.history:
+                return 0.0, 0.0, False, varying
+            self._noise, self._learnt = step2, 1
+        noise_d = self.z * math.sqrt(2.0 * self._noise / self.m) / s
+        a = math.hypot(mx - fast[0], my - fast[1]) / max(noise_d, self.min_fast) if fast is not None else 0.0
+        b = 0.0
+        if slow is not None:
+            # only while the motion goes on: the newer half of the horizon moved too
+            b = math.hypot(mx - slow[0], my - slow[1]) / max(noise_d, self.min_slow)
+            b = min(b, 2.0 * math.hypot(mx - half[0], my - half[1]) / max(noise_d, self.min_slow))
+        # stick-slip excites the CoF's sample-to-sample steps (the band the paper's
+        # wavelet detail sees); with some displacement to back it, that is a slip too
+        old_v = self._vib.swap(step2)
+        self._vib_sum += step2 - (old_v if old_v is not None else 0.0)
+        vib = self._vib_sum / (self.vib_n * self._noise) if old_v is not None else 0.0
+        slip = a > 1.0 or b > 1.0 or (vib > self.vib_ratio and a > self.vib_support)
+        if not slip and a < 0.5:  # learn the noise only while calm
+            self._learnt += 1
+            self._noise += max(self._a_noise, 1.0 / self._learnt) * (step2 - self._noise)
+        return a, b, slip, varying

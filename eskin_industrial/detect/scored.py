@@ -1,0 +1,231 @@
+"""Detectors built from one per-frame score: the rivals a reviewer asks for, and the
+skeleton of our own method.  Each shares the frame hygiene, contact logic, hop
+cadence and :class:`Update` output of the paper detector, so the evaluation and the
+bridge run them all the same way.
+
+Per frame k the subclass returns ``(score_a, score_b, slip, varying)``; an update is
+emitted every hop with the hop's largest scores, ``slip`` if any frame of the hop
+voted slip (for ``confirm`` consecutive frames), ``varying`` likewise.  What the two
+score columns mean is each class's ``columns``; they are written where the paper
+detector writes R_coe and R_dw.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from ..frames import FrameFlag
+from .hygiene import FrameHygiene
+from .settings import DetectorSettings
+from .state import GraspState
+from .updates import Update
+
+_WARMUP = int(FrameFlag.WARMUP)
+_NO, _STABLE, _VAR, _SLIP = (int(s) for s in GraspState)
+
+
+class ScoredDetector(FrameHygiene):
+    name = "scored"
+    columns = ("score", "unused")
+    #: frames of contact needed before the score is trusted
+    history_s = 0.1
+
+    def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
+                 hop_s: float | None = None, confirm: int = 1) -> None:
+        geo = settings.geometry(rate_hz)
+        super().__init__(int(len(x_mm)), rate_hz, geo.max_fill)
+        self.settings = settings
+        self.rate_hz = rate_hz
+        self.hop = max(1, round((hop_s if hop_s is not None else settings.hop_s) * rate_hz))
+        self.history = max(1, round(self.history_s * rate_hz))
+        self.confirm = confirm
+        self.hold = settings.hold_s
+        self._mat = np.column_stack([np.ones(self.n), x_mm, y_mm]).astype(np.float64)
+        self._thr = settings.contact_threshold_n
+        self.state = _NO
+        self._entered = -math.inf
+        self._reset(0)
+
+    def _reset(self, flags: int) -> None:
+        self._k = 0
+        self._contact_run = 0
+        self._hop_a = self._hop_b = 0.0
+        self._hop_slip = self._hop_var = False
+        self._slip_run = 0
+        self._hop_flags = flags
+        self._warm = True
+        self._cof = (float(self._mat[:, 1].mean()), float(self._mat[:, 2].mean()))
+        self.reset_scores()
+
+    # -- for subclasses ---------------------------------------------------------
+    def reset_scores(self) -> None:
+        """Forget the score's history (start, reset, loss of contact)."""
+
+    def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
+        raise NotImplementedError
+
+    # -- the per-frame loop -----------------------------------------------------
+    def _step(self, t: float, f: np.ndarray, flags: int, out: list[Update]) -> None:
+        s, sx, sy = (f @ self._mat).tolist()
+        contact = s >= self._thr and s > 0.0
+        if contact:
+            self._cof = (sx / s, sy / s)
+            self._contact_run += 1
+            a, b, slip, varying = self.score(t, f, s, self._cof[0], self._cof[1])
+            trusted = self._contact_run > self.history
+            if not trusted:
+                slip = varying = False
+            self._slip_run = self._slip_run + 1 if slip else 0
+            self._hop_slip |= self._slip_run >= self.confirm
+            self._hop_var |= varying
+            if a > self._hop_a:
+                self._hop_a = a
+            if b > self._hop_b:
+                self._hop_b = b
+            self._warm = not trusted
+        else:
+            if self._contact_run:
+                self.reset_scores()
+            self._contact_run = 0
+            self._slip_run = 0
+            self._warm = False
+        self._hop_flags |= flags
+        self._k += 1
+        if self._k % self.hop:
+            return
+        out.append(self._decide(t, s, contact))
+
+    def _decide(self, t: float, s: float, contact: bool) -> Update:
+        valid = not self._warm
+        if not contact:
+            candidate = _NO
+        elif not valid:
+            candidate = self.state if self.state != _NO else _STABLE
+        else:
+            candidate = _SLIP if self._hop_slip else _VAR if self._hop_var else _STABLE
+        cur = self.state
+        if candidate > cur or candidate == _NO or (candidate < cur and t - self._entered >= self.hold):
+            if candidate != cur:
+                self.state, self._entered = candidate, t
+        flags = self._hop_flags | (0 if valid else _WARMUP)
+        upd = Update(t, self._hop_a, self._hop_b, self.state, valid, s, self._cof[0], self._cof[1], flags)
+        self._hop_a = self._hop_b = 0.0
+        self._hop_slip = self._hop_var = False
+        self._hop_flags = 0
+        return upd
+
+    def feed(self, t: np.ndarray, forces: np.ndarray, flags: np.ndarray | None = None) -> list[Update]:
+        out: list[Update] = []
+        fl = np.zeros(len(t), np.int64) if flags is None else flags
+        for i in range(len(t)):
+            out.extend(self.push(float(t[i]), forces[i], int(fl[i])))
+        return out
+
+
+class _Lagged:
+    """A ring of the last ``lag`` values: ``swap(v)`` returns the value ``lag`` pushes ago."""
+
+    __slots__ = ("buf", "i", "full")
+
+    def __init__(self, lag: int, fill: object = 0.0) -> None:
+        self.buf = [fill] * lag
+        self.i = 0
+        self.full = False
+
+    def swap(self, value: object) -> object:
+        old = self.buf[self.i]
+        self.buf[self.i] = value
+        self.i += 1
+        if self.i == len(self.buf):
+            self.i = 0
+            self.full = True
+        return old
+
+
+class ForceRate(ScoredDetector):
+    """Rival: slip when the total force changes fast: |dS/dt| / S above ``threshold`` (1/s)."""
+
+    name = "force-rate"
+    columns = ("force_rate_per_s", "unused")
+
+    def __init__(self, *args, threshold_per_s: float = 1.0, lag_s: float = 0.1, **kw) -> None:
+        self.threshold = threshold_per_s
+        self.lag_s = lag_s
+        super().__init__(*args, **kw)
+
+    def reset_scores(self) -> None:
+        self._ring = _Lagged(max(1, round(self.lag_s * self.rate_hz)), None)
+
+    def score(self, t, f, s, xc, yc):
+        old = self._ring.swap(s)
+        if old is None:
+            return 0.0, 0.0, False, False
+        rate = abs(s - old) / self.lag_s / s
+        return rate, 0.0, rate > self.threshold, rate > 0.3 * self.threshold
+
+
+class CofVelocity(ScoredDetector):
+    """Rival: slip when the centre of force moves faster than ``threshold_mm_s``."""
+
+    name = "cof-velocity"
+    columns = ("cof_speed_mm_s", "unused")
+
+    def __init__(self, *args, threshold_mm_s: float = 4.0, lag_s: float = 0.1, **kw) -> None:
+        self.threshold = threshold_mm_s
+        self.lag_s = lag_s
+        super().__init__(*args, **kw)
+
+    def reset_scores(self) -> None:
+        self._ring = _Lagged(max(1, round(self.lag_s * self.rate_hz)), None)
+
+    def score(self, t, f, s, xc, yc):
+        old = self._ring.swap((xc, yc))
+        if old is None:
+            return 0.0, 0.0, False, False
+        speed = math.hypot(xc - old[0], yc - old[1]) / self.lag_s
+        return speed, 0.0, speed > self.threshold, False
+
+
+class HfEnergy(ScoredDetector):
+    """Rival (vibration-based slip detection): energy of the taxels' second difference,
+    relative to its own running baseline; slip when above ``threshold`` times it."""
+
+    name = "hf-energy"
+    columns = ("hf_energy_ratio", "unused")
+    history_s = 0.3
+
+    def __init__(self, *args, threshold: float = 6.0, smooth_s: float = 0.05, baseline_s: float = 2.0, **kw) -> None:
+        self.threshold = threshold
+        self.smooth_s = smooth_s
+        self.baseline_s = baseline_s
+        super().__init__(*args, **kw)
+
+    def reset_scores(self) -> None:
+        self._p1: np.ndarray | None = None
+        self._p2: np.ndarray | None = None
+        self._fast = 0.0
+        self._base = 0.0
+        self._a_fast = 1.0 / max(1.0, self.smooth_s * self.rate_hz)
+        self._a_base = 1.0 / max(1.0, self.baseline_s * self.rate_hz)
+        self._n_seen = 0
+
+    def score(self, t, f, s, xc, yc):
+        p1, p2 = self._p1, self._p2
+        self._p2, self._p1 = p1, f
+        if p2 is None:
+            return 0.0, 0.0, False, False
+        d = f - 2.0 * p1 + p2
+        e = float(d @ d) / (s * s)
+        self._fast += self._a_fast * (e - self._fast)
+        self._n_seen += 1
+        if self._n_seen < 5:
+            self._base = self._fast
+            return 0.0, 0.0, False, False
+        ratio = self._fast / (self._base + 1e-12)
+        slip = ratio > self.threshold
+        if not slip:  # the baseline learns only from calm frames
+            self._base += self._a_base * (e - self._base)
+        return ratio, 0.0, slip, False

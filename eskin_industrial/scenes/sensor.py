@@ -1,0 +1,55 @@
+"""What the sensor does to the true forces: each imperfection one small function."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .spec import SensorEffects
+
+
+def gain_mismatch(forces: np.ndarray, spread: float, rng: np.random.Generator) -> np.ndarray:
+    return forces * (1.0 + spread * rng.standard_normal(forces.shape[1]))[None, :]
+
+
+def machine_vibration(forces: np.ndarray, t: np.ndarray, amplitude_n: float, freq_hz: float) -> np.ndarray:
+    """The machine shakes the gripper: the loaded taxels share a total-force oscillation."""
+    total = forces.sum(axis=1, keepdims=True)
+    share = np.divide(forces, total, out=np.zeros_like(forces), where=total > 1e-9)
+    return forces + amplitude_n * np.sin(2 * np.pi * freq_hz * t)[:, None] * share
+
+
+def noise(forces: np.ndarray, sigma_n: float, rng: np.random.Generator) -> np.ndarray:
+    return forces + sigma_n * rng.standard_normal(forces.shape)
+
+
+def quantize(forces: np.ndarray, step_n: float) -> np.ndarray:
+    return np.round(forces / step_n) * step_n if step_n > 0 else forces
+
+
+def saturate(forces: np.ndarray, full_scale_n: float | None) -> np.ndarray:
+    return np.clip(forces, None, full_scale_n) if full_scale_n is not None else forces
+
+
+def dead_and_stuck(forces: np.ndarray, dead: tuple[int, ...], stuck: tuple[int, ...], stuck_value: float) -> np.ndarray:
+    out = forces.copy()
+    out[:, list(dead)] = 0.0
+    out[:, list(stuck)] = stuck_value
+    return out
+
+
+def drop_frames(n: int, rate: float, rng: np.random.Generator) -> np.ndarray:
+    """Indices of the frames that reach the host (each lost with probability ``rate``)."""
+    return np.flatnonzero(rng.random(n) >= rate)
+
+
+def apply(forces: np.ndarray, t: np.ndarray, fx: SensorEffects, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """All effects in the order a real chain applies them; returns (kept indices, forces)."""
+    out = gain_mismatch(forces, fx.gain_mismatch, rng) if fx.gain_mismatch else forces
+    if fx.machine_vibration_n:
+        out = machine_vibration(out, t, fx.machine_vibration_n, fx.machine_vibration_hz)
+    out = noise(out, fx.noise_n, rng) if fx.noise_n else out
+    out = np.maximum(out, 0.0)  # a piezoresistive taxel reads no tension
+    out = dead_and_stuck(out, fx.dead_taxels, fx.stuck_taxels, fx.stuck_value_n)
+    out = saturate(quantize(out, fx.quantization_n), fx.saturation_n)
+    keep = drop_frames(len(t), fx.drop_rate, rng) if fx.drop_rate else np.arange(len(t))
+    return keep, out[keep]

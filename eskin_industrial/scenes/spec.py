@@ -1,0 +1,142 @@
+"""A scene is data: a TOML file that names the array, the contact, what happens over
+time, and which sensor imperfections apply.  Built once into frozen dataclasses by the
+same validator as the profiles, so a typo in a user's scene is refused with the key."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from ..errors import ProfileError
+from ..schema import SchemaError, in_range, non_negative, parse_toml, positive
+
+
+@dataclass(frozen=True)
+class SceneInfo:
+    name: str
+    description: str = ""
+    #: The profile this scene is meant for (its layout must match ``[array]``).
+    profile: str = "paper-5x5"
+    duration_s: float = field(default=10.0, metadata=positive())
+
+
+@dataclass(frozen=True)
+class ArraySpec:
+    rows: int = field(default=5, metadata=positive())
+    cols: int = field(default=5, metadata=positive())
+    pitch_mm: float = field(default=5.0, metadata=positive())
+    row_pitch_mm: float | None = field(default=None, metadata=positive())
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """A flat-bottomed object pressing on the array: a rectangle of uniform pressure,
+    tilted by a linear gradient (relative change per mm, from its centre)."""
+
+    size_mm: tuple[float, ...] = (20.0, 20.0)
+    centre_mm: tuple[float, ...] = (10.0, 10.0)
+    gradient_per_mm: tuple[float, ...] = (0.0, 0.0)
+    #: Soft contact: the footprint's size scales as (F / reference_force_n)^exponent
+    #: (1/3 for a Hertzian pad, 0 for a rigid flat block).
+    size_exponent: float = field(default=0.0, metadata=in_range(0.0, 1.0))
+    reference_force_n: float = field(default=1.0, metadata=positive())
+
+    def __post_init__(self) -> None:
+        for key in ("size_mm", "centre_mm", "gradient_per_mm"):
+            if len(getattr(self, key)) != 2:
+                raise ValueError(f"{key}: expected [x, y], got {len(getattr(self, key))} values")
+
+
+EventKind = Literal["press", "force", "oscillate", "slide", "release"]
+
+
+@dataclass(frozen=True)
+class Event:
+    """One thing that happens; the timeline is the list of events in time order.
+
+    - press: the force ramps from 0 to ``force_n`` over ``duration_s`` (label: transition)
+    - force: the force ramps to ``force_n`` over ``duration_s`` (variable_force)
+    - oscillate: force x (1 + amplitude sin 2 pi f t) for ``duration_s`` (variable_force)
+    - slide: the footprint moves by ``distance_mm`` at ``speed_mm_s`` (slip); the force
+      may change to ``force_n`` meanwhile (a glass slipping out of a grasp)
+    - release: the force ramps to 0 over ``duration_s`` (transition, then no_contact)
+    """
+
+    kind: EventKind
+    t_s: float = field(metadata=non_negative())
+    duration_s: float = field(default=0.3, metadata=non_negative())
+    force_n: float | None = field(default=None, metadata=non_negative())
+    amplitude: float = field(default=0.0, metadata=non_negative())
+    freq_hz: float = field(default=1.0, metadata=positive())
+    distance_mm: tuple[float, ...] = (0.0, 0.0)
+    speed_mm_s: float = field(default=10.0, metadata=positive())
+    #: Stick-slip while sliding: position jitter (mm) and force ripple (fraction) at
+    #: ``stick_slip_hz``; the vibration the slide excites.
+    stick_slip_mm: float = field(default=0.15, metadata=non_negative())
+    stick_slip_force: float = field(default=0.04, metadata=non_negative())
+    stick_slip_hz: float = field(default=25.0, metadata=positive())
+
+    def __post_init__(self) -> None:
+        if self.kind in ("press", "force") and self.force_n is None:
+            raise ValueError(f"force_n: expected a force for a {self.kind} event")
+        if len(self.distance_mm) != 2:
+            raise ValueError("distance_mm: expected [x, y]")
+
+    @property
+    def end_s(self) -> float:
+        if self.kind == "slide":
+            dist = (self.distance_mm[0] ** 2 + self.distance_mm[1] ** 2) ** 0.5
+            return self.t_s + dist / self.speed_mm_s
+        return self.t_s + self.duration_s
+
+
+@dataclass(frozen=True)
+class SensorEffects:
+    """What the sensor adds; every effect is off (0, empty) unless set."""
+
+    noise_n: float = field(default=0.01, metadata=non_negative())
+    gain_mismatch: float = field(default=0.0, metadata=in_range(0.0, 0.9))
+    quantization_n: float = field(default=0.0, metadata=non_negative())
+    saturation_n: float | None = field(default=None, metadata=positive())
+    dead_taxels: tuple[int, ...] = ()
+    stuck_taxels: tuple[int, ...] = ()
+    stuck_value_n: float = 0.5
+    drop_rate: float = field(default=0.0, metadata=in_range(0.0, 0.9))
+    machine_vibration_n: float = field(default=0.0, metadata=non_negative())
+    machine_vibration_hz: float = field(default=50.0, metadata=positive())
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    scene: SceneInfo
+    array: ArraySpec = field(default_factory=ArraySpec)
+    footprint: Footprint = field(default_factory=Footprint)
+    events: tuple[Event, ...] = ()
+    sensor: SensorEffects = field(default_factory=SensorEffects)
+    #: After a press or release, this long is "transition" (don't care) in the labels.
+    settle_s: float = field(default=0.5, metadata=non_negative())
+    #: After a slide or force change ends, this long is still labelled as it was.
+    tail_s: float = field(default=0.0, metadata=non_negative())
+
+    def __post_init__(self) -> None:
+        n = self.array.rows * self.array.cols
+        for key in ("dead_taxels", "stuck_taxels"):
+            bad = [i for i in getattr(self.sensor, key) if not 0 <= i < n]
+            if bad:
+                raise SchemaError(f"sensor.{key}", f"expected taxel indices below {n}, got {bad}")
+        starts = [e.t_s for e in self.events]
+        if starts != sorted(starts):
+            raise SchemaError("events", "expected events in time order")
+
+
+def parse_scene(text: str, source: str) -> SceneSpec:
+    return parse_toml(SceneSpec, text, source)
+
+
+def load_scene_file(path: Path) -> SceneSpec:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ProfileError(f"{path}: cannot read scene: {exc.strerror or exc}") from None
+    return parse_scene(text, str(path))
