@@ -76,10 +76,12 @@ def slip_recording(rate_hz: float = 100.0, still_s: float = 1.5, slip_s: float =
     then still again.  Returns (t, forces (K, 25) N, slip onset time)."""
     rng = np.random.default_rng(seed)
     k1, k2, k3 = (int(round(x * rate_hz)) for x in (still_s, slip_s, after_s))
-    # Stick-slip: the footprint jumps every third scan (a smooth slide has no
-    # wavelet detail energy; a real slip is jerky).
-    steps = np.floor(np.arange(k2) / 3.0) * 3.0 / max(k2 - 1, 1)
-    cx = np.concatenate([np.full(k1, 1.0), 1.0 + 2.2 * steps, np.full(k3, 1.0 + 2.2 * steps[-1])])
+    # Stick-slip: the footprint slides and chatters (+-0.25 taxel at every scan).
+    # A smooth slide has no wavelet detail energy; a real slip is jerky, and the
+    # chatter keeps it visible however the polling aliases the node's scans.
+    steps = np.linspace(0.0, 2.2, k2) + 0.25 * (-1.0) ** np.arange(k2)
+    end = 1.0 + (2.2 if k2 else 0.0)
+    cx = np.concatenate([np.full(k1, 1.0), 1.0 + steps, np.full(k3, end)])
     f = np.stack([footprint(5, 5, x, 2.0, force) for x in cx])
     f = np.abs(f + rng.normal(0.0, 0.01, f.shape))
     t = np.arange(len(f)) / rate_hz

@@ -128,7 +128,8 @@ class ModbusBridge:
 
 
 class ReplaySource:
-    """A recording played at its own pace, as if polled (raw values or newtons)."""
+    """A recording's raw scans played at ``rate_hz`` (any speed), as if polled; scan
+    times are the recording's."""
 
     def __init__(self, profile: Profile, t: np.ndarray, raw: np.ndarray, rate_hz: float, *, loop: bool = False) -> None:
         self.t, self.raw, self.rate_hz, self.loop = t, raw, rate_hz, loop
@@ -136,7 +137,6 @@ class ReplaySource:
         self.bus_fault = False
         self.last_rx: float | None = None
         self._next = time.monotonic()
-        self.t0 = time.monotonic()
 
     @property
     def done(self) -> bool:
@@ -149,11 +149,13 @@ class ReplaySource:
         self._next = max(self._next, now) + 1.0 / self.rate_hz
         if self.done:
             return None
-        i = self.k % len(self.t)
+        lap, i = divmod(self.k, len(self.t))
         self.k += 1
         rx = time.monotonic()
         self.last_rx = rx
-        return RawScan(self.k - 1, rx - self.t0, self.raw[i], 0, rx)
+        # The recording's own time (each loop continues it), whatever the replay speed.
+        t = float(self.t[i]) + lap * (float(self.t[-1] - self.t[0]) + 1.0 / self.rate_hz)
+        return RawScan(self.k - 1, t, self.raw[i], 0, rx)
 
     def frame_age(self, now: float | None = None) -> float | None:
         if self.last_rx is None:

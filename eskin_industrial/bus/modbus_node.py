@@ -101,6 +101,7 @@ class NodeSimulator:
         serial = SerialSettings(port, baudrate or node.baudrate, node.parity, node.stopbits)
         self.server = RegisterServer(self.registers, serial=serial, unit_ids=[node.unit_id])
         self.index = 0
+        self.started: float | None = None  #: perf_counter when scan 0 went out
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -113,6 +114,7 @@ class NodeSimulator:
     def _step(self) -> None:
         period = 1.0 / self.rate_hz
         t0 = time.monotonic()
+        self.started = time.perf_counter()
         k = 0
         while not self._stop.is_set():
             k += 1

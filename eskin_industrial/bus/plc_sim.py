@@ -149,7 +149,9 @@ class PlcSimulator:
             regs = list(self.memory.regs[:STATUS_COUNT]) + [0, 0]
             v = decode(regs, wo)
             if prev is not None:
-                changes = [f"{k}={_show(k, v[k])}" for k in ("STATUS", "STATE") if v[k] != prev[k]]
+                quiet = ~int(Status.BRIDGE_ALIVE)  # the life bit toggles at every write
+                changes = [f"{k}={_show(k, v[k])}" for k in ("STATUS", "STATE")
+                           if v[k] & quiet != prev[k] & quiet]
                 if changes:
                     self._say(" ".join(changes) + f"  (R_COE={v['R_COE']} R_DW={v['R_DW']} F_SUM={v['F_SUM']} mN)")
             prev = v

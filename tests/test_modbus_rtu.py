@@ -1,0 +1,173 @@
+"""The RTU side: node simulator and poller on a socat pty pair, and the faults of a
+serial line: a silent node, garbled frames, exception responses."""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+
+import numpy as np
+import pytest
+import serial
+
+from eskin_industrial.bus.modbus_bridge import ModbusBridge
+from eskin_industrial.bus.modbus_node import NodeSimulator, decode_scans, encode_scan
+from eskin_industrial.bus.modbus_source import RtuPoller
+from eskin_industrial.bus.plc_image import Status
+from eskin_industrial.calibration import Calibrator
+from eskin_industrial.profile import ModbusNodeSection
+
+from modbus_support import mbpoll, mbpoll_values, pty_pair, slip_recording
+
+
+def with_node(profile, **changes):
+    node = dataclasses.replace(profile.modbus.node, **changes)
+    return dataclasses.replace(profile, modbus=dataclasses.replace(profile.modbus, node=node))
+
+
+def crc16(data: bytes) -> bytes:
+    """Modbus CRC-16 (poly 0xA001, init 0xFFFF), low byte first: written here, from the spec."""
+    crc = 0xFFFF
+    for b in data:
+        crc ^= b
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+    return bytes([crc & 0xFF, crc >> 8])
+
+
+class RecordingSink:
+    def __init__(self):
+        self.published: list[list[int]] = []
+
+    def publish(self, registers, image, urgent=False, t_event=None):
+        self.published.append(list(registers))
+
+    def take_commands(self):
+        return []
+
+    def commands_done(self):
+        pass
+
+
+@pytest.mark.parametrize("value_type", ["uint16", "int16", "uint32", "int32"])
+@pytest.mark.parametrize("word_order", ["big", "little"])
+def test_register_codec_round_trip(value_type, word_order):
+    node = ModbusNodeSection(value_type=value_type, word_order=word_order)
+    lo, hi = {"uint16": (0, 65535), "int16": (-32768, 32767), "uint32": (0, 2**32 - 1),
+              "int32": (-(2**31), 2**31 - 1)}[value_type]
+    raw = np.array([lo, hi, (lo + hi) // 2, lo + 1, 12345 % (hi + 1)], dtype=np.float64)
+    regs = encode_scan(node, raw)
+    assert len(regs) == 5 * node.words_per_taxel and all(0 <= r <= 0xFFFF for r in regs)
+    np.testing.assert_array_equal(decode_scans(node, regs), raw)
+    assert encode_scan(node, [hi + 10.0, lo - 10.0, np.nan])[: node.words_per_taxel] == encode_scan(node, [hi])
+
+
+def test_poller_reads_the_node_and_mbpoll_agrees(paper_profile, tmp_path):
+    t, f, _ = slip_recording(still_s=0.5, slip_s=0.0, after_s=0.0)
+    cal = Calibrator.from_section(paper_profile.calibration, 25)
+    with pty_pair(tmp_path) as (a, b):
+        with NodeSimulator(paper_profile, a, f, 100.0) as node:
+            expected = {tuple(s) for s in node.scans}
+            poller = RtuPoller(paper_profile, b).open()
+            try:
+                scans = [poller.poll_once() for _ in range(20)]
+            finally:
+                poller.close()
+            assert all(s is not None for s in scans) and poller.counters.scans == 20
+            assert poller.counters.bus_errors == 0 and not poller.bus_fault
+            for s in scans:
+                assert tuple(int(v) for v in s.raw) in expected
+            forces, flags = cal.to_newtons(scans[-1].raw)
+            assert abs(forces.sum() - 6.0) < 0.2 and flags == 0
+            assert [s.seq for s in scans] == list(range(20))
+            assert all(b_.rx_time > a_.rx_time for a_, b_ in zip(scans, scans[1:]))
+            # libmodbus reads the same input registers (-t 3); the scene is frozen first.
+            node._stop.set()
+            node._thread.join()
+            node.registers.scan = node.scans[0]
+            out = mbpoll("-m", "rtu", "-b", "115200", "-P", "none", "-a", "1", "-t", "3", "-r", "1", "-c", "25", "-1", b)
+            assert out.returncode == 0, out.stdout + out.stderr
+            got = mbpoll_values(out.stdout)
+            assert [got[i + 1] for i in range(25)] == node.scans[0]
+
+
+def test_silent_node_sets_stale_and_fault_and_never_stalls(paper_profile, tmp_path):
+    t, f, _ = slip_recording(still_s=1.0, slip_s=0.0, after_s=0.0)
+    node_cfg = paper_profile.modbus.node
+    with pty_pair(tmp_path) as (a, b):
+        node = NodeSimulator(paper_profile, a, f, 100.0).start()
+        poller = RtuPoller(paper_profile, b).open()
+        sink = RecordingSink()
+        bridge = ModbusBridge(paper_profile, poller, sink)
+        try:
+            deadline = time.monotonic() + 5
+            while not (bridge.pipeline.last_update is not None and bridge.pipeline.last_update.valid):
+                assert time.monotonic() < deadline
+                bridge.step()
+            bridge.publish_if_due(True)
+            assert Status(sink.published[-1][0]) & Status.DATA_VALID
+            node.stop()  # the node stops answering
+            budget = (node_cfg.retries + 1) * node_cfg.timeout_s
+            t0 = time.monotonic()
+            steps = 0
+            while time.monotonic() - t0 < paper_profile.modbus.plc.stale_s + 0.3:
+                s0 = time.monotonic()
+                bridge.step()
+                assert time.monotonic() - s0 < budget + 0.1  # never stalls longer than the retry budget
+                steps += 1
+            bridge.publish_if_due(True)
+            status = Status(sink.published[-1][0])
+            assert status & Status.SENSOR_STALE and status & Status.BUS_FAULT
+            assert not status & (Status.DATA_VALID | Status.STABLE | Status.SLIP | Status.CONTACT)
+            c = poller.counters
+            assert c.timeouts >= node_cfg.fault_after_failures and c.failed_polls >= steps - 1
+            assert bridge.pipeline.counters.scans == c.scans  # failed polls are not scans
+        finally:
+            poller.close()
+            node.stop()
+
+
+def test_garbled_frames_and_exceptions_are_counted_and_survived(paper_profile, tmp_path):
+    prof = with_node(paper_profile, retries=0, timeout_s=0.1)
+    with pty_pair(tmp_path) as (a, b):
+        poller = RtuPoller(prof, b).open()
+        fake = serial.Serial(a, 115200, timeout=1.0)
+        try:
+            def answer(reply: bytes) -> None:
+                request = fake.read(8)
+                assert len(request) == 8 and request[:2] == b"\x01\x04" and crc16(request[:6]) == request[6:]
+                fake.write(reply)
+
+            payload = bytes([1, 4, 50]) + bytes(range(50))
+            good = payload + crc16(payload)
+            replies = [good[:-1] + bytes([good[-1] ^ 0xFF]),  # bad CRC
+                       bytes([0xFF, 0x00, 0x13, 0x37]) * 8,  # line noise
+                       bytes([1, 0x84, 2]) + crc16(bytes([1, 0x84, 2])),  # exception: illegal address
+                       good]
+            th = threading.Thread(target=lambda: [answer(r) for r in replies], daemon=True)
+            th.start()
+            results = [poller.poll_once() for _ in replies]
+            th.join(timeout=5)
+            c = poller.counters
+            assert results[:3] == [None, None, None]
+            assert results[3] is not None and list(results[3].raw[:3]) == [0x0001, 0x0203, 0x0405]
+            assert c.crc_errors >= 1 and c.exceptions == 1
+            assert c.crc_errors + c.timeouts == 2 and c.scans == 1 and c.failed_polls == 3
+        finally:
+            fake.close()
+            poller.close()
+
+
+def test_exception_responses_from_a_misconfigured_node(paper_profile, tmp_path):
+    node_prof = with_node(paper_profile, start_address=100)
+    with pty_pair(tmp_path) as (a, b):
+        t, f, _ = slip_recording(still_s=0.2, slip_s=0.0, after_s=0.0)
+        with NodeSimulator(node_prof, a, f, 100.0):
+            poller = RtuPoller(paper_profile, b).open()  # asks for address 0
+            try:
+                assert poller.poll_once() is None
+                assert poller.counters.exceptions == paper_profile.modbus.node.retries + 1
+                assert poller.counters.timeouts == 0
+            finally:
+                poller.close()
