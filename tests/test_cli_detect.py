@@ -31,7 +31,7 @@ def rec(tmp_path) -> Path:
 
 def test_detect_writes_one_row_per_update(rec, tmp_path):
     out = tmp_path / "out.csv"
-    res = cli("detect", "--profile", PAPER, str(rec), "-o", str(out))
+    res = cli("detect", "--profile", PAPER, "--method", "paper", str(rec), "-o", str(out))
     assert res.returncode == 0, res.stderr
     assert "200.0 Hz" in res.stderr
     cols = read_updates(out)
@@ -46,8 +46,8 @@ def test_detect_writes_one_row_per_update(rec, tmp_path):
 
 def test_stdin_stdout_and_engines_agree(rec):
     text = rec.read_text()
-    batch = cli("detect", "-p", PAPER, "-", "-q", stdin=text)
-    stream = cli("detect", "-p", PAPER, "-", "-q", "--engine", "stream", stdin=text)
+    batch = cli("detect", "-p", PAPER, "--method", "paper", "-", "-q", stdin=text)
+    stream = cli("detect", "-p", PAPER, "--method", "paper", "-", "-q", "--engine", "stream", stdin=text)
     assert batch.returncode == 0 and batch.stderr == ""
     assert batch.stdout == stream.stdout and batch.stdout.count("\n") == 48
 

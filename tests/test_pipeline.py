@@ -14,7 +14,7 @@ def test_raw_scans_give_the_offline_answer(paper_profile):
     f[:100] = 0.0
     cal = Calibrator.from_section(paper_profile.calibration, 25)
     raw = np.rint(cal.to_raw(f))  # what the node sends: integer 0.1 ohm units
-    pipe = Pipeline(paper_profile)
+    pipe = Pipeline(paper_profile, method="paper")
     t = np.arange(600) / 100.0
     updates = []
     for k in range(600):

@@ -16,6 +16,7 @@ from .plc_sim_cmd import plc_sim
 from .profile_cmd import profile
 from .receive_cmd import receive
 from .simulate_cmd import simulate
+from .evaluate_cmd import evaluate_cmd
 
 
 class _Group(click.Group):
@@ -46,6 +47,7 @@ def main(ctx: click.Context, debug: bool) -> None:
 main.add_command(detect)
 main.add_command(profile)
 main.add_command(simulate)
+main.add_command(evaluate_cmd, name="evaluate")
 main.add_command(plc)
 main.add_command(plc_sim)
 main.add_command(modbus_node)

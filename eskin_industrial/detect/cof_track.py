@@ -7,10 +7,13 @@ noise numbers jumps.  A slide, however, always *moves* the pressure distribution
 and a varying normal force (a squeeze, a glass being moved) scales it in place.  So:
 
     m_k  = mean of the last M centres of force                 (M = smooth_s x f_s)
-    D_f  = |m_k - m_{k-Lf}|,  D_s = min(|m_k - m_{k-Ls}|, 2 |m_k - m_{k-Ls/2}|)   (fast, slow)
+    D_f  = |m_k - m_{k-Lf}|                                   (fast horizon)
+    D_s  = |u|, u = m_k - m_{k-Ls}; and onward = (m_k - m_{k-Ls/2}) . u/|u|   (slow, still moving)
     q    = running mean of S_k^2 |c_k - c_{k-1}|^2 / 2, learnt while calm
     s    = sqrt(q) / S_k                      (CoF noise: the force noise spread over S)
-    a    = D_f / max(z s sqrt(2/M), min_fast_mm),  b = D_s / max(z s sqrt(2/M), min_slow_mm)
+    n    = z s sqrt(2/M)                          (the displacement noise, z standard deviations)
+    a    = D_f / max(n, min_fast_mm)
+    b    = min(D_s / T, onward / max(T/2, 0.75 n)),   T = max(n, min_slow_mm)
     slip when a > 1 or b > 1; varying force when |S_k - S_{k-Lf}| / (Lf/f_s) / S_k > force_rate
 
 The cost per frame is one 3-column matrix product and a few scalar operations: less
@@ -84,27 +87,37 @@ class CofTrack(ScoredDetector):
         # CoF noise scales as 1 / S (sigma_F * spread / S): learn it in force units so
         # that a grip that loosens (or tightens) keeps the right threshold
         step2 = ((xc - prev[0]) ** 2 + (yc - prev[1]) ** 2) * 0.5 * s * s
+        if self.filled:  # a held copy has no step of its own: neither noise nor vibration
+            step2 = self._noise if self._noise is not None else 0.0
         self._seen += 1
-        if self._noise is None:
+        if self._noise is None or self._noise <= 0.0:
             # nothing learnt yet: the first frames after a grab still settle, so
             # vote nothing until a running mean over the settling time exists
             if self._seen <= self.history:
+                return 0.0, 0.0, False, varying
+            if self.filled or step2 <= 0.0:
                 return 0.0, 0.0, False, varying
             self._noise, self._learnt = step2, 1
         noise_d = self.z * math.sqrt(2.0 * self._noise / self.m) / s
         a = math.hypot(mx - fast[0], my - fast[1]) / max(noise_d, self.min_fast) if fast is not None else 0.0
         b = 0.0
         if slow is not None:
-            # only while the motion goes on: the newer half of the horizon moved too
-            b = math.hypot(mx - slow[0], my - slow[1]) / max(noise_d, self.min_slow)
-            b = min(b, 2.0 * math.hypot(mx - half[0], my - half[1]) / max(noise_d, self.min_slow))
+            # only while the motion goes on: the newer half of the horizon moved on in
+            # the same direction (noise alone points anywhere)
+            ux, uy = mx - slow[0], my - slow[1]
+            total = math.hypot(ux, uy)
+            onward = ((mx - half[0]) * ux + (my - half[1]) * uy) / total if total > 0 else 0.0
+            thr = max(noise_d, self.min_slow)
+            # the onward half gets a noise margin of its own (4.5 sigma): half the
+            # threshold alone would be only 3 sigma, met by noise every few seconds
+            b = min(total / thr, onward / max(0.5 * thr, 0.75 * noise_d))
         # stick-slip excites the CoF's sample-to-sample steps (the band the paper's
         # wavelet detail sees); with some displacement to back it, that is a slip too
         old_v = self._vib.swap(step2)
         self._vib_sum += step2 - (old_v if old_v is not None else 0.0)
         vib = self._vib_sum / (self.vib_n * self._noise) if old_v is not None else 0.0
         slip = a > 1.0 or b > 1.0 or (vib > self.vib_ratio and a > self.vib_support)
-        if not slip and a < 0.5:  # learn the noise only while calm
+        if not slip and a < 0.5 and not self.filled:  # learn the noise only while calm
             self._learnt += 1
             self._noise += max(self._a_noise, 1.0 / self._learnt) * (step2 - self._noise)
         return a, b, slip, varying

@@ -13,7 +13,6 @@ detector writes R_coe and R_dw.
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 
@@ -24,11 +23,13 @@ from .state import GraspState
 from .updates import Update
 
 _WARMUP = int(FrameFlag.WARMUP)
+_FILLED = int(FrameFlag.FILLED)
 _NO, _STABLE, _VAR, _SLIP = (int(s) for s in GraspState)
 
 
 class ScoredDetector(FrameHygiene):
     name = "scored"
+    filled = False  #: the current frame is a held copy (set before ``score`` is called)
     columns = ("score", "unused")
     #: frames of contact needed before the score is trusted
     history_s = 0.1
@@ -74,6 +75,7 @@ class ScoredDetector(FrameHygiene):
         if contact:
             self._cof = (sx / s, sy / s)
             self._contact_run += 1
+            self.filled = bool(flags & _FILLED)  # a held copy across a gap: no new information
             a, b, slip, varying = self.score(t, f, s, self._cof[0], self._cof[1])
             trusted = self._contact_run > self.history
             if not trusted:

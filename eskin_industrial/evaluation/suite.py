@@ -8,7 +8,7 @@ Seeds: ``TUNING_SEEDS`` are the only ones any threshold or default was chosen on
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
@@ -16,7 +16,7 @@ import numpy as np
 from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
 from ..detect.updates import UpdateTable
-from ..scenes import Rendered, render
+from ..scenes import Rendered, SceneSpec, load_scene, render
 from .metrics import SceneScore, score_scene
 
 TUNING_SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4)
@@ -66,14 +66,16 @@ def run_one(factory: Factory, settings: DetectorSettings, rendered: Rendered) ->
 
 def evaluate(methods: dict[str, Factory], scenes: tuple[str, ...] = SUITE, seeds: tuple[int, ...] = EVALUATION_SEEDS,
              rate_hz: float = 100.0, settings: DetectorSettings = DEFAULT_SETTINGS,
-             scene_hook: Callable[[Rendered], Rendered] | None = None, tolerance_s: float = 0.5) -> dict[str, Result]:
-    """Score every method on every scene and seed (each scene rendered once per seed)."""
+             spec_hook: Callable[[SceneSpec], SceneSpec] | None = None, tolerance_s: float = 0.5) -> dict[str, Result]:
+    """Score every method on every scene and seed (each scene rendered once per seed);
+    ``spec_hook`` changes a scene before it is rendered (the failure map's conditions)."""
     results = {name: Result(name) for name in methods}
     for scene in scenes:
+        spec = load_scene(scene)
+        if spec_hook is not None:
+            spec = spec_hook(spec)
         for seed in seeds:
-            rendered = render(scene, rate_hz, seed)
-            if scene_hook is not None:
-                rendered = scene_hook(rendered)
+            rendered = render(spec, rate_hz, seed)
             for name, factory in methods.items():
                 table, seconds = run_one(factory, settings, rendered)
                 s = score_scene(table, rendered.t, rendered.labels, tolerance_s)

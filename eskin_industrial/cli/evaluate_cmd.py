@@ -1,0 +1,65 @@
+"""``eskin-bus evaluate``: score detection methods on the scene suite."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import click
+
+from ..detect.methods import METHODS
+from ..evaluation.suite import EVALUATION_SEEDS, SUITE, TUNING_SEEDS, by_name, evaluate
+
+
+def _seeds(value: str) -> tuple[int, ...]:
+    if value == "evaluation":
+        return EVALUATION_SEEDS
+    if value == "tuning":
+        return TUNING_SEEDS
+    try:
+        if ".." in value:
+            a, b = value.split("..")
+            return tuple(range(int(a), int(b) + 1))
+        return tuple(int(v) for v in value.split(","))
+    except ValueError:
+        raise click.BadParameter(f"expected 'evaluation', 'tuning', N..M or N,M,..., got {value!r}") from None
+
+
+@click.command()
+@click.option("-m", "--method", "methods", multiple=True, type=click.Choice(sorted(METHODS)),
+              help="Method to score (repeatable; default: all).")
+@click.option("-s", "--scene", "scenes", multiple=True, help="Scene (repeatable; default: the built-in suite).")
+@click.option("--seeds", default="evaluation", show_default=True,
+              help="'evaluation' (held out), 'tuning', N..M or N,M,...")
+@click.option("--rate", "rate_hz", type=click.FloatRange(min=1.0), default=100.0, show_default=True)
+@click.option("--tolerance", "tolerance_s", type=float, default=0.5, show_default=True,
+              help="A slip flag up to this long after a slip ends still counts as found.")
+@click.option("--per-scene", is_flag=True, help="Also print each scene's figures.")
+@click.option("--charts", "charts_dir", type=click.Path(file_okay=False), default=None,
+              help="Regenerate the evaluation charts (PNG) into this directory instead (a few minutes).")
+@click.option("--quick", is_flag=True, help="With --charts: fewer seeds.")
+def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick) -> None:
+    """Event-level slip F1, false alarms per hour of holding, detection delay, varying
+    force read as slip, and cost per frame, for each method."""
+    if charts_dir is not None:
+        from ..evaluation.charts import all_charts
+
+        all_charts(Path(charts_dir), lambda line: click.echo(line, err=True), quick=quick)
+        return
+    names = methods or tuple(METHODS)
+    start = time.perf_counter()
+    res = evaluate(by_name(*names), scenes=tuple(scenes) or SUITE, seeds=_seeds(seeds), rate_hz=rate_hz,
+                   tolerance_s=tolerance_s)
+    click.echo(f"# eskin-bus evaluate --seeds {seeds} --rate {rate_hz:g}  "
+               f"({len(scenes) or len(SUITE)} scenes, {time.perf_counter() - start:.0f} s)")
+    click.echo("| method | events | found | F1 | false alarms (per h holding) | varying force as slip | delay p50 / p90 (ms) | cost (us/frame) |")
+    click.echo("|---|---|---|---|---|---|---|---|")
+    for name, r in res.items():
+        s = r.score
+        click.echo(f"| {name} | {s.events} | {s.found} | {s.f1:.3f} | {s.false_alarms} ({s.false_alarms_per_hour:.1f}) | "
+                   f"{s.vf_as_slip} | {s.delay_percentile(50) * 1000:.0f} / {s.delay_percentile(90) * 1000:.0f} | "
+                   f"{r.us_per_frame:.1f} |")
+        if per_scene:
+            for scene, ss in r.per_scene.items():
+                click.echo(f"|   {scene} | {ss.events} | {ss.found} | {ss.f1:.3f} | {ss.false_alarms} | {ss.vf_as_slip} | "
+                           f"{ss.delay_percentile(50) * 1000:.0f} / {ss.delay_percentile(90) * 1000:.0f} | |")

@@ -1,0 +1,49 @@
+"""The settings each chart point stands for: every method at several settings."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import partial
+from typing import Any, Callable
+
+from ..detect.cof_track import CofTrack
+from ..detect.methods import get_method
+from ..detect.paper import PaperDetector
+from ..detect.scored import CofVelocity, ForceRate, HfEnergy
+from ..detect.settings import DetectorSettings
+
+
+def _paper(rule: str, **changes: Any) -> Callable[..., Any]:
+    def make(settings: DetectorSettings, x, y, rate):
+        return PaperDetector(replace(settings, slip_rule=rule, **changes), x, y, rate)
+    return make
+
+
+def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
+    """(method family, point label, factory) for the accuracy charts."""
+    points: list[tuple[str, str, Callable[..., Any]]] = []
+    for window, hop in ((0.2, 0.05), (0.4, 0.1), (0.4, 0.05), (0.8, 0.1)):
+        for wavelet in ("db2", "db4"):
+            for thr in (1.0, 2.5):
+                label = f"w{window} h{hop} {wavelet} >{thr}"
+                ch = dict(window_s=window, hop_s=hop, lag_s=hop, wavelet=wavelet, slip_r_coe=thr, slip_r_dw=thr,
+                          variable_r_coe=min(0.5, thr), variable_r_dw=min(0.5, thr))
+                points.append(("paper", label, _paper("both", **ch)))
+                if wavelet == "db2":
+                    points.append(("paper-coe", label, _paper("coe", **ch)))
+                    points.append(("paper-dw", label, _paper("dw", **ch)))
+    for thr in (0.5, 1.0, 2.0, 4.0):
+        points.append(("force-rate", f">{thr}/s", partial(ForceRate, threshold_per_s=thr)))
+    for thr in (2.0, 6.0, 20.0):
+        points.append(("hf-energy", f">{thr}x", partial(HfEnergy, threshold=thr)))
+    for thr in (2.0, 4.0, 8.0, 16.0):
+        points.append(("cof-velocity", f">{thr} mm/s", partial(CofVelocity, threshold_mm_s=thr)))
+    for z in (4.0, 5.0, 6.0, 8.0):
+        for fast in (0.05, 0.1, 0.2):
+            points.append(("cof-track", f"z{z} fast {fast}s", partial(CofTrack, z=z, fast_s=fast)))
+    return points
+
+
+def defaults() -> dict[str, Callable[..., Any]]:
+    names = ("paper", "paper-coe", "paper-dw", "force-rate", "hf-energy", "cof-velocity", "cof-track")
+    return {n: get_method(n).stream for n in names}
