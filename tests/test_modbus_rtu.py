@@ -123,6 +123,8 @@ def test_silent_node_sets_stale_and_fault_and_never_stalls(paper_profile, tmp_pa
             c = poller.counters
             assert c.timeouts >= node_cfg.fault_after_failures and c.failed_polls >= steps - 1
             assert bridge.pipeline.counters.scans == c.scans  # failed polls are not scans
+            assert bridge.pipeline.counters.extra["rtu_timeouts"] == c.timeouts
+            assert sink.published[-1][17] == c.bus_errors  # BUS_ERRORS, low word (big word order)
         finally:
             poller.close()
             node.stop()
@@ -171,3 +173,23 @@ def test_exception_responses_from_a_misconfigured_node(paper_profile, tmp_path):
                 assert poller.counters.timeouts == 0
             finally:
                 poller.close()
+
+
+def test_hand_profile_holding_registers_unit_2(hand_profile, tmp_path):
+    """The hand's node: function 3 (holding registers), unit 2, 12-bit ADC counts."""
+    f = np.full((50, 20), 1.0)
+    f[:, 7] = 4.0
+    with pty_pair(tmp_path) as (a, b):
+        with NodeSimulator(hand_profile, a, f, 100.0) as node:
+            poller = RtuPoller(hand_profile, b).open()
+            try:
+                scan = poller.poll_once()
+            finally:
+                poller.close()
+            assert scan is not None and list(scan.raw) == node.scans[0] == [550] * 7 + [1300] + [550] * 12
+            out = mbpoll("-m", "rtu", "-b", "115200", "-P", "none", "-a", "2", "-t", "4", "-r", "1", "-c", "20",
+                         "-1", b)
+            assert out.returncode == 0, out.stdout + out.stderr
+            assert [mbpoll_values(out.stdout)[i + 1] for i in range(20)] == node.scans[0]
+            out = mbpoll("-m", "rtu", "-b", "115200", "-P", "none", "-a", "2", "-t", "3", "-r", "1", "-1", b)
+            assert out.returncode != 0  # input registers: not this node's function

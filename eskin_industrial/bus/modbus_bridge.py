@@ -92,6 +92,9 @@ class ModbusBridge:
         now = time.monotonic()
         if not urgent and now - self._last_pub < self.profile.modbus.plc.refresh_s:
             return False
+        src_counters = getattr(self.source, "counters", None)
+        if src_counters is not None and hasattr(src_counters, "as_dict"):
+            self.pipeline.counters.extra.update(src_counters.as_dict())
         regs = self.image.render(self.health(now))
         self.sink.publish(regs, self.image, urgent, t_event)
         self._last_pub = now
