@@ -11,7 +11,7 @@ short gaps by holding the previous frame and resets after long ones.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -80,3 +80,13 @@ class FrameHygiene:
         self._prev_frame = f
         self._step(t, f, flags, out)
         return out
+
+
+def feed(push: Callable[[float, np.ndarray, int], list[Any]], t: np.ndarray, forces: np.ndarray,
+         flags: np.ndarray | None = None) -> list[Any]:
+    """Push a chunk of frames in order through ``push``; all the updates they complete."""
+    out: list[Any] = []
+    fl = np.zeros(len(t), np.int64) if flags is None else flags
+    for i, ti in enumerate(np.asarray(t, dtype=np.float64).tolist()):
+        out.extend(push(ti, forces[i], int(fl[i])))
+    return out

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..frames import Frame
+from .hygiene import feed
 from .indicators import segment_indicators
 from .regularize import regularize
 from .settings import DetectorSettings
@@ -46,11 +47,7 @@ class PaperDetector:
 
     def feed(self, t: np.ndarray, forces: np.ndarray, flags: np.ndarray | None = None) -> list[Update]:
         """Push a chunk of frames in order; returns all updates they complete."""
-        out: list[Update] = []
-        fl = np.zeros(len(t), np.int64) if flags is None else flags
-        for i in range(len(t)):
-            out.extend(self.push(float(t[i]), forces[i], int(fl[i])))
-        return out
+        return feed(self.push, t, forces, flags)
 
 
 def paper_batch(

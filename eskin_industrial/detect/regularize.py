@@ -16,14 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..frames import FrameFlag
-
-_DUP = int(FrameFlag.DUPLICATE)
-_INVALID = int(FrameFlag.INVALID)
-_NEG = int(FrameFlag.NEGATIVE)
-_GAP = int(FrameFlag.GAP_BEFORE)
-_FILLED = int(FrameFlag.FILLED)
-_RESET = int(FrameFlag.RESET)
+from .hygiene import _DUP, _FILLED, _GAP, _INVALID, _NEG, _RESET
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from ..frames import FrameFlag
-from .hygiene import FrameHygiene
+from .hygiene import FrameHygiene, feed
 from .settings import DetectorSettings
 from .state import GraspState
 from .updates import Update
@@ -120,11 +120,7 @@ class ScoredDetector(FrameHygiene):
         return upd
 
     def feed(self, t: np.ndarray, forces: np.ndarray, flags: np.ndarray | None = None) -> list[Update]:
-        out: list[Update] = []
-        fl = np.zeros(len(t), np.int64) if flags is None else flags
-        for i in range(len(t)):
-            out.extend(self.push(float(t[i]), forces[i], int(fl[i])))
-        return out
+        return feed(self.push, t, forces, flags)
 
 
 class _Lagged:
