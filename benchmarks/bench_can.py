@@ -105,57 +105,124 @@ def bus_scan_rates() -> list[str]:
     return out
 
 
-def vcan_burst(seconds: float, profile: str, rate: float | None, burst: bool) -> int:
+def write_candump(path: Path, profile, seconds: float, scan_rate: float) -> int:
+    """``seconds`` of the node's traffic at ``scan_rate`` as a candump log (the format
+    canplayer replays), heartbeats included; returns the number of frames."""
+    layout = CanLayout.from_profile(profile)
+    k = int(round(seconds * scan_rate))
+    raw = grasp_raw(profile, min(k, 4096))
+    every = max(1, int(round(profile.can.heartbeat_s * scan_rate)))
+    from eskin_industrial.bus.can_layout import NodeState, NodeStatus
+
+    frames = layout.encode(np.arange(len(raw)), raw)
+    n = 0
+    with open(path, "w") as out:
+        for i in range(k):
+            t = 1000.0 + i / scan_rate
+            for can_id, data in frames[i % len(frames)]:
+                data = layout.header(i, can_id - layout.base_id) + data[2:]
+                out.write(f"({t:.6f}) can0 {can_id:03X}#{data.hex().upper()}\n")
+                n += 1
+            if i % every == every - 1:
+                hb = layout.encode_status(NodeStatus(layout.node_id, NodeState.RUNNING, 0, 0, int(scan_rate), i))
+                out.write(f"({t:.6f}) can0 {layout.status_id:03X}#{hb.hex().upper()}\n")
+                n += 1
+    return n
+
+
+def vcan_burst(seconds: float, profile: str, rate: float | None, burst: bool, feeder: str, cpus: int = 2) -> int:
     sys.path.insert(0, str(ROOT / "tests" / "vcan"))
     import vm  # the harness the vcan tests use
 
     prof = load_profile(ROOT / profile)
     layout = CanLayout.from_profile(prof)
     scan_rate = rate or (CLASSIC_LIMIT * 0.9 / layout.segments)
-    rec_k = 2000
     out = vm.CACHE / f"bench-{os.getpid()}"
     out.mkdir(parents=True, exist_ok=True)
-    raw = grasp_raw(prof, rec_k)
-    rec = out / "rec.csv"
-    from eskin_industrial.recording import write_recording
+    if feeder == "canplayer":  # can-utils sends, paced by the log's timestamps (-t: no pacing)
+        log = out / "traffic.log"
+        sent = write_candump(log, prof, seconds, scan_rate)
+        feed = f"canplayer {'-t' if burst else ''} -I {log} vcan0=can0"
+    else:  # our node simulator
+        from eskin_industrial.recording import write_recording
 
-    write_recording(rec, np.arange(rec_k) / scan_rate, raw, unit="raw")
-    mode = "--burst" if burst else ""
+        rec = out / "rec.csv"
+        write_recording(rec, np.arange(2000) / scan_rate, grasp_raw(prof, 2000), unit="raw")
+        sent = None
+        feed = (f"eskin-bus node -p {profile} -i socketcan -c vcan0 --recording {rec} --rate {scan_rate:.6g} "
+                f"--duration {seconds:g} {'--burst' if burst else ''} -q")
     script = f"""
-eskin-bus receive -p {profile} -i socketcan -c vcan0 --rate {scan_rate:.6g} --idle-exit 5 --duration {seconds + 120:.0f} \
-   2> "$ESKIN_VCAN_OUT/receive.json" &
+eskin-bus receive -p {profile} -i socketcan -c vcan0 --rate {scan_rate:.6g} --idle-exit 10 \
+   --duration {seconds * 3 + 120:.0f} 2> "$ESKIN_VCAN_OUT/receive.json" &
 rx=$!
-sleep 8
-eskin-bus node -p {profile} -i socketcan -c vcan0 --recording {rec} --rate {scan_rate:.6g} --duration {seconds:g} {mode} \
-   2> "$ESKIN_VCAN_OUT/node.txt"
+sleep 20
+start=$(date +%s)
+{feed}
+echo $(( $(date +%s) - start )) > "$ESKIN_VCAN_OUT/feed_s.txt"
 wait $rx
-cat /proc/net/dev | grep vcan0 > "$ESKIN_VCAN_OUT/netdev.txt"
 """
     if vm.native_can() and vm.native_vcan("vcan0") == "":
         env = {**os.environ, "ESKIN_VCAN_OUT": str(out), "PATH": f"{ROOT}/.venv/bin:{os.environ['PATH']}"}
-        subprocess.run(["sh", "-c", f"cd {ROOT} && {script}"], env=env, timeout=seconds + 300)
+        subprocess.run(["sh", "-c", f"cd {ROOT} && {script}"], env=env, timeout=seconds * 4 + 300)
         where = "native vcan0"
     else:
         missing = vm.missing_prerequisites()
         if missing:
             print(f"bench: cannot run the emulated machine: missing {', '.join(missing)}", file=sys.stderr)
             return 2
-        run = vm.run_in_vm(script, out, timeout_s=seconds + 300)
-        where = "vcan0 in the emulated machine (TCG, 1 vCPU)"
+        script += "python benchmarks/bench_can.py --scans 2000 > \"$ESKIN_VCAN_OUT/decode.txt\"\n"
+        run = vm.run_in_vm(script, out, timeout_s=seconds * 4 + 400, cpus=cpus)
+        where = f"vcan0 in the emulated machine (qemu TCG, {cpus} vCPU)"
         if run.rc != 0:
             print(run.console, run.boot_log[-2000:], file=sys.stderr)
             return 1
     rx = json.loads((out / "receive.json").read_text().strip().splitlines()[-1])
-    node = (out / "node.txt").read_text().strip()
+    feed_s = (out / "feed_s.txt").read_text().strip()
+    expected = int(round(seconds * scan_rate))
+    drops = rx["rx_queue_drops"] + rx["lost_scans"] + rx["torn_scans"] + (expected - rx["scans"] - rx["lost_scans"])
     print(f"# {time.strftime('%Y-%m-%d')} | {machine()} | {where}")
-    print(f"node: {node}")
+    print(f"# command: .venv/bin/python benchmarks/bench_can.py --vcan-burst {seconds:g} --profile {profile} "
+          f"--rate {scan_rate:.6g} --feeder {feeder}{' --burst' if burst else ''}")
     print(f"receiver: {json.dumps(rx)}")
-    sent = int(node.split(" frames in ")[0].split(", ")[-1])
-    drops = rx["rx_queue_drops"] + rx["lost_scans"] + rx["torn_scans"]
-    print(f"RESULT: {seconds:g} s at {scan_rate:.0f} scans/s ({scan_rate * layout.segments:.0f} frames/s, "
-          f"{'burst' if burst else 'paced'}): {sent} frames sent, {rx['frames']} in the node's range received, "
-          f"{rx['scans']} scans decoded, drops {drops} (queue {rx['rx_queue_drops']}, lost scans {rx['lost_scans']}, "
-          f"torn {rx['torn_scans']})")
+    if (out / "decode.txt").exists():
+        print("decode + detect inside the emulated machine:")
+        print((out / "decode.txt").read_text())
+    print(f"RESULT: {seconds:g} s of traffic at {scan_rate:.0f} scans/s ({scan_rate * layout.segments:.0f} frames/s"
+          f"{', sent unpaced' if burst else ''}) by {feeder}, sent in {feed_s} s: {sent if sent else '?'} frames; "
+          f"received {rx['frames']} frames, {rx['scans']} of {expected} scans; drops {drops} "
+          f"(queue {rx['rx_queue_drops']}, lost scans {rx['lost_scans']}, torn {rx['torn_scans']})")
+    return 0
+
+
+def virtual_burst(seconds: float, profile: str, rate: float | None) -> int:
+    """The same run on python-can's in-process virtual bus (no kernel): the node in a
+    thread, the receiver's reader thread and the detector in this process."""
+    import threading
+
+    from eskin_industrial.bus.can_node import CanNode
+    from eskin_industrial.bus.can_source import BusReader, CanSource, open_bus
+
+    prof = load_profile(ROOT / profile)
+    layout = CanLayout.from_profile(prof)
+    scan_rate = rate or (CLASSIC_LIMIT * 0.9 / layout.segments)
+    channel = f"bench-{os.getpid()}"
+    reader = BusReader(lambda: open_bus("virtual", channel)).start()
+    source = CanSource(reader, ScanAssembler(layout, scan_rate), Pipeline(prof, rate_hz=scan_rate))
+    tx = open_bus("virtual", channel)
+    node = CanNode(layout, tx, grasp_raw(prof, 2000), scan_rate, prof.can.heartbeat_s, duration_s=seconds)
+    th = threading.Thread(target=node.run)
+    th.start()
+    source.run(idle_timeout_s=2.0, duration_s=seconds * 3 + 10)
+    th.join()
+    tx.shutdown()
+    c, x = source.pipeline.counters, source.counters()
+    expected = int(round(seconds * scan_rate))
+    print(f"# {time.strftime('%Y-%m-%d')} | {machine()} | python-can virtual bus, one process")
+    print(f"# command: .venv/bin/python benchmarks/bench_can.py --virtual-burst {seconds:g} --profile {profile}")
+    print(f"RESULT: {seconds:g} s at {scan_rate:.0f} scans/s ({scan_rate * layout.segments:.0f} frames/s, paced; "
+          f"node worst lateness {node.stats.late_s * 1000:.1f} ms): {node.stats.frames_sent} frames sent, "
+          f"{x['frames']} received, {c.scans} of {expected} scans; drops: queue {x['rx_queue_drops']}, "
+          f"lost scans {c.lost_scans}, torn {x['torn_scans']}")
     return 0
 
 
@@ -164,13 +231,20 @@ def main() -> int:
     ap.add_argument("--scans", type=int, default=20_000, help="scans per run (default 20000)")
     ap.add_argument("--vcan-burst", type=float, default=None, metavar="SECONDS",
                     help="instead: send for SECONDS on vcan0 and count what the receiver lost")
+    ap.add_argument("--virtual-burst", type=float, default=None, metavar="SECONDS",
+                    help="instead: the same on python-can's in-process virtual bus")
     ap.add_argument("--profile", default="profiles/paper-5x5.toml")
     ap.add_argument("--rate", type=float, default=None,
                     help="scan rate of the vcan run (default: what fills 90%% of a 1 Mbit/s classic bus)")
     ap.add_argument("--burst", action="store_true", help="vcan run: no pacing, as fast as the bus takes frames")
+    ap.add_argument("--vm-cpus", type=int, default=2, help="vcan run in the emulated machine: its CPUs")
+    ap.add_argument("--feeder", choices=["canplayer", "node"], default="canplayer",
+                    help="vcan run: who sends (can-utils canplayer from a log, or eskin-bus node)")
     args = ap.parse_args()
+    if args.virtual_burst is not None:
+        return virtual_burst(args.virtual_burst, args.profile, args.rate)
     if args.vcan_burst is not None:
-        return vcan_burst(args.vcan_burst, args.profile, args.rate, args.burst)
+        return vcan_burst(args.vcan_burst, args.profile, args.rate, args.burst, args.feeder, args.vm_cpus)
     print(f"# {time.strftime('%Y-%m-%d')} | {machine()}")
     print("# command: .venv/bin/python benchmarks/bench_can.py")
     print("| profile | variant | bits | frames/scan | decode frames/s | decode+detect frames/s | scans/s | "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 
 import click
 
@@ -37,6 +38,9 @@ def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output,
     from ..bus.can_source import BusReader, CanSource, open_bus
     from ..pipeline import Pipeline
 
+    # The reader thread needs the interpreter for every frame; a short switch interval
+    # keeps it from waiting behind the detector (the default is 5 ms).
+    sys.setswitchinterval(0.0002)
     prof = open_profile(profile_path)
     kw = bus_kwargs(prof, interface, channel, bitrate, fd, data_bitrate)
     layout = CanLayout.from_profile(prof, fd=kw["fd"])

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-import vm
+from . import vm
 
 GUEST_TIMEOUT_S = 170.0
 

@@ -178,7 +178,7 @@ class GuestRun:
     seconds: float
 
 
-def run_in_vm(script: str, out: Path, timeout_s: float = 170.0, memory_mb: int = 1024) -> GuestRun:
+def run_in_vm(script: str, out: Path, timeout_s: float = 170.0, memory_mb: int = 1024, cpus: int = 1) -> GuestRun:
     """Boot, run ``script`` (sh, in the checkout, vcan0 up) in the host's root, power off.
 
     ``out`` must not be under /tmp (the guest mounts a tmpfs there); it is shared
@@ -199,7 +199,7 @@ def run_in_vm(script: str, out: Path, timeout_s: float = 170.0, memory_mb: int =
     exports = "".join(f"export {k}={shlex.quote(v)}\n" for k, v in env.items())
     (out / "guest.sh").write_text(f"{exports}cd {shlex.quote(str(ROOT))}\n{script}\n")
     cmd = [
-        "qemu-system-x86_64", "-machine", "q35,accel=tcg", "-cpu", "max", "-smp", "1", "-m", str(memory_mb),
+        "qemu-system-x86_64", "-machine", "q35,accel=tcg", "-cpu", "max", "-smp", str(cpus), "-m", str(memory_mb),
         "-nographic", "-no-reboot", "-kernel", str(kernel.vmlinuz), "-initrd", str(initrd),
         "-append", f"console=ttyS0 quiet panic=-1 eskin_out={out}",
         "-virtfs", "local,path=/,mount_tag=hostroot,security_model=none,readonly=on,multidevs=remap",
