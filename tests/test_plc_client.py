@@ -95,3 +95,25 @@ def test_plc_drops_and_comes_back_while_detection_runs(paper_profile):
     finally:
         writer.stop()
         plc.stop()
+
+
+def test_client_mode_over_rtu(paper_profile, tmp_path):
+    from eskin_industrial.bus.modbus_io import SerialSettings
+
+    from modbus_support import pty_pair
+
+    settings = paper_profile.modbus.plc
+    with pty_pair(tmp_path) as (a, b):
+        plc = PlcSimulator(settings, "", 0, echo=None, serial=SerialSettings(a, 115200)).start()
+        writer = PlcWriter(settings, serial=SerialSettings(b, 115200)).start()
+        try:
+            image = [int(Status.SLIP | Status.DATA_VALID)] + list(range(1, STATUS_COUNT))
+            writer.offer(image, urgent=True)
+            wait_for(lambda: plc.memory.regs[:STATUS_COUNT] == image)
+            plc.memory.regs[REG["COMMAND"].offset] = 1  # the PLC acknowledges
+            wait_for(lambda: plc.memory.regs[REG["COMMAND"].offset] == 0)
+            assert "ack" in [c.name for c in writer.take_commands()]
+            assert writer.stats.failures == 0 and "rtu" in writer.where
+        finally:
+            writer.stop()
+            plc.stop()

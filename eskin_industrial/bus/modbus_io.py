@@ -16,7 +16,6 @@ import asyncio
 import logging
 import socket
 import threading
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal, Protocol
@@ -215,9 +214,15 @@ class TcpMaster:
                                        reconnect_delay=0, reconnect_delay_max=0)
 
     def connect(self) -> None:
-        if not self._client.connect():
+        try:
+            ok = self._client.connect()
+            if ok:
+                self._client.socket.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        except (ModbusException, OSError, AttributeError) as exc:
+            self.close()
+            raise ModbusFault("connection", f"cannot connect to {self.host}:{self.port}: {exc}") from None
+        if not ok:
             raise ModbusFault("connection", f"cannot connect to {self.host}:{self.port}")
-        self._client.socket.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
     @property
     def connected(self) -> bool:
@@ -226,7 +231,7 @@ class TcpMaster:
     def write_registers(self, address: int, values: Sequence[int]) -> None:
         try:
             r = self._client.write_registers(address, list(values), device_id=self.unit_id)
-        except ModbusException as exc:
+        except (ModbusException, OSError) as exc:
             self.close()
             raise ModbusFault("connection", f"write to {self.host}:{self.port}: {exc}") from None
         _raise_on_error(r, f"write to {self.host}:{self.port}")
@@ -234,7 +239,7 @@ class TcpMaster:
     def read_holding(self, address: int, count: int) -> list[int]:
         try:
             r = self._client.read_holding_registers(address, count=count, device_id=self.unit_id)
-        except ModbusException as exc:
+        except (ModbusException, OSError) as exc:
             self.close()
             raise ModbusFault("connection", f"read from {self.host}:{self.port}: {exc}") from None
         return list(_raise_on_error(r, f"read from {self.host}:{self.port}").registers)
@@ -271,12 +276,26 @@ class RtuMaster:
         call = self._client.read_input_registers if function == 4 else self._client.read_holding_registers
         try:
             r = call(address, count=count, device_id=self.unit_id)
-        except ModbusException as exc:
+        except (ModbusException, OSError) as exc:
             kind = "crc" if self._rx and not _valid_frame(bytes(self._rx)) else "timeout"
             if not self._client.connected:
                 kind = "connection"
             raise ModbusFault(kind, f"{self.settings.port}: {kind}: {exc}") from None
         return list(_raise_on_error(r, f"{self.settings.port}").registers)
+
+    def write_registers(self, address: int, values: Sequence[int]) -> None:
+        try:
+            r = self._client.write_registers(address, list(values), device_id=self.unit_id)
+        except (ModbusException, OSError) as exc:
+            raise ModbusFault("timeout", f"{self.settings.port}: write: {exc}") from None
+        _raise_on_error(r, f"{self.settings.port}: write")
+
+    def read_holding(self, address: int, count: int) -> list[int]:
+        return self.read(3, address, count)
+
+    @property
+    def connected(self) -> bool:
+        return bool(self._client.connected)
 
     def reset_input(self) -> None:
         """Drop whatever is pending on the line (after garbage)."""
@@ -303,7 +322,3 @@ def rtu_transaction_s(count: int, baudrate: int, bits_per_char: int = 11) -> flo
     char_s = bits_per_char / baudrate
     gap = 1.75e-3 if baudrate > 19200 else 3.5 * char_s
     return chars * char_s + 2 * gap
-
-
-def monotonic() -> float:
-    return time.monotonic()

@@ -1,4 +1,5 @@
-"""Client mode: the bridge writes the register image into the PLC's holding registers.
+"""Client mode: the bridge writes the register image into the PLC's holding registers,
+over Modbus TCP (TCP_NODELAY) or RTU.
 
 A writer thread owns the connection, so that a slow or absent PLC never stalls
 detection: the bridge hands it the newest image (:meth:`PlcWriter.offer`) and goes
@@ -19,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..profile import ModbusPlcSection
-from .modbus_io import ModbusFault, TcpMaster
+from .modbus_io import ModbusFault, RtuMaster, SerialSettings, TcpMaster
 from .plc_image import REG, Command, PlcImage, Refused
 
 
@@ -36,12 +37,16 @@ class WriterStats:
 
 class PlcWriter:
     def __init__(self, settings: ModbusPlcSection, host: str | None = None, port: int | None = None,
-                 *, timeout_s: float = 0.5, poll_commands: bool = True,
+                 *, timeout_s: float = 0.5, poll_commands: bool = True, serial: SerialSettings | None = None,
                  on_written: Callable[[float, float], None] | None = None) -> None:
         self.settings = settings
         self.host = host or settings.host
         self.port = port or settings.port
-        self.master = TcpMaster(self.host, self.port, settings.unit_id, timeout_s)
+        self.serial = serial
+        if serial is not None:  # the PLC as a Modbus RTU slave
+            self.master: TcpMaster | RtuMaster = RtuMaster(serial, settings.unit_id, timeout_s)
+        else:
+            self.master = TcpMaster(self.host, self.port, settings.unit_id, timeout_s)
         self.poll_commands = poll_commands
         self.on_written = on_written
         self.stats = WriterStats()
@@ -56,6 +61,8 @@ class PlcWriter:
 
     @property
     def where(self) -> str:
+        if self.serial is not None:
+            return f"rtu {self.serial.port} at {self.serial.baudrate} baud, unit {self.settings.unit_id} (client)"
         return f"tcp {self.host}:{self.port} (client)"
 
     def start(self) -> "PlcWriter":
@@ -133,9 +140,13 @@ class PlcWriter:
                         self._read_commands()
             except ModbusFault as exc:
                 self._fail(exc, item)
-                if exc.kind != "exception":
+                if exc.kind == "connection" or (exc.kind != "exception" and self.serial is None):
                     self.connected = False
                     self.master.close()
+            except Exception as exc:  # noqa: BLE001 - the writer must outlive any one failure
+                self._fail(ModbusFault("connection", f"{type(exc).__name__}: {exc}"), item)
+                self.connected = False
+                self.master.close()
 
     def _fail(self, exc: ModbusFault, item) -> None:
         self.stats.failures += 1

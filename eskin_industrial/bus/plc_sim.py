@@ -1,5 +1,6 @@
-"""A PLC stand-in for commissioning: a Modbus server whose holding registers the bridge
-writes (client mode), which reports every change and runs example gripper logic.
+"""A PLC stand-in for commissioning: a Modbus server (TCP, or an RTU slave) whose
+holding registers the bridge writes (client mode), which reports every change and
+runs example gripper logic.
 
 The logic is the one ``docs/plc.md`` gives in Structured Text: trust the state only
 while DATA_VALID is set and the heartbeat moves; on a rising SLIP_LATCHED raise the
@@ -16,7 +17,7 @@ from dataclasses import dataclass, field
 
 from ..detect.state import GraspState
 from ..profile import ModbusPlcSection
-from .modbus_io import ILLEGAL_ADDRESS, RegisterServer
+from .modbus_io import ILLEGAL_ADDRESS, RegisterServer, SerialSettings
 from .plc_image import CMD_ACK, IMAGE_COUNT, REG, REGISTERS, STATUS_COUNT, Status, join32
 
 
@@ -105,11 +106,15 @@ class PlcSimulator:
     """Serve the PLC memory over TCP; a scan thread prints changes and runs the logic."""
 
     def __init__(self, settings: ModbusPlcSection, host: str, port: int, *, scan_s: float = 0.01,
-                 echo: Callable[[str], None] | None = print, gripper: Gripper | None = None) -> None:
+                 echo: Callable[[str], None] | None = print, gripper: Gripper | None = None,
+                 serial: SerialSettings | None = None) -> None:
         self.settings = settings
         self.memory = PlcMemory(settings.base_address, on_write=self._on_write)
         self.memory.regs[REG["ENABLE"].offset] = 1  # the PLC program enables detection
-        self.server = RegisterServer(self.memory, tcp=(host, port))
+        if serial is not None:  # an RTU slave with the profile's unit id
+            self.server = RegisterServer(self.memory, serial=serial, unit_ids=[settings.unit_id])
+        else:
+            self.server = RegisterServer(self.memory, tcp=(host, port))
         self.scan_s = scan_s
         self.echo = echo
         self.gripper = gripper or Gripper()

@@ -90,6 +90,8 @@ def _host_port(text: str, what: str) -> tuple[str, int]:
 @click.option("--baud", "baudrate", type=int, default=None, help="Node baud rate (default: the profile's).")
 @click.option("--plc-host", default=None, help="Client mode: the PLC's host (default: the profile's).")
 @click.option("--plc-port", type=int, default=None, help="Client mode: the PLC's port (default: the profile's).")
+@click.option("--plc-rtu", default=None, metavar="PORT", help="Client mode over Modbus RTU: the PLC's serial port.")
+@click.option("--plc-baud", type=int, default=115200, show_default=True, help="Baud rate for --plc-rtu.")
 @click.option("--serve", "serve", default=None, metavar="HOST:PORT",
               help="Server mode over TCP (default host: the profile's bind, 127.0.0.1).")
 @click.option("--serve-rtu", default=None, metavar="PORT", help="Server mode over Modbus RTU on this serial port.")
@@ -98,8 +100,8 @@ def _host_port(text: str, what: str) -> tuple[str, int]:
               help="Stop after this many seconds (default: until interrupted).")
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=0.0,
               help="Print counters every N seconds (0: only at the end).")
-def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_port, serve, serve_rtu, serve_baud,
-                  duration_s, status_every) -> None:
+def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_port, plc_rtu, plc_baud, serve,
+                  serve_rtu, serve_baud, duration_s, status_every) -> None:
     """Poll the node over Modbus RTU, detect, and publish the PLC register image:
     written to the PLC (client mode, the default when the profile says so) or served
     (--serve / --serve-rtu)."""
@@ -115,7 +117,10 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
         raise click.UsageError("give one of --rtu PORT or --recording REC.csv")
     if serve and serve_rtu:
         raise click.UsageError("--serve and --serve-rtu exclude each other")
-    server_mode = bool(serve or serve_rtu) or (plc.mode == "server" and plc_host is None and plc_port is None)
+    client_asked = plc_host is not None or plc_port is not None or plc_rtu is not None
+    if client_asked and (serve or serve_rtu):
+        raise click.UsageError("client options (--plc-*) and server options (--serve*) exclude each other")
+    server_mode = bool(serve or serve_rtu) or (plc.mode == "server" and not client_asked)
     if rtu_port is not None:
         source = RtuPoller(prof, rtu_port, baudrate=baudrate).open()
     else:
@@ -129,7 +134,8 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
             sink = PlcServer(plc, tcp=_host_port(serve, "--serve") if serve else (plc.bind, plc.port))
         sink.start()
     else:
-        sink = PlcWriter(plc, plc_host, plc_port).start()
+        serial = SerialSettings(plc_rtu, plc_baud) if plc_rtu else None
+        sink = PlcWriter(plc, plc_host, plc_port, serial=serial).start()
     bridge = ModbusBridge(prof, source, sink)
     click.echo(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {sink.where}, base address "
                f"{plc.base_address}", err=True)

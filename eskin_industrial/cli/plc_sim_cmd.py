@@ -13,11 +13,14 @@ from .common import open_profile, profile_option
 @profile_option()
 @click.option("--host", default="127.0.0.1", show_default=True, help="Address to listen on.")
 @click.option("--port", type=int, default=None, help="TCP port (default: the profile's [modbus.plc] port).")
+@click.option("--rtu", "rtu_port", default=None, metavar="PORT", help="Be an RTU slave on this serial port instead.")
+@click.option("--baud", "baudrate", type=int, default=115200, show_default=True, help="Baud rate for --rtu.")
 @click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,
               help="Stop after this many seconds (default: until interrupted).")
 @click.option("--grip-step", type=click.FloatRange(min=0.0), default=2.0, show_default=True,
               help="Newtons added to the grip force at each slip.")
-def plc_sim(profile_path: str, host: str, port: int | None, duration_s: float | None, grip_step: float) -> None:
+def plc_sim(profile_path: str, host: str, port: int | None, rtu_port: str | None, baudrate: int,
+            duration_s: float | None, grip_step: float) -> None:
     """Serve the PLC's receive registers over Modbus TCP (for `modbus-bridge` in client
     mode), print every status change, and run the example gripper logic: raise the
     grip force when the slip flag comes, acknowledge the latch, hold when the data
@@ -26,10 +29,13 @@ def plc_sim(profile_path: str, host: str, port: int | None, duration_s: float | 
 
     prof = open_profile(profile_path)
     plc = prof.modbus.plc
+    from ..bus.modbus_io import SerialSettings
+
+    serial = SerialSettings(rtu_port, baudrate) if rtu_port else None
     sim = PlcSimulator(plc, host, port or plc.port, gripper=Gripper(step_n=grip_step),
-                       echo=lambda s: click.echo(s))
+                       echo=lambda s: click.echo(s), serial=serial)
     sim.start()
-    click.echo(f"plc-sim: listening on {host}:{port or plc.port}, registers from {plc.base_address} "
+    click.echo(f"plc-sim: listening on {sim.server.where}, registers from {plc.base_address} "
                f"(40001 + {plc.base_address}), grip force {sim.gripper.force_n:g} N", err=True)
     try:
         if duration_s is None:
