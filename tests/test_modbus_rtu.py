@@ -126,6 +126,14 @@ def test_silent_node_sets_stale_and_fault_and_never_stalls(paper_profile, tmp_pa
             assert bridge.pipeline.counters.scans == c.scans  # failed polls are not scans
             assert bridge.pipeline.counters.extra["rtu_timeouts"] == c.timeouts
             assert sink.published[-1][17] == c.bus_errors  # BUS_ERRORS, low word (big word order)
+            # The node comes back: fault and stale clear at once, DATA_VALID after the warm-up.
+            node = NodeSimulator(paper_profile, a, f, 100.0).start()
+            deadline = time.monotonic() + 5
+            while not Status(sink.published[-1][0]) & Status.DATA_VALID:
+                assert time.monotonic() < deadline, Status(sink.published[-1][0])
+                bridge.step()
+            status = Status(sink.published[-1][0])
+            assert not status & (Status.BUS_FAULT | Status.SENSOR_STALE) and status & Status.STABLE
         finally:
             poller.close()
             node.stop()
@@ -194,3 +202,41 @@ def test_hand_profile_holding_registers_unit_2(hand_profile, tmp_path):
             assert [mbpoll_values(out.stdout)[i + 1] for i in range(20)] == node.scans[0]
             out = mbpoll("-m", "rtu", "-b", "115200", "-P", "none", "-a", "2", "-t", "3", "-r", "1", "-1", b)
             assert out.returncode != 0  # input registers: not this node's function
+
+
+def test_line_noise_never_becomes_data(paper_profile, tmp_path):
+    """Bursts of noise on a live line: polls may fail (counted), but every scan that
+    gets through is one the node really sent."""
+    t, f, _ = slip_recording(still_s=1.0, slip_s=0.0, after_s=0.0)
+    prof = with_node(paper_profile, timeout_s=0.2)
+    rng = np.random.default_rng(3)
+    with pty_pair(tmp_path) as (a, b):
+        with NodeSimulator(prof, a, f, 100.0) as node:
+            expected = {tuple(s) for s in node.scans}
+            noise = serial.Serial(a, 115200)  # a second writer on the node's end of the line
+            stop = threading.Event()
+
+            def inject():
+                while not stop.wait(0.013):
+                    noise.write(rng.integers(0, 256, int(rng.integers(1, 40)), dtype=np.uint8).tobytes())
+
+            th = threading.Thread(target=inject, daemon=True)
+            th.start()
+            poller = RtuPoller(prof, b).open()
+            try:
+                scans = [poller.poll_once() for _ in range(60)]
+            finally:
+                stop.set()
+                th.join(timeout=2)
+                noise.close()
+            try:
+                stop.clear()
+                after = [poller.poll_once() for _ in range(10)]  # quiet line again
+            finally:
+                poller.close()
+    good = [s for s in scans if s is not None]
+    c = poller.counters
+    assert c.failed_polls + len(good) == 60 and c.scans == len(good) + sum(s is not None for s in after)
+    for s in good + [s for s in after if s is not None]:
+        assert tuple(int(v) for v in s.raw) in expected
+    assert sum(s is not None for s in after) >= 8  # recovers once the noise stops
