@@ -73,3 +73,13 @@ def test_many_dropped_frames_still_detect_and_never_divide_by_zero(drop):
     rec, table = run("cof-track", conditions.drop_rate(drop), scene="case2")
     s = score_scene(table, rec.t, rec.labels)
     assert s.found == 1 and s.false_alarms == 0
+
+
+@pytest.mark.parametrize("scene", ["case1", "case2", "hand"])
+def test_the_grab_itself_reads_no_slip_with_the_default_method(scene):
+    rec, table = run("cof-track", None, scene=scene)
+    first_slide = min([e.t_s for e in load_scene(scene).events if e.kind == "slide"], default=np.inf)
+    before = table.t < first_slide
+    assert not (table.state[before] == GraspState.SLIP).any()
+    touching = table.f_sum > 0.2
+    assert not table.valid[touching][0]  # the first updates in contact say "not yet"

@@ -15,6 +15,7 @@ from .plc_cmd import plc
 from .plc_sim_cmd import plc_sim
 from .profile_cmd import profile
 from .receive_cmd import receive
+from .plot_cmd import plot
 from .simulate_cmd import simulate
 from .evaluate_cmd import evaluate_cmd
 
@@ -47,6 +48,7 @@ def main(ctx: click.Context, debug: bool) -> None:
 main.add_command(detect)
 main.add_command(profile)
 main.add_command(simulate)
+main.add_command(plot)
 main.add_command(evaluate_cmd, name="evaluate")
 main.add_command(plc)
 main.add_command(plc_sim)

@@ -32,7 +32,9 @@ from .settings import DetectorSettings
 class CofTrack(ScoredDetector):
     name = "cof-track"
     columns = ("fast_score", "slow_score")
-    history_s = 0.15
+    #: no vote until the noise has been learnt for a while after the grab settled
+    history_s = 0.35
+    settle_s = 0.15
 
     def __init__(self, settings: DetectorSettings, x_mm, y_mm, rate_hz: float, **overrides) -> None:
         """Settings from ``settings.cof_track``; keyword arguments override single
@@ -47,13 +49,14 @@ class CofTrack(ScoredDetector):
         self.fast_s = c.fast_s
         self._a_noise = 1.0 / max(1.0, c.noise_s * rate_hz)
         self.vib_n = max(2, round(c.vib_s * rate_hz))
+        self._settle = max(1, round(self.settle_s * rate_hz))
         self.vib_ratio, self.vib_support = c.vib_ratio, c.vib_support
         self._noise: float | None = None  # learnt CoF noise, in force units (N^2 mm^2)
         super().__init__(settings, x_mm, y_mm, rate_hz, hop_s=c.hop_s, confirm=1)
 
     def reset_scores(self) -> None:
         self._win = _Lagged(self.m, None)
-        self._sx = self._sy = 0.0
+        self._sx = self._sy = self._ss = 0.0
         self._cnt = 0
         self._fast = _Lagged(self.lf, None)
         self._slow = _Lagged(self.ls, None)
@@ -66,22 +69,26 @@ class CofTrack(ScoredDetector):
 
     def score(self, t, f, s, xc, yc):
         # running mean of the last m centres
-        old = self._win.swap((xc, yc))
+        # running means of the last m centres and totals (the total is smoothed too,
+        # so that sensor noise does not read as a varying force)
+        old = self._win.swap((xc, yc, s))
         self._sx += xc
         self._sy += yc
+        self._ss += s
         if old is None:
             self._cnt += 1
         else:
             self._sx -= old[0]
             self._sy -= old[1]
-        mx, my = self._sx / self._cnt, self._sy / self._cnt
+            self._ss -= old[2]
+        mx, my, ms = self._sx / self._cnt, self._sy / self._cnt, self._ss / self._cnt
         prev = self._prev
         self._prev = (xc, yc)
         fast = self._fast.swap((mx, my))
         slow = self._slow.swap((mx, my))
         half = self._half.swap((mx, my))
-        old_s = self._force.swap(s)
-        varying = old_s is not None and abs(s - old_s) / self.fast_s > self.force_rate * s
+        old_s = self._force.swap(ms)
+        varying = old_s is not None and abs(ms - old_s) / self.fast_s > self.force_rate * ms
         if prev is None or self._cnt < self.m:
             return 0.0, 0.0, False, varying
         # CoF noise scales as 1 / S (sigma_F * spread / S): learn it in force units so
@@ -93,7 +100,7 @@ class CofTrack(ScoredDetector):
         if self._noise is None or self._noise <= 0.0:
             # nothing learnt yet: the first frames after a grab still settle, so
             # vote nothing until a running mean over the settling time exists
-            if self._seen <= self.history:
+            if self._seen <= self._settle:
                 return 0.0, 0.0, False, varying
             if self.filled or step2 <= 0.0:
                 return 0.0, 0.0, False, varying

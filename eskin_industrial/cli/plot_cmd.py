@@ -1,0 +1,84 @@
+"""``eskin-bus plot``: a recording's indicators over time, states shaded, as a PNG."""
+
+from __future__ import annotations
+
+import click
+import numpy as np
+
+from ..detect.methods import METHODS, get_method
+from ..detect.state import GraspState
+from ..errors import InputFormatError
+from ..recording import read_recording
+from .common import open_profile, profile_option
+
+STATE_COLOURS = {GraspState.SLIP: "tab:red", GraspState.VARIABLE_FORCE: "tab:orange"}
+
+
+@click.command()
+@profile_option()
+@click.argument("input_path", metavar="REC.csv", type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="PNG file to write.")
+@click.option("--method", type=click.Choice(sorted(METHODS)), default=None, help="Detection method (default: the profile's).")
+@click.option("--labels", "labels_path", type=click.Path(dir_okay=False, exists=True), default=None,
+              help="Ground truth (t,label, from `eskin-bus simulate --labels`) drawn under the states.")
+def plot(profile_path: str, input_path: str, output: str, method: str | None, labels_path: str | None) -> None:
+    """Draw total force, the two indicators and the detected states of a recording."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise click.ClickException("plot needs matplotlib: pip install 'eskin-industrial[plot]'") from None
+    prof = open_profile(profile_path)
+    rec = read_recording(input_path, prof.taxels)
+    values = rec.values
+    if rec.unit == "raw":
+        from ..calibration import Calibrator
+
+        values, _ = Calibrator.from_section(prof.calibration, prof.taxels).to_newtons(values)
+    chosen = get_method(method or prof.detector.method)
+    x, y = prof.coordinates_mm
+    rate = rec.rate_hz(prof.sensor.rate_hz)
+    table = chosen.batch(prof.detector, x, y, rate, rec.t, values, None)
+    col_a, col_b = getattr(chosen.stream, "columns", ("R_coe", "R_dw"))
+
+    fig, (ax_f, ax_r) = plt.subplots(2, 1, figsize=(11, 6), sharex=True, gridspec_kw={"height_ratios": [1, 2]})
+    ax_f.plot(rec.t, np.nansum(values, axis=1), color="k", lw=0.8)
+    ax_f.set_ylabel("total force (N)")
+    if labels_path is not None:
+        _shade_labels(ax_r, labels_path)
+    for state, colour in STATE_COLOURS.items():
+        on = table.state == state
+        ax_r.fill_between(table.t, 0, 1, where=on, transform=ax_r.get_xaxis_transform(), color=colour,
+                          alpha=0.35, step="post", lw=0, label=f"detected {state.label}")
+    ax_r.plot(table.t, table.r_coe, lw=1.0, label=col_a)
+    ax_r.plot(table.t, table.r_dw, lw=1.0, label=col_b)
+    if chosen.name.startswith("paper"):
+        ax_r.axhline(prof.detector.slip_r_coe, color="k", ls="--", lw=0.8, label="slip threshold")
+    else:
+        ax_r.axhline(1.0, color="k", ls="--", lw=0.8, label="threshold")
+    ax_r.set_yscale("symlog", linthresh=1.0)
+    ax_r.set_ylim(bottom=0.0)
+    ax_r.set_xlabel("time (s)")
+    ax_r.legend(fontsize=8, ncol=3, loc="upper left")
+    fig.suptitle(f"{rec.name}: {chosen.name} on {prof.name}, {rate:.0f} Hz")
+    fig.tight_layout()
+    try:
+        fig.savefig(output, dpi=100)
+    except OSError as exc:
+        raise InputFormatError(f"{output}: cannot write: {exc.strerror or exc}") from None
+    finally:
+        plt.close(fig)
+    click.echo(f"{output}: {len(table)} updates, "
+               + ", ".join(f"{s.label} {int(np.sum(table.state == s))}" for s in GraspState), err=True)
+
+
+def _shade_labels(ax, path: str) -> None:
+    data = np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    t, labels = np.atleast_1d(data["t"]), np.atleast_1d(data["label"])
+    from ..evaluation.metrics import spans
+
+    for label, colour in (("slip", "tab:red"), ("variable_force", "tab:orange")):
+        for a, b in spans(labels == label):
+            ax.axvspan(t[a], t[b - 1], ymax=0.06, color=colour, alpha=0.9, lw=0)

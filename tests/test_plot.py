@@ -1,0 +1,24 @@
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from conftest import PROFILES, ROOT
+
+
+def test_plot_writes_a_png_of_a_recording(tmp_path):
+    out = tmp_path / "case2.png"
+    res = subprocess.run([sys.executable, "-m", "eskin_industrial", "plot", "-p", str(PROFILES / "paper-5x5.toml"),
+                          str(ROOT / "examples" / "case2.csv"), "--labels", str(ROOT / "examples" / "case2-labels.csv"),
+                          "--method", "cof-track", "-o", str(out)], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+    assert "slip" in res.stderr and "slip 0" not in res.stderr  # the example's slide is detected
+
+
+def test_plot_refuses_a_bad_recording_in_one_line(tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,f0\n0,1\n")
+    res = subprocess.run([sys.executable, "-m", "eskin_industrial", "plot", "-p", str(PROFILES / "paper-5x5.toml"),
+                          str(bad), "-o", str(tmp_path / "x.png")], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "1 taxel columns" in res.stderr
