@@ -7,7 +7,8 @@ import pytest
 from click.testing import CliRunner
 
 from eskin_industrial.bus.plc_image import (
-    IMAGE_COUNT, REG, REGISTERS, STATUS_COUNT, Command, Health, PlcImage, Refused, Status, join32, map_rows, split32,
+    IMAGE_COUNT, REG, REGISTERS, STATUS_COUNT, Command, Health, PlcImage, Refused, Status, join32, map_rows,
+    parse_coil_write, parse_register_write, split32,
 )
 from eskin_industrial.cli import main
 from eskin_industrial.detect.updates import Update
@@ -96,21 +97,20 @@ def test_slip_latch_ack_and_enable(paper_profile):
 
 
 def test_writes_outside_the_command_registers_are_refused(paper_profile):
-    image = PlcImage(paper_profile.modbus.plc)
-    assert image.parse_register_write(REG["COMMAND"].offset, [3]) == [Command("ack"), Command("tare")]
-    assert image.parse_register_write(REG["COMMAND"].offset, [0, 1]) == [Command("enable")]
+    assert parse_register_write(REG["COMMAND"].offset, [3]) == [Command("ack"), Command("tare")]
+    assert parse_register_write(REG["COMMAND"].offset, [0, 1]) == [Command("enable")]
     for offset in (0, REG["STATE"].offset, REG["RESERVED"].offset, IMAGE_COUNT):
         with pytest.raises(Refused) as info:
-            image.parse_register_write(offset, [1])
+            parse_register_write(offset, [1])
         assert info.value.code == 2
     with pytest.raises(Refused) as info:
-        image.parse_register_write(REG["ENABLE"].offset, [7])
+        parse_register_write(REG["ENABLE"].offset, [7])
     assert info.value.code == 3
     with pytest.raises(Refused):
-        image.parse_register_write(REG["COMMAND"].offset - 1, [0, 1])  # straddles into read-only
-    assert image.parse_coil_write(0, [True, False, False]) == [Command("ack"), Command("disable")]
+        parse_register_write(REG["COMMAND"].offset - 1, [0, 1])  # straddles into read-only
+    assert parse_coil_write(0, [True, False, False]) == [Command("ack"), Command("disable")]
     with pytest.raises(Refused):
-        image.parse_coil_write(3, [True])
+        parse_coil_write(3, [True])
 
 
 def test_non_finite_values_do_not_break_the_image(paper_profile):

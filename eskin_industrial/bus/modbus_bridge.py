@@ -83,7 +83,6 @@ class ModbusBridge:
             else:
                 self.image.apply(cmd)
             urgent = True
-        self.image.pending.clear()
         if commands:
             self.sink.commands_done()
         return self.publish_if_due(urgent, t_event)
@@ -124,8 +123,8 @@ class ModbusBridge:
         src_counters = getattr(self.source, "counters", None)
         if src_counters is not None and hasattr(src_counters, "as_dict"):
             out.update(src_counters.as_dict())
-        stats = getattr(self.sink, "stats_dict", None) or getattr(self.sink, "stats", None)
-        if callable(stats):
+        stats = getattr(self.sink, "stats_dict", None)
+        if stats is not None:
             out.update(stats())
         return out
 

@@ -40,9 +40,13 @@ ILLEGAL_VALUE = int(ExcCodes.ILLEGAL_VALUE)
 _TABLE_OF_FC: dict[int, Table] = {1: "coils", 5: "coils", 15: "coils", 2: "discrete", 3: "holding", 6: "holding",
                                   16: "holding", 22: "holding", 23: "holding", 4: "input"}
 
-# pymodbus logs refused requests and lost peers at ERROR through the root fallback
-# handler; the package counts those itself.
-logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+
+
+def quiet_pymodbus() -> None:
+    """For the command line: pymodbus logs refused requests, timeouts and lost peers
+    at ERROR (through Python's last-resort handler when nothing is configured); the
+    package counts those itself and reports them in one line."""
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 
 class ModbusFault(EskinError):

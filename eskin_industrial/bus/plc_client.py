@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 from ..profile import ModbusPlcSection
 from .modbus_io import ModbusFault, RtuMaster, SerialSettings, TcpMaster
-from .plc_image import REG, Command, PlcImage, Refused
+from .plc_image import REG, Command, PlcImage, Refused, parse_register_write
 
 
 @dataclass
@@ -51,7 +51,6 @@ class PlcWriter:
         self.on_written = on_written
         self.stats = WriterStats()
         self.commands: queue.SimpleQueue[Command] = queue.SimpleQueue()
-        self._parser = PlcImage(settings)
         self._cond = threading.Condition()
         self._pending: tuple[list[int], bool, float] | None = None
         self._last: list[int] | None = None
@@ -166,9 +165,9 @@ class PlcWriter:
         at = s.base_address + REG["COMMAND"].offset
         command, enable = self.master.read_holding(at, 2)
         try:
-            cmds = self._parser.parse_register_write(REG["ENABLE"].offset, [enable])
+            cmds = parse_register_write(REG["ENABLE"].offset, [enable])
             if command:
-                cmds = self._parser.parse_register_write(REG["COMMAND"].offset, [command]) + cmds
+                cmds = parse_register_write(REG["COMMAND"].offset, [command]) + cmds
         except Refused:
             cmds = []
         for c in cmds:

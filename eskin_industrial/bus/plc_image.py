@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal
 
 from ..detect.state import GraspState
@@ -164,7 +164,6 @@ class PlcImage:
     slip_events: int = 0
     state_changes: int = 0
     update: Update | None = None
-    pending: list[Command] = field(default_factory=list)  #: commands for the bridge (tare)
 
     # -- input side -------------------------------------------------------------
     def observe(self, update: Update) -> bool:
@@ -191,8 +190,7 @@ class PlcImage:
         elif command.name == "disable":
             self.enabled = False
             self.latched = False
-        elif command.name == "tare":
-            self.pending.append(command)
+        # "tare" acts on the calibration: the bridge does it, the image has no part in it.
 
     # -- output side ------------------------------------------------------------
     def status(self, health: Health) -> int:
@@ -243,45 +241,48 @@ class PlcImage:
             *split32(health.lost_scans, wo), *split32(health.bus_errors, wo), flags, 0,
         ]
 
-    # -- PLC writes -------------------------------------------------------------
-    def parse_register_write(self, offset: int, values: list[int]) -> list[Command]:
-        """Commands for a write of holding registers starting at ``offset`` (from the
-        base); :class:`Refused` for anything outside COMMAND/ENABLE or a bad value."""
-        cmd_at, en_at = REG["COMMAND"].offset, REG["ENABLE"].offset
-        out: list[Command] = []
-        for i, v in enumerate(values):
-            at = offset + i
-            if at == cmd_at:
-                if v & ~(CMD_ACK | CMD_TARE):
-                    raise Refused(ILLEGAL_VALUE, f"COMMAND: unknown bits {v:#06x}")
-                if v & CMD_ACK:
-                    out.append(Command("ack"))
-                if v & CMD_TARE:
-                    out.append(Command("tare"))
-            elif at == en_at:
-                if v not in (0, 1):
-                    raise Refused(ILLEGAL_VALUE, f"ENABLE: expected 0 or 1, got {v}")
-                out.append(Command("enable" if v else "disable"))
-            else:
-                raise Refused(ILLEGAL_ADDRESS, f"register offset {at} is read-only or does not exist")
-        return out
-
-    def parse_coil_write(self, offset: int, values: list[bool]) -> list[Command]:
-        out: list[Command] = []
-        for i, v in enumerate(values):
-            at = offset + i
-            if at == 0:
-                out += [Command("ack")] if v else []
-            elif at == 1:
-                out += [Command("tare")] if v else []
-            elif at == 2:
-                out.append(Command("enable" if v else "disable"))
-            else:
-                raise Refused(ILLEGAL_ADDRESS, f"coil offset {at} does not exist")
-        return out
-
     def coils(self) -> list[bool]:
         return [False, False, self.enabled]
+
+
+# -- PLC writes: pure checks, shared by server mode (writes) and client mode (reads) ---
+
+def parse_register_write(offset: int, values: list[int]) -> list[Command]:
+    """Commands for a write of holding registers starting at ``offset`` (from the
+    base); :class:`Refused` for anything outside COMMAND/ENABLE or a bad value."""
+    cmd_at, en_at = REG["COMMAND"].offset, REG["ENABLE"].offset
+    out: list[Command] = []
+    for i, v in enumerate(values):
+        at = offset + i
+        if at == cmd_at:
+            if v & ~(CMD_ACK | CMD_TARE):
+                raise Refused(ILLEGAL_VALUE, f"COMMAND: unknown bits {v:#06x}")
+            if v & CMD_ACK:
+                out.append(Command("ack"))
+            if v & CMD_TARE:
+                out.append(Command("tare"))
+        elif at == en_at:
+            if v not in (0, 1):
+                raise Refused(ILLEGAL_VALUE, f"ENABLE: expected 0 or 1, got {v}")
+            out.append(Command("enable" if v else "disable"))
+        else:
+            raise Refused(ILLEGAL_ADDRESS, f"register offset {at} is read-only or does not exist")
+    return out
+
+
+def parse_coil_write(offset: int, values: list[bool]) -> list[Command]:
+    out: list[Command] = []
+    for i, v in enumerate(values):
+        at = offset + i
+        if at == 0:
+            out += [Command("ack")] if v else []
+        elif at == 1:
+            out += [Command("tare")] if v else []
+        elif at == 2:
+            out.append(Command("enable" if v else "disable"))
+        else:
+            raise Refused(ILLEGAL_ADDRESS, f"coil offset {at} does not exist")
+    return out
 
 
 def bits_of(status: int) -> list[bool]:

@@ -14,7 +14,10 @@ import threading
 
 from ..profile import ModbusPlcSection
 from .modbus_io import ILLEGAL_ADDRESS, RegisterServer, SerialSettings
-from .plc_image import BITS, COILS, IMAGE_COUNT, REG, STATUS_COUNT, Command, PlcImage, Refused, bits_of
+from .plc_image import (
+    BITS, COILS, IMAGE_COUNT, REG, STATUS_COUNT, Command, PlcImage, Refused, bits_of, parse_coil_write,
+    parse_register_write,
+)
 
 
 class PlcRegisterHandler:
@@ -23,7 +26,6 @@ class PlcRegisterHandler:
     def __init__(self, settings: ModbusPlcSection) -> None:
         self.settings = settings
         self.base = settings.base_address
-        self._parser = PlcImage(settings)  # parse_* are pure; its state is never used
         self.registers: list[int] = [0] * STATUS_COUNT
         self.enabled = True
         self.command_pending = 0  #: COMMAND reads this until the bridge has acted
@@ -65,9 +67,9 @@ class PlcRegisterHandler:
         off = address - self.base
         try:
             if table == "holding":
-                cmds = self._parser.parse_register_write(off, [int(v) for v in values])
+                cmds = parse_register_write(off, [int(v) for v in values])
             elif table == "coils":
-                cmds = self._parser.parse_coil_write(off, [bool(v) for v in values])
+                cmds = parse_coil_write(off, [bool(v) for v in values])
             else:
                 return ILLEGAL_ADDRESS
         except Refused as exc:
@@ -115,7 +117,7 @@ class PlcServer:
     def commands_done(self) -> None:
         self.handler.done()
 
-    def stats(self) -> dict[str, int]:
+    def stats_dict(self) -> dict[str, int]:
         return {"plc_reads": self.handler.reads, "plc_refused_writes": self.handler.refused}
 
     def stop(self) -> None:

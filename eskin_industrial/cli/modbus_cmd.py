@@ -57,8 +57,10 @@ def load_scene_forces(prof: Profile, scene: str | None, recording: str | None, r
               help="Stop after this many seconds (default: until interrupted).")
 def modbus_node(profile_path, port, scene, recording, rate_hz, baudrate, seed, once, duration_s) -> None:
     """Serve a scene as the sensor node: a Modbus RTU slave with the profile's register map."""
+    from ..bus.modbus_io import quiet_pymodbus
     from ..bus.modbus_node import serve_scene_rtu
 
+    quiet_pymodbus()
     prof = open_profile(profile_path)
     t, forces, rate = load_scene_forces(prof, scene, recording, rate_hz, seed)
     node = prof.modbus.node
@@ -106,11 +108,12 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
     written to the PLC (client mode, the default when the profile says so) or served
     (--serve / --serve-rtu)."""
     from ..bus.modbus_bridge import ModbusBridge, ReplaySource
-    from ..bus.modbus_io import SerialSettings
+    from ..bus.modbus_io import SerialSettings, quiet_pymodbus
     from ..bus.modbus_source import RtuPoller
     from ..bus.plc_client import PlcWriter
     from ..bus.plc_server import PlcServer
 
+    quiet_pymodbus()
     prof = open_profile(profile_path)
     plc = prof.modbus.plc
     if (rtu_port is None) == (recording is None):

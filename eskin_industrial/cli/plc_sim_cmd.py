@@ -29,8 +29,9 @@ def plc_sim(profile_path: str, host: str, port: int | None, rtu_port: str | None
 
     prof = open_profile(profile_path)
     plc = prof.modbus.plc
-    from ..bus.modbus_io import SerialSettings
+    from ..bus.modbus_io import SerialSettings, quiet_pymodbus
 
+    quiet_pymodbus()
     serial = SerialSettings(rtu_port, baudrate) if rtu_port else None
     sim = PlcSimulator(plc, host, port or plc.port, gripper=Gripper(step_n=grip_step),
                        echo=lambda s: click.echo(s), serial=serial)
