@@ -201,6 +201,15 @@ def test_bus_options_and_python_can_environment(tmp_path):
     assert res.returncode == 2 and "expected a probability" in res.stderr
 
 
+def test_python_can_config_file_is_honoured(tmp_path):
+    (tmp_path / ".canrc").write_text("[default]\ninterface = virtual\nchannel = from-config\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("CAN_")}
+    res = subprocess.run([sys.executable, "-m", "eskin_industrial", "receive", "-p", PAPER, "--duration", "0.2"],
+                         capture_output=True, text=True, timeout=120, env={**env, "HOME": str(tmp_path)})
+    assert res.returncode == 0, res.stderr
+    assert '"scans": 0' in res.stderr
+
+
 def test_detect_needs_exactly_one_input(tmp_path):
     res = cli("detect", "-p", PAPER)
     assert res.returncode == 2 and "exactly one of INPUT.csv or --can-log" in res.stderr

@@ -60,7 +60,8 @@ def open_bus(interface: str | None = None, channel: str | None = None, bitrate: 
         if channel:
             where += f", channel {channel!r}"
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise CanBusError(f"cannot open CAN bus ({where}): {detail}; valid interfaces: "
+        hint = "" if interface else " (give -i/--interface and -c/--channel, or set CAN_INTERFACE and CAN_CHANNEL)"
+        raise CanBusError(f"cannot open CAN bus ({where}): {detail}{hint}; valid interfaces: "
                           f"{', '.join(sorted(can.interfaces.VALID_INTERFACES))}") from exc
     enlarge_rcvbuf(bus, rcvbuf_bytes)
     return bus
