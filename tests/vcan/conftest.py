@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import functools
 import os
+import shlex
 import shutil
+import sys
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,12 +39,12 @@ def _mode() -> tuple[str, str]:
     channel = os.environ.get("ESKIN_VCAN_CHANNEL")
     if channel:
         return "direct", channel
-    if vm.native_can():
-        problem = vm.native_vcan("vcan0")
-        return ("direct", "vcan0") if problem == "" else ("missing", problem)
+    native = vm.native_vcan("vcan0")  # "" when ready, else why not
+    if native == "":
+        return "direct", "vcan0"
     missing = vm.missing_prerequisites()
     if missing:
-        return "missing", ("this kernel has no SocketCAN and the emulated machine needs: " + ", ".join(missing)
+        return "missing", (f"no native vcan0 ({native}) and the emulated machine needs: " + ", ".join(missing)
                            + " (scripts/setup installs them)")
     return "vm", ""
 
@@ -55,7 +57,7 @@ def _ci() -> bool:
 def vm_results() -> dict[str, GuestOutcome]:
     out = vm.CACHE / f"run-{os.getpid()}"
     run = vm.run_in_vm(
-        "python -m pytest -q -p no:cacheprovider -p no:hypothesispytest tests/vcan "
+        f"{shlex.quote(sys.executable)} -m pytest -q -p no:cacheprovider -p no:hypothesispytest tests/vcan "
         "--junitxml=\"$ESKIN_VCAN_OUT/junit.xml\" -o junit_family=xunit1",
         out, timeout_s=GUEST_TIMEOUT_S)
     try:
