@@ -240,3 +240,32 @@ def test_line_noise_never_becomes_data(paper_profile, tmp_path):
     for s in good + [s for s in after if s is not None]:
         assert tuple(int(v) for v in s.raw) in expected
     assert sum(s is not None for s in after) >= 8  # recovers once the noise stops
+
+
+def test_stale_is_published_at_once_not_at_the_next_refresh(paper_profile):
+    """A status bit that changes (here SENSOR_STALE) goes out in the step that sees it."""
+    import dataclasses as dc
+
+    slow = dc.replace(paper_profile, modbus=dc.replace(paper_profile.modbus, plc=dc.replace(
+        paper_profile.modbus.plc, refresh_s=60.0, stale_s=0.05)))
+
+    class Frozen:
+        bus_fault = False
+        last_rx = time.monotonic()
+
+        def poll(self):
+            time.sleep(0.005)
+            return None
+
+        def frame_age(self, now=None):
+            return (time.monotonic() if now is None else now) - self.last_rx
+
+    sink = RecordingSink()
+    bridge = ModbusBridge(slow, Frozen(), sink)
+    bridge.step()
+    assert len(sink.published) == 1 and not Status(sink.published[0][0]) & Status.SENSOR_STALE
+    deadline = time.monotonic() + 1.0
+    while not Status(sink.published[-1][0]) & Status.SENSOR_STALE:
+        assert time.monotonic() < deadline
+        bridge.step()
+    assert len(sink.published) == 2  # no refresh in between (60 s), the change went out alone

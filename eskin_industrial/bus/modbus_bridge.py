@@ -19,7 +19,9 @@ import numpy as np
 
 from ..pipeline import Pipeline, RawScan
 from ..profile import Profile
-from .plc_image import Command, Health, PlcImage
+from .plc_image import Command, Health, PlcImage, Status
+
+_QUIET = ~int(Status.BRIDGE_ALIVE)  # the life bit changes at every publication
 
 
 class Source(Protocol):
@@ -53,6 +55,7 @@ class ModbusBridge:
         self.tares = 0
         self.publications = 0
         self._last_pub = float("-inf")
+        self._last_status = -1
         self._stop = threading.Event()
 
     def health(self, now: float | None = None) -> Health:
@@ -88,14 +91,19 @@ class ModbusBridge:
         return self.publish_if_due(urgent, t_event)
 
     def publish_if_due(self, urgent: bool, t_event: float | None = None) -> bool:
+        """Publish when urgent, when a status bit other than the life bit changed
+        (stale, bus fault, ...), or when ``refresh_s`` has passed."""
         now = time.monotonic()
-        if not urgent and now - self._last_pub < self.profile.modbus.plc.refresh_s:
+        health = self.health(now)
+        status = self.image.status(health) & _QUIET
+        if not urgent and status == self._last_status and now - self._last_pub < self.profile.modbus.plc.refresh_s:
             return False
         src_counters = getattr(self.source, "counters", None)
         if src_counters is not None and hasattr(src_counters, "as_dict"):
             self.pipeline.counters.extra.update(src_counters.as_dict())
-        regs = self.image.render(self.health(now))
-        self.sink.publish(regs, self.image, urgent, t_event)
+        regs = self.image.render(health)
+        self.sink.publish(regs, self.image, urgent or status != self._last_status, t_event)
+        self._last_status = status
         self._last_pub = now
         self.publications += 1
         return True
