@@ -171,6 +171,10 @@ class ModbusNodeSection:
     poll_hz: float | None = field(default=None, metadata=positive())
     #: Consecutive failed polls after which the bus-fault bit is set.
     fault_after_failures: int = field(default=3, metadata=positive("an integer >= 1"))
+    #: The node keeps its scan counter (uint16, wrapping) in the register before the
+    #: taxels: scans are then timed on the node's clock (counter / rate_hz), a scan
+    #: polled twice is used once, and skipped scans count as lost.
+    counter_register: bool = False
 
     @property
     def words_per_taxel(self) -> int:

@@ -269,3 +269,25 @@ def test_stale_is_published_at_once_not_at_the_next_refresh(paper_profile):
         assert time.monotonic() < deadline
         bridge.step()
     assert len(sink.published) == 2  # no refresh in between (60 s), the change went out alone
+
+
+def test_scan_counter_gives_node_time_and_drops_repeats(paper_profile, tmp_path):
+    prof = with_node(paper_profile, counter_register=True, poll_hz=250.0, timeout_s=0.5)
+    f = np.tile(np.linspace(0.5, 5.0, 40)[:, None], (1, 25))  # scan k is recognisable by its force
+    with pty_pair(tmp_path) as (a, b):
+        with NodeSimulator(prof, a, f, 100.0) as node:  # the node scans at 100 Hz, we poll at 250 Hz
+            poller = RtuPoller(prof, b).open()
+            try:
+                scans = [s for s in (poller.poll() for _ in range(150)) if s is not None]
+            finally:
+                poller.close()
+            first_counter = poller._counter - scans[-1].seq
+            table = node.scans
+    c = poller.counters
+    assert c.repeats > 0 and c.scans == len(scans) and c.failed_polls == 0
+    seqs = [s.seq for s in scans]
+    assert seqs == sorted(set(seqs))  # each node scan once, in order
+    assert seqs[-1] - seqs[0] + 1 - len(seqs) <= max(3, len(seqs) // 10)  # 2.5x the node rate: few lost
+    for s in scans:
+        assert abs(s.t - s.seq / prof.sensor.rate_hz) < 1e-12  # node time
+        assert [int(v) for v in s.raw] == table[(first_counter + s.seq) % len(table)]

@@ -2,7 +2,8 @@
 
 The node keeps its newest scan in ``taxels x words`` registers from the profile's
 ``[modbus.node] start_address`` (input registers for function 4, holding registers
-for function 3), row-major, each the calibration's raw value as ``value_type``.
+for function 3), row-major, each the calibration's raw value as ``value_type``;
+with ``counter_register`` the node's scan counter comes first.
 :func:`encode_scan` / :func:`decode_scans` are the pure codec; the poller
 (``modbus_source``) and the simulator here share them.
 """
@@ -24,7 +25,8 @@ _LIMITS = {"uint16": (0, 0xFFFF), "int16": (-0x8000, 0x7FFF), "uint32": (0, 0xFF
 
 
 def register_count(node: ModbusNodeSection, taxels: int) -> int:
-    return taxels * node.words_per_taxel
+    """Registers of one scan, the scan counter (if any) included."""
+    return taxels * node.words_per_taxel + int(node.counter_register)
 
 
 def encode_scan(node: ModbusNodeSection, raw: np.ndarray) -> list[int]:
@@ -97,7 +99,8 @@ class NodeSimulator:
         self.scans = [encode_scan(node, row) for row in cal.to_raw(forces)]
         self.rate_hz = rate_hz
         self.loop = loop
-        self.registers = NodeRegisters(node, register_count(node, profile.taxels), list(self.scans[0]))
+        self.counter = node.counter_register
+        self.registers = NodeRegisters(node, register_count(node, profile.taxels), self._content(0, 0))
         serial = SerialSettings(port, baudrate or node.baudrate, node.parity, node.stopbits)
         self.server = RegisterServer(self.registers, serial=serial, unit_ids=[node.unit_id])
         self.index = 0
@@ -122,8 +125,13 @@ class NodeSimulator:
             if delay > 0 and self._stop.wait(delay):
                 return
             i = k % len(self.scans) if self.loop else min(k, len(self.scans) - 1)
+            if not self.loop and k >= len(self.scans):
+                continue  # the scene is over: the last scan stays, its counter too
             self.index = i
-            self.registers.scan = self.scans[i]
+            self.registers.scan = self._content(k, i)
+
+    def _content(self, k: int, i: int) -> list[int]:
+        return [k & 0xFFFF, *self.scans[i]] if self.counter else self.scans[i]
 
     def stop(self) -> None:
         self._stop.set()

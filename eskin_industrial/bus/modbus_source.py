@@ -1,7 +1,8 @@
 """The Modbus RTU source: poll the node's registers, one scan per poll.
 
 Each successful read becomes a :class:`~eskin_industrial.pipeline.RawScan`
-timestamped on receipt.  A failed read is retried within the same scan period
+timestamped on receipt (or, when the node keeps a scan counter, on the node's
+clock, with a scan polled twice used once).  A failed read is retried within the same scan period
 (``[modbus.node] retries``); a poll that still fails is a lost scan (its sequence
 number is skipped, so the pipeline counts it) and never blocks longer than
 ``(retries + 1) x timeout_s``.  Timeouts, garbled frames (bad CRC) and exception
@@ -29,6 +30,8 @@ class RtuCounters:
     exceptions: int = 0
     retries: int = 0
     failed_polls: int = 0
+    repeats: int = 0  #: with a scan counter: the same scan polled again (not used twice)
+    counter_resets: int = 0  #: with a scan counter: the node restarted its count
 
     @property
     def bus_errors(self) -> int:
@@ -50,7 +53,10 @@ class RtuPoller:
         self.consecutive_failures = 0
         self.last_rx: float | None = None  #: monotonic time of the newest good scan
         self.t0 = time.monotonic()
+        self.node_rate_hz = profile.sensor.rate_hz
         self._seq = -1
+        self._counter: int | None = None  #: the node's last scan counter
+        self._last_node_seq = 0
         self._next = time.monotonic()
 
     def open(self) -> "RtuPoller":
@@ -87,13 +93,33 @@ class RtuPoller:
             if len(regs) != self.count:
                 c.crc_errors += 1
                 continue
-            c.scans += 1
             self.consecutive_failures = 0
             self.last_rx = rx
+            if self.node.counter_register:
+                return self._counted(regs, rx)
+            c.scans += 1
             return RawScan(self._seq, rx - self.t0, decode_scans(self.node, regs), 0, rx)
         c.failed_polls += 1
         self.consecutive_failures += 1
         return None
+
+    def _counted(self, regs: list[int], rx: float) -> RawScan | None:
+        """A scan numbered by the node: node time, repeats dropped, skips lost."""
+        counter = regs[0]
+        if self._counter is None:
+            seq = 0
+        else:
+            step = (counter - self._counter) & 0xFFFF
+            if step == 0:
+                self.counters.repeats += 1
+                return None
+            if step >= 0x8000:  # the counter went back: the node restarted
+                self.counters.counter_resets += 1
+                step = 1
+            seq = self._last_node_seq + step
+        self._counter, self._last_node_seq = counter, seq
+        self.counters.scans += 1
+        return RawScan(seq, seq / self.node_rate_hz, decode_scans(self.node, regs[1:]), 0, rx)
 
     def poll(self) -> RawScan | None:
         """Wait for the next poll time (``poll_hz``), then poll; a late poll does not
