@@ -40,7 +40,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from eskin_industrial import load_profile  # noqa: E402
-from eskin_industrial.bus.modbus_io import TcpMaster, rtu_transaction_s  # noqa: E402
+from eskin_industrial.bus.modbus_io import TcpMaster, quiet_pymodbus, rtu_transaction_s  # noqa: E402
 from eskin_industrial.bus.modbus_node import NodeSimulator  # noqa: E402
 from eskin_industrial.bus.modbus_source import RtuPoller  # noqa: E402
 from eskin_industrial.bus.plc_client import PlcWriter  # noqa: E402
@@ -279,6 +279,7 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=3.0)
     ap.add_argument("--skip-rtu", action="store_true")
     args = ap.parse_args()
+    quiet_pymodbus()  # "connection refused" while plc-sim starts is expected
     prof = load_profile(PROFILE)
     print(f"# python benchmarks/bench_modbus.py --writes {args.writes} --seconds {args.seconds:g}")
     print(f"# {machine()}")
