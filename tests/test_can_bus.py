@@ -179,8 +179,11 @@ def test_paced_node_keeps_absolute_deadlines(hand_profile):
     assert stats.scans == 100 and len(first) == 100
     offsets = np.array(first) - t0 - np.arange(100) / 200.0
     # each scan leaves at start + k / rate: no accumulated drift, only scheduling jitter
-    assert np.median(offsets) < 0.005 and np.abs(offsets[-10:] - np.median(offsets)).max() < 0.02
-    assert 0.49 < stats.elapsed_s < 0.6
+    # (bounds loose enough for a loaded machine; a relative-sleep loop drifts by the
+    # per-scan overhead times 100, and a burst would leave everything at offset <= 0)
+    assert np.median(offsets) < 0.01 and np.median(offsets[-20:]) < 0.02
+    assert offsets.min() > -0.002  # never early
+    assert 0.49 < stats.elapsed_s < 0.8
 
 
 def test_bus_options_and_python_can_environment(tmp_path):
