@@ -27,7 +27,7 @@ from .common import open_profile, profile_option
 @click.option("--scans", "max_scans", type=int, default=None, help="Stop after this many scans.")
 @click.option("--queue-frames", type=int, default=200_000, show_default=True,
               help="Frames the reader may queue ahead of the detector before dropping.")
-@click.option("-q", "--quiet", is_flag=True, help="No counters on stderr.")
+@click.option("-q", "--quiet", is_flag=True, help="Nothing on stderr (no start line, no counters).")
 def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output, log_path, rate_hz, duration_s,
             idle_s, max_scans, queue_frames, quiet) -> None:
     """Receive scans from a CAN bus until stopped (Ctrl-C, --duration, --idle-exit,
@@ -49,6 +49,10 @@ def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output,
     reader = BusReader(lambda: open_bus(**kw), queue_frames=queue_frames)
     log = can.Logger(log_path) if log_path else None
     source = CanSource(reader.start(), ScanAssembler(layout, rate), pipeline, log)
+    if not quiet:
+        bus = reader.bus
+        click.echo(f"eskin-bus: receiving {prof.name} on {getattr(bus, 'channel_info', '?')} "
+                   f"({layout.segments} frame{'s' if layout.segments > 1 else ''} per scan)", err=True)
     try:
         source.run(duration_s=duration_s, idle_timeout_s=idle_s, max_scans=max_scans)
     finally:

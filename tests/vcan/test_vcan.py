@@ -2,6 +2,7 @@
 wrote (can-utils' cansend, canplayer, candump)."""
 from __future__ import annotations
 
+import json
 import socket
 import subprocess
 import sys
@@ -174,3 +175,28 @@ def test_error_frames_and_bus_off_are_counted(vcan):
     source.run(idle_timeout_s=1.0, duration_s=10)
     c = source.counters()
     assert c["error_frames"] == 2 and c["bus_off"] == 1
+
+
+def test_live_receiver_and_its_log_replay_agree(vcan, tmp_path):
+    """The whole path as a user runs it: eskin-bus receive (recording the traffic) and
+    eskin-bus node with faults on vcan0, then eskin-bus detect --can-log."""
+    f = forces(400, 25, seed=5)
+    rec, log, live, replay = (tmp_path / n for n in ("rec.csv", "traffic.log", "live.csv", "replay.csv"))
+    write_recording(rec, np.arange(400) / 100.0, f)
+    with subprocess.Popen([sys.executable, "-m", "eskin_industrial", "receive", "-p", PAPER, "-i", "socketcan",
+                           "-c", vcan, "--log", str(log), "-o", str(live), "--idle-exit", "2", "--duration", "90"],
+                          stderr=subprocess.PIPE, text=True) as rx:
+        try:
+            assert "receiving paper-5x5" in rx.stderr.readline()  # the bus is open
+            res = eskin("node", "-p", PAPER, "-i", "socketcan", "-c", vcan, "--recording", str(rec), "--burst",
+                        "--drop", "0.01", "--duplicate", "0.01", "--seed", "3")
+            assert res.returncode == 0, res.stderr
+            counters = json.loads(rx.stderr.read().strip().splitlines()[-1])
+            assert rx.wait(timeout=60) == 0
+        finally:
+            rx.kill()
+    assert counters["duplicate_frames"] > 0 and counters["lost_scans"] + counters["torn_scans"] > 0
+    assert counters["scans"] + counters["lost_scans"] >= 390
+    res = eskin("detect", "-p", PAPER, "--can-log", str(log), "-o", str(replay))
+    assert res.returncode == 0, res.stderr
+    assert replay.read_text() == live.read_text() and live.read_text().count("\n") > 30
