@@ -234,3 +234,13 @@ def test_one_scene_through_the_node(tmp_path):
     res = cli("node", "-p", PAPER, "-i", "virtual", "-c", "s", "--scene", "case2", "--burst", "--rate", "100")
     assert res.returncode == 0, res.stderr
     assert "node:" in res.stderr and "frames" in res.stderr
+
+
+def test_fd_frames_use_bit_rate_switching(paper_profile):
+    ch = channel()
+    layout = CanLayout.from_profile(paper_profile, fd=True)
+    with open_bus("virtual", ch) as rx, open_bus("virtual", ch) as tx:
+        CanNode(layout, tx, scene_raw(paper_profile, 3), 100.0, burst=True).run()
+        got = [m for m in iter(lambda: rx.recv(0.2), None)]
+    data = [m for m in got if m.arbitration_id == layout.base_id]
+    assert len(data) == 3 and all(m.is_fd and m.bitrate_switch and len(m.data) == 64 for m in data)
