@@ -210,12 +210,15 @@ class CanSource:
     """
 
     def __init__(self, reader: BusReader, assembler: ScanAssembler, pipeline: Pipeline,
-                 log: can.Listener | None = None) -> None:
+                 log: can.Listener | None = None, keep_updates: bool = True) -> None:
         self.reader = reader
         self.assembler = assembler
         self.pipeline = pipeline
         self.log = log
+        #: every update, when ``keep_updates`` (for an output file); else only the
+        #: pipeline's newest (a bridge running for days must not grow)
         self.updates: list[Update] = []
+        self.keep_updates = keep_updates
 
     def counters(self) -> dict[str, int]:
         extra = self.pipeline.counters.extra
@@ -234,7 +237,9 @@ class CanSource:
                 log.on_message_received(msg)
             scan = asm.feed(msg)
             if scan is not None:
-                self.updates += pipe.push(scan)
+                updates = pipe.push(scan)
+                if self.keep_updates:
+                    self.updates += updates
                 time.sleep(0)  # hand the interpreter to the reader thread once per scan
         return n
 

@@ -48,7 +48,7 @@ def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output,
     pipeline = Pipeline(prof, rate_hz=rate)
     reader = BusReader(lambda: open_bus(**kw), queue_frames=queue_frames)
     log = can.Logger(log_path) if log_path else None
-    source = CanSource(reader.start(), ScanAssembler(layout, rate), pipeline, log)
+    source = CanSource(reader.start(), ScanAssembler(layout, rate), pipeline, log, keep_updates=output is not None)
     if not quiet:
         bus = reader.bus
         click.echo(f"eskin-bus: receiving {prof.name} on {getattr(bus, 'channel_info', '?')} "
