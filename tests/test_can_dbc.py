@@ -9,6 +9,7 @@ import cantools
 import numpy as np
 import pytest
 
+from eskin_industrial import load_profile
 from eskin_industrial.bus.can_dbc import dbc_text
 from eskin_industrial.bus.can_layout import CanLayout, NodeState, NodeStatus, decode_messages
 from eskin_industrial.calibration import Calibrator
@@ -25,8 +26,8 @@ def variants(profile):
                 yield pytest.param(dataclasses.replace(profile, can=can), id=f"{profile.name}-{order}-fd{int(fd)}-ext{int(ext)}")
 
 
-@pytest.mark.parametrize("variant", [*variants(__import__("eskin_industrial").load_profile(PROFILES / "paper-5x5.toml")),
-                                     *variants(__import__("eskin_industrial").load_profile(PROFILES / "hand-4x5.toml"))])
+@pytest.mark.parametrize("variant", [*variants(load_profile(PROFILES / "paper-5x5.toml")),
+                                     *variants(load_profile(PROFILES / "hand-4x5.toml"))])
 def test_cantools_decodes_our_frames_to_our_forces(variant):
     lay = CanLayout.from_profile(variant)
     db = cantools.database.load_string(dbc_text(variant), "dbc")

@@ -31,10 +31,6 @@ class Faults:
     silent_for_s: float = 0.0  #: for how long (scans keep counting, nothing is sent)
     seed: int = 0
 
-    @property
-    def any(self) -> bool:
-        return bool(self.drop or self.duplicate or self.reorder or self.corrupt or self.silent_at_s is not None)
-
 
 @dataclass
 class NodeStats:

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import collections
 import errno
+import json
 import select
 import socket
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -24,10 +26,10 @@ from pathlib import Path
 
 import can
 
-from ..detect.updates import Update
+from ..detect.updates import Update, UpdateTable
 from ..errors import EskinError, InputFormatError
 from ..pipeline import Pipeline, RawScan
-from .can_layout import ScanAssembler
+from .can_layout import CanLayout, ScanAssembler, decode_messages
 
 #: Socket receive buffer asked for on SocketCAN (the kernel default holds a few
 #: hundred frames: a 1 Mbit/s bus fills it in tens of milliseconds).
@@ -305,11 +307,6 @@ def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: 
                quiet: bool = True):
     """A CAN log through the live path's assembler and pipeline: the updates as a
     table, and (unless ``quiet``) the counters on stderr."""
-    import json
-    import sys
-
-    from ..detect.updates import UpdateTable
-    from .can_layout import CanLayout, decode_messages
 
     messages = list(read_can_log(path))
     lo = profile.can.base_id
