@@ -97,7 +97,8 @@ def test_the_cli_path_end_to_end(paper_profile, tmp_path):
             plc = subprocess.Popen([*exe, "plc-sim", "-p", profile, "--port", str(port), "--duration", "8"],
                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
             procs.append(plc)
-            node = subprocess.Popen([*exe, "modbus-node", "-p", profile, "--port", a, "--recording", str(rec),
+            # the form: `node --modbus-rtu PORT` (the same server as `modbus-node --port PORT`)
+            node = subprocess.Popen([*exe, "node", "-p", profile, "--modbus-rtu", a, "--recording", str(rec),
                                      "--duration", "8"],
                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
             procs.append(node)

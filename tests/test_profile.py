@@ -119,3 +119,11 @@ def test_cli_check_and_show(tmp_path):
     assert shown.returncode == 0
     table = tomllib.loads(shown.stdout)
     assert table["derived"]["window_samples"] == 40 and table["layout"]["rows"] == 4
+
+
+def test_check_warns_when_raw_values_do_not_fit_the_can_bits(tmp_path):
+    path = tmp_path / "wide.toml"
+    path.write_text(BASE.replace("per_newton = -181.0", "per_newton = -181.0\nvalid_max = 20000.0"))
+    res = run_cli("profile", "check", str(path))
+    assert res.returncode == 0 and "ok" in res.stdout
+    assert "warning" in res.stderr and "[can] taxel_bits" in res.stderr and res.stderr.count("\n") == 1

@@ -57,11 +57,15 @@ def load_scene_forces(prof: Profile, scene: str | None, recording: str | None, r
               help="Stop after this many seconds (default: until interrupted).")
 def modbus_node(profile_path, port, scene, recording, rate_hz, baudrate, seed, once, duration_s) -> None:
     """Serve a scene as the sensor node: a Modbus RTU slave with the profile's register map."""
+    run_rtu_node(open_profile(profile_path), port, scene, recording, rate_hz, baudrate, seed, once, duration_s)
+
+
+def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, duration_s) -> None:
+    """The RTU node, shared by ``modbus-node`` and ``node --modbus-rtu``."""
     from ..bus.modbus_io import quiet_pymodbus
     from ..bus.modbus_node import serve_scene_rtu
 
     quiet_pymodbus()
-    prof = open_profile(profile_path)
     t, forces, rate = load_scene_forces(prof, scene, recording, rate_hz, seed)
     node = prof.modbus.node
     click.echo(f"modbus-node: unit {node.unit_id} on {port} at {baudrate or node.baudrate} baud, "

@@ -51,11 +51,17 @@ def _scene_forces(name: str, rate_hz: float, seed: int, taxels: int):
 @click.option("--corrupt", type=float, default=0.0, help="Fault: probability that a frame is sent one byte short.")
 @click.option("--silent-at", "silent_at_s", type=float, default=None, help="Fault: fall silent at this node time (s)...")
 @click.option("--silent-for", "silent_for_s", type=float, default=0.0, help="...for this long (s).")
+@click.option("--modbus-rtu", "modbus_rtu", default=None, metavar="PORT",
+              help="Be a Modbus RTU node on this serial port instead of a CAN node (the profile's [modbus.node] map).")
+@click.option("--baud", "baudrate", type=int, default=None, help="With --modbus-rtu: baud rate (default: the profile's).")
 @click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
 def node(profile_path, interface, channel, bitrate, fd, data_bitrate, scene, recording, rate_hz, burst, repeat,
-         duration_s, seed, drop, duplicate, reorder, corrupt, silent_at_s, silent_for_s, quiet) -> None:
+         duration_s, seed, drop, duplicate, reorder, corrupt, silent_at_s, silent_for_s, modbus_rtu, baudrate,
+         quiet) -> None:
     """Send scans as the profile's sensor node: one scan every 1/rate seconds (absolute
-    deadlines, no drift), with the node's heartbeat and optional faults."""
+    deadlines, no drift), with the node's heartbeat and optional faults; or, with
+    --modbus-rtu PORT, serve them as a Modbus RTU slave (the scene loops until
+    --duration or Ctrl-C)."""
     from ..bus.can_layout import CanLayout
     from ..bus.can_node import CanNode, Faults
     from ..bus.can_source import open_bus
@@ -63,6 +69,11 @@ def node(profile_path, interface, channel, bitrate, fd, data_bitrate, scene, rec
     prof = open_profile(profile_path)
     if (scene is None) == (recording is None):
         raise click.UsageError("give exactly one of --scene NAME or --recording REC.csv")
+    if modbus_rtu is not None:
+        from .modbus_cmd import run_rtu_node
+
+        run_rtu_node(prof, modbus_rtu, scene, recording, rate_hz, baudrate, seed, False, duration_s)
+        return
     for name, p in (("--drop", drop), ("--duplicate", duplicate), ("--reorder", reorder), ("--corrupt", corrupt)):
         if not 0.0 <= p <= 1.0:
             raise click.BadParameter(f"expected a probability in [0, 1], got {p}", param_hint=name)

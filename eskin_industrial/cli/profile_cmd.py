@@ -29,6 +29,12 @@ def check(files: tuple[str, ...]) -> None:
             failed = True
             continue
         click.echo(f"{path}: ok ({_brief(p)})")
+        try:  # the transports' own checks; only the commands that use them refuse
+            from ..bus.can_layout import CanLayout
+
+            CanLayout.from_profile(p)
+        except ProfileError as exc:
+            click.echo(f"eskin-bus: warning: {exc} (CAN commands will refuse this profile)", err=True)
     if failed:
         raise SystemExit(2)
 
