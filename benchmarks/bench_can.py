@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import time
@@ -30,6 +29,7 @@ sys.path.insert(0, str(ROOT))
 from eskin_industrial import Calibrator, load_profile  # noqa: E402
 from eskin_industrial.bus.can_layout import CanLayout, ScanAssembler  # noqa: E402
 from eskin_industrial.pipeline import Pipeline  # noqa: E402
+from machine import describe  # noqa: E402  (benchmarks/machine.py)
 
 CLASSIC_LIMIT = 9_000  # eight-byte frames per second at 1 Mbit/s, no stuffing (7,400 worst case)
 FD_LIMIT = 5_900  # 64-byte frames per second at 1/5 Mbit/s
@@ -44,15 +44,7 @@ def classic_frame_bits(dlc: int, worst_stuffing: bool) -> int:
 
 
 def machine() -> str:
-    cpu = "?"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{platform.machine()}, {os.cpu_count()} cores, {cpu}, Python {platform.python_version()}"
+    return describe()
 
 
 def grasp_raw(profile, k: int) -> np.ndarray:

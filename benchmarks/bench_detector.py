@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import statistics
 import sys
 import time
@@ -20,8 +19,10 @@ from dataclasses import replace
 import numpy as np
 
 from eskin_industrial.detect import PaperDetector, paper_batch
+from eskin_industrial.detect.cof_track import CofTrack
 from eskin_industrial.detect.reference import reference_window_sums
 from eskin_industrial.detect.settings import DetectorSettings
+from machine import describe  # noqa: E402  (benchmarks/machine.py)
 
 RATE = 1000.0
 
@@ -39,12 +40,13 @@ def recording(k: int, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return np.arange(k) / RATE, f
 
 
-def stream_us_per_frame(cfg: DetectorSettings, rows: int, cols: int, frames: int, repeats: int) -> float:
+def stream_us_per_frame(cfg: DetectorSettings, rows: int, cols: int, frames: int, repeats: int,
+                        factory=PaperDetector) -> float:
     x, y = grid(rows, cols)
     t, f = recording(frames, rows * cols)
     runs = []
     for _ in range(repeats):
-        det = PaperDetector(cfg, x, y, RATE)
+        det = factory(cfg, x, y, RATE)
         push = det.push
         tl = t.tolist()
         start = time.perf_counter()
@@ -74,13 +76,7 @@ def reference_us_per_frame(cfg: DetectorSettings, frames: int) -> float:
 
 
 def machine() -> str:
-    cpu = "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as fh:
-            cpu = next(line.split(":", 1)[1].strip() for line in fh if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return f"{platform.machine()}, {os.cpu_count()} cores, {cpu}, Python {platform.python_version()}, numpy {np.__version__}"
+    return describe()
 
 
 def main() -> None:
@@ -105,6 +101,10 @@ def main() -> None:
     fps = batch_frames_per_s(cfg, batch_frames, max(1, repeats // 2))
     print(f"| batch 5x5, {batch_frames / RATE / 60:g} min at 1 kHz | frames per second | {fps:,.0f} | "
           f"{1e6 / ref:,.0f} | {fps / (1e6 / ref):,.0f}x faster |")
+    paper_us = stream_us_per_frame(cfg, 5, 5, frames, repeats)
+    ours_us = stream_us_per_frame(cfg, 5, 5, frames, repeats, factory=CofTrack)
+    print(f"| stream 5x5, cof-track (ours) against paper, same run | median cost per frame | {ours_us:.1f} us | "
+          f"paper {paper_us:.1f} us | {ours_us / paper_us:.2f}x the paper's cost |")
     for window in (0.2, 0.8):
         us = stream_us_per_frame(replace(cfg, window_s=window), 5, 5, frames, repeats)
         print(f"| stream 5x5, window {window} s | median cost per frame | {us:.1f} us | | (independent of the window) |")

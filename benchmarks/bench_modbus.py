@@ -23,8 +23,6 @@
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import shutil
 import subprocess
 import sys
@@ -49,21 +47,13 @@ from eskin_industrial.calibration import Calibrator  # noqa: E402
 from eskin_industrial.detect.state import GraspState  # noqa: E402
 from eskin_industrial.pipeline import Pipeline, RawScan  # noqa: E402
 from modbus_support import free_port, slip_recording  # noqa: E402
+from machine import describe  # noqa: E402  (benchmarks/machine.py)
 
 PROFILE = ROOT / "profiles" / "paper-5x5.toml"
 
 
 def machine() -> str:
-    cpu = "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{time.strftime('%Y-%m-%d', time.gmtime())} on {platform.machine()}, {os.cpu_count()} cores, {cpu}, " \
-           f"Python {platform.python_version()}"
+    return f"{time.strftime('%Y-%m-%d', time.gmtime())} on {describe()}"
 
 
 def pct(values, q) -> float:
