@@ -49,8 +49,8 @@ mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000 out /mnt$out || echo "
 mount -t proc proc /mnt/proc
 mount -t sysfs sys /mnt/sys
 mount -t devtmpfs dev /mnt/dev
-mount -t tmpfs tmp /mnt/tmp
 mount -t tmpfs run /mnt/run
+mkdir -p /mnt/run/tmp
 mount -t tmpfs shm /mnt/dev/shm 2>/dev/null
 ip link set lo up
 ip link add dev vcan0 type vcan && ip link set vcan0 up && echo "init: vcan0 up"
@@ -187,19 +187,18 @@ class GuestRun:
 def run_in_vm(script: str, out: Path, timeout_s: float = 170.0, memory_mb: int = 1024, cpus: int = 1) -> GuestRun:
     """Boot, run ``script`` (sh, in the checkout, vcan0 up) in the host's root, power off.
 
-    ``out`` must not be under /tmp (the guest mounts a tmpfs there); it is shared
-    writable at the same path.
+    ``out`` is shared writable at the same path.  The guest's scratch space is a
+    tmpfs at /run/tmp (``TMPDIR``); the host's /tmp stays visible (read-only), so a
+    checkout under /tmp works too.
     """
     kernel, initrd = build_initramfs()
     out = out.resolve()
-    if str(out).startswith("/tmp/") or str(out) == "/tmp":
-        raise ValueError("the out share must not be under /tmp (the guest mounts a tmpfs there)")
     out.mkdir(parents=True, exist_ok=True)
     for name in ("rc", "console.txt"):
         (out / name).unlink(missing_ok=True)
     env = {
         "PATH": f"{ROOT}/.venv/bin:/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin",
-        "HOME": "/tmp", "LANG": "C.UTF-8", "PYTHONDONTWRITEBYTECODE": "1", "ESKIN_VCAN_CHANNEL": "vcan0",
+        "HOME": "/run/tmp", "TMPDIR": "/run/tmp", "LANG": "C.UTF-8", "PYTHONDONTWRITEBYTECODE": "1", "ESKIN_VCAN_CHANNEL": "vcan0",
         "ESKIN_VCAN_OUT": str(out), "CI": os.environ.get("CI", ""),
     }
     exports = "".join(f"export {k}={shlex.quote(v)}\n" for k, v in env.items())
