@@ -3,7 +3,7 @@
 - Inside the emulated machine (or wherever ``ESKIN_VCAN_CHANNEL`` names a ready
   channel): the tests run as they are.
 - On a kernel with CAN: on a native ``vcan0`` (created when missing, as root).
-- Otherwise: one emulated machine boots for the whole session (``vm.py``), runs
+- Otherwise: one emulated machine boots for the whole test run (``vm.py``), runs
   ``pytest tests/vcan`` inside, and each test here reports its outcome there.
 
 A missing prerequisite skips the tests with the reason, and fails them when ``CI``
