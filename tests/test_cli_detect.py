@@ -93,3 +93,13 @@ def test_missing_file_and_bad_profile(tmp_path, rec):
     bad.write_text("[sensor]\nname = 1\n")
     res = cli("detect", "-p", str(bad), str(rec))
     assert res.returncode == 2 and "[sensor] name: expected a string" in res.stderr
+
+
+def test_changes_only(rec):
+    full = cli("detect", "-p", PAPER, str(rec), "-q")
+    changes = cli("detect", "-p", PAPER, str(rec), "-q", "--changes")
+    assert changes.returncode == 0
+    rows = [r.split(",") for r in full.stdout.splitlines()[1:]]
+    expect = [r for i, r in enumerate(rows) if i == 0 or r[3] != rows[i - 1][3]]
+    assert [r.split(",") for r in changes.stdout.splitlines()[1:]] == expect
+    assert 1 < len(expect) < len(rows)

@@ -10,7 +10,7 @@ import numpy as np
 from ..calibration import Calibrator
 from ..detect.methods import METHODS, get_method
 from ..detect.state import GraspState
-from ..detect.updates import UpdateTable
+from ..detect.updates import COLUMNS, UpdateTable
 from ..errors import InputFormatError
 from ..frames import FrameFlag
 from ..recording import read_recording, write_updates
@@ -30,9 +30,10 @@ from .common import open_profile, profile_option
               help="Sample rate in Hz (default: from the timestamps; the profile's if there are too few).")
 @click.option("--engine", type=click.Choice(["batch", "stream"]), default="batch", show_default=True,
               help="Vectorized over the whole file, or frame by frame as the bridge runs (same output).")
+@click.option("--changes", is_flag=True, help="Write only the updates where the state changes (and the first).")
 @click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
 def detect(profile_path: str, input_path: str | None, can_log: str | None, output: str, method: str | None,
-           rate_hz: float | None, engine: str, quiet: bool) -> None:
+           rate_hz: float | None, engine: str, changes: bool, quiet: bool) -> None:
     """Detect grasp states in a recording CSV (header t,f0,...,f{n-1} in newtons,
     or t,raw0,... in the profile's raw unit), or in a CAN log (--can-log)."""
     prof = open_profile(profile_path)
@@ -59,7 +60,12 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
     else:
         det = chosen.stream(settings, x, y, rate)
         table = UpdateTable.from_updates(det.feed(rec.t, values, flags))
-    write_updates(output, table)
+    if changes:
+        keep = np.ones(len(table), bool)
+        keep[1:] = table.state[1:] != table.state[:-1]
+        write_updates(output, UpdateTable(**{c: getattr(table, c)[keep] for c in COLUMNS}))
+    else:
+        write_updates(output, table)
     if not quiet:
         _summary(rec.name, len(rec.t), rate, geo.window, table)
 
