@@ -83,3 +83,16 @@ def test_the_grab_itself_reads_no_slip_with_the_default_method(scene):
     assert not (table.state[before] == GraspState.SLIP).any()
     touching = table.f_sum > 0.2
     assert not table.valid[touching][0]  # the first updates in contact say "not yet"
+
+
+def test_a_touch_at_the_contact_threshold_does_not_toggle_the_state():
+    # the total force wobbles around contact_threshold_n (0.2 N) for two seconds
+    rng = np.random.default_rng(0)
+    t = np.arange(300) / 100.0
+    total = np.where(t < 0.5, 0.0, 0.2 + 0.03 * rng.standard_normal(300))
+    forces = np.tile(total[:, None] / 25.0, (1, 25)) * (1 + 0.1 * rng.standard_normal((300, 25)))
+    x, y = np.tile(np.arange(5) * 5.0, 5), np.repeat(np.arange(5) * 5.0, 5)
+    det = get_method("cof-track").stream(DetectorSettings(), x, y, 100.0)
+    states = np.array([u.state for u in det.feed(t, forces)])
+    touched = np.flatnonzero(states != GraspState.NO_CONTACT)[0]
+    assert not (states[touched:] == GraspState.NO_CONTACT).any()  # once touching, no flicker back

@@ -71,7 +71,9 @@ class ScoredDetector(FrameHygiene):
     # -- the per-frame loop -----------------------------------------------------
     def _step(self, t: float, f: np.ndarray, flags: int, out: list[Update]) -> None:
         s, sx, sy = (f @ self._mat).tolist()
-        contact = s >= self._thr and s > 0.0
+        # contact with hysteresis: a total force hovering at the threshold (the first
+        # touch) must not toggle the PLC between no_contact and stable every frame
+        contact = s > 0.0 and (s >= self._thr or (self._contact_run > 0 and s >= 0.5 * self._thr))
         if contact:
             self._cof = (sx / s, sy / s)
             self._contact_run += 1
