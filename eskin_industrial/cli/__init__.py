@@ -8,6 +8,7 @@ import sys
 import click
 
 from ..errors import EskinError
+from .demo_cmd import demo
 from .detect_cmd import detect
 from .node_cmd import node
 from .modbus_cmd import modbus_bridge, modbus_node
@@ -45,6 +46,7 @@ def main(ctx: click.Context, debug: bool) -> None:
     ctx.obj["debug"] = debug
 
 
+main.add_command(demo)
 main.add_command(detect)
 main.add_command(profile)
 main.add_command(simulate)

@@ -14,7 +14,7 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     n    = z s sqrt(2/M)                          (the displacement noise, z standard deviations)
     a    = D_f / max(n, min_fast_mm)
     b    = min(D_s / T, onward / max(T/2, 0.75 n)),   T = max(n, min_slow_mm)
-    slip when a > 1 or b > 1; varying force when |S_k - S_{k-Lf}| / (Lf/f_s) / S_k > force_rate
+    slip when a > 1 or b > 1, or the stick-slip channel fires (below) while the force is steady
 
 The cost per frame is one 3-column matrix product and a few scalar operations: less
 than the paper's indicators.  The score columns hold a and b (1 = threshold).
@@ -50,8 +50,10 @@ class CofTrack(ScoredDetector):
         self._a_noise = 1.0 / max(1.0, c.noise_s * rate_hz)
         self.vib_n = max(2, round(c.vib_s * rate_hz))
         self._settle = max(1, round(self.settle_s * rate_hz))
+        self._steady_n = max(1, round(1.0 * rate_hz))
         self.vib_ratio, self.vib_support = c.vib_ratio, c.vib_support
         self._noise: float | None = None  # learnt CoF noise, in force units (N^2 mm^2)
+        self._fnoise = 0.0  # learnt noise of the total force (N^2)
         super().__init__(settings, x_mm, y_mm, rate_hz, hop_s=c.hop_s, confirm=1)
 
     def reset_scores(self) -> None:
@@ -66,6 +68,7 @@ class CofTrack(ScoredDetector):
         self._seen = 0
         self._vib = _Lagged(self.vib_n, None)
         self._vib_sum = 0.0
+        self._calm_force = 0
 
     def score(self, t, f, s, xc, yc):
         # running mean of the last m centres
@@ -83,12 +86,15 @@ class CofTrack(ScoredDetector):
             self._ss -= old[2]
         mx, my, ms = self._sx / self._cnt, self._sy / self._cnt, self._ss / self._cnt
         prev = self._prev
-        self._prev = (xc, yc)
+        self._prev = (xc, yc, s)
         fast = self._fast.swap((mx, my))
         slow = self._slow.swap((mx, my))
         half = self._half.swap((mx, my))
         old_s = self._force.swap(ms)
-        varying = old_s is not None and abs(ms - old_s) / self.fast_s > self.force_rate * ms
+        # a varying force: the smoothed total changes faster than force_rate, and by
+        # more than its own noise (z sigma), which matters when the grip is light
+        varying = old_s is not None and abs(ms - old_s) > max(
+            self.force_rate * ms * self.fast_s, self.z * math.sqrt(2.0 * self._fnoise / self.m))
         if prev is None or self._cnt < self.m:
             return 0.0, 0.0, False, varying
         # CoF noise scales as 1 / S (sigma_F * spread / S): learn it in force units so
@@ -123,8 +129,14 @@ class CofTrack(ScoredDetector):
         old_v = self._vib.swap(step2)
         self._vib_sum += step2 - (old_v if old_v is not None else 0.0)
         vib = self._vib_sum / (self.vib_n * self._noise) if old_v is not None else 0.0
-        slip = a > 1.0 or b > 1.0 or (vib > self.vib_ratio and a > self.vib_support)
+        # (not while the force changes, nor for a second after: a squeeze or a swaying
+        # load moves a soft contact's CoF in steps too)
+        self._calm_force = 0 if varying else self._calm_force + 1
+        steady = self._calm_force > self._steady_n
+        slip = a > 1.0 or b > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
         if not slip and a < 0.5 and not self.filled:  # learn the noise only while calm
             self._learnt += 1
-            self._noise += max(self._a_noise, 1.0 / self._learnt) * (step2 - self._noise)
+            gain = max(self._a_noise, 1.0 / self._learnt)
+            self._noise += gain * (step2 - self._noise)
+            self._fnoise += gain * ((s - prev[2]) ** 2 * 0.5 - self._fnoise)
         return a, b, slip, varying

@@ -19,7 +19,7 @@ from ..detect.updates import UpdateTable
 from ..scenes import Rendered, SceneSpec, load_scene, render
 from .metrics import SceneScore, score_scene
 
-TUNING_SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4)
+TUNING_SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4, 7)  # 7: the demo's seed, where a false alarm was found
 EVALUATION_SEEDS: tuple[int, ...] = tuple(range(1000, 1010))
 
 #: The built-in suite: the paper's cases, the hand, and the scenes made to break methods.

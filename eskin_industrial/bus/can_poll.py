@@ -1,0 +1,61 @@
+"""CAN scans one at a time, for loops that poll a source (the Modbus bridge loop).
+
+:class:`~eskin_industrial.bus.can_source.CanSource` runs its own loop into a
+pipeline; this adapter instead hands out one :class:`RawScan` per ``poll()``, with
+the health a bridge publishes (frame age, bus fault) and the CAN counters.
+"""
+
+from __future__ import annotations
+
+import collections
+import time
+
+from ..pipeline import RawScan
+from .can_layout import ScanAssembler
+from .can_source import BusReader
+
+
+class _Counters:
+    def __init__(self, poller: "CanScanPoller") -> None:
+        self._p = poller
+
+    @property
+    def bus_errors(self) -> int:
+        return self._p.reader.counters.get("bus_errors", 0)
+
+    def as_dict(self) -> dict[str, int]:
+        return {**self._p.assembler.counters, **self._p.reader.counters}
+
+
+class CanScanPoller:
+    def __init__(self, reader: BusReader, assembler: ScanAssembler, idle_sleep_s: float = 0.0005) -> None:
+        self.reader = reader
+        self.assembler = assembler
+        self.idle_sleep_s = idle_sleep_s
+        self.counters = _Counters(self)
+        self._ready: collections.deque[RawScan] = collections.deque()
+        self._last_rx: float | None = None
+        self._errors_seen = 0
+
+    @property
+    def bus_fault(self) -> bool:
+        """Bus errors were reported and no frame has arrived since."""
+        return self.counters.bus_errors > self._errors_seen
+
+    def poll(self) -> RawScan | None:
+        q = self.reader.queue
+        while not self._ready and q:
+            scan = self.assembler.feed(q.popleft())
+            self._errors_seen = self.counters.bus_errors  # a frame arrived: the bus works
+            if scan is not None:
+                self._ready.append(scan)
+        if self._ready:
+            self._last_rx = time.monotonic()
+            return self._ready.popleft()
+        time.sleep(self.idle_sleep_s)  # nothing queued: do not spin the bridge loop
+        return None
+
+    def frame_age(self, now: float | None = None) -> float | None:
+        if self._last_rx is None:
+            return None
+        return (time.monotonic() if now is None else now) - self._last_rx
