@@ -77,6 +77,7 @@ class Gripper:
     _last_hb: int = -1
     _hb_time: float = 0.0
     _latched_before: bool = False
+    _acked: bool = False
 
     def cycle(self, v: dict[str, int], now: float) -> tuple[list[str], bool]:
         """One PLC scan; returns messages and whether to acknowledge the latch."""
@@ -96,8 +97,15 @@ class Gripper:
         if latched and not self._latched_before and alive:
             self.force_n = min(self.force_n + self.step_n, self.max_n)
             self.raises += 1
-            msgs.append(f"SLIP: grip force raised to {self.force_n:g} N; acknowledging")
+            msgs.append(f"SLIP: grip force raised to {self.force_n:g} N")
+        if latched and alive and not status & Status.SLIP:
+            # the latch stays set while the slip lasts: acknowledge once it is over
             ack = True
+            if not self._acked:
+                msgs.append("slip over: acknowledging the latch")
+            self._acked = True
+        if not latched:
+            self._acked = False
         self._latched_before = latched
         return msgs, ack
 
