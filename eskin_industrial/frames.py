@@ -41,7 +41,3 @@ class Frame:
     t: float
     forces: np.ndarray
     flags: int = 0
-
-    @property
-    def total_n(self) -> float:
-        return float(self.forces.sum())

@@ -16,6 +16,9 @@ from .detect.updates import Update
 from .frames import Frame, FrameFlag
 from .profile import Profile
 
+_INVALID = int(FrameFlag.INVALID)  # plain ints: IntFlag arithmetic costs microseconds per scan
+_SATURATED = int(FrameFlag.SATURATED)
+
 
 @dataclass(frozen=True, slots=True)
 class RawScan:
@@ -58,7 +61,6 @@ class Pipeline:
         self.last_frame: Frame | None = None
         self.last_update: Update | None = None
         self._last_seq: int | None = None
-        self._raw_is_newton = profile.calibration.raw_unit == "newton" and not profile.calibration.overrides
 
     def calibrate(self, scan: RawScan) -> Frame:
         forces, flags = self.calibrator.to_newtons(scan.raw)
@@ -72,9 +74,9 @@ class Pipeline:
         if self._last_seq is None or scan.seq > self._last_seq:
             self._last_seq = scan.seq
         frame = self.calibrate(scan)
-        if frame.flags & FrameFlag.INVALID:
+        if frame.flags & _INVALID:
             c.invalid_scans += 1
-        if frame.flags & FrameFlag.SATURATED:
+        if frame.flags & _SATURATED:
             c.saturated_scans += 1
         self.last_frame = frame
         before = self.detector.dropped

@@ -226,12 +226,6 @@ def test_detect_needs_exactly_one_input(tmp_path):
 
 
 def test_one_scene_through_the_node(tmp_path):
-    try:
-        import eskin_industrial.scenes  # noqa: F401
-    except ModuleNotFoundError as exc:
-        if exc.name != "eskin_industrial.scenes":
-            raise
-        pytest.skip("the scene simulator is not part of this checkout")
     res = cli("node", "-p", PAPER, "-i", "virtual", "-c", "s", "--scene", "case2", "--burst", "--rate", "100")
     assert res.returncode == 0, res.stderr
     assert "node:" in res.stderr and "frames" in res.stderr

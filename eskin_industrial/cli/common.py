@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
-import click
+from dataclasses import dataclass
 
+import click
+import numpy as np
+
+from ..calibration import Calibrator
+from ..errors import InputFormatError
 from ..profile import Profile, load_profile
+from ..recording import read_recording
 
 
 def profile_option(required: bool = True):
@@ -17,3 +23,44 @@ def profile_option(required: bool = True):
 def open_profile(path: str) -> Profile:
     """Load and validate; a bad profile stops the command before anything starts."""
     return load_profile(path)
+
+
+@dataclass(frozen=True)
+class NodeScans:
+    """What a node simulator plays: times, forces in N, the scan rate, and the raw
+    values when the recording already holds them (so they are sent unchanged)."""
+
+    t: np.ndarray
+    forces: np.ndarray
+    rate_hz: float
+    raw: np.ndarray | None = None
+
+    def raw_values(self, profile: Profile) -> np.ndarray:
+        if self.raw is not None:
+            return self.raw
+        return Calibrator.from_section(profile.calibration, profile.taxels).to_raw(self.forces)
+
+
+def scene_or_recording(prof: Profile, scene: str | None, recording: str | None, rate_hz: float | None,
+                       seed: int = 0) -> NodeScans:
+    """The scans of ``--scene NAME`` (rendered at ``--rate``, else the profile's) or
+    ``--recording REC.csv`` (at ``--rate``, else the rate its timestamps show)."""
+    if (scene is None) == (recording is None):
+        raise click.UsageError("give exactly one of --scene NAME or --recording REC.csv")
+    if rate_hz is not None and not rate_hz > 0:
+        raise click.BadParameter(f"expected a positive rate, got {rate_hz}", param_hint="--rate")
+    if scene is not None:
+        from ..scenes import render
+
+        rate = rate_hz or prof.sensor.rate_hz
+        rendered = render(scene, rate, seed)
+        if rendered.forces.shape[1] != prof.taxels:
+            raise InputFormatError(f"--scene {scene}: {rendered.forces.shape[1]} taxels ({rendered.profile_name}), "
+                                   f"but profile {prof.name} has {prof.taxels}")
+        return NodeScans(rendered.t, rendered.forces, rate)
+    rec = read_recording(recording, prof.taxels)
+    rate = rate_hz or rec.rate_hz(prof.sensor.rate_hz)
+    if rec.unit == "raw":
+        forces, _ = Calibrator.from_section(prof.calibration, prof.taxels).to_newtons(rec.values)
+        return NodeScans(rec.t, forces, rate, rec.values)
+    return NodeScans(rec.t, rec.values, rate)

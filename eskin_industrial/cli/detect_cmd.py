@@ -41,41 +41,39 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
         raise click.UsageError("give exactly one of INPUT.csv or --can-log LOG")
     if can_log is not None:  # the live receiver's path, on recorded traffic: same output
         from ..bus.can_source import detect_log
-        write_updates(output, detect_log(prof, can_log, rate_hz, method, quiet))
-        return
-    rec = read_recording(input_path, prof.taxels)
-    flags = None
-    values = rec.values
-    if rec.unit == "raw":
-        values, flags = Calibrator.from_section(prof.calibration, prof.taxels).to_newtons(values)
-    rate = rate_hz if rate_hz is not None else rec.rate_hz(prof.sensor.rate_hz)
-    if not (rate > 0 and np.isfinite(rate)):
-        raise InputFormatError(f"--rate: expected a positive sample rate, got {rate}")
-    settings = prof.detector
-    geo = settings.geometry(rate)
-    chosen = get_method(method or settings.method)
-    x, y = prof.coordinates_mm
-    if engine == "batch":
-        table = chosen.batch(settings, x, y, rate, rec.t, values, flags)
+
+        table = detect_log(prof, can_log, rate_hz, method, quiet)
     else:
-        det = chosen.stream(settings, x, y, rate)
-        table = UpdateTable.from_updates(det.feed(rec.t, values, flags))
+        rec = read_recording(input_path, prof.taxels)
+        flags = None
+        values = rec.values
+        if rec.unit == "raw":
+            values, flags = Calibrator.from_section(prof.calibration, prof.taxels).to_newtons(values)
+        rate = rate_hz if rate_hz is not None else rec.rate_hz(prof.sensor.rate_hz)
+        if not (rate > 0 and np.isfinite(rate)):
+            raise InputFormatError(f"--rate: expected a positive sample rate, got {rate}")
+        settings = prof.detector
+        chosen = get_method(method or settings.method)
+        x, y = prof.coordinates_mm
+        if engine == "batch":
+            table = chosen.batch(settings, x, y, rate, rec.t, values, flags)
+        else:
+            table = UpdateTable.from_updates(chosen.stream(settings, x, y, rate).feed(rec.t, values, flags))
+        if not quiet:
+            _summary(rec.name, len(rec.t), rate, chosen.name, table)
     if changes:
         keep = np.ones(len(table), bool)
         keep[1:] = table.state[1:] != table.state[:-1]
-        write_updates(output, UpdateTable(**{c: getattr(table, c)[keep] for c in COLUMNS}))
-    else:
-        write_updates(output, table)
-    if not quiet:
-        _summary(rec.name, len(rec.t), rate, geo.window, table)
+        table = UpdateTable(**{c: getattr(table, c)[keep] for c in COLUMNS})
+    write_updates(output, table)
 
 
-def _summary(name: str, frames: int, rate: float, window: int, table: UpdateTable) -> None:
+def _summary(name: str, frames: int, rate: float, method: str, table: UpdateTable) -> None:
     counts = {s.label: int(np.sum(table.state == s)) for s in GraspState}
     flagged = int(np.sum(table.flags & ~int(FrameFlag.WARMUP) != 0))
     states = ", ".join(f"{k} {v}" for k, v in counts.items())
     click.echo(
-        f"{name}: {frames} frames at {rate:.1f} Hz (window {window} samples) -> {len(table)} updates "
+        f"{name}: {frames} frames at {rate:.1f} Hz, method {method} -> {len(table)} updates "
         f"({int(table.valid.sum())} valid, {flagged} with flagged frames); {states}",
         err=True,
     )

@@ -7,40 +7,9 @@ import threading
 import time
 
 import click
-import numpy as np
 
 from ..calibration import Calibrator
-from ..errors import EskinError, InputFormatError
-from ..profile import Profile
-from ..recording import read_recording
-from .common import open_profile, profile_option
-
-
-def load_scene_forces(prof: Profile, scene: str | None, recording: str | None, rate_hz: float | None,
-                      seed: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
-    """(t, forces in N, rate) from ``--scene`` or ``--recording``."""
-    if (scene is None) == (recording is None):
-        raise click.UsageError("give one of --scene NAME or --recording REC.csv")
-    if scene is not None:
-        try:
-            from ..scenes import render
-        except ImportError:
-            raise EskinError("--scene: the scene simulator is not available in this installation; "
-                             "use --recording REC.csv") from None
-        rendered = render(scene, rate_hz or prof.sensor.rate_hz, seed)
-        t, forces = np.asarray(rendered.t), np.asarray(rendered.forces)
-    else:
-        rec = read_recording(recording, prof.taxels)
-        t, forces = rec.t, rec.values
-        if rec.unit == "raw":
-            forces, _ = Calibrator.from_section(prof.calibration, prof.taxels).to_newtons(rec.values)
-    if forces.ndim != 2 or forces.shape[1] != prof.taxels:
-        raise InputFormatError(f"scene has {forces.shape[-1]} taxels, profile {prof.name} has {prof.taxels}")
-    if rate_hz is None:
-        steps = np.diff(t)
-        steps = steps[steps > 0]
-        rate_hz = float(1.0 / np.median(steps)) if steps.size else prof.sensor.rate_hz
-    return t, forces, rate_hz
+from .common import open_profile, profile_option, scene_or_recording
 
 
 @click.command("modbus-node")
@@ -66,7 +35,8 @@ def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, du
     from ..bus.modbus_node import serve_scene_rtu
 
     quiet_pymodbus()
-    t, forces, rate = load_scene_forces(prof, scene, recording, rate_hz, seed)
+    scans = scene_or_recording(prof, scene, recording, rate_hz, seed)
+    t, forces, rate = scans.t, scans.forces, scans.rate_hz
     node = prof.modbus.node
     click.echo(f"modbus-node: unit {node.unit_id} on {port} at {baudrate or node.baudrate} baud, "
                f"{len(t)} scans at {rate:g} Hz, function {node.function} from address {node.start_address}",
@@ -131,7 +101,8 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
     if rtu_port is not None:
         source = RtuPoller(prof, rtu_port, baudrate=baudrate).open()
     else:
-        t, forces, rate = load_scene_forces(prof, None, recording, None)
+        scans = scene_or_recording(prof, None, recording, None)
+        t, forces, rate = scans.t, scans.forces, scans.rate_hz
         raw = Calibrator.from_section(prof.calibration, prof.taxels).to_raw(forces)
         source = ReplaySource(prof, t, raw, rate, loop=True)
     if server_mode:

@@ -5,31 +5,9 @@ from __future__ import annotations
 import json
 
 import click
-import numpy as np
 
-from ..calibration import Calibrator
-from ..errors import EskinError, InputFormatError
-from ..recording import read_recording
 from .can_common import bus_kwargs, bus_options
-from .common import open_profile, profile_option
-
-
-def _scene_forces(name: str, rate_hz: float, seed: int, taxels: int):
-    try:
-        from .. import scenes  # built beside the sources; optional here
-    except ImportError:
-        raise EskinError("--scene: the scene simulator (eskin_industrial.scenes) is not installed; "
-                         "use --recording REC.csv") from None
-    try:
-        scene = scenes.render(name, rate_hz, seed)
-    except (KeyError, ValueError, FileNotFoundError) as exc:
-        known = ", ".join(scenes.list_scenes()) if hasattr(scenes, "list_scenes") else "?"
-        raise InputFormatError(f"--scene {name}: {exc} (known scenes: {known})") from None
-    forces = np.asarray(scene.forces, dtype=np.float64)
-    if forces.shape[1] != taxels:
-        raise InputFormatError(f"--scene {name}: {forces.shape[1]} taxels ({scene.profile_name}), "
-                               f"but the profile has {taxels}")
-    return forces
+from .common import open_profile, profile_option, scene_or_recording
 
 
 @click.command()
@@ -67,8 +45,6 @@ def node(profile_path, interface, channel, bitrate, fd, data_bitrate, scene, rec
     from ..bus.can_source import open_bus
 
     prof = open_profile(profile_path)
-    if (scene is None) == (recording is None):
-        raise click.UsageError("give exactly one of --scene NAME or --recording REC.csv")
     if modbus_rtu is not None:
         from .modbus_cmd import run_rtu_node
 
@@ -77,16 +53,8 @@ def node(profile_path, interface, channel, bitrate, fd, data_bitrate, scene, rec
     for name, p in (("--drop", drop), ("--duplicate", duplicate), ("--reorder", reorder), ("--corrupt", corrupt)):
         if not 0.0 <= p <= 1.0:
             raise click.BadParameter(f"expected a probability in [0, 1], got {p}", param_hint=name)
-    if rate_hz is not None and not rate_hz > 0:
-        raise click.BadParameter(f"expected a positive rate, got {rate_hz}", param_hint="--rate")
-    cal = Calibrator.from_section(prof.calibration, prof.taxels)
-    if recording is not None:
-        rec = read_recording(recording, prof.taxels)
-        rate = rate_hz or rec.rate_hz(prof.sensor.rate_hz)
-        raw = rec.values if rec.unit == "raw" else cal.to_raw(rec.values)
-    else:
-        rate = rate_hz or prof.sensor.rate_hz
-        raw = cal.to_raw(_scene_forces(scene, rate, seed, prof.taxels))
+    scans = scene_or_recording(prof, scene, recording, rate_hz, seed)
+    rate, raw = scans.rate_hz, scans.raw_values(prof)
     kw = bus_kwargs(prof, interface, channel, bitrate, fd, data_bitrate)
     layout = CanLayout.from_profile(prof, fd=kw["fd"])
     faults = Faults(drop, duplicate, reorder, corrupt, silent_at_s, silent_for_s, seed)

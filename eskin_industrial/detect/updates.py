@@ -48,10 +48,3 @@ class UpdateTable:
             dtype = np.int64 if f.name in ("state", "flags") else bool if f.name == "valid" else np.float64
             cols[f.name] = np.array([getattr(u, f.name) for u in updates], dtype=dtype)
         return cls(**cols)
-
-    @classmethod
-    def concat(cls, tables: list["UpdateTable"]) -> "UpdateTable":
-        return cls(**{c: np.concatenate([getattr(t, c) for t in tables]) for c in COLUMNS})
-
-    def row(self, i: int) -> Update:
-        return Update(*(getattr(self, c)[i].item() for c in COLUMNS))

@@ -16,6 +16,7 @@ import numpy as np
 from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
 from ..detect.updates import UpdateTable
+from ..profile import LayoutSection
 from ..scenes import Rendered, SceneSpec, load_scene, render
 from .metrics import SceneScore, score_scene
 
@@ -31,9 +32,9 @@ DEFAULT_SETTINGS = DetectorSettings()
 
 
 def coordinates(rendered: Rendered) -> tuple[np.ndarray, np.ndarray]:
+    """Taxel coordinates of the scene's array, as a profile's layout computes them."""
     a = rendered.spec.array
-    r, c = np.divmod(np.arange(a.rows * a.cols), a.cols)
-    return c * a.pitch_mm, r * (a.row_pitch_mm or a.pitch_mm)
+    return LayoutSection(a.rows, a.cols, a.pitch_mm, a.row_pitch_mm).coordinates_mm()
 
 
 @dataclass
