@@ -9,7 +9,7 @@ See ``docs/profiles.md`` for every key.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Literal
@@ -19,6 +19,9 @@ import numpy as np
 from .detect.settings import DetectorSettings
 from .errors import ProfileError
 from .schema import SchemaError, in_range, non_negative, parse_toml, positive, to_table
+
+#: A sensor silent for this many scan periods is stale (the PLC must see it within three).
+STALE_PERIODS = 2.5
 
 
 @dataclass(frozen=True)
@@ -207,7 +210,9 @@ class ModbusPlcSection:
     #: R_coe and R_dw are sent as round(R x r_scale), saturated at 65535.
     r_scale: float = field(default=100.0, metadata=positive())
     #: The newest frame older than this sets the sensor-stale bit (and clears data-valid).
-    stale_s: float = field(default=0.2, metadata=positive())
+    #: Default: 2.5 scan periods (of the slower of ``[sensor] rate_hz`` and
+    #: ``[modbus.node] poll_hz``), so a silent sensor shows within three periods.
+    stale_s: float | None = field(default=None, metadata=positive())
 
     def __post_init__(self) -> None:
         if self.backoff_max_s < self.backoff_s:
@@ -255,6 +260,12 @@ class Profile:
                 f"expected a window of at least {geo.filter_len} samples at {self.sensor.rate_hz:g} Hz "
                 f"(the {self.detector.wavelet} filter length), got {geo.window}",
             )
+
+        if self.modbus.plc.stale_s is None:
+            # Resolved here, once, so every consumer reads a number.
+            rate = min(self.sensor.rate_hz, self.modbus.node.poll_hz or self.sensor.rate_hz)
+            plc = replace(self.modbus.plc, stale_s=STALE_PERIODS / rate)
+            object.__setattr__(self, "modbus", replace(self.modbus, plc=plc))
 
     @property
     def name(self) -> str:

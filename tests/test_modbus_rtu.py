@@ -253,7 +253,7 @@ def test_stale_is_published_at_once_not_at_the_next_refresh(paper_profile):
         bus_fault = False
         last_rx = time.monotonic()
 
-        def poll(self):
+        def poll(self, timeout_s=None):
             time.sleep(0.005)
             return None
 

@@ -42,8 +42,20 @@ class CanScanPoller:
         """Bus errors were reported and no frame has arrived since."""
         return self.counters.bus_errors > self._errors_seen
 
-    def poll(self) -> RawScan | None:
+    def poll(self, timeout_s: float | None = None) -> RawScan | None:
+        """The next complete scan, or None after waiting up to ``timeout_s`` (default
+        ``idle_sleep_s``) for frames."""
         q = self.reader.queue
+        if not self._ready and not q:
+            arrived = getattr(self.reader, "arrived", None)
+            wait = self.idle_sleep_s if timeout_s is None else timeout_s
+            if arrived is None:
+                time.sleep(wait)
+            else:
+                # Cleared before the second look, so a frame queued in between is seen.
+                arrived.clear()
+                if not q:
+                    arrived.wait(wait)
         while not self._ready and q:
             scan = self.assembler.feed(q.popleft())
             self._errors_seen = self.counters.bus_errors  # a frame arrived: the bus works
@@ -52,8 +64,12 @@ class CanScanPoller:
         if self._ready:
             self._last_rx = time.monotonic()
             return self._ready.popleft()
-        time.sleep(self.idle_sleep_s)  # nothing queued: do not spin the bridge loop
         return None
+
+    @property
+    def pending(self) -> bool:
+        """Frames or scans are waiting: another ``poll`` returns at once."""
+        return bool(self._ready or self.reader.queue)
 
     def frame_age(self, now: float | None = None) -> float | None:
         if self._last_rx is None:

@@ -102,6 +102,8 @@ class BusReader:
         self.max_frames = queue_frames
         self.retry_s = retry_s
         self.counters = {"rx_queue_drops": 0, "bus_errors": 0, "bus_reopens": 0}
+        #: Set after frames were queued: a consumer waits on it instead of polling.
+        self.arrived = threading.Event()
         self.bus_up = True
         self.last_error = ""
         self._stop = threading.Event()
@@ -131,6 +133,8 @@ class BusReader:
                     counters["rx_queue_drops"] += 1
                 else:
                     q.append(msg)
+            if q:
+                self.arrived.set()
 
     def _fail(self, exc: Exception) -> None:
         self.counters["bus_errors"] += 1

@@ -1,11 +1,12 @@
-"""The Modbus bridge loop: source -> pipeline -> register image -> PLC sink.
+"""The bridge loop for one sensor node: source -> pipeline -> register image -> PLC sink.
 
-The source is anything with ``poll() -> RawScan | None`` (the RTU poller; a
-recording replay), ``bus_fault``, ``frame_age()`` and bus-error counters.  The sink
-is a :class:`~eskin_industrial.bus.plc_server.PlcServer` or a
-:class:`~eskin_industrial.bus.plc_client.PlcWriter`; both take ``publish`` and hand
-back the PLC's commands.  A state change is published at once; otherwise every
-``refresh_s``.
+The source is anything with ``poll(timeout_s) -> RawScan | None`` (the RTU poller,
+the CAN scan poller, a recording replay), ``bus_fault``, ``frame_age()`` and
+bus-error counters.  The sink is a :class:`~eskin_industrial.bus.plc_server.PlcServer`
+(or one block of it) or a :class:`~eskin_industrial.bus.plc_client.PlcWriter`; both
+take ``publish`` and hand back the PLC's commands.  A state change is published at
+once, a status bit change (stale, bus fault) as soon as it happens, otherwise every
+``refresh_s``.  :meth:`ModbusBridge.shutdown` leaves the PLC reading BRIDGE_OFFLINE.
 """
 
 from __future__ import annotations
@@ -13,10 +14,12 @@ from __future__ import annotations
 import collections
 import threading
 import time
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
 
+from ..detect.updates import Update
 from ..pipeline import Pipeline, RawScan
 from ..profile import Profile
 from .plc_image import Command, Health, PlcImage, Status
@@ -27,7 +30,7 @@ _QUIET = ~int(Status.BRIDGE_ALIVE)  # the life bit changes at every publication
 class Source(Protocol):
     bus_fault: bool
 
-    def poll(self) -> RawScan | None: ...
+    def poll(self, timeout_s: float | None = None) -> RawScan | None: ...
 
     def frame_age(self, now: float | None = None) -> float | None: ...
 
@@ -45,7 +48,12 @@ class ModbusBridge:
     #: Unloaded scans kept for a tare.
     TARE_SCANS = 50
 
-    def __init__(self, profile: Profile, source, sink, *, rate_hz: float | None = None) -> None:
+    #: Longest wait for traffic before the loop looks at the time again.
+    MAX_WAIT_S = 0.05
+
+    def __init__(self, profile: Profile, source, sink, *, rate_hz: float | None = None,
+                 on_update: Callable[[Update], None] | None = None,
+                 on_command: Callable[[str], None] | None = None) -> None:
         self.profile = profile
         self.source = source
         self.sink = sink
@@ -57,6 +65,9 @@ class ModbusBridge:
         self._last_pub = float("-inf")
         self._last_status = -1
         self._stop = threading.Event()
+        self.on_update = on_update
+        self.on_command = on_command
+        self.offline = False
 
     def health(self, now: float | None = None) -> Health:
         src = self.source
@@ -71,20 +82,28 @@ class ModbusBridge:
     def step(self) -> bool:
         """One poll, its updates, the PLC's commands and, when due, a publication.
         Returns whether it published."""
-        t_event = time.perf_counter()
-        scan = self.source.poll()
+        scan = self.source.poll(self.wait_budget())
+        t_event = time.perf_counter()  # after the wait: the event is now
         urgent = False
         if scan is not None:
-            t_event = time.perf_counter()
             self.recent_raw.append(scan.raw)
+            hook = self.on_update
             for u in self.pipeline.push(scan):
                 urgent |= self.image.observe(u)
+                if hook is not None:
+                    hook(u)
         commands = self.sink.take_commands()
         for cmd in commands:
+            before = (self.image.enabled, self.image.latched)
             if cmd.name == "tare":
                 self._tare()
             else:
                 self.image.apply(cmd)
+                # A client-mode PLC's ENABLE is read back every refresh: only a change counts.
+                if (self.image.enabled, self.image.latched) == before:
+                    continue
+            if self.on_command is not None:
+                self.on_command(cmd.name)
             urgent = True
         if commands:
             self.sink.commands_done()
@@ -107,6 +126,27 @@ class ModbusBridge:
         self._last_pub = now
         self.publications += 1
         return True
+
+    def wait_budget(self, now: float | None = None) -> float:
+        """How long the loop may wait for traffic before a publication falls due:
+        the next refresh, or the moment the newest frame turns stale."""
+        now = time.monotonic() if now is None else now
+        budget = min(self.MAX_WAIT_S, self._last_pub + self.profile.modbus.plc.refresh_s - now)
+        age = self.source.frame_age(now)
+        stale_s = self.profile.modbus.plc.stale_s or 0.2
+        if age is not None and age <= stale_s:
+            budget = min(budget, stale_s - age + 1e-4)
+        return max(budget, 0.0)
+
+    def shutdown(self) -> None:
+        """Publish the last image, BRIDGE_OFFLINE with no state claimed, and stop the sink
+        (a client-mode writer writes it before it lets go)."""
+        if self.offline:
+            return
+        self.offline = True
+        regs = self.image.render_offline(self.health())
+        self.sink.publish(regs, self.image, True, time.perf_counter())
+        self.publications += 1
 
     def _tare(self) -> None:
         """Move each taxel's zero to its mean over the recent scans (gripper open)."""
@@ -152,7 +192,7 @@ class ReplaySource:
     def done(self) -> bool:
         return not self.loop and self.k >= len(self.t)
 
-    def poll(self) -> RawScan | None:
+    def poll(self, timeout_s: float | None = None) -> RawScan | None:
         now = time.monotonic()
         if self._next > now:
             time.sleep(self._next - now)

@@ -121,9 +121,10 @@ class RtuPoller:
         self.counters.scans += 1
         return RawScan(seq, seq / self.node_rate_hz, decode_scans(self.node, regs[1:]), 0, rx)
 
-    def poll(self) -> RawScan | None:
+    def poll(self, timeout_s: float | None = None) -> RawScan | None:
         """Wait for the next poll time (``poll_hz``), then poll; a late poll does not
-        try to catch up."""
+        try to catch up.  (``timeout_s`` is for sources that wait for traffic; the
+        poller keeps its own pace.)"""
         now = time.monotonic()
         period = 1.0 / self.poll_hz
         if self._next > now:

@@ -13,6 +13,7 @@ retried with a delay doubling from ``backoff_s`` up to ``backoff_max_s``.
 
 from __future__ import annotations
 
+import collections
 import queue
 import threading
 import time
@@ -32,7 +33,9 @@ class WriterStats:
     connects: int = 0
     superseded: int = 0  #: images replaced by a newer one before they were written
     last_error: str = ""
-    latencies_s: list[float] = field(default_factory=list)  #: offer -> acknowledged write (urgent only)
+    #: offer -> acknowledged write (urgent only); the newest ones, so months of
+    #: running do not grow it
+    latencies_s: collections.deque[float] = field(default_factory=lambda: collections.deque(maxlen=100_000))
 
 
 class PlcWriter:
@@ -55,6 +58,7 @@ class PlcWriter:
         self._pending: tuple[list[int], bool, float] | None = None
         self._last: list[int] | None = None
         self._stop = False
+        self._flush_until = 0.0  #: on stop, an image still pending is written until then
         self._thread: threading.Thread | None = None
         self.connected = False
 
@@ -101,12 +105,12 @@ class PlcWriter:
         next_refresh = time.monotonic()
         while True:
             with self._cond:
-                if self._stop:
+                if self._stop and not self._flushing():
                     break
                 timeout = max(0.0, next_refresh - time.monotonic())
                 if not (self._pending is not None and self._pending[1]):
                     self._cond.wait(timeout)
-                if self._stop:
+                if self._stop and not self._flushing():
                     break
                 item, self._pending = self._pending, None
             if not self.connected:
@@ -147,6 +151,10 @@ class PlcWriter:
                 self.connected = False
                 self.master.close()
 
+    def _flushing(self) -> bool:
+        """Stopping, but the last image (``bridge offline``) is not written yet."""
+        return self._pending is not None and time.monotonic() < self._flush_until
+
     def _fail(self, exc: ModbusFault, item) -> None:
         self.stats.failures += 1
         self.stats.last_error = str(exc)
@@ -159,6 +167,8 @@ class PlcWriter:
         with self._cond:
             if not self._stop:
                 self._cond.wait(delay)
+            elif self._flushing():
+                self._cond.wait(min(delay, self._flush_until - time.monotonic()))
 
     def _read_commands(self) -> None:
         s = self.settings
@@ -175,13 +185,22 @@ class PlcWriter:
         if command:
             self.master.write_registers(at, [0])
 
-    def stop(self) -> None:
+    def stop(self, flush_s: float = 1.0) -> None:
+        """Stop the writer; an image still pending (the bridge's last, "offline") is
+        written first if the PLC answers within ``flush_s``."""
         with self._cond:
             self._stop = True
+            self._flush_until = time.monotonic() + flush_s
             self._cond.notify_all()
         if self._thread is not None:
-            self._thread.join(timeout=5)
+            self._thread.join(timeout=flush_s + 5)
         self.master.close()
+
+    @property
+    def flushed(self) -> bool:
+        """Nothing offered is left unwritten."""
+        with self._cond:
+            return self._pending is None
 
     def stats_dict(self) -> dict[str, int]:
         st = self.stats

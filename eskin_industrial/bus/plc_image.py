@@ -32,6 +32,7 @@ class Status(enum.IntFlag):
     BUS_FAULT = 1 << 7
     BRIDGE_ALIVE = 1 << 8
     ENABLED = 1 << 9
+    BRIDGE_OFFLINE = 1 << 10
 
 
 BIT_DOC: dict[Status, str] = {
@@ -41,10 +42,11 @@ BIT_DOC: dict[Status, str] = {
     Status.SLIP: "state code 3: slip now",
     Status.SLIP_LATCHED: "a slip was seen since the last acknowledge (stays set while slip lasts)",
     Status.DATA_VALID: "the state is a verdict: indicators valid, sensor fresh, no bus fault, enabled",
-    Status.SENSOR_STALE: "no scan from the sensor for longer than stale_s",
+    Status.SENSOR_STALE: "no scan from the sensor for longer than stale_s (default 2.5 scan periods)",
     Status.BUS_FAULT: "the sensor bus fails (consecutive polls failed, or the node is unreachable)",
     Status.BRIDGE_ALIVE: "toggles at every publication (life bit; HEARTBEAT counts the same)",
     Status.ENABLED: "detection enabled by the PLC (ENABLE register)",
+    Status.BRIDGE_OFFLINE: "the bridge has shut down (last image it wrote); no state is claimed",
 }
 
 Kind = Literal["bits", "u16", "i16", "u32"]
@@ -196,7 +198,9 @@ class PlcImage:
     def status(self, health: Health) -> int:
         u = self.update
         bits = Status(0)
-        stale = health.frame_age_s is None or health.frame_age_s > self.settings.stale_s
+        # A bare section (not from a profile) has no rate to derive stale_s from.
+        limit = self.settings.stale_s if self.settings.stale_s is not None else 0.2
+        stale = health.frame_age_s is None or health.frame_age_s > limit
         if stale:
             bits |= Status.SENSOR_STALE
         if health.bus_fault:
@@ -240,6 +244,21 @@ class PlcImage:
             *split32(self.slip_events, wo), *split32(self.state_changes, wo),
             *split32(health.lost_scans, wo), *split32(health.bus_errors, wo), flags, 0,
         ]
+
+    def render_offline(self, health: Health) -> list[int]:
+        """The last image of a bridge that stops: BRIDGE_OFFLINE and nothing else in
+        STATUS (no state bit, DATA_VALID clear), STATE 0, FRAME_AGE 65535, counters kept.
+        A client-mode PLC keeps what was written last, so this is what it must read,
+        never the last "stable"."""
+        regs = self.render(health)
+        wo = self.settings.word_order
+        regs[REG["STATUS"].offset] = int(Status.BRIDGE_OFFLINE)
+        for name in ("STATE", "R_COE", "R_DW", "FLAGS"):
+            regs[REG[name].offset] = 0
+        regs[REG["FRAME_AGE"].offset] = 0xFFFF
+        at = REG["F_SUM"].offset
+        regs[at: at + 2] = split32(0, wo)
+        return regs
 
     def coils(self) -> list[bool]:
         return [False, False, self.enabled]

@@ -85,14 +85,55 @@ class PlcRegisterHandler:
         return None
 
 
+class PlcBlocks:
+    """Several register blocks on one server, one per sensor node, each at its own
+    ``base_address``; a request must fall inside one block."""
+
+    SIZES = {"holding": IMAGE_COUNT, "coils": len(COILS), "discrete": len(BITS)}
+
+    def __init__(self, handlers: list[PlcRegisterHandler]) -> None:
+        bases = sorted(h.base for h in handlers)
+        for lo, hi in zip(bases, bases[1:]):
+            if hi - lo < IMAGE_COUNT:
+                raise ValueError(f"register blocks at {lo} and {hi} overlap (a block takes {IMAGE_COUNT} registers)")
+        self.handlers = handlers
+
+    def _find(self, table: str, address: int, count: int) -> PlcRegisterHandler | None:
+        size = self.SIZES.get(table)
+        if size is None:
+            return None
+        for h in self.handlers:
+            if h.base <= address and address + count <= h.base + size:
+                return h
+        return None
+
+    def read(self, table, address, count):
+        h = self._find(table, address, count)
+        return ILLEGAL_ADDRESS if h is None else h.read(table, address, count)
+
+    def write(self, table, address, values):
+        h = self._find(table, address, len(values))
+        return ILLEGAL_ADDRESS if h is None else h.write(table, address, values)
+
+
 class PlcServer:
-    """The register image served over TCP (``host:port``) or RTU (``serial``)."""
+    """The register image served over TCP (``host:port``) or RTU (``serial``).
+
+    ``blocks``: one register block per sensor node (each its own ``base_address``);
+    :meth:`block` gives each node's bridge loop its sink.  Default: one block, and the
+    server is itself that block's sink.
+    """
 
     def __init__(self, settings: ModbusPlcSection, *, tcp: tuple[str, int] | None = None,
-                 serial: SerialSettings | None = None) -> None:
-        self.handler = PlcRegisterHandler(settings)
+                 serial: SerialSettings | None = None, blocks: list[ModbusPlcSection] | None = None) -> None:
+        self.handlers = [PlcRegisterHandler(b) for b in (blocks or [settings])]
+        self.handler = self.handlers[0]
         units = None if tcp is not None else [settings.unit_id]
-        self.server = RegisterServer(self.handler, tcp=tcp, serial=serial, unit_ids=units)
+        served = self.handler if len(self.handlers) == 1 else PlcBlocks(self.handlers)
+        self.server = RegisterServer(served, tcp=tcp, serial=serial, unit_ids=units)
+
+    def block(self, index: int) -> "PlcBlockSink":
+        return PlcBlockSink(self, self.handlers[index])
 
     @property
     def where(self) -> str:
@@ -101,6 +142,35 @@ class PlcServer:
     def start(self) -> "PlcServer":
         self.server.start()
         return self
+
+    # One block: the server is its sink.
+    def publish(self, registers: list[int], image: PlcImage, urgent: bool = False,
+                t_event: float | None = None) -> None:
+        self.handler.publish(registers, image.enabled)
+
+    def take_commands(self) -> list[Command]:
+        return self.block(0).take_commands()
+
+    def commands_done(self) -> None:
+        self.handler.done()
+
+    def stats_dict(self) -> dict[str, int]:
+        return self.block(0).stats_dict()
+
+    def stop(self, flush_s: float = 0.0) -> None:
+        self.server.stop()
+
+
+class PlcBlockSink:
+    """One node's block of a shared :class:`PlcServer`, as that node's sink."""
+
+    def __init__(self, server: PlcServer, handler: PlcRegisterHandler) -> None:
+        self.server = server
+        self.handler = handler
+
+    @property
+    def where(self) -> str:
+        return f"{self.server.where}, base address {self.handler.base}"
 
     def publish(self, registers: list[int], image: PlcImage, urgent: bool = False,
                 t_event: float | None = None) -> None:
@@ -120,5 +190,5 @@ class PlcServer:
     def stats_dict(self) -> dict[str, int]:
         return {"plc_reads": self.handler.reads, "plc_refused_writes": self.handler.refused}
 
-    def stop(self) -> None:
-        self.server.stop()
+    def stop(self, flush_s: float = 0.0) -> None:
+        pass  # the shared server is stopped once, by its owner

@@ -8,6 +8,7 @@ import sys
 import click
 
 from ..errors import EskinError
+from .bridge_cmd import bridge
 from .demo_cmd import demo
 from .detect_cmd import detect
 from .node_cmd import node
@@ -46,6 +47,7 @@ def main(ctx: click.Context, debug: bool) -> None:
     ctx.obj["debug"] = debug
 
 
+main.add_command(bridge)
 main.add_command(demo)
 main.add_command(detect)
 main.add_command(profile)

@@ -1,0 +1,150 @@
+"""Several sensor nodes on one CAN bus: one reader, frames routed by arbitration ID.
+
+The bus (or a replayed log) is read by one thread into one bounded queue
+(:class:`~eskin_industrial.bus.can_source.BusReader`, or :class:`LogPlayer` for a
+log).  :class:`CanGroup` moves each frame into the queue of the node that owns its
+ID (16 IDs from the node's ``base_id``), where that node's
+:class:`~eskin_industrial.bus.can_poll.CanScanPoller` assembles it; error frames go
+to every node, since a bus error concerns them all; frames of no node are counted.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import can
+
+from ..bus.can_layout import ID_RANGE, CanLayout, ScanAssembler
+from ..bus.can_poll import CanScanPoller
+from ..errors import EskinError
+from .config import ResolvedNode
+
+
+class _NoWait:
+    """A node's queue is filled by the group loop itself: nothing to wait for."""
+
+    def clear(self) -> None:
+        pass
+
+    def wait(self, timeout: float | None = None) -> bool:
+        return False
+
+
+class _NodeQueue:
+    """What a node's poller reads: its own frames, the bus's counters."""
+
+    def __init__(self, bus_counters: dict[str, int]) -> None:
+        self.queue: collections.deque[can.Message] = collections.deque()
+        self.counters = bus_counters
+        self.arrived = _NoWait()
+
+
+class CanGroup:
+    def __init__(self, reader, nodes: list[ResolvedNode]) -> None:
+        self.reader = reader
+        self.names = [n.name for n in nodes]
+        self.pollers: list[CanScanPoller] = []
+        self._route: dict[tuple[bool, int], collections.deque] = {}
+        self._queues: list[collections.deque] = []
+        self.unrouted_frames = 0
+        for n in nodes:
+            layout = CanLayout.from_profile(n.profile, fd=n.fd)
+            nq = _NodeQueue(reader.counters)
+            self.pollers.append(CanScanPoller(nq, ScanAssembler(layout, n.rate_hz)))  # type: ignore[arg-type]
+            self._queues.append(nq.queue)
+            for can_id in range(layout.base_id, layout.base_id + ID_RANGE):
+                self._route[(layout.extended_id, can_id)] = nq.queue
+
+    def route(self, timeout_s: float) -> int:
+        """Wait up to ``timeout_s`` for frames, then hand every queued frame to its
+        node; returns how many."""
+        q, arrived = self.reader.queue, self.reader.arrived
+        if not q:
+            arrived.clear()
+            if not q:
+                arrived.wait(timeout_s)
+        n = 0
+        route = self._route
+        while q:
+            msg = q.popleft()
+            n += 1
+            if msg.is_error_frame:
+                for nq in self._queues:
+                    nq.append(msg)
+                continue
+            dest = route.get((msg.is_extended_id, msg.arbitration_id))
+            if dest is None:
+                self.unrouted_frames += 1
+            else:
+                dest.append(msg)
+        return n
+
+    @property
+    def done(self) -> bool:
+        """A replayed log has ended and every frame was handed on."""
+        return bool(getattr(self.reader, "done", False)) and not self.reader.queue
+
+    def stop(self) -> None:
+        self.reader.stop()
+
+
+class LogPlayer:
+    """A CAN log replayed at its own pace into a bounded queue, as if received.
+
+    Frames keep their relative timing; their timestamps are moved to the replay's
+    clock (the assembler times scans by them).  A log that fails to parse half-way
+    stops the replay; the error is kept in ``last_error``.
+    """
+
+    def __init__(self, path: str | Path, messages: Iterator[can.Message], queue_frames: int = 200_000,
+                 speed: float = 1.0) -> None:
+        self.path = str(path)
+        self._messages = messages
+        self.queue: collections.deque[can.Message] = collections.deque()
+        self.max_frames = queue_frames
+        self.speed = speed
+        self.counters = {"rx_queue_drops": 0, "bus_errors": 0, "bus_reopens": 0, "log_frames": 0}
+        self.arrived = threading.Event()
+        self.last_error = ""
+        self.done = False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="can-log-player", daemon=True)
+
+    def start(self) -> "LogPlayer":
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        first_log = first_wall = None
+        try:
+            for msg in self._messages:
+                if self._stop.is_set():
+                    break
+                if first_log is None:
+                    first_log, first_wall = msg.timestamp, time.time()
+                due = first_wall + (msg.timestamp - first_log) / self.speed
+                delay = due - time.time()
+                if delay > 0 and self._stop.wait(delay):
+                    break
+                msg.timestamp = max(due, time.time() - 1.0)
+                if len(self.queue) >= self.max_frames:
+                    self.counters["rx_queue_drops"] += 1
+                    continue
+                self.queue.append(msg)
+                self.counters["log_frames"] += 1
+                self.arrived.set()
+        except EskinError as exc:
+            self.last_error = str(exc)
+            self.counters["bus_errors"] += 1
+        finally:
+            self.done = True
+            self.arrived.set()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=2.0)

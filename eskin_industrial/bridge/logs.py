@@ -1,0 +1,97 @@
+"""Structured logs for a bridge that runs for months: one event per line, plain or JSON.
+
+Every line is an *event* with named fields (``event=state node=left state=slip``),
+so that a journal can be searched and a log shipper can parse it.  The loops that
+decode and detect never write to the stream themselves: they put records on a
+bounded queue that a separate thread writes out.  A stream that blocks (a full pipe,
+a slow terminal) costs dropped log lines, counted in ``log_drops``, never detection.
+
+Configured by the command, never at import time.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import logging
+import logging.handlers
+import math
+import queue
+from typing import IO, Any
+
+LOGGER = "eskin_industrial.bridge"
+#: Records waiting for the writer thread; beyond it they are dropped and counted.
+QUEUE_RECORDS = 10_000
+
+
+def _utc(record: logging.LogRecord) -> str:
+    t = dt.datetime.fromtimestamp(record.created, dt.timezone.utc)
+    return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
+
+
+def _plain_value(v: Any) -> str:
+    text = f"{v:.4g}" if isinstance(v, float) else str(v)
+    return json.dumps(text) if (not text or any(c in text for c in " =\"")) else text
+
+
+class PlainFormatter(logging.Formatter):
+    """``2026-11-22T10:00:00.123Z info  state node=left state=slip``."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        fields = getattr(record, "fields", {})
+        body = " ".join(f"{k}={_plain_value(v)}" for k, v in fields.items())
+        return f"{_utc(record)} {record.levelname.lower():7s} {record.getMessage()}" + (f" {body}" if body else "")
+
+
+class JsonFormatter(logging.Formatter):
+    """One JSON object per line: ``ts``, ``level``, ``event``, then the event's fields."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        out = {"ts": _utc(record), "level": record.levelname.lower(), "event": record.getMessage()}
+        for k, v in getattr(record, "fields", {}).items():
+            # NaN and infinity are not JSON: null, so that every line parses.
+            out[k] = None if isinstance(v, float) and not math.isfinite(v) else v
+        return json.dumps(out, default=str)
+
+
+class _DroppingQueueHandler(logging.handlers.QueueHandler):
+    """Never blocks the caller: a full queue drops the record and counts it."""
+
+    def __init__(self, q: queue.Queue, log: "EventLog") -> None:
+        super().__init__(q)
+        self._log = log
+
+    def enqueue(self, record: logging.LogRecord) -> None:
+        try:
+            self.queue.put_nowait(record)
+        except queue.Full:
+            self._log.drops += 1
+
+    def prepare(self, record: logging.LogRecord) -> logging.LogRecord:
+        return record  # the fields travel as they are; the writer formats them
+
+
+class EventLog:
+    """``event(name, level, **fields)`` from any thread; :meth:`close` flushes."""
+
+    def __init__(self, stream: IO[str], fmt: str = "plain", level: str = "info") -> None:
+        self.drops = 0
+        self.logger = logging.getLogger(f"{LOGGER}.{id(self)}")
+        self.logger.setLevel(level.upper())
+        self.logger.propagate = False
+        out = logging.StreamHandler(stream)
+        out.setFormatter(JsonFormatter() if fmt == "json" else PlainFormatter())
+        q: queue.Queue = queue.Queue(maxsize=QUEUE_RECORDS)
+        self._handler = _DroppingQueueHandler(q, self)
+        self.logger.addHandler(self._handler)
+        self._listener = logging.handlers.QueueListener(q, out)
+        self._listener.start()
+
+    def event(self, name: str, level: str = "info", **fields: Any) -> None:
+        lvl = logging.getLevelName(level.upper())
+        if self.logger.isEnabledFor(lvl):
+            self.logger.log(lvl, name, extra={"fields": fields})
+
+    def close(self) -> None:
+        self._listener.stop()  # writes out what is queued
+        self.logger.removeHandler(self._handler)
