@@ -90,7 +90,7 @@ class Gripper:
         if trusted != self.trusted:
             self.trusted = trusted
             why = "bridge silent" if not alive else describe_status(status & (
-                Status.SENSOR_STALE | Status.BUS_FAULT | Status.ENABLED | Status.DATA_VALID))
+                Status.SENSOR_STALE | Status.BUS_FAULT | Status.ENABLED | Status.DATA_VALID | Status.BRIDGE_OFFLINE))
             msgs.append("data trusted" if trusted else f"NO VERDICT ({why}): holding grip force")
         latched = bool(status & Status.SLIP_LATCHED)
         ack = False

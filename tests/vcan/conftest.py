@@ -24,7 +24,7 @@ import pytest
 
 from . import vm
 
-GUEST_TIMEOUT_S = 170.0
+GUEST_TIMEOUT_S = 300.0
 
 
 @dataclass(frozen=True)

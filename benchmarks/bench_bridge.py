@@ -1,0 +1,383 @@
+"""The bridge end to end: from the arrival of the scan that decides a state to the
+PLC's acknowledged write, at 100 Hz and 1 kHz, over CAN (python-can's virtual bus,
+or SocketCAN vcan) and Modbus RTU; and the CPU the bridge takes.
+
+    .venv/bin/python benchmarks/bench_bridge.py                 # every path, 60 s each (~5 min)
+    .venv/bin/python benchmarks/bench_bridge.py --paths can-1k --duration 30
+    python tests/vcan/vm.py -- .venv/bin/python benchmarks/bench_bridge.py --paths vcan-100,vcan-1k
+
+What runs: the product's own :class:`~eskin_industrial.bridge.runtime.Bridge` (reader
+thread, CAN loop, detector, register image, client-mode writer thread) writing
+Modbus TCP on loopback into a PLC stand-in in its *own process*, which notes the
+wall-clock time of every write that changes STATE.  The scene is a "slip train": a
+still grasp with a short slide every 1.2 s, so a minute holds about 50 slip decisions.
+
+- arrival: the time the frame completing the deciding scan reached the bus (CAN:
+  python-can's message timestamp: the virtual bus stamps at send, SocketCAN at
+  kernel receipt); for RTU, the moment the poll's answer was complete.
+- end: the PLC stand-in's receipt of the write that first shows the new STATE (the
+  acknowledgement follows on loopback within microseconds).
+- Every state change is a sample ("all"), slip entries are also reported alone.
+- CPU: the bridge's own threads (from /proc/self/task), in % of one core; the node
+  simulator sharing the process (the virtual bus exists in one process only) is
+  excluded.
+- Reference, in the same run: python-can's ``Notifier`` + a plain pymodbus client
+  writing the same register at the same decision scans (no assembly, no detection,
+  no image): the floor set by the two libraries.  Ratio = ours / reference.
+
+1 kHz uses the profile's CAN FD layout (one frame per scan): classic CAN at 1 Mbit/s
+carries about 8,000 frames/s, and a 5 x 5 scan at 16 bits takes 9 classic frames.
+RTU runs at 100 Hz only: one poll of 25 registers takes 9.5 ms at 115200 baud.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+PROFILE = ROOT / "profiles" / "paper-5x5.toml"
+PATHS = ("can-100", "can-1k", "rtu-100")
+
+
+def slip_train_toml(duration_s: float, every_s: float = 1.2) -> str:
+    """A still 8 N grasp with a 4 mm slide at 20 mm/s every ``every_s``, back and forth."""
+    lines = ['[scene]', 'name = "slip-train"', 'description = "benchmark: a slide every 1.2 s"',
+             'profile = "paper-5x5"', f'duration_s = {duration_s:.1f}', '',
+             '[footprint]', 'size_mm = [20.0, 20.0]', 'centre_mm = [10.0, 10.0]', 'gradient_per_mm = [0.01, 0.0]',
+             '', '[[events]]', 'kind = "press"', 't_s = 0.5', 'duration_s = 0.5', 'force_n = 8.0']
+    t, sign = 2.5, 1.0
+    while t < duration_s - 1.0:
+        lines += ['', '[[events]]', 'kind = "slide"', f't_s = {t:.2f}', f'distance_mm = [{4.0 * sign:.1f}, 0.0]',
+                  'speed_mm_s = 20.0']
+        t += every_s
+        sign = -sign
+    return "\n".join(lines) + "\n"
+
+
+# -- the PLC stand-in (its own process) ----------------------------------------------
+
+def capture_main(port: int, out: str) -> None:
+    """Serve the PLC's registers; note (time, STATE) for every write that changes STATE."""
+    from eskin_industrial.bus.modbus_io import RegisterServer, quiet_pymodbus
+    from eskin_industrial.bus.plc_image import IMAGE_COUNT, REG
+
+    quiet_pymodbus()
+    seen: list[tuple[float, int]] = []
+    state_at = REG["STATE"].offset
+
+    class Capture:
+        last = -1
+
+        def read(self, table, address, count):
+            regs = [0] * IMAGE_COUNT
+            regs[REG["ENABLE"].offset] = 1
+            return regs[address: address + count]
+
+        def write(self, table, address, values):
+            t = time.time()
+            if address <= state_at < address + len(values):
+                state = int(values[state_at - address])
+                if state != self.last:
+                    self.last = state
+                    seen.append((t, state))
+            return None
+
+    server = RegisterServer(Capture(), tcp=("127.0.0.1", port)).start()
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    print("ready", flush=True)
+    done.wait()
+    server.stop()
+    Path(out).write_text(json.dumps(seen))
+
+
+class PlcCapture:
+    def __init__(self) -> None:
+        from modbus_support import free_port
+
+        self.port = free_port()
+        self.out = tempfile.mktemp(suffix=".json")
+        self.proc = subprocess.Popen([sys.executable, __file__, "--capture", str(self.port), self.out],
+                                     stdout=subprocess.PIPE, text=True)
+        assert self.proc.stdout is not None and self.proc.stdout.readline().strip() == "ready"
+
+    def finish(self) -> list[tuple[float, int]]:
+        self.proc.send_signal(signal.SIGTERM)
+        self.proc.wait(timeout=10)
+        data = json.loads(Path(self.out).read_text())
+        os.unlink(self.out)
+        return [(float(t), int(s)) for t, s in data]
+
+
+# -- per-thread CPU -------------------------------------------------------------------
+
+def thread_cpu_s() -> dict[str, float]:
+    """CPU seconds of each thread of this process, by thread name."""
+    names = {t.native_id: t.name for t in threading.enumerate()}
+    tick = os.sysconf("SC_CLK_TCK")
+    out: dict[str, float] = {}
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            stat = Path(f"/proc/self/task/{tid}/stat").read_text()
+        except OSError:
+            continue
+        fields = stat.rsplit(")", 1)[1].split()
+        cpu = (int(fields[11]) + int(fields[12])) / tick  # utime + stime
+        name = names.get(int(tid), f"tid-{tid}")
+        out[name] = out.get(name, 0.0) + cpu
+    return out
+
+
+# -- matching decisions to PLC writes -------------------------------------------------
+
+def latencies(decisions: list[tuple[int, int]], arrival: dict[int, float], writes: list[tuple[float, int]]):
+    """For each decision (scan index, new state): the first write after the scan's
+    arrival that shows that state, if it comes before the next decision's arrival
+    (else the write was superseded: skipped, counted)."""
+    out_all, out_slip, skipped = [], [], 0
+    times = np.array([t for t, _ in writes])
+    for i, (k, state) in enumerate(decisions):
+        t0 = arrival.get(k)
+        if t0 is None:
+            skipped += 1
+            continue
+        t_next = arrival.get(decisions[i + 1][0], np.inf) if i + 1 < len(decisions) else np.inf
+        j = int(np.searchsorted(times, t0))
+        while j < len(writes) and writes[j][1] != state and writes[j][0] < t_next:
+            j += 1
+        if j >= len(writes) or writes[j][0] >= t_next + 0.05:
+            skipped += 1
+            continue
+        dt = writes[j][0] - t0
+        out_all.append(dt)
+        if state == 3:
+            out_slip.append(dt)
+    return out_all, out_slip, skipped
+
+
+# -- our bridge -------------------------------------------------------------------------
+
+def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, channel: str):
+    from eskin_industrial import load_profile
+    from eskin_industrial.bridge.config import BridgeConfig, NodeConfig, PlcOutput, resolve
+    from eskin_industrial.bridge.logs import EventLog
+    from eskin_industrial.bridge.runtime import Bridge
+
+    rate = 1000.0 if path.endswith("1k") else 100.0
+    fd = rate > 500
+    plc = PlcCapture()
+    rtu_proc = pty = None
+    try:
+        if path.startswith("rtu"):
+            from modbus_support import pty_pair
+
+            pty = pty_pair(Path(tempfile.mkdtemp()))
+            a, b = pty.__enter__()
+            rtu_proc = subprocess.Popen([str(ROOT / ".venv/bin/eskin-bus"), "modbus-node", "-p", str(PROFILE),
+                                         "--port", str(a), "--scene", str(scene_file), "--rate", str(rate)],
+                                        stderr=subprocess.DEVNULL)
+            time.sleep(1.0)
+            node_cfg = NodeConfig(name="n1", profile=str(PROFILE), source="modbus-rtu", serial_port=str(b),
+                                  rate_hz=rate)
+        else:
+            node_cfg = NodeConfig(name="n1", profile=str(PROFILE), source="can", interface=interface,
+                                  channel=channel, fd=fd, rate_hz=rate)
+        cfg = BridgeConfig(node=(node_cfg,), plc=PlcOutput(mode="client", host="127.0.0.1", port=plc.port),
+                           log=replace(BridgeConfig.__dataclass_fields__["log"].default_factory(), status_every_s=0))
+        nodes = resolve(cfg)
+        decisions: list[tuple[int, int]] = []
+        last = [-1]
+
+        def on_update(_name, u):
+            if u.state != last[0]:
+                if last[0] != -1:  # the first state is no change (and the PLC link may still be opening)
+                    decisions.append((int(round(u.t * rate)), int(u.state)))
+                last[0] = u.state
+
+        log = EventLog(open(os.devnull, "w"), "plain", "warning")
+        br = Bridge(cfg, nodes, log, on_update=on_update).open()
+        arrival: dict[int, float] = {}
+        source = br.runs[0].bridge.source
+        poll = source.poll
+        mono_to_wall = time.time() - time.monotonic()
+
+        def timed_poll(timeout_s=None):
+            scan = poll(timeout_s)
+            if scan is not None:
+                rx = scan.rx_time + (mono_to_wall if path.startswith("rtu") else 0.0)
+                arrival[int(round(scan.t * rate))] = rx
+            return scan
+
+        source.poll = timed_poll  # type: ignore[method-assign]
+        node_thread = None
+        if not path.startswith("rtu"):
+            node_thread = start_can_node(nodes[0].profile, scene_file, rate, fd, interface, channel)
+        cpu0, t0 = thread_cpu_s(), time.monotonic()
+        br.start()
+        br.wait(duration_s)
+        wall = time.monotonic() - t0
+        cpu1 = thread_cpu_s()
+        br.stop()
+        log.close()
+        counters = br.counters()["n1"]
+    finally:
+        writes = plc.finish()
+        if rtu_proc is not None:
+            rtu_proc.terminate()
+            rtu_proc.wait(timeout=5)
+        if pty is not None:
+            pty.__exit__(None, None, None)
+    if node_thread is not None:
+        node_thread.join(timeout=5)
+    ours = {k: cpu1.get(k, 0.0) - cpu0.get(k, 0.0) for k in cpu1}
+    bridge_cpu = sum(v for k, v in ours.items() if k not in ("bench-node", "MainThread"))
+    lat_all, lat_slip, skipped = latencies(decisions, arrival, writes)
+    return dict(rate=rate, decisions=decisions, lat_all=lat_all, lat_slip=lat_slip, skipped=skipped, arrival=arrival, writes=writes,
+                cpu=bridge_cpu / wall, counters=counters)
+
+
+def start_can_node(profile, scene_file: Path, rate: float, fd: bool, interface: str, channel: str,
+                   repeat: int = 1) -> threading.Thread:
+    from eskin_industrial.bus.can_layout import CanLayout
+    from eskin_industrial.bus.can_node import CanNode, Faults
+    from eskin_industrial.bus.can_source import open_bus
+    from eskin_industrial.calibration import Calibrator
+    from eskin_industrial.scenes import render
+
+    rec = render(str(scene_file), rate, 0)
+    raw = np.rint(Calibrator.from_section(profile.calibration, profile.taxels).to_raw(rec.forces))
+    layout = CanLayout.from_profile(profile, fd=fd)
+    tx = open_bus(interface, channel, fd=fd)
+    node = CanNode(layout, tx, raw, rate, profile.can.heartbeat_s, Faults(), False, repeat, None)
+
+    def run():
+        try:
+            node.run()
+        finally:
+            tx.shutdown()
+
+    t = threading.Thread(target=run, name="bench-node", daemon=True)
+    t.start()
+    return t
+
+
+# -- the reference: python-can Notifier + plain pymodbus --------------------------------
+
+def run_reference(path: str, decisions: list[tuple[int, int]], scene_file: Path, interface: str, channel: str):
+    """The same node and the same decision scans; a listener that writes STATE with a
+    plain pymodbus client as soon as the last frame of a decision scan arrives."""
+    import can
+
+    from eskin_industrial import load_profile
+    from eskin_industrial.bus.can_layout import CanLayout
+    from eskin_industrial.bus.can_source import open_bus
+    from eskin_industrial.bus.modbus_io import TcpMaster
+    from eskin_industrial.bus.plc_image import REG
+
+    rate = 1000.0 if path.endswith("1k") else 100.0
+    fd = rate > 500
+    prof = load_profile(PROFILE)
+    layout = CanLayout.from_profile(prof, fd=fd)
+    last_id = layout.data_id(layout.segments - 1)
+    want = dict(decisions)
+    plc = PlcCapture()
+    master = TcpMaster("127.0.0.1", plc.port, 1, 0.5)
+    master.connect()
+    arrival: dict[int, float] = {}
+    state_at = REG["STATE"].offset
+    count = [0]
+
+    class Forward(can.Listener):
+        def on_message_received(self, msg: can.Message) -> None:
+            if msg.arbitration_id != last_id:
+                return
+            k = count[0]
+            count[0] += 1
+            state = want.get(k)
+            if state is not None:
+                arrival[k] = msg.timestamp
+                master.write_registers(prof.modbus.plc.base_address + state_at, [state])
+
+    rx = open_bus(interface, channel, fd=fd)
+    notifier = can.Notifier(rx, [Forward()], timeout=0.01)
+    node_thread = start_can_node(prof, scene_file, rate, fd, interface, channel)
+    node_thread.join()
+    time.sleep(0.2)
+    notifier.stop()
+    rx.shutdown()
+    master.close()
+    writes = plc.finish()
+    lat_all, lat_slip, skipped = latencies(decisions, arrival, writes)
+    return dict(lat_all=lat_all, lat_slip=lat_slip, skipped=skipped)
+
+
+def ms(values, q) -> str:
+    return f"{np.percentile(np.asarray(values) * 1000, q):.2f}" if len(values) else "-"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--paths", default=",".join(PATHS),
+                    help=f"comma-separated: {', '.join(PATHS)}, vcan-100, vcan-1k (SocketCAN vcan0)")
+    ap.add_argument("--duration", type=float, default=60.0, help="seconds per path (default 60)")
+    ap.add_argument("--capture", nargs=2, metavar=("PORT", "OUT"), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.capture:
+        capture_main(int(args.capture[0]), args.capture[1])
+        return
+    from eskin_industrial.bus.modbus_io import quiet_pymodbus
+    from machine import describe
+
+    quiet_pymodbus()
+    cmd = f".venv/bin/python benchmarks/bench_bridge.py --paths {args.paths} --duration {args.duration:g}"
+    print(f"# {cmd}")
+    print(f"# {time.strftime('%Y-%m-%d', time.gmtime())} on {describe()}")
+    print("| path | rate | decisions (slips) | ours p50 / p99 ms | slips p50 / p99 ms | reference p50 / p99 ms "
+          "| ratio p50 / p99 | bridge CPU | drops |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = Path(tmp) / "slip-train.toml"
+        scene.write_text(slip_train_toml(args.duration))
+        for path in args.paths.split(","):
+            if path.startswith("vcan"):
+                interface, channel = "socketcan", "vcan0"
+            else:
+                interface, channel = "virtual", f"bench-bridge-{os.getpid()}-{path}"
+            r = run_ours(path, args.duration, scene, interface, channel)
+            ref = None
+            if not path.startswith("rtu"):
+                ref = run_reference(path, r["decisions"], scene, interface, channel + "-ref"
+                                    if interface == "virtual" else channel)
+            c = r["counters"]
+            drops = (c.get("rx_queue_drops", 0) + c.get("lost_scans", 0) + c.get("torn_scans", 0)
+                     + c.get("rtu_failed_polls", 0))
+            n_slip = sum(1 for _, s in r["decisions"] if s == 3)
+            ratio = "-"
+            if ref and ref["lat_all"] and r["lat_all"]:
+                p50 = np.percentile(r["lat_all"], 50) / np.percentile(ref["lat_all"], 50)
+                p99 = np.percentile(r["lat_all"], 99) / np.percentile(ref["lat_all"], 99)
+                ratio = f"{p50:.1f}x / {p99:.1f}x"
+            refcol = f"{ms(ref['lat_all'], 50)} / {ms(ref['lat_all'], 99)}" if ref else "- (no RTU reference)"
+            print(f"| {path} | {r['rate']:g} Hz | {len(r['lat_all'])} ({n_slip}) | {ms(r['lat_all'], 50)} / "
+                  f"{ms(r['lat_all'], 99)} | {ms(r['lat_slip'], 50)} / {ms(r['lat_slip'], 99)} | {refcol} | {ratio} | "
+                  f"{r['cpu'] * 100:.1f} % | {drops} (of {c.get('scans', 0)} scans) |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
