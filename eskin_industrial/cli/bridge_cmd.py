@@ -116,6 +116,12 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     if (config_path is None) == (profile_path is None):
         raise click.UsageError("give --config FILE, or --profile P for one node")
     if config_path is not None:
+        given = [opt for opt, value in (("--source", source != "can"), ("-i", interface), ("-c", channel),
+                                        ("-b", bitrate), ("--fd", fd is not None), ("--data-bitrate", data_bitrate),
+                                        ("--plc", plc_spec), ("--base-address", base_address is not None),
+                                        ("--rate", rate_hz), ("--name", name != "node")) if value]
+        if given:  # never silently ignored: the file says it all
+            raise click.UsageError(f"{', '.join(given)}: one-node options; with --config the file gives them")
         cfg = load_bridge_config(config_path)
     else:
         node = node_from_options(profile_path, source, interface, channel, bitrate, fd, data_bitrate, base_address,
