@@ -12,6 +12,7 @@ import os
 import socket
 import threading
 import time
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -42,6 +43,17 @@ class DemoResult:
     grip_raises: int = 0
 
 
+@dataclass(frozen=True)
+class DemoParts:
+    """The running chain, for a live view that watches it (``run_demo(live=...)``)."""
+
+    profile: Profile
+    bridge: ModbusBridge
+    plc: PlcSimulator
+    channel: str
+    started: float  #: ``time.monotonic()`` at the start
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -49,7 +61,14 @@ def free_port() -> int:
 
 
 def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_echo: Callable[[str], None] | None,
-             drain_s: float = 1.0) -> DemoResult:
+             drain_s: float = 1.0,
+             live: Callable[[DemoParts], AbstractContextManager[object]] | None = None) -> DemoResult:
+    """Run the chain until the node has played ``rec`` and ``drain_s`` more.
+
+    ``live``, when given, is entered once the chain is up and left before it is torn
+    down (also on Ctrl-C or an error): a live view that only reads the chain's newest
+    values.
+    """
     layout = CanLayout.from_profile(profile, fd=False)
     raw = np.rint(Calibrator.from_section(profile.calibration, profile.taxels).to_raw(rec.forces))
     port = free_port()
@@ -77,13 +96,15 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
     tx = open_bus("virtual", channel)
     node = CanNode(layout, tx, raw, rec.rate_hz, profile.can.heartbeat_s, Faults(), False, 1, None)
     node_thread = threading.Thread(target=node.run, name="demo-node", daemon=True)
+    parts = DemoParts(profile, bridge, plc, channel, time.monotonic())
     try:
-        node_thread.start()
-        while node_thread.is_alive():
-            bridge.step()
-        end = time.monotonic() + drain_s
-        while time.monotonic() < end:
-            bridge.step()
+        with live(parts) if live is not None else nullcontext():
+            node_thread.start()
+            while node_thread.is_alive():
+                bridge.step()
+            end = time.monotonic() + drain_s
+            while time.monotonic() < end:
+                bridge.step()
     finally:
         tx.shutdown()
         reader.stop()

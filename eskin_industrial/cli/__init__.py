@@ -16,6 +16,7 @@ from .modbus_cmd import modbus_bridge, modbus_node
 from .plc_cmd import plc
 from .plc_sim_cmd import plc_sim
 from .profile_cmd import profile
+from .monitor_cmd import monitor
 from .receive_cmd import receive
 from .plot_cmd import plot
 from .simulate_cmd import simulate
@@ -60,3 +61,4 @@ main.add_command(modbus_node)
 main.add_command(modbus_bridge)
 main.add_command(node)
 main.add_command(receive)
+main.add_command(monitor)

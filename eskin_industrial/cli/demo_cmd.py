@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
 
 import click
 import numpy as np
 
 from .common import open_profile
+
+if TYPE_CHECKING:
+    from ..demo import DemoResult
+    from ..profile import Profile
+    from ..scenes import Rendered
+    from ..view.terminal import LiveScreen
 
 #: the shipped profiles, next to the package in a checkout
 PROFILES = Path(__file__).resolve().parents[2] / "profiles"
@@ -19,12 +27,15 @@ PROFILES = Path(__file__).resolve().parents[2] / "profiles"
               help="Profile (default: the scene's, from profiles/).")
 @click.option("--rate", "rate_hz", type=click.FloatRange(min=10.0, max=2000.0), default=100.0, show_default=True)
 @click.option("--seed", type=int, default=7, show_default=True)
-@click.option("--plain", is_flag=True, help="One line per state change (the default; the live view is not built yet).")
+@click.option("--plain", is_flag=True,
+              help="One line per state change instead of the live view (the default when stdout is not a terminal).")
 @click.option("--plc-log", is_flag=True, help="Also print the PLC stand-in's register changes and gripper actions.")
 def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain: bool, plc_log: bool) -> None:
     """Play a scene as a CAN sensor node on python-can's virtual bus, run the bridge
     (decode, detect) and write the registers over Modbus TCP on loopback into a PLC
-    stand-in; print each state change and a summary."""
+    stand-in.  In a terminal: a live view (taxel heat map, scores against their
+    thresholds, state, the PLC's registers), then the state changes and a summary;
+    piped or with --plain: each state change as it comes, then the summary."""
     from ..demo import run_demo
     from ..scenes import render
 
@@ -34,7 +45,11 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
     say(f"demo: scene {rec.name} ({rec.spec.scene.description}), {len(rec.t)} scans at {rate_hz:g} Hz on a "
         f"virtual CAN bus -> bridge ({prof.detector.method}) -> Modbus TCP -> PLC stand-in; "
         f"about {rec.t[-1]:.0f} s in real time")
-    res = run_demo(prof, rec, say, (lambda line: say(f"    PLC {line}")) if plc_log else None)
+    stdout = sys.stdout
+    if plain or not stdout.isatty():
+        res = run_demo(prof, rec, say, (lambda line: say(f"    PLC {line}")) if plc_log else None)
+    else:
+        res = _run_live(prof, rec, plc_log, stdout)
     s, c = res.score, res.counters
     say("summary:")
     if s is not None:
@@ -47,3 +62,42 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
     say(f"  scans {c.get('scans', 0)}, lost {c.get('lost_scans', 0)}, torn {c.get('torn_scans', 0)}, "
         f"malformed {c.get('malformed_frames', 0)}, rx queue drops {c.get('rx_queue_drops', 0)}; "
         f"PLC status changes {res.plc_status_changes}, grip force raised {res.grip_raises} times")
+
+
+def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> DemoResult:
+    """The demo under the live view; the lines it would have printed are kept and
+    printed once the view has left the screen."""
+    from ..bus.plc_image import STATUS_COUNT
+    from ..demo import DemoParts, run_demo
+    from ..view.live import Watch, live_screen
+    from ..view.terminal import color_wanted
+
+    kept: list[str] = []
+    watches: list[Watch] = []
+
+    def say(line: str) -> None:  # the bridge loop: an append or two
+        kept.append(line)
+        if watches:
+            watches[0].note(line)
+
+    def view(parts: DemoParts) -> LiveScreen:
+        bridge, plc = parts.bridge, parts.plc
+        watch = Watch(parts.profile, bridge.pipeline, method=parts.profile.detector.method,
+                      registers=lambda: plc.memory.regs[:STATUS_COUNT], registers_from="as the PLC reads them",
+                      counters=bridge.counters, title="eskin-bus demo",
+                      source=f"{rec.name} | {parts.profile.name} | {parts.profile.detector.method}",
+                      started=parts.started)
+        watches.append(watch)
+        return live_screen(watch, stdout, color_wanted())
+
+    try:
+        res = run_demo(prof, rec, say, (lambda line: kept.append(f"    PLC {line}")) if plc_log else None,
+                       live=view)
+    except KeyboardInterrupt:  # the view has restored the terminal: say what was seen
+        for line in kept:
+            click.echo(line)
+        click.echo("demo: interrupted", err=True)
+        sys.exit(130)
+    for line in kept:
+        click.echo(line)
+    return res

@@ -1,0 +1,101 @@
+"""``eskin-bus monitor``: the live view on a sensor node's real CAN traffic."""
+
+from __future__ import annotations
+
+import sys
+import time
+from contextlib import nullcontext
+
+import click
+
+from ..detect.methods import METHODS
+from .can_common import bus_kwargs, bus_options
+from .common import open_profile, profile_option
+
+
+@click.command()
+@profile_option()
+@bus_options
+@click.option("--rate", "rate_hz", type=float, default=None, help="The node's scan rate in Hz (default: the profile's).")
+@click.option("--method", type=click.Choice(sorted(METHODS)), default=None,
+              help="Detection method (default: the profile's).")
+@click.option("--duration", "duration_s", type=float, default=None, help="Stop after this many seconds.")
+@click.option("--idle-exit", "idle_s", type=float, default=None,
+              help="Stop once no scan came for this many seconds (after the first).")
+@click.option("--plain", is_flag=True,
+              help="One line per state change instead of the live view (the default when stdout is not a terminal).")
+def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, rate_hz, method, duration_s, idle_s,
+            plain) -> None:
+    """Watch a sensor node on a CAN bus: its scans decoded and detected, shown live
+    (taxel heat map, scores against their thresholds, state, the register image the
+    bridge would publish, counters) until Ctrl-C, --duration or --idle-exit; then one
+    line of counters.  No PLC is contacted."""
+    from ..bus.can_layout import CanLayout, ScanAssembler
+    from ..bus.can_poll import CanScanPoller
+    from ..bus.can_source import BusReader, open_bus
+    from ..bus.modbus_bridge import ModbusBridge
+    from ..detect.updates import Update
+    from ..pipeline import Pipeline, RawScan
+    from ..view.live import KeptImage, Watch, change_line, live_screen
+    from ..view.terminal import color_wanted
+
+    if rate_hz is not None and not rate_hz > 0:
+        raise click.BadParameter(f"expected a positive rate, got {rate_hz}", param_hint="--rate")
+    # The reader thread needs the interpreter for every frame; a short switch interval
+    # keeps it from waiting behind the detector and the redraws (the default is 5 ms).
+    sys.setswitchinterval(0.0002)
+    prof = open_profile(profile_path)
+    kw = bus_kwargs(prof, interface, channel, bitrate, fd, data_bitrate)
+    layout = CanLayout.from_profile(prof, fd=kw["fd"])
+    rate = rate_hz or prof.sensor.rate_hz
+    chosen = method or prof.detector.method
+    reader = BusReader(lambda: open_bus(**kw))  # a bus that cannot be opened: one line, exit 3
+    sink = KeptImage()
+    bridge = ModbusBridge(prof, CanScanPoller(reader, ScanAssembler(layout, rate)), sink, rate_hz=rate)
+    if method is not None:
+        bridge.pipeline = Pipeline(prof, rate_hz=rate, method=method)
+    where = str(getattr(reader.bus, "channel_info", None) or channel or "?")
+    stdout = sys.stdout
+    live = not plain and stdout.isatty()
+    watch = Watch(prof, bridge.pipeline, method=chosen, registers=lambda: sink.registers,
+                  registers_from="as the bridge would publish them", counters=bridge.counters,
+                  title="eskin-bus monitor", source=f"{prof.name} | {chosen} | {where}", started=time.monotonic())
+
+    push = bridge.pipeline.push
+    last_state: int | None = None
+
+    def observed(scan: RawScan) -> list[Update]:  # on the data path: a comparison per update
+        nonlocal last_state
+        updates = push(scan)
+        for u in updates:
+            if u.state != last_state:
+                last_state = u.state
+                line = change_line(u)
+                watch.note(line)
+                if not live:
+                    click.echo(line)
+        return updates
+
+    bridge.pipeline.push = observed  # type: ignore[method-assign]
+    if not live:
+        click.echo(f"eskin-bus monitor: {prof.name} on {where}, method {chosen}; Ctrl-C ends", err=True)
+    start = time.monotonic()
+    end = None if duration_s is None else start + duration_s
+    interrupted = False
+    reader.start()
+    try:
+        with live_screen(watch, stdout, color_wanted()) if live else nullcontext():
+            while end is None or time.monotonic() < end:
+                bridge.step()
+                age = bridge.source.frame_age()
+                if idle_s is not None and age is not None and age >= idle_s:
+                    break
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        reader.stop()
+    c = bridge.counters()
+    click.echo(f"monitor: {time.monotonic() - start:.1f} s{' (interrupted)' if interrupted else ''}, "
+               f"scans {c.get('scans', 0)}, lost {c.get('lost_scans', 0)}, torn {c.get('torn_scans', 0)}, "
+               f"malformed {c.get('malformed_frames', 0)}, rx queue drops {c.get('rx_queue_drops', 0)}, "
+               f"bus errors {c.get('bus_errors', 0)}, state changes {c.get('state_changes', 0)}")

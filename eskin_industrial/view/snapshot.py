@@ -1,0 +1,111 @@
+"""What one screen of the live view shows, as plain values: :class:`Snapshot`.
+
+Pure code, no I/O and no clock.  The glue that reads a running chain
+(:mod:`eskin_industrial.view.live`) builds snapshots; the renderer
+(:mod:`eskin_industrial.view.screen`) draws them.  Register decoding lives here so
+the view shows exactly the numbers :meth:`PlcImage.render` produced.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..bus.plc_image import REGISTERS, Status, join32
+from ..detect.settings import DetectorSettings
+
+
+@dataclass(frozen=True, slots=True)
+class IndicatorScale:
+    """How to read the two score columns (R_coe and R_dw in the paper's method)."""
+
+    names: tuple[str, str] = ("R_coe", "R_dw")
+    #: What the columns hold for this method (shown as a note).
+    meaning: str = ""
+    #: Slip thresholds; None: the column has none (or is unused).
+    slip: tuple[float | None, float | None] = (None, None)
+    #: Varying-force thresholds, where the method has them.
+    variable: tuple[float | None, float | None] = (None, None)
+
+
+def indicator_scale(method: str, settings: DetectorSettings, detector: object | None = None) -> IndicatorScale:
+    """The thresholds of ``method`` as the profile's detector settings give them.
+
+    The paper's rules compare R_coe and R_dw with ``slip_r_*`` and ``variable_r_*``;
+    other methods write their own scores in the same two columns (``columns`` on the
+    detector), so their thresholds come from the method, not from ``slip_r_*``.
+    """
+    if method.startswith("paper"):
+        rule = {"paper-coe": "R_coe alone", "paper-dw": "R_dw alone"}.get(method, "both")
+        return IndicatorScale(("R_coe", "R_dw"), f"{method}: slip > | ({rule}), varying > :",
+                              (settings.slip_r_coe, settings.slip_r_dw),
+                              (settings.variable_r_coe, settings.variable_r_dw))
+    columns = tuple(getattr(detector, "columns", ("score", "unused")))
+    if method == "cof-track":
+        # Both scores are normalised by the method: 1 is its threshold (detect/cof_track.py).
+        return IndicatorScale(("R_coe", "R_dw"), f"{method} scores ({columns[0].removesuffix('_score')}, {columns[1].removesuffix('_score')}): slip > 1", (1.0, 1.0))
+    threshold = getattr(detector, "threshold", None)
+    slip_a = float(threshold) if isinstance(threshold, (int, float)) else None
+    slip_b = None
+    return IndicatorScale(("R_coe", "R_dw"), f"{method}: {' | '.join(columns)}", (slip_a, slip_b))
+
+
+def decode_registers(registers: list[int] | tuple[int, ...], word_order: str) -> dict[str, int]:
+    """Named values of the STATUS..FLAGS registers (``PlcImage.render`` order); 32-bit
+    values joined in the profile's word order, i16 values signed."""
+    out: dict[str, int] = {}
+    for r in REGISTERS:
+        words = list(registers[r.offset: r.offset + r.words])
+        if len(words) < r.words:
+            continue  # the command registers are not part of a publication
+        if r.kind == "u32":
+            out[r.name] = join32(words, word_order)
+        elif r.kind == "i16":
+            out[r.name] = words[0] - 0x10000 if words[0] >= 0x8000 else words[0]
+        else:
+            out[r.name] = words[0]
+    return out
+
+
+def status_names(status: int) -> tuple[str, ...]:
+    """The STATUS bits that are set, by name, in bit order."""
+    return tuple(str(b.name) for b in Status if status & b)
+
+
+@dataclass(frozen=True, slots=True)
+class Snapshot:
+    """Everything one screen shows; built from the newest values of a running chain."""
+
+    #: Taxel forces in N, shape (rows, cols); None before the first scan.
+    forces: np.ndarray | None
+    #: Names of the rows (the hand's fingers) when the layout has them.
+    row_names: tuple[str, ...] | None = None
+    r_coe: float | None = None
+    r_dw: float | None = None
+    scale: IndicatorScale = field(default_factory=IndicatorScale)
+    #: State label (``GraspState.label``); None before the first update.
+    state: str | None = None
+    valid: bool = False
+    #: No fresh scan: the state is not a verdict (the image's SENSOR_STALE).
+    stale: bool = False
+    f_sum: float | None = None
+    #: Centre of force in mm.
+    cof: tuple[float, float] | None = None
+    #: Decoded registers as :meth:`PlcImage.render` made them; None before the first.
+    registers: Mapping[str, int] | None = None
+    #: Where the registers come from ("as the PLC reads them", "as the bridge would publish").
+    registers_from: str = ""
+    counters: Mapping[str, int] = field(default_factory=dict)
+    elapsed_s: float = 0.0
+    #: Scans per second lately (None until measured).
+    scan_rate_hz: float | None = None
+    #: What is watched: profile, method, bus.
+    source: str = ""
+    #: Title of the screen (the command).
+    title: str = "eskin-bus"
+    #: Newest state-change lines, oldest first.
+    log: tuple[str, ...] = ()
+    #: Heat-map colour scale: at least this many N at the top (noise stays dark).
+    scale_min_n: float = 0.5
