@@ -14,6 +14,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .cof_track import CofTrack
+from .learned import learned
 from .paper import PaperDetector, paper_batch
 from .scored import CofVelocity, ForceRate, HfEnergy
 from .updates import UpdateTable
@@ -56,6 +57,7 @@ METHODS: dict[str, Method] = {
     "hf-energy": _method("hf-energy", "rival: high-frequency energy of the taxel signals over its baseline", HfEnergy),
     "cof-velocity": _method("cof-velocity", "rival: centre-of-force speed above a threshold", CofVelocity),
     "cof-track": _method("cof-track", "ours: centre-of-force displacement against its learnt noise", CofTrack),
+    "learned": _method("learned", "accuracy ceiling: a small classifier on the other methods' features (extra: learn)", learned),
 }
 
 

@@ -19,7 +19,8 @@ from .suite import EVALUATION_SEEDS, evaluate, run_one
 from .sweeps import defaults, sweep
 
 COLOURS = {"paper": "tab:blue", "paper-coe": "tab:cyan", "paper-dw": "tab:purple", "force-rate": "tab:orange",
-           "hf-energy": "tab:brown", "cof-velocity": "tab:gray", "cof-track": "tab:red"}
+           "hf-energy": "tab:brown", "cof-velocity": "tab:gray", "cof-track": "tab:red",
+           "learned": "tab:green"}
 LABEL_COLOURS = {"slip": "tab:red", "variable_force": "tab:orange", "transition": "0.85", "stable": "white", "no_contact": "white"}
 
 

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import importlib.util
 from dataclasses import replace
 from functools import partial
 from typing import Any, Callable
 
 from ..detect.cof_track import CofTrack
+from ..detect.learned import learned
 from ..detect.methods import get_method
 from ..detect.paper import PaperDetector
 from ..detect.scored import CofVelocity, ForceRate, HfEnergy
@@ -41,6 +43,9 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
     for z in (4.0, 5.0, 6.0, 8.0):
         for fast in (0.05, 0.1, 0.2):
             points.append(("cof-track", f"z{z} fast {fast}s", partial(CofTrack, z=z, fast_s=fast)))
+    if importlib.util.find_spec("sklearn") is not None:  # the optional extra: one model, several decision rules
+        for p, hops in ((0.5, 1), (0.7, 1), (0.5, 2), (0.7, 2), (0.5, 3), (0.7, 3)):
+            points.append(("learned", f"p>{p} x{hops} hops", partial(learned, slip_p=p, confirm_hops=hops)))
     return points
 
 

@@ -1,0 +1,135 @@
+"""Training the ``learned`` method's model (scikit-learn, the optional extra ``learn``).
+
+Only the tuning seeds of the built-in scenes are rendered for training; the held-out
+evaluation seeds never are (``TrainConfig`` refuses them).  Training is in-process
+and takes a few seconds; the model is kept for the rest of the process.  The fitted
+estimator is turned into the numpy-only forms of ``detect.learned`` so that the
+detector neither imports scikit-learn nor pays its per-call overhead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+from ..detect.learned import CLASSES, FEATURES, Learned, MissingExtra, TreeEnsemble
+from ..detect.settings import DetectorSettings
+from ..scenes import load_scene, render
+from .suite import EVALUATION_SEEDS, SUITE, TUNING_SEEDS, coordinates
+
+INSTALL_HINT = "the learned method needs scikit-learn: pip install eskin-industrial[learn]"
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    scenes: tuple[str, ...] = SUITE
+    seeds: tuple[int, ...] = TUNING_SEEDS
+    rate_hz: float = 100.0
+    trees: int = 40  #: boosting rounds (one tree of depth <= 3 per class each)
+    random_state: int = 0
+
+    def __post_init__(self) -> None:
+        held_out = set(self.seeds) & set(EVALUATION_SEEDS)
+        if held_out:
+            raise ValueError(f"seeds: the evaluation seeds are held out, never trained on (got {sorted(held_out)})")
+
+
+def require_sklearn() -> None:
+    """Raise the one-line error naming the extra when scikit-learn is missing."""
+    try:
+        import sklearn  # noqa: F401
+    except ImportError:
+        raise MissingExtra(INSTALL_HINT) from None
+
+
+class _Recorder(Learned):
+    """The detector itself, recording each feature vector it would classify (and when)."""
+
+    def __init__(self, *args: Any) -> None:
+        self.rows: list[np.ndarray] = []
+        self.times: list[float] = []
+        uniform = np.full(len(CLASSES), 1.0 / len(CLASSES))
+        super().__init__(*args, model=lambda x: self.rows.append(x.copy()) or uniform)
+
+    def score(self, t, f, s, xc, yc):
+        n = len(self.rows)
+        out = super().score(t, f, s, xc, yc)
+        if len(self.rows) > n:
+            self.times.append(t)
+        return out
+
+
+def dataset(config: TrainConfig = TrainConfig(), settings: DetectorSettings = DetectorSettings()
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Feature rows the detector classifies on the config's scenes and seeds, and the
+    class index of each (rows labelled ``transition`` or ``no_contact`` are left out:
+    the first is don't-care, the second the detector decides without the model)."""
+    xs, ys = [], []
+    for scene in config.scenes:
+        spec = load_scene(scene)
+        for seed in config.seeds:
+            rec = render(spec, config.rate_hz, seed)
+            det = _Recorder(settings, *coordinates(rec), rec.rate_hz)
+            det.feed(rec.t, rec.forces)
+            if not det.rows:
+                continue
+            idx = np.searchsorted(rec.t, np.asarray(det.times), side="right") - 1
+            labels = rec.labels[np.clip(idx, 0, len(rec.t) - 1)]
+            keep = np.isin(labels, CLASSES)
+            xs.append(np.asarray(det.rows)[keep])
+            ys.append(np.array([CLASSES.index(v) for v in labels[keep]], np.int64))
+    return np.concatenate(xs), np.concatenate(ys)
+
+
+def fit(config: TrainConfig = TrainConfig()) -> TreeEnsemble:
+    """Gradient-boosted trees (scikit-learn's histogram boosting) on :func:`dataset`."""
+    require_sklearn()
+    from sklearn.ensemble import HistGradientBoostingClassifier
+    from threadpoolctl import threadpool_limits
+
+    x, y = dataset(config)
+    clf = HistGradientBoostingClassifier(max_iter=config.trees, max_depth=3, learning_rate=0.2,
+                                         early_stopping=False, random_state=config.random_state)
+    # one thread: on a busy machine OpenMP threads made the fit six times slower
+    with threadpool_limits(limits=1):
+        clf.fit(x, y)
+    return trees_from_sklearn(clf)
+
+
+def trees_from_sklearn(clf: Any) -> TreeEnsemble:
+    """Tabulate a fitted multiclass HistGradientBoostingClassifier of depth <= 3 (from
+    its predictors' node arrays; ``tests/test_learned.py`` checks the result against
+    ``predict_proba``)."""
+    trees = [nodes for it in clf._predictors for nodes in (p.nodes for p in it)]
+    splits = 7
+    feature = np.zeros((len(trees), splits), np.int64)
+    threshold = np.full((len(trees), splits), np.inf)
+    table = np.zeros((len(trees), 1 << splits))
+    for i, nodes in enumerate(trees):
+        inner = [j for j in range(len(nodes)) if not nodes["is_leaf"][j]]
+        if len(inner) > splits:
+            raise ValueError(f"tree {i}: {len(inner)} splits, at most {splits} (depth 3) can be tabulated")
+        slot = {j: k for k, j in enumerate(inner)}
+        for k, j in enumerate(inner):
+            feature[i, k] = nodes["feature_idx"][j]
+            threshold[i, k] = nodes["num_threshold"][j]
+        for code in range(1 << splits):
+            j = 0
+            while not nodes["is_leaf"][j]:
+                j = nodes["right"][j] if code >> slot[j] & 1 else nodes["left"][j]
+            table[i, code] = nodes["value"][j]
+    init = np.asarray(clf._baseline_prediction, float).ravel()
+    return TreeEnsemble(feature, threshold, table, init)
+
+
+@lru_cache(maxsize=4)
+def default_model(config: TrainConfig = TrainConfig()) -> TreeEnsemble:
+    """The model ``learned`` runs with unless given another: trained once per process."""
+    return fit(config)
+
+
+__all__ = ["FEATURES", "INSTALL_HINT", "TrainConfig", "dataset", "default_model", "fit", "require_sklearn",
+           "trees_from_sklearn"]
