@@ -78,21 +78,16 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
     plc = PlcSimulator(profile.modbus.plc, "127.0.0.1", port, echo=plc_echo).start()
     reader = BusReader(lambda: open_bus("virtual", channel)).start()
     writer = PlcWriter(profile.modbus.plc, "127.0.0.1", port).start()
+
+    def observed(u: Update) -> None:
+        if not result.updates or u.state != result.updates[-1].state:
+            truth = rec.labels[min(np.searchsorted(rec.t, u.t), len(rec.t) - 1)]
+            say(f"{u.t:7.2f} s  {GraspState(u.state).label:15s} valid={int(u.valid)}  "
+                f"F={u.f_sum:5.2f} N  scores {u.r_coe:6.2f} {u.r_dw:6.2f}   (truth: {truth})")
+        result.updates.append(u)
+
     bridge = ModbusBridge(profile, CanScanPoller(reader, ScanAssembler(layout, rec.rate_hz)), writer,
-                          rate_hz=rec.rate_hz)
-    push = bridge.pipeline.push
-
-    def observed(scan):
-        ups = push(scan)
-        for u in ups:
-            if not result.updates or u.state != result.updates[-1].state:
-                truth = rec.labels[min(np.searchsorted(rec.t, u.t), len(rec.t) - 1)]
-                say(f"{u.t:7.2f} s  {GraspState(u.state).label:15s} valid={int(u.valid)}  "
-                    f"F={u.f_sum:5.2f} N  scores {u.r_coe:6.2f} {u.r_dw:6.2f}   (truth: {truth})")
-            result.updates.append(u)
-        return ups
-
-    bridge.pipeline.push = observed  # type: ignore[method-assign]
+                          rate_hz=rec.rate_hz, on_update=observed)
     tx = open_bus("virtual", channel)
     node = CanNode(layout, tx, raw, rec.rate_hz, profile.can.heartbeat_s, Faults(), False, 1, None)
     node_thread = threading.Thread(target=node.run, name="demo-node", daemon=True)

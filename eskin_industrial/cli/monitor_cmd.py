@@ -35,7 +35,7 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, rate_hz
     from ..bus.can_source import BusReader, open_bus
     from ..bus.modbus_bridge import ModbusBridge
     from ..detect.updates import Update
-    from ..pipeline import Pipeline, RawScan
+    from ..pipeline import Pipeline
     from ..view.live import KeptImage, Watch, change_line, live_screen
     from ..view.terminal import color_wanted
 
@@ -61,22 +61,18 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, rate_hz
                   registers_from="as the bridge would publish them", counters=bridge.counters,
                   title="eskin-bus monitor", source=f"{prof.name} | {chosen} | {where}", started=time.monotonic())
 
-    push = bridge.pipeline.push
     last_state: int | None = None
 
-    def observed(scan: RawScan) -> list[Update]:  # on the data path: a comparison per update
+    def observed(u: Update) -> None:  # on the data path: a comparison per update
         nonlocal last_state
-        updates = push(scan)
-        for u in updates:
-            if u.state != last_state:
-                last_state = u.state
-                line = change_line(u)
-                watch.note(line)
-                if not live:
-                    click.echo(line)
-        return updates
+        if u.state != last_state:
+            last_state = u.state
+            line = change_line(u)
+            watch.note(line)
+            if not live:
+                click.echo(line)
 
-    bridge.pipeline.push = observed  # type: ignore[method-assign]
+    bridge.on_update = observed
     if not live:
         click.echo(f"eskin-bus monitor: {prof.name} on {where}, method {chosen}; Ctrl-C ends", err=True)
     start = time.monotonic()
