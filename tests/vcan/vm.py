@@ -9,8 +9,8 @@ this checkout with the host's Python, virtualenv and can-utils; a writable 9p sh
 (``out``) brings results back.  Packages: ``scripts/debian-packages.txt``.
 
 Used by ``tests/vcan/conftest.py`` and ``benchmarks/bench_can.py``; run directly
-(``python tests/vcan/vm.py [--timeout S] -- COMMAND``) it runs one shell command on
-vcan0 (170 s at most unless ``--timeout`` says otherwise).
+(``python tests/vcan/vm.py [--timeout S] [--cpus N] -- COMMAND``) it runs one shell
+command on vcan0 (170 s and one virtual CPU unless told otherwise).
 """
 
 from __future__ import annotations
@@ -225,9 +225,12 @@ def run_in_vm(script: str, out: Path, timeout_s: float = 170.0, memory_mb: int =
 
 
 def main(argv: list[str]) -> int:
-    timeout_s = 170.0
-    if "--timeout" in argv[: argv.index("--") if "--" in argv else len(argv)]:
-        timeout_s = float(argv[argv.index("--timeout") + 1])
+    timeout_s, cpus = 170.0, 1
+    opts = argv[: argv.index("--") if "--" in argv else len(argv)]
+    if "--timeout" in opts:
+        timeout_s = float(opts[opts.index("--timeout") + 1])
+    if "--cpus" in opts:
+        cpus = int(opts[opts.index("--cpus") + 1])
     if "--" in argv:
         argv = argv[argv.index("--") + 1:]
     script = " ".join(shlex.quote(a) for a in argv) or "ip -details link show vcan0"
@@ -235,7 +238,7 @@ def main(argv: list[str]) -> int:
     if missing:
         print(f"vm: missing: {', '.join(missing)}", file=sys.stderr)
         return 2
-    run = run_in_vm(script, CACHE / "manual", timeout_s=timeout_s)
+    run = run_in_vm(script, CACHE / "manual", timeout_s=timeout_s, cpus=cpus)
     sys.stdout.write(run.console)
     print(f"vm: exit {run.rc} after {run.seconds:.1f} s", file=sys.stderr)
     return 1 if run.rc is None else run.rc
