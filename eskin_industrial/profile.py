@@ -253,7 +253,15 @@ class Profile:
 
         if self.detector.method not in METHODS:
             raise SchemaError("detector.method", f"expected one of {', '.join(sorted(METHODS))}, got {self.detector.method!r}")
-        geo = self.detector.geometry(self.sensor.rate_hz)
+        try:
+            geo = self.detector.geometry(self.sensor.rate_hz)
+        except (ValueError, OverflowError):
+            # Finite but huge times x rate overflow when they become sample counts; name
+            # the rate rather than let the arithmetic error out unlabelled.
+            raise SchemaError(
+                "sensor.rate_hz", f"expected a rate at which the detector's times are countable samples, "
+                f"got {self.sensor.rate_hz:g} Hz (window_s = {self.detector.window_s:g}, hop_s = "
+                f"{self.detector.hop_s:g}, max_gap_s = {self.detector.max_gap_s:g})") from None
         if geo.window < geo.filter_len:
             raise SchemaError(
                 "detector.window_s",

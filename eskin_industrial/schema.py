@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
 import tomllib
 import types
 import typing
@@ -94,7 +95,15 @@ def _convert(tp: Any, value: Any, key: str) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise SchemaError(key, f"expected a number, got {_show(value)}")
-        return float(value)
+        # TOML has nan and inf; no setting means them (NaN would pass every range check
+        # and reach the detector, inf overflows where times become sample counts).
+        try:
+            number = float(value)  # an integer beyond the float range overflows here
+        except OverflowError:
+            number = math.inf
+        if not math.isfinite(number):
+            raise SchemaError(key, f"expected a finite number, got {_show(value)}")
+        return number
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise SchemaError(key, f"expected an integer, got {_show(value)}")
@@ -177,7 +186,10 @@ def build(cls: type, table: dict[str, Any], where: str = "") -> Any:
         return cls(**kwargs)
     except SchemaError:
         raise
-    except ValueError as exc:
+    # A __post_init__ rule may also fail on arithmetic with huge values (OverflowError)
+    # or inside a library it consults (PyWavelets raises TypeError for an empty wavelet
+    # name): still one line naming the section, not a traceback.
+    except (ValueError, OverflowError, TypeError) as exc:
         # __post_init__ messages start with the offending field's name.
         msg = str(exc)
         field, _, rest = msg.partition(": ")

@@ -24,7 +24,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..errors import ProfileError
+from ..errors import DecodeError, ProfileError
 from ..pipeline import RawScan
 from ..profile import Profile
 
@@ -232,6 +232,10 @@ class CanLayout:
             int(status.seq & SEQ_MASK).to_bytes(2, o)  # type: ignore[arg-type]
 
     def decode_status(self, data: bytes, t: float = math.nan) -> NodeStatus:
+        # A short payload would raise IndexError from the byte indexing below; say what
+        # is wrong instead (the assembler checks the length first and counts it).
+        if len(data) != STATUS_LENGTH:
+            raise DecodeError(f"heartbeat: expected {STATUS_LENGTH} bytes, got {len(data)}")
         o = self.byte_order
         return NodeStatus(data[0], data[1], data[2], data[3], int.from_bytes(data[4:6], o),  # type: ignore[arg-type]
                           int.from_bytes(data[6:8], o) & SEQ_MASK, t)  # type: ignore[arg-type]
@@ -253,6 +257,10 @@ ASSEMBLER_COUNTERS = (
 )
 
 _CAN_ERR_BUSOFF = 0x040  # linux/can/error.h: error class bit in the error frame's ID
+#: Receipt-time gaps from this long on are no clock (a garbled log, a clock jump of
+#: decades): the unwrap then trusts the counter alone.  It also bounds the wraps the
+#: clock can add, so ``RawScan.t`` stays a finite float.
+_CLOCK_LIMIT_S = 1e9
 
 
 class ScanAssembler:
@@ -280,6 +288,7 @@ class ScanAssembler:
         self._full = (1 << layout.segments) - 1
         self._order = layout.byte_order
         self._cur: int | None = None  # 12-bit counter of the scan being assembled
+        self._cur_rx = math.nan  # receipt time of the scan's first frame
         self._have = 0
         self._parts: list[bytes] = [b""] * layout.segments
         self._last12: int | None = None  # counter of the last delivered scan
@@ -330,7 +339,7 @@ class ScanAssembler:
             c["torn_scans"] += 1
             self._cur = None
         if self._cur is None:
-            if self._last12 is not None and not (rx - self._last_rx > self._horizon):
+            if self._last12 is not None and not self._clock_wraps(rx - self._last_rx):
                 d = (seq - self._last12) % SEQ_MODULO
                 if d == 0:
                     c["duplicate_frames"] += 1
@@ -338,7 +347,7 @@ class ScanAssembler:
                 if d > SEQ_MODULO // 2:
                     c["late_frames"] += 1
                     return None
-            self._cur, self._have = seq, 0
+            self._cur, self._cur_rx, self._have = seq, rx, 0
         bit = 1 << segment
         if self._have & bit:
             c["duplicate_frames"] += 1
@@ -349,15 +358,26 @@ class ScanAssembler:
             return None
         return self._emit(seq, rx)
 
+    def _clock_wraps(self, elapsed: float) -> bool:
+        """Whether a silence of ``elapsed`` seconds is long enough for the receipt times
+        to count the counter's wraps (and short enough to be a clock at all: NaN and
+        infinite times are not)."""
+        return self._horizon < elapsed < _CLOCK_LIMIT_S
+
     def _emit(self, seq: int, rx: float) -> RawScan:
         lay = self.layout
         if self._last12 is None:
             self._abs = seq
         else:
             d = (seq - self._last12) % SEQ_MODULO
-            elapsed = rx - self._last_rx
-            if elapsed > self._horizon:  # long silence: count the wraps from the clock
-                d += SEQ_MODULO * max(0, round((elapsed * self.rate_hz - d) / SEQ_MODULO))
+            # The silence is measured to the scan's first frame, as ``feed`` did when it
+            # let the scan start: with the last frame's time instead, a scan whose frames'
+            # times go backwards could pass as new there and add 0 here (a repeated seq).
+            elapsed = self._cur_rx - self._last_rx
+            if self._clock_wraps(elapsed):  # long silence: count the wraps from the clock
+                wraps = max(0, round((elapsed * self.rate_hz - d) / SEQ_MODULO))
+                # the same counter value after a silence is at least one wrap later
+                d += SEQ_MODULO * (max(wraps, 1) if d == 0 else wraps)
             self._abs += d
         self._last12, self._last_rx, self._cur = seq, rx, None
         if lay.segments == 1:

@@ -234,7 +234,9 @@ class PlcImage:
         state = u.state if shown else 0
         r_coe = _u16(u.r_coe * cfg.r_scale) if shown else 0
         r_dw = _u16(u.r_dw * cfg.r_scale) if shown else 0
-        f_sum = int(min(max(round(u.f_sum * 1000.0), 0), 0xFFFFFFFF)) if u is not None and math.isfinite(u.f_sum) else 0
+        # Clip before rounding: a finite f_sum above ~1.8e305 N is infinite in mN, and
+        # round(inf) raises (the register saturates instead).
+        f_sum = int(round(min(max(u.f_sum * 1000.0, 0.0), 0xFFFFFFFF))) if u is not None and math.isfinite(u.f_sum) else 0
         xc = _i16(u.xc * 100.0) if u is not None else 0
         yc = _i16(u.yc * 100.0) if u is not None else 0
         age = 0xFFFF if health.frame_age_s is None else _u16(health.frame_age_s * 1000.0)
