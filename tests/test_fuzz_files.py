@@ -303,5 +303,5 @@ def test_an_empty_wavelet_name_is_a_profile_error():
     # PyWavelets raises TypeError (not ValueError) for "": it must still be one line
     table = json.loads(json.dumps(BASES["hand-4x5.toml"]))
     table["detector"]["wavelet"] = ""
-    with pytest.raises(ProfileError, match=r"^fuzz\.toml: \[detector\]: "):
+    with pytest.raises(ProfileError, match=r"^fuzz\.toml: \[detector\] wavelet: expected a discrete PyWavelets"):
         parse_profile(_dump(table), "fuzz.toml")

@@ -200,7 +200,8 @@ class PlcImage:
         bits = Status(0)
         # A bare section (not from a profile) has no rate to derive stale_s from.
         limit = self.settings.stale_s if self.settings.stale_s is not None else 0.2
-        stale = health.frame_age_s is None or health.frame_age_s > limit
+        # written so that a NaN age (a broken clock) reads as stale, never as fresh
+        stale = health.frame_age_s is None or not health.frame_age_s <= limit
         if stale:
             bits |= Status.SENSOR_STALE
         if health.bus_fault:

@@ -96,7 +96,7 @@ class DetectorSettings:
             )
         try:
             w = pywt.Wavelet(self.wavelet)
-        except ValueError:
+        except (ValueError, TypeError):  # PyWavelets raises TypeError for an empty name
             raise ValueError(
                 f"wavelet: expected a discrete PyWavelets wavelet such as 'db2', got {self.wavelet!r}"
             ) from None
