@@ -151,3 +151,21 @@ def test_plc_section_is_checked():
         parse_profile(base.replace("backoff_max_s = 2.0", "backoff_max_s = 0.01"), "p.toml")
     with pytest.raises(ProfileError, match="value_type"):
         parse_profile(base.replace('value_type = "uint16"', 'value_type = "float"'), "p.toml")
+
+
+@pytest.mark.parametrize("age", [None, math.nan, 10.0])
+def test_no_frame_a_broken_clock_or_an_old_frame_is_stale_never_a_verdict(paper_profile, age):
+    image = PlcImage(paper_profile.modbus.plc)
+    image.observe(upd(1))
+    status = Status(image.status(Health(frame_age_s=age)))
+    assert status & Status.SENSOR_STALE and not status & (Status.DATA_VALID | Status.STABLE)
+
+
+def test_the_offline_image_claims_nothing_and_keeps_the_counters(paper_profile):
+    image = PlcImage(paper_profile.modbus.plc)
+    image.observe(upd(1))
+    image.observe(upd(3))
+    regs = image.render_offline(FRESH)
+    assert Status(field(regs, "STATUS")) == Status.BRIDGE_OFFLINE
+    assert field(regs, "STATE") == 0 and field(regs, "FRAME_AGE") == 0xFFFF and field(regs, "F_SUM") == 0
+    assert field(regs, "SLIP_EVENTS") == 1 and field(regs, "STATE_CHANGES") == 1
