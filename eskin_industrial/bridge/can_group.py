@@ -37,10 +37,17 @@ class _NoWait:
 class _NodeQueue:
     """What a node's poller reads: its own frames, the bus's counters."""
 
-    def __init__(self, bus_counters: dict[str, int]) -> None:
+    def __init__(self, reader) -> None:
         self.queue: collections.deque[can.Message] = collections.deque()
-        self.counters = bus_counters
+        self.counters = reader.counters
         self.arrived = _NoWait()
+        self._reader = reader
+
+    @property
+    def last_error(self) -> str:
+        """The shared bus's last error: the bridge's ``bus_fault`` log line reads it
+        from the node's reader, which would otherwise always say ``-``."""
+        return getattr(self._reader, "last_error", "")
 
 
 class CanGroup:
@@ -53,7 +60,7 @@ class CanGroup:
         self.unrouted_frames = 0
         for n in nodes:
             layout = CanLayout.from_profile(n.profile, fd=n.fd)
-            nq = _NodeQueue(reader.counters)
+            nq = _NodeQueue(reader)
             self.pollers.append(CanScanPoller(nq, ScanAssembler(layout, n.rate_hz)))  # type: ignore[arg-type]
             self._queues.append(nq.queue)
             for can_id in range(layout.base_id, layout.base_id + ID_RANGE):

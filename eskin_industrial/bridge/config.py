@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Literal
 
 from ..errors import ProfileError
-from ..profile import Profile, load_profile
+from ..profile import STALE_PERIODS, Profile, load_profile
 from ..schema import in_range, parse_toml, positive
 
 SourceKind = Literal["can", "can-log", "modbus-rtu", "scene"]
@@ -179,11 +179,18 @@ def resolve(config: BridgeConfig) -> list[ResolvedNode]:
     for i, nc in enumerate(config.node):
         where = f"{config.source}: [node {nc.name!r}]"
         path = Path(nc.profile)
-        prof = load_profile(path if path.is_absolute() else base / path)
         try:
-            prof = _apply_overrides(prof, nc)
+            loaded = load_profile(path if path.is_absolute() else base / path)
+        except ProfileError as exc:
+            # The profile's own message names its file; prefix the configuration file
+            # and the node, so that the line says which [[node]] table points at it.
+            raise ProfileError(f"{where} profile: {exc}") from None
+        try:
+            prof = _apply_overrides(loaded, nc)
         except ValueError as exc:  # the override broke the profile's own rules
             raise ProfileError(f"{where}: {exc}") from None
+        # dataclasses.replace() resets the init=False ``source``: keep the profile's path.
+        object.__setattr__(prof, "source", loaded.source)
         nodes.append(ResolvedNode(nc, prof))
     _check_together(config, nodes)
     return nodes
@@ -200,6 +207,12 @@ def _apply_overrides(prof: Profile, nc: NodeConfig) -> Profile:
     plc = prof.modbus.plc
     if nc.base_address is not None:
         plc = replace(plc, base_address=nc.base_address)
+    if nc.rate_hz is not None:
+        # A stale limit the profile did not set was derived from the profile's rate;
+        # a node running slower must get its own, or it reads stale between two scans.
+        poll = prof.modbus.node.poll_hz
+        if plc.stale_s == STALE_PERIODS / min(prof.sensor.rate_hz, poll or prof.sensor.rate_hz):
+            plc = replace(plc, stale_s=STALE_PERIODS / min(nc.rate_hz, poll or nc.rate_hz))
     return replace(prof, can=can, modbus=replace(prof.modbus, node=node, plc=plc))
 
 

@@ -71,6 +71,21 @@ class _DroppingQueueHandler(logging.handlers.QueueHandler):
         return record  # the fields travel as they are; the writer formats them
 
 
+class _Listener(logging.handlers.QueueListener):
+    def stop_within(self, timeout_s: float) -> None:
+        """``stop()``, bounded: the standard one puts its end marker with
+        ``put_nowait`` (``queue.Full`` when a blocked stream has let the queue fill)
+        and then joins for ever; a bridge's shutdown must neither raise nor hang on
+        its log.  A stream that does not move for ``timeout_s`` is given up."""
+        try:
+            self.queue.put(self._sentinel, timeout=timeout_s)
+        except queue.Full:
+            return
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            self._thread = None
+
+
 class EventLog:
     """``event(name, level, **fields)`` from any thread; :meth:`close` flushes."""
 
@@ -84,7 +99,7 @@ class EventLog:
         q: queue.Queue = queue.Queue(maxsize=QUEUE_RECORDS)
         self._handler = _DroppingQueueHandler(q, self)
         self.logger.addHandler(self._handler)
-        self._listener = logging.handlers.QueueListener(q, out)
+        self._listener = _Listener(q, out)
         self._listener.start()
 
     def event(self, name: str, level: str = "info", **fields: Any) -> None:
@@ -92,6 +107,7 @@ class EventLog:
         if self.logger.isEnabledFor(lvl):
             self.logger.log(lvl, name, extra={"fields": fields})
 
-    def close(self) -> None:
-        self._listener.stop()  # writes out what is queued
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Write out what is queued (waiting at most ``timeout_s`` for a blocked stream)."""
         self.logger.removeHandler(self._handler)
+        self._listener.stop_within(timeout_s)

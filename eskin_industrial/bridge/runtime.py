@@ -198,6 +198,10 @@ class Bridge:
                        sources=",".join(_describe_source(r.node) for r in self.runs))
         for group, members in self.groups:
             runs = [self.runs[i] for i in members]
+            # The reader (BusReader or LogPlayer) is only built by open(): without this
+            # no frame ever reached a CAN node's loop.  Started here, not in open(), so
+            # that a replayed log does not run ahead of its loop.
+            group.reader.start()
             self._spawn(f"can-{'+'.join(r.name for r in runs)}", self._group_loop, group, runs)
         grouped = {i for _, members in self.groups for i in members}
         for i, run in enumerate(self.runs):
@@ -302,7 +306,9 @@ class Bridge:
                             stats is not None and stats.failures)):
                         continue
                 run.logged[key] = value
-                if before is not None or value:  # a healthy start is not news
+                # A healthy start is not news; a PLC refusing from the start is (the
+                # first refusal reaches here only after a failed write).
+                if before is not None or value or key == "plc_connected":
                     self._log_change(run, key, value)
 
     def _log_change(self, run: NodeRun, key: str, value: bool) -> None:

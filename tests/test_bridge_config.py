@@ -1,0 +1,191 @@
+"""The bridge's configuration file: a valid one loads and plans; every bad one is one
+ProfileError line naming the file and the key, and the command exits 2 before it
+opens anything."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from eskin_industrial.bridge.config import load_bridge_config, resolve
+from eskin_industrial.errors import ProfileError
+
+from bridge_support import PAPER
+from modbus_support import free_port
+
+TWO_NODES = """
+[log]
+format = "json"
+
+[plc]
+mode = "server"
+host = "127.0.0.1"
+port = {port}
+
+[[node]]
+name = "left"
+profile = "{profile}"
+interface = "virtual"
+channel = "shared"
+base_address = 0
+
+[[node]]
+name = "right"
+profile = "{profile}"
+interface = "virtual"
+channel = "shared"
+base_id = 0x210
+node_id = 2
+base_address = 100
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "bridge.toml", port: int = 15999) -> Path:
+    path = tmp_path / name
+    path.write_text(text.format(profile=PAPER, port=port))
+    return path
+
+
+def bad(tmp_path: Path, old: str, new: str) -> Path:
+    text = TWO_NODES.replace(old, new, 1)
+    assert text != TWO_NODES, f"{old!r} not in the template"
+    return write(tmp_path, text, "bad.toml")
+
+
+def test_a_valid_two_node_file_loads_with_each_nodes_overrides(tmp_path):
+    path = write(tmp_path, TWO_NODES)
+    cfg = load_bridge_config(path)
+    assert cfg.source == str(path) and cfg.log.format == "json" and cfg.plc.mode == "server"
+    nodes = resolve(cfg)
+    assert [n.name for n in nodes] == ["left", "right"]
+    assert [n.profile.can.base_id for n in nodes] == [0x200, 0x210]
+    assert [n.profile.can.node_id for n in nodes] == [1, 2]
+    assert [n.profile.modbus.plc.base_address for n in nodes] == [0, 100]
+    assert nodes[0].bus_key == nodes[1].bus_key  # one bus, one reader
+    # the profile keeps its own path through the overrides (messages name it)
+    assert all(n.profile.source == PAPER for n in nodes)
+
+
+def test_a_relative_profile_path_is_taken_from_the_files_folder(tmp_path):
+    (tmp_path / "profiles").mkdir()
+    (tmp_path / "profiles" / "p.toml").write_text(Path(PAPER).read_text())
+    path = write(tmp_path, TWO_NODES.replace('"{profile}"', '"profiles/p.toml"'))
+    nodes = resolve(load_bridge_config(path))
+    assert nodes[0].profile.sensor.name == "paper-5x5"
+
+
+def test_a_slower_node_than_its_profile_gets_its_own_stale_limit(tmp_path):
+    """A node's rate_hz override also moves the stale limit (2.5 periods of the node's
+    rate): with the profile's 100 Hz limit (25 ms), a 20 Hz node would read stale
+    between every two scans."""
+    path = write(tmp_path, TWO_NODES.replace('base_address = 100', 'base_address = 100\nrate_hz = 20.0'))
+    left, right = resolve(load_bridge_config(path))
+    assert left.profile.modbus.plc.stale_s == pytest.approx(0.025)
+    assert right.rate_hz == 20.0 and right.profile.modbus.plc.stale_s == pytest.approx(0.125)
+
+
+@pytest.mark.parametrize("old, new, expected", [
+    ('channel = "shared"', 'chanel = "shared"', "bad.toml: [node[0]] chanel: unknown key; did you mean 'channel'?"),
+    ('base_id = 0x210', 'base_id = 0x208',
+     "bad.toml: [node 'right'] base_id: 0x208 overlaps node 'left' at 0x200 on the same bus"),
+    ('base_address = 100', 'base_address = 10',
+     "bad.toml: [node 'right'] base_address: 10 overlaps the block of node 'left' at 0"),
+    ('name = "right"', 'name = "left"', "bad.toml: [node] name: 'left' is used by two nodes"),
+    ('interface = "virtual"\nchannel = "shared"\nbase_address = 0', 'source = "can-log"\nbase_address = 0',
+     "bad.toml: [node[0]] path: missing key (source = 'can-log' needs it)"),
+    ('profile = "{profile}"', 'profile = "no-such-profile.toml"',
+     "bad.toml: [node 'left'] profile: "),
+    ('port = {port}', 'port = 70000', "bad.toml: [plc] port:"),
+    ('format = "json"', 'format = "xml"', "bad.toml: [log] format:"),
+])
+def test_each_bad_file_is_one_line_naming_file_and_key(tmp_path, old, new, expected):
+    path = bad(tmp_path, old, new)
+    with pytest.raises(ProfileError) as err:
+        resolve(load_bridge_config(path))
+    msg = str(err.value)
+    assert "\n" not in msg and str(tmp_path / "bad.toml") in msg, msg
+    assert expected.split("bad.toml", 1)[1] in msg, msg
+    if "no-such-profile" in new:  # the node's line, then the profile's own message
+        assert msg.endswith("no-such-profile.toml: cannot read profile: No such file or directory"), msg
+
+
+def test_two_rtu_nodes_on_one_serial_port_are_refused(tmp_path):
+    text = f"""
+[plc]
+mode = "server"
+[[node]]
+name = "a"
+profile = "{PAPER}"
+source = "modbus-rtu"
+serial_port = "/dev/ttyS9"
+[[node]]
+name = "b"
+profile = "{PAPER}"
+source = "modbus-rtu"
+serial_port = "/dev/ttyS9"
+base_address = 100
+"""
+    path = tmp_path / "rtu.toml"
+    path.write_text(text)
+    with pytest.raises(ProfileError, match=r"rtu\.toml: \[node\] serial_port: '/dev/ttyS9' is used by two nodes"):
+        resolve(load_bridge_config(path))
+
+
+def test_a_node_profile_that_does_not_validate_names_the_node(tmp_path):
+    broken = tmp_path / "broken.toml"
+    broken.write_text(Path(PAPER).read_text().replace("rate_hz = 100.0", "rate_hz = -5", 1))
+    path = write(tmp_path, TWO_NODES.replace('"{profile}"', f'"{broken}"', 1), "bad.toml")
+    with pytest.raises(ProfileError) as err:
+        resolve(load_bridge_config(path))
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(f"{path}: [node 'left'] profile: {broken}"), msg
+    assert "rate_hz" in msg
+
+
+def cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "eskin_industrial", "bridge", *args], capture_output=True,
+                          text=True, timeout=timeout, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+
+
+def test_the_command_refuses_a_bad_file_with_one_line_and_starts_nothing(tmp_path):
+    port = free_port()
+    path = write(tmp_path, TWO_NODES.replace('base_address = 100', 'base_address = 10'), "bad.toml", port=port)
+    res = cli("--config", str(path), "--duration", "5")
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("eskin-bus: error: ") and str(path) in lines[0], res.stderr
+    assert "base_address" in lines[0] and res.stdout == ""
+    # nothing was started: no log line, and the configured port was never taken
+    assert "start" not in res.stderr
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", port))
+
+
+def test_check_prints_the_plan_and_exits(tmp_path):
+    port = free_port()
+    path = write(tmp_path, TWO_NODES, port=port)
+    res = cli("--config", str(path), "--check")
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    assert len(lines) == 2 and res.stderr == ""
+    assert lines[0].startswith("left: paper-5x5 (") and PAPER in lines[0]
+    assert "100 Hz, can virtual shared ids 0x200+16 -> PLC server block at 0" in lines[0]
+    assert "ids 0x210+16 -> PLC server block at 100" in lines[1]
+    with socket.socket() as s:  # --check opens nothing
+        s.bind(("127.0.0.1", port))
+
+
+def test_command_line_errors(tmp_path):
+    res = cli("-p", PAPER, "--source", "carrier-pigeon:x", "--check")
+    assert res.returncode == 2 and "unknown source kind 'carrier-pigeon'" in res.stderr
+    res = cli("-p", PAPER, "--plc", "udp:1.2.3.4:5", "--check")
+    assert res.returncode == 2 and "unknown PLC kind 'udp'" in res.stderr
+    res = cli("--check")
+    assert res.returncode == 2 and "give --config FILE, or --profile P" in res.stderr
+    res = cli("-p", PAPER, "--source", "scene:case2", "--plc", "serve:127.0.0.1:1502", "--check")
+    assert res.returncode == 0 and "scene case2 -> PLC server block at 0" in res.stdout, res.stderr
