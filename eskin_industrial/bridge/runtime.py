@@ -70,6 +70,7 @@ class Bridge:
         self._closers: list[Callable[[], None]] = []
         self.started = False
         self.stopped = False
+        self._switch_interval: float | None = None
         self.failure = ""
 
     # -- building: everything is opened before anything runs ----------------------
@@ -193,6 +194,7 @@ class Bridge:
 
     # -- running --------------------------------------------------------------------
     def start(self) -> "Bridge":
+        self._switch_interval = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         self.log.event("start", nodes=",".join(r.name for r in self.runs), plc=self.where, mode=self.mode,
                        sources=",".join(_describe_source(r.node) for r in self.runs))
@@ -357,6 +359,8 @@ class Bridge:
         if self.server is not None and self.runs:
             time.sleep(self.config.plc.offline_linger_s)  # let a polling PLC read "offline"
         self._close_all()
+        if self._switch_interval is not None:  # the process's setting, as it was
+            sys.setswitchinterval(self._switch_interval)
         offline = [r.name for r in self.runs if getattr(r.sink, "flushed", True)]
         self.log.event("stopped", reason=self.stop_reason or ("failure" if self.failure else "end"),
                        offline_written=",".join(offline) or "-")
