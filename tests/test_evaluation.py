@@ -6,7 +6,9 @@ import pytest
 
 from eskin_industrial.detect import GraspState, UpdateTable
 from eskin_industrial.evaluation.metrics import score_scene
-from eskin_industrial.evaluation.suite import EVALUATION_SEEDS, SUITE, TUNING_SEEDS, by_name, evaluate
+from eskin_industrial.evaluation.suite import (
+    EVALUATION_SEEDS, HOLD_EVALUATION_SEEDS, HOLD_SCENES, HOLD_TUNING_SEEDS, SUITE, TUNING_SEEDS, by_name, evaluate,
+)
 
 S = GraspState
 
@@ -52,7 +54,8 @@ def test_tolerance_after_the_end():
 
 
 def test_tuning_and_evaluation_seeds_are_disjoint():
-    assert not set(TUNING_SEEDS) & set(EVALUATION_SEEDS)
+    tuning = set(TUNING_SEEDS) | set(HOLD_TUNING_SEEDS)
+    assert not tuning & (set(EVALUATION_SEEDS) | set(HOLD_EVALUATION_SEEDS))
 
 
 def test_our_method_meets_its_targets_on_held_out_seeds():
@@ -66,3 +69,13 @@ def test_our_method_meets_its_targets_on_held_out_seeds():
     assert ours.score.false_alarms == 0
     assert ours.us_per_frame < 2.0 * paper.us_per_frame * 1.5  # cost within 2x (noise margin)
     assert ours.per_scene["case1"].false_alarms == 0  # varying force alone never reads slip
+
+
+def test_no_false_alarm_over_hours_of_held_out_holding():
+    """False alarms per hour need hours: the still holds over the 100 held-out
+    long-hold seeds (3.8 h; the default before the long-hold check raised 9 false
+    alarms there, all on the light hand grip, none in the first 30 seeds)."""
+    res = evaluate(by_name("cof-track"), scenes=HOLD_SCENES, seeds=HOLD_EVALUATION_SEEDS)
+    score = res["cof-track"].score
+    assert score.holding_s > 3 * 3600
+    assert score.false_alarms == 0
