@@ -22,3 +22,32 @@ def test_plot_refuses_a_bad_recording_in_one_line(tmp_path):
     res = subprocess.run([sys.executable, "-m", "eskin_industrial", "plot", "-p", str(PROFILES / "paper-5x5.toml"),
                           str(bad), "-o", str(tmp_path / "x.png")], capture_output=True, text=True, timeout=60)
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "1 taxel columns" in res.stderr
+
+
+def test_plot_draws_a_can_log_through_the_receivers_decoding(tmp_path):
+    import numpy as np
+
+    from eskin_industrial import Calibrator, load_profile
+    from eskin_industrial.bus.can_layout import CanLayout
+    from eskin_industrial.recording import read_recording
+
+    prof = load_profile(PROFILES / "paper-5x5.toml")
+    rec = read_recording(ROOT / "examples" / "case2.csv", prof.taxels)
+    raw = np.rint(Calibrator.from_section(prof.calibration, prof.taxels).to_raw(rec.values))
+    layout = CanLayout.from_profile(prof, fd=False)
+    lines = [f"({100 + k / 100 + s * 1e-4:.6f}) can0 {can_id:03X}#{data.hex().upper()}"
+             for k, scan in enumerate(layout.encode(np.arange(len(raw)), raw)) for s, (can_id, data) in enumerate(scan)]
+    log = tmp_path / "case2.log"
+    log.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "case2-log.png"
+    res = subprocess.run([sys.executable, "-m", "eskin_industrial", "plot", "-p", str(PROFILES / "paper-5x5.toml"),
+                          "--can-log", str(log), "-o", str(out)], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert f"{len(raw)} updates" in res.stderr and "slip 0" not in res.stderr
+    empty = tmp_path / "other.log"
+    empty.write_text("(1.000000) can0 7FF#00\n")
+    res = subprocess.run([sys.executable, "-m", "eskin_industrial", "plot", "-p", str(PROFILES / "paper-5x5.toml"),
+                          "--can-log", str(empty), "-o", str(tmp_path / "x.png")], capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "no complete scan" in res.stderr

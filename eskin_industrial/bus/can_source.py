@@ -307,17 +307,22 @@ def replay(scans: list[RawScan], pipeline: Pipeline) -> list[Update]:
     return updates
 
 
+def log_scans(profile, path: str | Path, rate_hz: float | None = None) -> tuple[list[RawScan], ScanAssembler]:
+    """The node's scans in a CAN log, through the live path's assembler (the FD layout
+    when the node's frames are FD frames)."""
+    messages = list(read_can_log(path))
+    lo = profile.can.base_id
+    fd = any(m.is_fd for m in messages[:10_000] if lo <= m.arbitration_id < lo + 16)
+    layout = CanLayout.from_profile(profile, fd=fd or profile.can.fd)
+    return decode_messages(layout, messages, rate_hz or profile.sensor.rate_hz)
+
+
 def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: str | None = None,
                quiet: bool = True):
     """A CAN log through the live path's assembler and pipeline: the updates as a
     table, and (unless ``quiet``) the counters on stderr."""
-
-    messages = list(read_can_log(path))
-    lo = profile.can.base_id
-    fd = any(m.is_fd for m in messages[:10_000] if lo <= m.arbitration_id < lo + 16)  # FD frames: the FD layout
-    layout = CanLayout.from_profile(profile, fd=fd or profile.can.fd)
     rate = rate_hz or profile.sensor.rate_hz
-    scans, asm = decode_messages(layout, messages, rate)
+    scans, asm = log_scans(profile, path, rate)
     pipeline = Pipeline(profile, rate_hz=rate, method=method)
     table = UpdateTable.from_updates(replay(scans, pipeline))
     if not quiet:

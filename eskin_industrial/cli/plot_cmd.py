@@ -16,13 +16,19 @@ STATE_COLOURS = {GraspState.SLIP: "tab:red", GraspState.VARIABLE_FORCE: "tab:ora
 
 @click.command()
 @profile_option()
-@click.argument("input_path", metavar="REC.csv", type=click.Path(dir_okay=False, allow_dash=True))
+@click.argument("input_path", metavar="[REC.csv]", required=False, type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("--can-log", default=None, type=click.Path(dir_okay=False),
+              help="Plot a CAN log of the node's traffic instead (candump .log, .asc, .blf, ...).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="PNG file to write.")
 @click.option("--method", type=click.Choice(sorted(METHODS)), default=None, help="Detection method (default: the profile's).")
 @click.option("--labels", "labels_path", type=click.Path(dir_okay=False, exists=True), default=None,
               help="Ground truth (t,label, from `eskin-bus simulate --labels`) drawn under the states.")
-def plot(profile_path: str, input_path: str, output: str, method: str | None, labels_path: str | None) -> None:
-    """Draw total force, the two indicators and the detected states of a recording."""
+def plot(profile_path: str, input_path: str | None, can_log: str | None, output: str, method: str | None,
+         labels_path: str | None) -> None:
+    """Draw total force, the two indicators and the detected states of a recording
+    (or of a CAN log, through the live receiver's decoding)."""
+    if (input_path is None) == (can_log is None):
+        raise click.UsageError("give exactly one of REC.csv or --can-log LOG")
     try:
         import matplotlib
 
@@ -30,21 +36,34 @@ def plot(profile_path: str, input_path: str, output: str, method: str | None, la
         import matplotlib.pyplot as plt
     except ImportError:
         raise click.ClickException("plot needs matplotlib: pip install 'eskin-industrial[plot]'") from None
-    prof = open_profile(profile_path)
-    rec = read_recording(input_path, prof.taxels)
-    values = rec.values
-    if rec.unit == "raw":
-        from ..calibration import Calibrator
+    from ..calibration import Calibrator
 
-        values, _ = Calibrator.from_section(prof.calibration, prof.taxels).to_newtons(values)
+    prof = open_profile(profile_path)
+    cal = Calibrator.from_section(prof.calibration, prof.taxels)
+    if can_log is not None:
+        from ..bus.can_source import log_scans
+
+        rate = prof.sensor.rate_hz
+        scans, _ = log_scans(prof, can_log, rate)
+        if not scans:
+            raise InputFormatError(f"{can_log}: no complete scan of node {prof.can.node_id} "
+                                   f"(IDs {prof.can.base_id:#x}..{prof.can.base_id + 15:#x})")
+        t = np.array([sc.t for sc in scans])
+        values, _ = cal.to_newtons(np.stack([sc.raw for sc in scans]))
+        name = can_log
+    else:
+        rec = read_recording(input_path, prof.taxels)
+        t, values, name = rec.t, rec.values, rec.name
+        if rec.unit == "raw":
+            values, _ = cal.to_newtons(values)
+        rate = rec.rate_hz(prof.sensor.rate_hz)
     chosen = get_method(method or prof.detector.method)
     x, y = prof.coordinates_mm
-    rate = rec.rate_hz(prof.sensor.rate_hz)
-    table = chosen.batch(prof.detector, x, y, rate, rec.t, values, None)
+    table = chosen.batch(prof.detector, x, y, rate, t, values, None)
     col_a, col_b = getattr(chosen.stream, "columns", ("R_coe", "R_dw"))
 
     fig, (ax_f, ax_r) = plt.subplots(2, 1, figsize=(11, 6), sharex=True, gridspec_kw={"height_ratios": [1, 2]})
-    ax_f.plot(rec.t, np.nansum(values, axis=1), color="k", lw=0.8)
+    ax_f.plot(t, np.nansum(values, axis=1), color="k", lw=0.8)
     ax_f.set_ylabel("total force (N)")
     if labels_path is not None:
         _shade_labels(ax_r, labels_path)
@@ -62,7 +81,7 @@ def plot(profile_path: str, input_path: str, output: str, method: str | None, la
     ax_r.set_ylim(bottom=0.0)
     ax_r.set_xlabel("time (s)")
     ax_r.legend(fontsize=8, ncol=3, loc="upper left")
-    fig.suptitle(f"{rec.name}: {chosen.name} on {prof.name}, {rate:.0f} Hz")
+    fig.suptitle(f"{name}: {chosen.name} on {prof.name}, {rate:.0f} Hz")
     fig.tight_layout()
     try:
         fig.savefig(output, dpi=100)
