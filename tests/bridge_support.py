@@ -24,7 +24,8 @@ from eskin_industrial.bus.can_node import CanNode, Faults
 from eskin_industrial.bus.can_source import open_bus
 from eskin_industrial.bus.modbus_io import RegisterServer
 from eskin_industrial.bus.plc_image import REG, STATUS_COUNT, Status
-from eskin_industrial.bus.plc_sim import PlcMemory, decode
+from eskin_industrial.bus.plc_image import decode_registers as decode
+from eskin_industrial.bus.plc_sim import PlcMemory
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.profile import Profile
 

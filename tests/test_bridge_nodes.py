@@ -10,7 +10,7 @@ import can
 from eskin_industrial.bus.can_source import open_bus
 from eskin_industrial.bus.modbus_io import TcpMaster
 from eskin_industrial.bus.plc_image import IMAGE_COUNT, Status
-from eskin_industrial.bus.plc_sim import decode
+from eskin_industrial.bus.plc_image import decode_registers as decode
 
 from bridge_support import (
     can_node, channel, hold_raw, node_thread, running_bridge, server_config, slip_raw, wait_for,

@@ -9,7 +9,8 @@ import time
 from eskin_industrial.bus.modbus_bridge import ModbusBridge, ReplaySource
 from eskin_industrial.bus.plc_client import PlcWriter
 from eskin_industrial.bus.plc_image import REG, STATUS_COUNT, Status
-from eskin_industrial.bus.plc_sim import PlcSimulator, decode
+from eskin_industrial.bus.plc_image import decode_registers as decode
+from eskin_industrial.bus.plc_sim import PlcSimulator
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
 

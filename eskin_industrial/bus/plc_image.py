@@ -155,6 +155,24 @@ def join32(words: list[int], word_order: str) -> int:
     return (hi << 16) | lo
 
 
+def decode_registers(registers, word_order: str) -> dict[str, int]:
+    """Named values of registers read from the base address (the inverse of
+    :meth:`PlcImage.render`): 32-bit values joined in ``word_order``, i16 values
+    signed; registers past the end of ``registers`` are left out."""
+    out: dict[str, int] = {}
+    for r in REGISTERS:
+        words = list(registers[r.offset: r.offset + r.words])
+        if len(words) < r.words:
+            continue  # e.g. COMMAND and ENABLE are not part of a publication
+        if r.kind == "u32":
+            out[r.name] = join32(words, word_order)
+        elif r.kind == "i16":
+            out[r.name] = words[0] - 0x10000 if words[0] >= 0x8000 else words[0]
+        else:
+            out[r.name] = words[0]
+    return out
+
+
 @dataclass
 class PlcImage:
     """State, latch, enable and counters as the PLC sees them."""

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from ..detect.state import GraspState
 from ..profile import ModbusPlcSection
 from .modbus_io import ILLEGAL_ADDRESS, RegisterServer, SerialSettings
-from .plc_image import CMD_ACK, IMAGE_COUNT, REG, REGISTERS, STATUS_COUNT, Status, join32
+from .plc_image import CMD_ACK, IMAGE_COUNT, REG, STATUS_COUNT, Status, decode_registers
 
 
 @dataclass
@@ -45,19 +45,6 @@ class PlcMemory:
         if self.on_write is not None:
             self.on_write(time.perf_counter())
         return None
-
-
-def decode(regs: list[int], word_order: str) -> dict[str, int]:
-    out = {}
-    for r in REGISTERS:
-        v = regs[r.offset: r.offset + r.words]
-        if r.kind == "u32":
-            out[r.name] = join32(v, word_order)
-        elif r.kind == "i16":
-            out[r.name] = v[0] - 0x10000 if v[0] >= 0x8000 else v[0]
-        else:
-            out[r.name] = v[0]
-    return out
 
 
 def describe_status(status: int) -> str:
@@ -160,7 +147,7 @@ class PlcSimulator:
         wo = self.settings.word_order
         while not self._stop.wait(self.scan_s):
             regs = list(self.memory.regs[:STATUS_COUNT]) + [0, 0]
-            v = decode(regs, wo)
+            v = decode_registers(regs, wo)
             if prev is not None:
                 quiet = ~int(Status.BRIDGE_ALIVE)  # the life bit toggles at every write
                 changes = [f"{k}={_show(k, v[k])}" for k in ("STATUS", "STATE")

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..bus.plc_image import REGISTERS, Status, join32
+from ..bus.plc_image import Status, decode_registers  # decode_registers: re-exported by view
 from ..detect.settings import DetectorSettings
 
 
@@ -50,23 +50,6 @@ def indicator_scale(method: str, settings: DetectorSettings, detector: object | 
     slip_a = float(threshold) if isinstance(threshold, (int, float)) else None
     slip_b = None
     return IndicatorScale(("R_coe", "R_dw"), f"{method}: {' | '.join(columns)}", (slip_a, slip_b))
-
-
-def decode_registers(registers: list[int] | tuple[int, ...], word_order: str) -> dict[str, int]:
-    """Named values of the STATUS..FLAGS registers (``PlcImage.render`` order); 32-bit
-    values joined in the profile's word order, i16 values signed."""
-    out: dict[str, int] = {}
-    for r in REGISTERS:
-        words = list(registers[r.offset: r.offset + r.words])
-        if len(words) < r.words:
-            continue  # the command registers are not part of a publication
-        if r.kind == "u32":
-            out[r.name] = join32(words, word_order)
-        elif r.kind == "i16":
-            out[r.name] = words[0] - 0x10000 if words[0] >= 0x8000 else words[0]
-        else:
-            out[r.name] = words[0]
-    return out
 
 
 def status_names(status: int) -> tuple[str, ...]:
