@@ -15,7 +15,7 @@ from eskin_industrial.bus.can_node import CanNode
 from eskin_industrial.bus.can_source import open_bus
 from eskin_industrial.bus.modbus_io import TcpMaster
 from eskin_industrial.bus.plc_image import IMAGE_COUNT
-from eskin_industrial.bus.plc_sim import decode
+from eskin_industrial.bus.plc_image import decode_registers as decode
 
 from bridge_support import can_node, channel, hold_raw, running_bridge, server_config, wait_for
 
