@@ -40,7 +40,9 @@ def scene_raw(profile, k=600, seed=4):
 
 
 def channel() -> str:
-    return f"test-{uuid.uuid4().hex[:8]}"
+    # Not ending in digits: python-can's BLF writer takes trailing digits for a channel
+    # number and fails past 65535 ("test-...99389").
+    return f"test-{uuid.uuid4().hex[:8]}-bus"
 
 
 def send_and_receive(profile, raw, faults=Faults(), fd=False, log=None, rate=100.0):
