@@ -45,8 +45,8 @@ def channel() -> str:
     return f"test-{uuid.uuid4().hex[:8]}-bus"
 
 
-def send_and_receive(profile, raw, faults=Faults(), fd=False, log=None, rate=100.0):
-    ch = channel()
+def send_and_receive(profile, raw, faults=Faults(), fd=False, log=None, rate=100.0, ch: str | None = None):
+    ch = ch or channel()
     layout = CanLayout.from_profile(profile, fd=fd)
     reader = BusReader(lambda: open_bus("virtual", ch)).start()
     source = CanSource(reader, ScanAssembler(layout, rate), Pipeline(profile, rate_hz=rate), log)
@@ -241,3 +241,15 @@ def test_fd_frames_use_bit_rate_switching(paper_profile):
         got = [m for m in iter(lambda: rx.recv(0.2), None)]
     data = [m for m in got if m.arbitration_id == layout.base_id]
     assert len(data) == 3 and all(m.is_fd and m.bitrate_switch and len(m.data) == 64 for m in data)
+
+
+def test_a_recording_that_fails_to_write_never_stops_reception(paper_profile, tmp_path):
+    """python-can's BLF writer cannot store this channel name (its trailing digits
+    overflow the 16-bit channel field): every write fails, every scan still decodes."""
+    raw = scene_raw(paper_profile)
+    log = can.Logger(tmp_path / "traffic.blf")
+    source, stats = send_and_receive(paper_profile, raw, log=log, ch=f"rec-{uuid.uuid4().hex[:6]}-99389")
+    log.stop()
+    c = source.counters()
+    assert source.pipeline.counters.scans == stats.scans == len(raw)
+    assert c["log_write_errors"] == c["frames"] + c["foreign_frames"] > 0

@@ -18,6 +18,7 @@ import errno
 import json
 import select
 import socket
+import struct
 import sys
 import threading
 import time
@@ -240,7 +241,13 @@ class CanSource:
             msg = q.popleft()
             n += 1
             if log is not None:
-                log.on_message_received(msg)
+                try:
+                    log.on_message_received(msg)
+                except (OSError, ValueError, TypeError, struct.error):
+                    # a full disk or a frame the format cannot hold: the recording has a
+                    # gap (counted), the reception goes on
+                    extra = pipe.counters.extra
+                    extra["log_write_errors"] = extra.get("log_write_errors", 0) + 1
             scan = asm.feed(msg)
             if scan is not None:
                 updates = pipe.push(scan)
