@@ -17,8 +17,7 @@ from typing import Literal
 import numpy as np
 
 from .detect.settings import DetectorSettings
-from .errors import ProfileError
-from .schema import SchemaError, in_range, non_negative, parse_toml, positive, to_table
+from .schema import SchemaError, in_range, non_negative, parse_toml, positive, read_toml_file, to_table
 
 #: A sensor silent for this many scan periods is stale (the PLC must see it within three).
 STALE_PERIODS = 2.5
@@ -294,10 +293,7 @@ class Profile:
 def load_profile(path: str | Path) -> Profile:
     """Read and validate a profile; :class:`ProfileError` names the file and the key."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ProfileError(f"{path}: cannot read profile: {exc.strerror or exc}") from None
+    text = read_toml_file(path, "profile")
     return parse_profile(text, str(path))
 
 

@@ -216,6 +216,15 @@ def to_table(obj: Any) -> Any:
     return obj
 
 
+def read_toml_file(path, what: str) -> str:
+    """The text of a TOML file; one :class:`ProfileError` line when it cannot be read
+    (``what``: "profile", "scene", ... for the message)."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ProfileError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
+
+
 def parse_toml(cls: type[T], text: str, source: str) -> T:
     """TOML text to ``cls``; any problem is one :class:`ProfileError` line:
     ``SOURCE: [section] key: what was expected``."""

@@ -41,7 +41,7 @@ from typing import Literal
 
 from ..errors import ProfileError
 from ..profile import STALE_PERIODS, Profile, load_profile
-from ..schema import in_range, parse_toml, positive
+from ..schema import in_range, parse_toml, positive, read_toml_file
 
 SourceKind = Literal["can", "can-log", "modbus-rtu", "scene"]
 
@@ -162,10 +162,7 @@ class ResolvedNode:
 
 def load_bridge_config(path: str | Path) -> BridgeConfig:
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ProfileError(f"{path}: cannot read bridge configuration: {exc.strerror or exc}") from None
+    text = read_toml_file(path, "bridge configuration")
     config = parse_toml(BridgeConfig, text, str(path))
     object.__setattr__(config, "source", str(path))
     return config

@@ -72,6 +72,7 @@ class Bridge:
         self.stopped = False
         self._switch_interval: float | None = None
         self.failure = ""
+        self.stop_reason = ""  #: the signal's name, when one stopped the bridge
 
     # -- building: everything is opened before anything runs ----------------------
     def open(self) -> "Bridge":
@@ -279,8 +280,6 @@ class Bridge:
         if reason and not self._stop.is_set():
             self.stop_reason = reason
         self._stop.set()
-
-    stop_reason = ""
 
     def check_health(self) -> None:
         """Log what changed since the last look: stale, bus fault, PLC connection."""

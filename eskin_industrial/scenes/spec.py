@@ -8,8 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from ..errors import ProfileError
-from ..schema import SchemaError, in_range, non_negative, parse_toml, positive
+from ..schema import SchemaError, in_range, non_negative, parse_toml, positive, read_toml_file
 
 
 @dataclass(frozen=True)
@@ -135,8 +134,4 @@ def parse_scene(text: str, source: str) -> SceneSpec:
 
 
 def load_scene_file(path: Path) -> SceneSpec:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ProfileError(f"{path}: cannot read scene: {exc.strerror or exc}") from None
-    return parse_scene(text, str(path))
+    return parse_scene(read_toml_file(path, "scene"), str(path))

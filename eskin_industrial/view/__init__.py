@@ -6,8 +6,9 @@
 - :mod:`.live`: snapshots from a running chain's newest values.
 """
 
+from ..bus.plc_image import decode_registers
 from .screen import render
-from .snapshot import IndicatorScale, Snapshot, decode_registers, indicator_scale, status_names
+from .snapshot import IndicatorScale, Snapshot, indicator_scale, status_names
 from .terminal import LiveScreen, color_wanted
 
 __all__ = ["IndicatorScale", "LiveScreen", "Snapshot", "color_wanted", "decode_registers", "indicator_scale",

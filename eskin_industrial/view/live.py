@@ -16,13 +16,13 @@ from typing import TextIO
 
 import numpy as np
 
-from ..bus.plc_image import Command, PlcImage
+from ..bus.plc_image import Command, PlcImage, decode_registers
 from ..detect.state import GraspState
 from ..detect.updates import Update
 from ..pipeline import Pipeline
 from ..profile import Profile
 from .screen import render
-from .snapshot import Snapshot, decode_registers, indicator_scale, status_names
+from .snapshot import Snapshot, indicator_scale, status_names
 from .terminal import DEFAULT_FPS, LiveScreen
 
 #: Counters the view shows, in this order, under these names.

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..bus.plc_image import Status, decode_registers  # decode_registers: re-exported by view
+from ..bus.plc_image import Status
 from ..detect.settings import DetectorSettings
 
 
