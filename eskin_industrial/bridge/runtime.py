@@ -140,17 +140,10 @@ class Bridge:
 
             reader = LogPlayer(c.path, read_can_log(c.path), self.config.queue_frames)  # type: ignore[arg-type]
         else:
-            from ..bus.can_source import BusReader, open_bus
+            from ..bus.can_source import BusReader, bus_kwargs, open_bus
 
-            bitrate = c.bitrate_bps
-            if bitrate is None and c.interface not in (None, "virtual", "socketcan"):
-                bitrate = n.profile.can.bitrate_bps  # hardware adapters need one
-            data = c.data_bitrate_bps or (n.profile.can.data_bitrate_bps if n.fd and bitrate else None)
-
-            def opener():
-                return open_bus(c.interface, c.channel, bitrate, n.fd, data)
-
-            reader = BusReader(opener, self.config.queue_frames)
+            kw = bus_kwargs(n.profile, c.interface, c.channel, c.bitrate_bps, c.fd, c.data_bitrate_bps)
+            reader = BusReader(lambda: open_bus(**kw), self.config.queue_frames)
         self._closers.append(reader.stop)
         return reader
 
@@ -249,11 +242,11 @@ class Bridge:
         bridges = [r.bridge for r in runs]
         pollers = group.pollers
         while not stop.is_set():
-            group.route(min(b.wait_budget() for b in bridges))
+            group.route(min(b.wait_budget() for b in bridges))  # the round's one wait
             for b, p in zip(bridges, pollers):
-                b.step()
+                b.step(0.0)
                 while p.pending:  # every scan routed in this round
-                    b.step()
+                    b.step(0.0)
             if group.done:
                 self.log.event("source_ended", node=",".join(r.name for r in runs),
                                error=getattr(group.reader, "last_error", "") or "-")

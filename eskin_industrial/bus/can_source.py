@@ -70,6 +70,18 @@ def open_bus(interface: str | None = None, channel: str | None = None, bitrate: 
     return bus
 
 
+def bus_kwargs(profile, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None,
+               data_bitrate: int | None) -> dict:
+    """Arguments for :func:`open_bus` from python-can's options, the profile filling in
+    what they leave open (the command line's ``-i/-c/-b/--fd``, or a bridge node's keys)."""
+    use_fd = profile.can.fd if fd is None else fd
+    # A bit rate is only passed on when given: virtual and socketcan buses ignore it,
+    # hardware adapters need it (the profile's when none is given).
+    rate = bitrate if bitrate is not None else (profile.can.bitrate_bps if interface not in (None, "virtual", "socketcan") else None)
+    data = data_bitrate if data_bitrate is not None else (profile.can.data_bitrate_bps if rate is not None else None)
+    return dict(interface=interface, channel=channel, bitrate=rate, fd=use_fd, data_bitrate=data)
+
+
 def enlarge_rcvbuf(bus: can.BusABC, size: int) -> int | None:
     """Raise a SocketCAN socket's receive buffer to ``size`` bytes (past the system
     limit when privileged); returns what the kernel granted, None for other buses."""

@@ -79,10 +79,11 @@ class ModbusBridge:
             bus_errors=int(getattr(counters, "bus_errors", 0)),
         )
 
-    def step(self) -> bool:
-        """One poll, its updates, the PLC's commands and, when due, a publication.
-        Returns whether it published."""
-        scan = self.source.poll(self.wait_budget())
+    def step(self, timeout_s: float | None = None) -> bool:
+        """One poll (waiting up to ``timeout_s`` for traffic, default: until a
+        publication falls due), its updates, the PLC's commands and, when due, a
+        publication.  Returns whether it published."""
+        scan = self.source.poll(self.wait_budget() if timeout_s is None else timeout_s)
         t_event = time.perf_counter()  # after the wait: the event is now
         urgent = False
         if scan is not None:
@@ -133,7 +134,7 @@ class ModbusBridge:
         now = time.monotonic() if now is None else now
         budget = min(self.MAX_WAIT_S, self._last_pub + self.profile.modbus.plc.refresh_s - now)
         age = self.source.frame_age(now)
-        stale_s = self.profile.modbus.plc.stale_s or 0.2
+        stale_s = self.image.stale_limit_s
         if age is not None and age <= stale_s:
             budget = min(budget, stale_s - age + 1e-4)
         return max(budget, 0.0)

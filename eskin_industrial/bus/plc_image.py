@@ -213,13 +213,17 @@ class PlcImage:
         # "tare" acts on the calibration: the bridge does it, the image has no part in it.
 
     # -- output side ------------------------------------------------------------
+    @property
+    def stale_limit_s(self) -> float:
+        """Frame age beyond which the sensor is stale (a profile resolves ``stale_s``
+        from its rate; a bare section, with no rate to derive it from, takes 0.2 s)."""
+        return self.settings.stale_s if self.settings.stale_s is not None else 0.2
+
     def status(self, health: Health) -> int:
         u = self.update
         bits = Status(0)
-        # A bare section (not from a profile) has no rate to derive stale_s from.
-        limit = self.settings.stale_s if self.settings.stale_s is not None else 0.2
         # written so that a NaN age (a broken clock) reads as stale, never as fresh
-        stale = health.frame_age_s is None or not health.frame_age_s <= limit
+        stale = health.frame_age_s is None or not health.frame_age_s <= self.stale_limit_s
         if stale:
             bits |= Status.SENSOR_STALE
         if health.bus_fault:

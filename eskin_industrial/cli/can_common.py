@@ -25,13 +25,3 @@ def bus_options(func):
     for opt in reversed(opts):
         func = opt(func)
     return func
-
-
-def bus_kwargs(profile, interface, channel, bitrate, fd, data_bitrate) -> dict:
-    """Arguments for :func:`~eskin_industrial.bus.can_source.open_bus`."""
-    use_fd = profile.can.fd if fd is None else fd
-    # A bit rate is only passed on when given: virtual and socketcan buses ignore it,
-    # hardware adapters need it (the profile's when the command line has none).
-    rate = bitrate if bitrate is not None else (profile.can.bitrate_bps if interface not in (None, "virtual", "socketcan") else None)
-    data = data_bitrate if data_bitrate is not None else (profile.can.data_bitrate_bps if rate is not None else None)
-    return dict(interface=interface, channel=channel, bitrate=rate, fd=use_fd, data_bitrate=data)

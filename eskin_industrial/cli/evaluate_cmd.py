@@ -9,8 +9,10 @@ import click
 
 from ..detect.methods import METHODS
 from ..evaluation.suite import (
-    EVALUATION_SEEDS, HOLD_EVALUATION_SEEDS, HOLD_SCENES, HOLD_TUNING_SEEDS, SUITE, TUNING_SEEDS, by_name, evaluate,
+    DEFAULT_SETTINGS, EVALUATION_SEEDS, HOLD_EVALUATION_SEEDS, HOLD_SCENES, HOLD_TUNING_SEEDS, SUITE, TUNING_SEEDS,
+    by_name, evaluate,
 )
+from .common import open_profile
 
 
 def _seeds(value: str) -> tuple[int, ...]:
@@ -43,7 +45,10 @@ def _seeds(value: str) -> tuple[int, ...]:
 @click.option("--long-holds", is_flag=True,
               help="False alarms over hours of still holding instead: the hold scenes over 100 held-out seeds "
                    "(2000-2099; with --seeds tuning, 100-159), about 25 s per method.")
-def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, long_holds) -> None:
+@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None,
+              help="Take the detector settings from this profile's [detector] (default: the built-in defaults).")
+def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, long_holds,
+                 profile_path) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
     force read as slip, and cost per frame, for each method."""
     if charts_dir is not None:
@@ -64,8 +69,9 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
     start = time.perf_counter()
     if "learned" in names:
         names = _prepare_learned(names, explicit=bool(methods))
+    settings = open_profile(profile_path).detector if profile_path else DEFAULT_SETTINGS
     res = evaluate(by_name(*names), scenes=tuple(scenes) or SUITE, seeds=seed_set, rate_hz=rate_hz,
-                   tolerance_s=tolerance_s)
+                   tolerance_s=tolerance_s, settings=settings)
     held = sum(r.score.holding_s for r in res.values()) / max(1, len(res)) / 3600
     click.echo(f"# eskin-bus evaluate --seeds {seeds} --rate {rate_hz:g}  "
                f"({len(scenes) or len(SUITE)} scenes x {len(seed_set)} seeds, {held:.2f} h of holding, "

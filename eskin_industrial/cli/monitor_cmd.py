@@ -9,7 +9,7 @@ from contextlib import nullcontext
 import click
 
 from ..detect.methods import METHODS
-from .can_common import bus_kwargs, bus_options
+from .can_common import bus_options
 from .common import open_profile, profile_option
 
 
@@ -32,7 +32,7 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, rate_hz
     line of counters.  No PLC is contacted."""
     from ..bus.can_layout import CanLayout, ScanAssembler
     from ..bus.can_poll import CanScanPoller
-    from ..bus.can_source import BusReader, open_bus
+    from ..bus.can_source import BusReader, bus_kwargs, open_bus
     from ..bus.modbus_bridge import ModbusBridge
     from ..detect.updates import Update
     from ..pipeline import Pipeline

@@ -6,7 +6,7 @@ import json
 
 import click
 
-from .can_common import bus_kwargs, bus_options
+from .can_common import bus_options
 from .common import open_profile, profile_option, scene_or_recording
 
 
@@ -42,7 +42,7 @@ def node(profile_path, interface, channel, bitrate, fd, data_bitrate, scene, rec
     --duration or Ctrl-C)."""
     from ..bus.can_layout import CanLayout
     from ..bus.can_node import CanNode, Faults
-    from ..bus.can_source import open_bus
+    from ..bus.can_source import bus_kwargs, open_bus
 
     prof = open_profile(profile_path)
     if modbus_rtu is not None:

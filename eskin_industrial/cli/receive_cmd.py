@@ -9,7 +9,7 @@ import click
 
 from ..detect.updates import UpdateTable
 from ..recording import write_updates
-from .can_common import bus_kwargs, bus_options
+from .can_common import bus_options
 from .common import open_profile, profile_option
 
 
@@ -35,7 +35,7 @@ def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output,
     import can
 
     from ..bus.can_layout import CanLayout, ScanAssembler
-    from ..bus.can_source import BusReader, CanSource, open_bus
+    from ..bus.can_source import BusReader, CanSource, bus_kwargs, open_bus
     from ..pipeline import Pipeline
 
     # The reader thread needs the interpreter for every frame; a short switch interval

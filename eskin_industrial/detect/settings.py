@@ -43,7 +43,7 @@ class CofTrackSettings:
     vib_ratio: float = field(default=3.0, metadata=positive())
     #: ... counts when the fast displacement reaches this fraction of its threshold.
     #: (0.5 let a light grip's noise through: 1.8 false alarms per hour over the 2.3 h
-    #: of the long-hold tuning seeds; 0.6, the smallest value with none there, costs
+    #: of the long-hold tuning seeds; 0.6, the smallest of 0.5-0.8 with none there, costs
     #: no delay on the suite's tuning seeds: docs/evaluation.md.)
     vib_support: float = field(default=0.6, metadata=non_negative())
     #: Time between updates.
