@@ -14,10 +14,13 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     n    = z s sqrt(2/M)                          (the displacement noise, z standard deviations)
     a    = D_f / max(n, min_fast_mm)
     b    = min(D_s / T, onward / max(T/2, 0.75 n)),   T = max(n, min_slow_mm)
-    slip when a > 1 or b > 1, or the stick-slip channel fires (below) while the force is steady
+    r    = the ramp channel (detect/ramp.py): a least-squares ramp in the raw CoF against
+           the mean before it, over a bank of horizons, in units of ramp_z sigma
+    slip when a > 1, b > 1 or r > 1, or the stick-slip channel fires (below) while the
+    force is steady
 
-The cost per frame is one 3-column matrix product and a few scalar operations: less
-than the paper's indicators.  The score columns hold a and b (1 = threshold).
+The cost per frame is one 3-column matrix product, one (3 x N) product for the ramp
+and a few scalar operations.  The score columns hold max(a, r) and b (1 = threshold).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+from .ramp import RampBank
 from .scored import ScoredDetector, _Lagged
 from .settings import DetectorSettings
 
@@ -52,7 +56,12 @@ class CofTrack(ScoredDetector):
         self._settle = max(1, round(self.settle_s * rate_hz))
         self._steady_n = max(1, round(1.0 * rate_hz))
         self.vib_ratio, self.vib_support = c.vib_ratio, c.vib_support
+        self.ramp_min, self.ramp_varying = c.ramp_min_mm, max(c.ramp_varying_mm, c.ramp_min_mm)
+        self._ramp = RampBank(tuple(max(2, round(h * rate_hz)) for h in c.ramp_horizons_s),
+                              max(2, round(c.ramp_base_s * rate_hz)), c.ramp_z)
+        self.fast_score = self.ramp_score = 0.0  # the two parts of the first column
         self._noise: float | None = None  # learnt CoF noise, in force units (N^2 mm^2)
+        self._noise_x = 0.0  # the part of it along x (sigma_x^2 S^2)
         self._fnoise = 0.0  # learnt noise of the total force (N^2)
         super().__init__(settings, x_mm, y_mm, rate_hz, hop_s=c.hop_s, confirm=1)
 
@@ -69,6 +78,7 @@ class CofTrack(ScoredDetector):
         self._vib = _Lagged(self.vib_n, None)
         self._vib_sum = 0.0
         self._calm_force = 0
+        self._ramp.reset()
 
     def score(self, t, f, s, xc, yc):
         # running mean of the last m centres
@@ -111,6 +121,11 @@ class CofTrack(ScoredDetector):
             if self.filled or step2 <= 0.0:
                 return 0.0, 0.0, False, varying
             self._noise, self._learnt = step2, 1
+            self._noise_x = 0.5 * step2
+        # the ramp's base must not hold the grab: its centres start once it has settled;
+        # a held copy is no sample (repeats would count one noise draw twice)
+        if not self.filled:
+            self._ramp.push(xc, yc)
         noise_d = self.z * math.sqrt(2.0 * self._noise / self.m) / s
         a = math.hypot(mx - fast[0], my - fast[1]) / max(noise_d, self.min_fast) if fast is not None else 0.0
         b = 0.0
@@ -133,10 +148,19 @@ class CofTrack(ScoredDetector):
         # load moves a soft contact's CoF in steps too)
         self._calm_force = 0 if varying else self._calm_force + 1
         steady = self._calm_force > self._steady_n
-        slip = a > 1.0 or b > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
+        # the ramp weighs raw centres, each axis against its own noise (one centre's
+        # standard deviation; the floor keeps a constant axis, a strip's y, harmless)
+        qx, qy = self._noise_x, self._noise - self._noise_x
+        floor = 0.0025 * self._noise
+        # (a changing force moves a soft pad's CoF a little by itself: a sway is no slip)
+        r = self._ramp.score(math.sqrt(max(qx, floor)) / s, math.sqrt(max(qy, floor)) / s,
+                             self.ramp_min if steady else self.ramp_varying)
+        self.fast_score, self.ramp_score = a, r
+        slip = a > 1.0 or b > 1.0 or r > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
         if not slip and a < 0.5 and not self.filled:  # learn the noise only while calm
             self._learnt += 1
             gain = max(self._a_noise, 1.0 / self._learnt)
             self._noise += gain * (step2 - self._noise)
+            self._noise_x += gain * ((xc - prev[0]) ** 2 * 0.5 * s * s - self._noise_x)
             self._fnoise += gain * ((s - prev[2]) ** 2 * 0.5 - self._fnoise)
-        return a, b, slip, varying
+        return max(a, r), b, slip, varying

@@ -44,6 +44,7 @@ FEATURES: tuple[str, ...] = (
     "hf_energy",  # taxel second-difference energy over its baseline (hf-energy's score)
     "log_f_sum",  # total force (N), log
     "contact_s",  # time in contact, capped at 3 s
+    "ramp_score",  # cof-track: the ramp channel (a slide starting), 1 = its threshold
 )
 
 #: Classes the model predicts, in the order of its probabilities.
@@ -122,7 +123,8 @@ class Learned(CofTrack):
         self._run = 0  # consecutive hops over slip_p
 
     def score(self, t, f, s, xc, yc):
-        a, b, _slip, _varying = super().score(t, f, s, xc, yc)
+        _, b, _slip, _varying = super().score(t, f, s, xc, yc)
+        a = self.fast_score
         rate, _, _, _ = self._rate_score.score(t, f, s, xc, yc)
         hf, _, _, _ = self._hf_score.score(t, f, s, xc, yc)
         mx, my = self._sx / self._cnt, self._sy / self._cnt
@@ -143,6 +145,7 @@ class Learned(CofTrack):
         x[7], x[8] = rate, hf
         x[9] = math.log(s)
         x[10] = min(self._contact_run / self.rate_hz, 3.0)
+        x[11] = self.ramp_score
         p = self.model(x)
         p_var, p_slip = float(p[1]), float(p[2])
         self._run = self._run + 1 if p_slip > self.slip_p else 0

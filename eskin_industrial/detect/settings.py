@@ -48,6 +48,21 @@ class CofTrackSettings:
     vib_support: float = field(default=0.6, metadata=non_negative())
     #: Time between updates.
     hop_s: float = field(default=0.01, metadata=positive())
+    #: Ramp channel (detect/ramp.py): a slide that starts is a ramp in the CoF.  Over
+    #: each horizon the least-squares ramp against the mean of the ``ramp_base_s``
+    #: before it, each axis in standard deviations of its own noise, must exceed
+    #: ``ramp_z`` ...
+    ramp_horizons_s: tuple[float, ...] = field(default=(0.05, 0.1, 0.2), metadata=positive())
+    ramp_base_s: float = field(default=0.2, metadata=positive())
+    #: (the smallest of 4.5-7.0 within the false-alarm target, 1 per hour of holding,
+    #: on the tuning seeds 0-4, 7 and 10-59: 0.7 per hour; 5.75 had none but a median
+    #: delay of 55 ms against 50: docs/evaluation.md)
+    ramp_z: float = field(default=5.5, metadata=positive())
+    #: While the force changes, and for a second after, a ramp must move the CoF this
+    #: far: a soft pad's CoF follows its force a little (the hand's swaying glass).
+    ramp_varying_mm: float = field(default=0.8, metadata=non_negative())
+    #: ... and the displacement it implies over the horizon this many mm.
+    ramp_min_mm: float = field(default=0.1, metadata=non_negative())
 
 
 @dataclass(frozen=True)

@@ -43,6 +43,9 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
     for z in (4.0, 5.0, 6.0, 8.0):
         for fast in (0.05, 0.1, 0.2):
             points.append(("cof-track", f"z{z} fast {fast}s", partial(CofTrack, z=z, fast_s=fast)))
+    for ramp_z in (4.5, 5.0, 6.0, 7.0, 1e9):  # the ramp channel's threshold (1e9: no ramp)
+        label = f"ramp z{ramp_z:g}" if ramp_z < 1e9 else "no ramp"
+        points.append(("cof-track", label, partial(CofTrack, ramp_z=ramp_z)))
     if importlib.util.find_spec("sklearn") is not None:  # the optional extra: one model, several decision rules
         for p, hops in ((0.5, 1), (0.7, 1), (0.5, 2), (0.7, 2), (0.5, 3), (0.7, 3)):
             points.append(("learned", f"p>{p} x{hops} hops", partial(learned, slip_p=p, confirm_hops=hops)))

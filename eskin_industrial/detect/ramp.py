@@ -1,0 +1,98 @@
+"""The ramp channel of ``cof-track``: has the centre of force started to move?
+
+A slide that starts turns the CoF from a constant into a ramp.  For a ramp that began
+``L`` samples ago, the best linear statistic (least squares, white noise) weights the
+newest samples ``1 .. L`` against the mean of the ``B`` samples before them:
+
+    num_L = sum_{j=1..L} j (c_{k-L+j} - mean(c_{k-L-B+1} .. c_{k-L}))        (2-vector)
+    sd_L  = sqrt(sum j^2 + (sum j)^2 / B)         (its noise, per unit sample noise)
+    T_L   = |(num_x / sigma_x, num_y / sigma_y)| / sd_L      (Rayleigh: P(T > z) = e^(-z^2/2))
+    d_L   = |num_L| L / sum j^2                  (the displacement the ramp implies, mm)
+
+and a slide is a ramp when ``T_L > z`` and ``d_L > min_mm`` for any horizon of a small
+bank (the onset time is unknown).  Each axis is divided by its own noise: an array
+with rows 20 mm apart has a CoF four times noisier across the rows, and a magnitude
+over the pooled noise then has a one-dimensional tail, far heavier than Rayleigh's
+(the light hand grip's false alarms before the axes were whitened).  Its delay grows as (sigma / speed)^(2/3), against
+(sigma / speed) for a two-window difference: docs/evaluation.md.
+
+All horizons are one (H x N) matrix product over the last N = max L + B centres,
+kept twice in a flat buffer so that the newest N are always one contiguous slice.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def ramp_weights(horizons: tuple[int, ...], base: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weights ``G`` (H x N, oldest sample first), the noise ``sd`` of each row for unit
+    sample noise, and ``disp``: mm of displacement per unit of ``|G c|``."""
+    n = max(horizons) + base
+    g = np.zeros((len(horizons), n))
+    sd = np.zeros(len(horizons))
+    disp = np.zeros(len(horizons))
+    for h, length in enumerate(horizons):
+        w = np.arange(1.0, length + 1.0)
+        g[h, n - length:] = w
+        g[h, n - length - base:n - length] = -w.sum() / base
+        sd[h] = math.sqrt(float(g[h] @ g[h]))
+        disp[h] = length / float(w @ w)
+    return g, sd, disp
+
+
+def ramp_batch(c: np.ndarray, sigma: np.ndarray, horizons: tuple[int, ...], base: int, z: float,
+               min_mm: float | np.ndarray) -> np.ndarray:
+    """The score (1 = threshold) at every sample of a (K, 2) CoF series, with the
+    per-axis noise (K, 2), and no streaming state: what :class:`RampBank` must
+    reproduce (NaN until N samples).  ``min_mm`` may change per sample (K,)."""
+    floors = np.broadcast_to(np.asarray(min_mm, dtype=float), (len(c),))
+    g, sd, disp = ramp_weights(horizons, base)
+    n = g.shape[1]
+    out = np.full(len(c), np.nan)
+    for k in range(n - 1, len(c)):
+        num = g @ c[k - n + 1:k + 1]
+        t = np.linalg.norm(num / sigma[k], axis=1) / sd
+        mm = np.linalg.norm(num, axis=1) * disp
+        floor = floors[k]
+        out[k] = float(np.max(np.minimum(t / z, mm / floor if floor > 0 else np.inf)))
+    return out
+
+
+class RampBank:
+    """Streaming :func:`ramp_batch`: ``push`` a centre, ``score`` with the current noise."""
+
+    def __init__(self, horizons: tuple[int, ...], base: int, z: float) -> None:
+        self.g, sd, disp = ramp_weights(horizons, base)
+        self.n = self.g.shape[1]
+        self._noise_unit = (sd * z).tolist()  # |whitened num| / this: 1 at the threshold
+        self._disp = disp.tolist()  # |num| x this: the displacement in mm
+        self.reset()
+
+    def reset(self) -> None:
+        self._buf = np.zeros((2 * self.n, 2))
+        self._i = 0
+        self.count = 0
+
+    def push(self, x: float, y: float) -> None:
+        i, n = self._i, self.n
+        self._buf[i] = self._buf[i + n] = (x, y)
+        self._i = i + 1 if i + 1 < n else 0
+        self.count += 1
+
+    def score(self, sigma_x: float, sigma_y: float, min_mm: float) -> float:
+        """Largest over the horizons of min(T / z, d / min_mm); 0 until N centres."""
+        if self.count < self.n or not (sigma_x > 0.0 and sigma_y > 0.0):
+            return 0.0
+        num = (self.g @ self._buf[self._i:self._i + self.n]).tolist()
+        best = 0.0
+        for h, (nx, ny) in enumerate(num):
+            wx, wy = nx / sigma_x, ny / sigma_y
+            r = math.sqrt(wx * wx + wy * wy) / self._noise_unit[h]
+            if min_mm > 0.0:
+                r = min(r, math.sqrt(nx * nx + ny * ny) * self._disp[h] / min_mm)
+            if r > best:
+                best = r
+        return best

@@ -1,0 +1,92 @@
+"""The ramp channel of cof-track (detect/ramp.py): its streaming state against the batch
+answer, its statistic against least squares, its false-alarm rate on white noise, and
+its delay on a ramp against the two-window difference it was added to beat."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from eskin_industrial.detect.ramp import RampBank, ramp_batch, ramp_weights
+
+HORIZONS, BASE = (5, 10, 20), 20
+
+
+def test_streaming_equals_batch() -> None:
+    rng = np.random.default_rng(5)
+    c = np.cumsum(rng.normal(0, 0.05, (400, 2)), axis=0)  # a wandering centre
+    sigma = np.abs(rng.normal(0.1, 0.02, (400, 2))) + 0.01
+    batch = ramp_batch(c, sigma, HORIZONS, BASE, z=5.0, min_mm=0.1)
+    bank = RampBank(HORIZONS, BASE, z=5.0)
+    stream = []
+    for k in range(len(c)):
+        bank.push(*c[k])
+        stream.append(bank.score(*sigma[k], 0.1))
+    n = max(HORIZONS) + BASE
+    assert stream[:n - 1] == [0.0] * (n - 1)
+    np.testing.assert_allclose(stream[n - 1:], batch[n - 1:], rtol=1e-12)
+    # and a reset forgets everything
+    bank.reset()
+    bank.push(1.0, 1.0)
+    assert bank.score(0.1, 0.1, 0.1) == 0.0
+
+
+def test_weights_are_the_least_squares_ramp_against_the_base() -> None:
+    """G c, for a ramp of speed v starting L samples ago, is v * sum j^2 per axis: so
+    |G c| * disp is the displacement over the horizon."""
+    g, sd, disp = ramp_weights(HORIZONS, BASE)
+    n = g.shape[1]
+    for h, length in enumerate(HORIZONS):
+        c = np.zeros((n, 2))
+        c[n - length:, 0] = 0.03 * np.arange(1, length + 1)  # 0.03 mm a sample along x
+        num = g[h] @ c
+        assert num[1] == 0.0
+        assert num[0] * disp[h] == pytest.approx(0.03 * length)
+        # the rows have no response to a constant (an offset is not a ramp)
+        assert abs(g[h].sum()) < 1e-9
+        assert sd[h] == pytest.approx(math.sqrt((g[h] ** 2).sum()))
+
+
+@pytest.mark.parametrize("sigma_x, sigma_y", [(0.2, 0.2), (0.05, 0.4)])
+def test_white_noise_crosses_the_threshold_as_rarely_as_its_rayleigh_tail(sigma_x, sigma_y) -> None:
+    """Under white noise the whitened statistic exceeds z with probability
+    exp(-z^2 / 2) per horizon, however unequal the axes' noise (rows 20 mm apart make
+    y four times noisier); a bank of three horizons, strongly correlated, stays within
+    three times one horizon's rate."""
+    rng = np.random.default_rng(11)
+    c = rng.normal(0, 1, (60_000, 2)) * (sigma_x, sigma_y)
+    z = 2.2
+    sigma = np.tile((sigma_x, sigma_y), (len(c), 1))
+    scores = ramp_batch(c, sigma, HORIZONS, BASE, z=z, min_mm=0.0)
+    rate = float(np.mean(scores[~np.isnan(scores)] > 1.0))
+    one = math.exp(-z * z / 2)
+    assert one < rate < 3 * one
+
+
+def test_a_ramp_is_found_sooner_than_by_a_two_window_difference() -> None:
+    """At the same false-alarm margin the ramp statistic needs (sigma/v)^(2/3) samples,
+    a difference of two means (sigma/v): on a slow ramp it must be clearly faster.
+    Both thresholds are z times the rms of their statistic's 2-D magnitude (whitened,
+    the ramp's rms is sqrt(2) per-axis units)."""
+    rng = np.random.default_rng(3)
+    sigma, v = 0.1, 0.01  # mm per sample: a slow slide deep in the noise
+    onset, z = 300, 5.0
+    delays_ramp, delays_diff = [], []
+    for _ in range(20):
+        c = rng.normal(0, sigma / math.sqrt(2), (600, 2))
+        c[onset:, 0] += v * np.arange(1, 600 - onset + 1)
+        score = ramp_batch(c, np.full((len(c), 2), sigma / math.sqrt(2)), HORIZONS, BASE, z=z * math.sqrt(2), min_mm=0.0)
+        delays_ramp.append(int(np.argmax(score[onset:] > 1.0)))
+        # the two-window difference: mean of the last 3 against the mean 10 samples back,
+        # threshold z times the rms of that difference
+        m = np.convolve(c[:, 0], np.ones(3) / 3, mode="full")[:len(c)]
+        my = np.convolve(c[:, 1], np.ones(3) / 3, mode="full")[:len(c)]
+        d = np.hypot(m[10:] - m[:-10], my[10:] - my[:-10])
+        thr = z * sigma * math.sqrt(2 / 3)
+        hit = np.flatnonzero(d[onset - 10:] > thr)
+        delays_diff.append(int(hit[0]) if hit.size else 300)
+    assert 0 < np.median(delays_ramp) < 0.7 * np.median(delays_diff)
+    # and nothing before the onset
+    assert min(delays_ramp) > 0
