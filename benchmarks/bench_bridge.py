@@ -172,7 +172,6 @@ def latencies(decisions: list[tuple[int, int]], arrival: dict[int, float], write
 # -- our bridge -------------------------------------------------------------------------
 
 def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, channel: str):
-    from eskin_industrial import load_profile
     from eskin_industrial.bridge.config import BridgeConfig, NodeConfig, PlcOutput, resolve
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge

@@ -120,3 +120,15 @@ def test_evaluate_takes_the_detector_settings_from_a_profile(tmp_path):
 
     assert false_alarms([]) == 0
     assert false_alarms(["-p", str(loose)]) > 0  # a threshold at the noise: the still hold flags slip
+
+
+def test_seed_lists_mix_single_seeds_and_ranges():
+    from click.testing import CliRunner
+
+    from eskin_industrial.cli import main
+    from eskin_industrial.cli.evaluate_cmd import _seeds
+
+    assert _seeds("0..4,7,10..12") == (0, 1, 2, 3, 4, 7, 10, 11, 12)
+    assert _seeds("tuning") == TUNING_SEEDS and _seeds("1000") == (1000,)
+    res = CliRunner().invoke(main, ["evaluate", "-m", "cof-track", "--seeds", "0..x"])
+    assert res.exit_code == 2 and "0..4,7,10..59" in res.output

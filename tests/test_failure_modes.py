@@ -96,3 +96,23 @@ def test_a_touch_at_the_contact_threshold_does_not_toggle_the_state():
     states = np.array([u.state for u in det.feed(t, forces)])
     touched = np.flatnonzero(states != GraspState.NO_CONTACT)[0]
     assert not (states[touched:] == GraspState.NO_CONTACT).any()  # once touching, no flicker back
+
+
+def test_a_swaying_glass_on_a_hand_with_eight_dead_taxels_stays_bounded():
+    """The failure the map found for cof-track: 8 of the hand's 20 taxels dead, and the
+    glass swayed.  Some sways read as slip (the ramp channel is silenced by a varying
+    force, and half the force is on dead taxels); pinned here: every such episode is
+    short and few, the indicators stay finite, and the real slip is still found."""
+    spec = conditions.dead_taxels(8)(load_scene("hand"))
+    rec = render(spec, 100.0, 1)  # a tuning seed where the sway reads as slip three times
+    table, _ = run_one(get_method("cof-track").stream, DetectorSettings(), rec)
+    assert np.isfinite(table.r_coe).all() and np.isfinite(table.r_dw).all()
+    s = score_scene(table, rec.t, rec.labels)
+    assert s.found == s.events == 1
+    assert 1 <= s.false_alarms <= 4
+    slip = np.asarray(table.state) == int(GraspState.SLIP)
+    t = np.asarray(table.t)
+    starts = np.flatnonzero(slip & ~np.r_[False, slip[:-1]])
+    ends = np.flatnonzero(slip & ~np.r_[slip[1:], False])
+    false_lengths = [t[b] - t[a] for a, b in zip(starts, ends) if t[a] < 15.5]
+    assert len(false_lengths) == s.false_alarms and max(false_lengths) <= 0.3

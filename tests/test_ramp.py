@@ -17,13 +17,14 @@ HORIZONS, BASE = (5, 10, 20), 20
 def test_streaming_equals_batch() -> None:
     rng = np.random.default_rng(5)
     c = np.cumsum(rng.normal(0, 0.05, (400, 2)), axis=0)  # a wandering centre
-    sigma = np.abs(rng.normal(0.1, 0.02, (400, 2))) + 0.01
-    batch = ramp_batch(c, sigma, HORIZONS, BASE, z=5.0, min_mm=0.1)
+    q = (np.abs(rng.normal(0.1, 0.02, (400, 2))) + 0.01) ** 2  # each axis' noise variance
+    scale = rng.uniform(0.2, 5.0, 400)  # each centre's own noise scale (1 / S^2)
+    batch = ramp_batch(c, q, HORIZONS, BASE, z=5.0, min_mm=0.1, scale=scale)
     bank = RampBank(HORIZONS, BASE, z=5.0)
     stream = []
     for k in range(len(c)):
-        bank.push(*c[k])
-        stream.append(bank.score(*sigma[k], 0.1))
+        bank.push(*c[k], scale[k])
+        stream.append(bank.score(*q[k], 0.1))
     n = max(HORIZONS) + BASE
     assert stream[:n - 1] == [0.0] * (n - 1)
     np.testing.assert_allclose(stream[n - 1:], batch[n - 1:], rtol=1e-12)
@@ -58,8 +59,8 @@ def test_white_noise_crosses_the_threshold_as_rarely_as_its_rayleigh_tail(sigma_
     rng = np.random.default_rng(11)
     c = rng.normal(0, 1, (60_000, 2)) * (sigma_x, sigma_y)
     z = 2.2
-    sigma = np.tile((sigma_x, sigma_y), (len(c), 1))
-    scores = ramp_batch(c, sigma, HORIZONS, BASE, z=z, min_mm=0.0)
+    q = np.tile((sigma_x ** 2, sigma_y ** 2), (len(c), 1))
+    scores = ramp_batch(c, q, HORIZONS, BASE, z=z, min_mm=0.0)
     rate = float(np.mean(scores[~np.isnan(scores)] > 1.0))
     one = math.exp(-z * z / 2)
     assert one < rate < 3 * one
@@ -77,7 +78,7 @@ def test_a_ramp_is_found_sooner_than_by_a_two_window_difference() -> None:
     for _ in range(20):
         c = rng.normal(0, sigma / math.sqrt(2), (600, 2))
         c[onset:, 0] += v * np.arange(1, 600 - onset + 1)
-        score = ramp_batch(c, np.full((len(c), 2), sigma / math.sqrt(2)), HORIZONS, BASE, z=z * math.sqrt(2), min_mm=0.0)
+        score = ramp_batch(c, np.full((len(c), 2), sigma ** 2 / 2), HORIZONS, BASE, z=z * math.sqrt(2), min_mm=0.0)
         delays_ramp.append(int(np.argmax(score[onset:] > 1.0)))
         # the two-window difference: mean of the last 3 against the mean 10 samples back,
         # threshold z times the rms of that difference
@@ -90,3 +91,21 @@ def test_a_ramp_is_found_sooner_than_by_a_two_window_difference() -> None:
     assert 0 < np.median(delays_ramp) < 0.7 * np.median(delays_diff)
     # and nothing before the onset
     assert min(delays_ramp) > 0
+
+
+def test_the_noise_is_the_windows_not_the_current_frames() -> None:
+    """A centre's noise scales as 1 / S; when S swings within the window (a machine's
+    vibration), white noise of that changing size must still cross the threshold as
+    rarely as steady noise does: the bank uses the window's mean scale."""
+    rng = np.random.default_rng(2)
+    k = 60_000
+    force = 3.0 + 2.0 * np.sin(2 * np.pi * 0.37 * np.arange(k))  # 1-5 N, sample to sample
+    scale = 1.0 / force ** 2
+    c = rng.normal(0, 1, (k, 2)) * np.sqrt(0.04 * scale)[:, None]  # noise variance 0.04 / S^2
+    z = 2.2
+    q = np.full((k, 2), 0.04)
+    mean_scale = ramp_batch(c, q, HORIZONS, BASE, z=z, min_mm=0.0, scale=scale)
+    current = ramp_batch(c, q * scale[:, None], HORIZONS, BASE, z=z, min_mm=0.0)
+    one = math.exp(-z * z / 2)
+    assert float(np.nanmean(mean_scale > 1.0)) < 3 * one
+    assert float(np.nanmean(current > 1.0)) > 3 * one  # the frame's own S misjudges it

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import math
 import time
+from typing import Any
 from pathlib import Path
 
 import click
@@ -20,13 +22,17 @@ def _seeds(value: str) -> tuple[int, ...]:
         return EVALUATION_SEEDS
     if value == "tuning":
         return TUNING_SEEDS
+    seeds: list[int] = []
     try:
-        if ".." in value:
-            a, b = value.split("..")
-            return tuple(range(int(a), int(b) + 1))
-        return tuple(int(v) for v in value.split(","))
+        for item in value.split(","):  # N or N..M, any mix: 0..4,7,10..59
+            if ".." in item:
+                a, b = item.split("..")
+                seeds.extend(range(int(a), int(b) + 1))
+            else:
+                seeds.append(int(item))
     except ValueError:
-        raise click.BadParameter(f"expected 'evaluation', 'tuning', N..M or N,M,..., got {value!r}") from None
+        raise click.BadParameter(f"expected 'evaluation', 'tuning' or seeds such as 0..4,7,10..59, got {value!r}") from None
+    return tuple(seeds)
 
 
 @click.command()
@@ -34,7 +40,7 @@ def _seeds(value: str) -> tuple[int, ...]:
               help="Method to score (repeatable; default: all).")
 @click.option("-s", "--scene", "scenes", multiple=True, help="Scene (repeatable; default: the built-in suite).")
 @click.option("--seeds", default="evaluation", show_default=True,
-              help="'evaluation' (held out), 'tuning', N..M or N,M,...")
+              help="'evaluation' (held out), 'tuning', or seeds and ranges: 0..4,7,10..59")
 @click.option("--rate", "rate_hz", type=click.FloatRange(min=1.0), default=100.0, show_default=True)
 @click.option("--tolerance", "tolerance_s", type=float, default=0.5, show_default=True,
               help="A slip flag up to this long after a slip ends still counts as found.")
@@ -82,12 +88,20 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
     for name, r in res.items():
         s = r.score
         click.echo(f"| {name} | {s.events} | {s.found} | {s.f1:.3f} | {s.false_alarms} ({s.false_alarms_per_hour:.1f}) | "
-                   f"{s.vf_as_slip} | {s.delay_percentile(50) * 1000:.0f} / {s.delay_percentile(90) * 1000:.0f} | "
-                   f"{r.us_per_frame:.1f} | {r.us_per_frame / paper_us:.1f}x |")
+                   f"{s.vf_as_slip} | {_delays(s)} | {r.us_per_frame:.1f} | {_num(r.us_per_frame / paper_us, 'x')} |")
         if per_scene:
             for scene, ss in r.per_scene.items():
                 click.echo(f"|   {scene} | {ss.events} | {ss.found} | {ss.f1:.3f} | {ss.false_alarms} | {ss.vf_as_slip} | "
-                           f"{ss.delay_percentile(50) * 1000:.0f} / {ss.delay_percentile(90) * 1000:.0f} | | |")
+                           f"{_delays(ss)} | | |")
+
+
+def _num(value: float, unit: str = "", digits: int = 1) -> str:
+    """A figure, or '-' where there is none (no slip found, no paper in the run)."""
+    return f"{value:.{digits}f}{unit}" if math.isfinite(value) else "-"
+
+
+def _delays(score: Any) -> str:
+    return f"{_num(score.delay_percentile(50) * 1000, digits=0)} / {_num(score.delay_percentile(90) * 1000, digits=0)}"
 
 
 def _prepare_learned(names: tuple[str, ...], explicit: bool) -> tuple[str, ...]:

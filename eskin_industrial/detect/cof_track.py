@@ -56,9 +56,10 @@ class CofTrack(ScoredDetector):
         self._settle = max(1, round(self.settle_s * rate_hz))
         self._steady_n = max(1, round(1.0 * rate_hz))
         self.vib_ratio, self.vib_support = c.vib_ratio, c.vib_support
-        self.ramp_min, self.ramp_varying = c.ramp_min_mm, max(c.ramp_varying_mm, c.ramp_min_mm)
-        self._ramp = RampBank(tuple(max(2, round(h * rate_hz)) for h in c.ramp_horizons_s),
-                              max(2, round(c.ramp_base_s * rate_hz)), c.ramp_z)
+        self.ramp_min = c.ramp_min_mm
+        horizons = tuple(max(2, round(h * rate_hz)) for h in c.ramp_horizons_s)
+        base = max(2, round(c.ramp_base_s * rate_hz))
+        self._ramp = RampBank(horizons, base, c.ramp_z)
         self.fast_score = self.ramp_score = 0.0  # the two parts of the first column
         self._noise: float | None = None  # learnt CoF noise, in force units (N^2 mm^2)
         self._noise_x = 0.0  # the part of it along x (sigma_x^2 S^2)
@@ -125,7 +126,7 @@ class CofTrack(ScoredDetector):
         # the ramp's base must not hold the grab: its centres start once it has settled;
         # a held copy is no sample (repeats would count one noise draw twice)
         if not self.filled:
-            self._ramp.push(xc, yc)
+            self._ramp.push(xc, yc, 1.0 / (s * s))
         noise_d = self.z * math.sqrt(2.0 * self._noise / self.m) / s
         a = math.hypot(mx - fast[0], my - fast[1]) / max(noise_d, self.min_fast) if fast is not None else 0.0
         b = 0.0
@@ -148,13 +149,13 @@ class CofTrack(ScoredDetector):
         # load moves a soft contact's CoF in steps too)
         self._calm_force = 0 if varying else self._calm_force + 1
         steady = self._calm_force > self._steady_n
-        # the ramp weighs raw centres, each axis against its own noise (one centre's
-        # standard deviation; the floor keeps a constant axis, a strip's y, harmless)
+        # the ramp weighs raw centres, each axis against its own noise (in force units,
+        # like q; the floor keeps a constant axis, a strip's y, harmless)
         qx, qy = self._noise_x, self._noise - self._noise_x
         floor = 0.0025 * self._noise
-        # (a changing force moves a soft pad's CoF a little by itself: a sway is no slip)
-        r = self._ramp.score(math.sqrt(max(qx, floor)) / s, math.sqrt(max(qy, floor)) / s,
-                             self.ramp_min if steady else self.ramp_varying)
+        # (silent while the force changes and for a second after, like the stick-slip
+        # channel: a soft pad's CoF follows its force, and a swaying glass is no slip)
+        r = self._ramp.score(max(qx, floor), max(qy, floor), self.ramp_min) if steady else 0.0
         self.fast_score, self.ramp_score = a, r
         slip = a > 1.0 or b > 1.0 or r > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
         if not slip and a < 0.5 and not self.filled:  # learn the noise only while calm

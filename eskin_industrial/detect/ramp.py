@@ -16,6 +16,11 @@ over the pooled noise then has a one-dimensional tail, far heavier than Rayleigh
 (the light hand grip's false alarms before the axes were whitened).  Its delay grows as (sigma / speed)^(2/3), against
 (sigma / speed) for a two-window difference: docs/evaluation.md.
 
+A centre's noise is the force noise spread over the total force, so it scales as
+1 / S: with each centre the caller pushes that scale (1 / S^2), and the noise used is
+q times its mean over the window (under a machine's vibration S swings by a factor
+of five within the window, and the current frame's S alone misjudged it).
+
 All horizons are one (H x N) matrix product over the last N = max L + B centres,
 kept twice in a flat buffer so that the newest N are always one contiguous slice.
 """
@@ -43,18 +48,21 @@ def ramp_weights(horizons: tuple[int, ...], base: int) -> tuple[np.ndarray, np.n
     return g, sd, disp
 
 
-def ramp_batch(c: np.ndarray, sigma: np.ndarray, horizons: tuple[int, ...], base: int, z: float,
-               min_mm: float | np.ndarray) -> np.ndarray:
-    """The score (1 = threshold) at every sample of a (K, 2) CoF series, with the
-    per-axis noise (K, 2), and no streaming state: what :class:`RampBank` must
-    reproduce (NaN until N samples).  ``min_mm`` may change per sample (K,)."""
+def ramp_batch(c: np.ndarray, q: np.ndarray, horizons: tuple[int, ...], base: int, z: float,
+               min_mm: float | np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
+    """The score (1 = threshold) at every sample of a (K, 2) CoF series, with no
+    streaming state: what :class:`RampBank` must reproduce (NaN until N samples).
+    ``q`` (K, 2): each axis' noise variance per unit ``scale``; ``scale`` (K,), each
+    centre's noise scale (1 by default); ``min_mm`` may change per sample (K,)."""
     floors = np.broadcast_to(np.asarray(min_mm, dtype=float), (len(c),))
+    scale = np.ones(len(c)) if scale is None else scale
     g, sd, disp = ramp_weights(horizons, base)
     n = g.shape[1]
     out = np.full(len(c), np.nan)
     for k in range(n - 1, len(c)):
         num = g @ c[k - n + 1:k + 1]
-        t = np.linalg.norm(num / sigma[k], axis=1) / sd
+        sigma = np.sqrt(q[k] * scale[k - n + 1:k + 1].mean())
+        t = np.linalg.norm(num / sigma, axis=1) / sd
         mm = np.linalg.norm(num, axis=1) * disp
         floor = floors[k]
         out[k] = float(np.max(np.minimum(t / z, mm / floor if floor > 0 else np.inf)))
@@ -62,7 +70,8 @@ def ramp_batch(c: np.ndarray, sigma: np.ndarray, horizons: tuple[int, ...], base
 
 
 class RampBank:
-    """Streaming :func:`ramp_batch`: ``push`` a centre, ``score`` with the current noise."""
+    """Streaming :func:`ramp_batch`: ``push`` a centre and its noise scale, ``score``
+    with the current noise variance per unit scale."""
 
     def __init__(self, horizons: tuple[int, ...], base: int, z: float) -> None:
         self.g, sd, disp = ramp_weights(horizons, base)
@@ -73,19 +82,27 @@ class RampBank:
 
     def reset(self) -> None:
         self._buf = np.zeros((2 * self.n, 2))
+        self._scale = [0.0] * self.n
+        self._scale_sum = 0.0
         self._i = 0
         self.count = 0
 
-    def push(self, x: float, y: float) -> None:
+    def push(self, x: float, y: float, scale: float = 1.0) -> None:
         i, n = self._i, self.n
         self._buf[i] = self._buf[i + n] = (x, y)
+        self._scale_sum += scale - self._scale[i]  # the sample n pushes ago leaves
+        self._scale[i] = scale
         self._i = i + 1 if i + 1 < n else 0
         self.count += 1
+        if self._i == 0:  # once a round, against the running sum's rounding drift
+            self._scale_sum = math.fsum(self._scale)
 
-    def score(self, sigma_x: float, sigma_y: float, min_mm: float) -> float:
+    def score(self, q_x: float, q_y: float, min_mm: float) -> float:
         """Largest over the horizons of min(T / z, d / min_mm); 0 until N centres."""
-        if self.count < self.n or not (sigma_x > 0.0 and sigma_y > 0.0):
+        mean_scale = self._scale_sum / self.n
+        if self.count < self.n or not (q_x > 0.0 and q_y > 0.0 and mean_scale > 0.0):
             return 0.0
+        sigma_x, sigma_y = math.sqrt(q_x * mean_scale), math.sqrt(q_y * mean_scale)
         num = (self.g @ self._buf[self._i:self._i + self.n]).tolist()
         best = 0.0
         for h, (nx, ny) in enumerate(num):

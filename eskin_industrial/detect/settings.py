@@ -58,9 +58,6 @@ class CofTrackSettings:
     #: on the tuning seeds 0-4, 7 and 10-59: 0.7 per hour; 5.75 had none but a median
     #: delay of 55 ms against 50: docs/evaluation.md)
     ramp_z: float = field(default=5.5, metadata=positive())
-    #: While the force changes, and for a second after, a ramp must move the CoF this
-    #: far: a soft pad's CoF follows its force a little (the hand's swaying glass).
-    ramp_varying_mm: float = field(default=0.8, metadata=non_negative())
     #: ... and the displacement it implies over the horizon this many mm.
     ramp_min_mm: float = field(default=0.1, metadata=non_negative())
 
