@@ -134,7 +134,7 @@ def test_a_failing_bus_reads_bus_fault_and_recovers(paper_profile, monkeypatch):
             node.start()
             wait_for(lambda: run.block(0)["STATUS"] & Status.DATA_VALID, what="valid data before the fault")
             reader = run.bridge.groups[0][0].reader
-            opener = FlakyOpener(reader._open, down_s=0.5)
+            opener = FlakyOpener(reader._open, down_s=1.0)  # several 0.2 s retries, even on a loaded machine
             monkeypatch.setattr(reader, "_open", opener)
             reader.bus.shutdown()  # the adapter goes away under the reader: its next recv fails
             wait_for(lambda: run.block(0)["STATUS"] & Status.BUS_FAULT, what="BUS_FAULT")
