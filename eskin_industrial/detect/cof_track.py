@@ -15,7 +15,8 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     a    = D_f / max(n, min_fast_mm)
     b    = min(D_s / T, onward / max(T/2, 0.75 n)),   T = max(n, min_slow_mm)
     r    = the ramp channel (detect/ramp.py): a least-squares ramp in the raw CoF against
-           the mean before it, over a bank of horizons, in units of ramp_z sigma
+           the mean before it, over a bank of horizons, each axis in units of ramp_z of
+           its own noise (q_x, q_y learnt like q); only while the force is steady
     slip when a > 1, b > 1 or r > 1, or the stick-slip channel fires (below) while the
     force is steady
 

@@ -13,8 +13,9 @@ and a slide is a ramp when ``T_L > z`` and ``d_L > min_mm`` for any horizon of a
 bank (the onset time is unknown).  Each axis is divided by its own noise: an array
 with rows 20 mm apart has a CoF four times noisier across the rows, and a magnitude
 over the pooled noise then has a one-dimensional tail, far heavier than Rayleigh's
-(the light hand grip's false alarms before the axes were whitened).  Its delay grows as (sigma / speed)^(2/3), against
-(sigma / speed) for a two-window difference: docs/evaluation.md.
+(the light hand grip's false alarms before the axes were whitened).  Its delay grows
+as (sigma / speed)^(2/3), against (sigma / speed) for a two-window difference:
+docs/evaluation.md.
 
 A centre's noise is the force noise spread over the total force, so it scales as
 1 / S: with each centre the caller pushes that scale (1 / S^2), and the noise used is
