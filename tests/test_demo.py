@@ -5,28 +5,9 @@ import re
 import subprocess
 import sys
 
-SCENE = """
-[scene]
-name = "short-slide"
-profile = "paper-5x5"
-duration_s = 5.0
+from conftest import press_scene
 
-[footprint]
-size_mm = [20.0, 20.0]
-centre_mm = [10.0, 10.0]
-
-[[events]]
-kind = "press"
-t_s = 0.5
-duration_s = 0.4
-force_n = 8.0
-
-[[events]]
-kind = "slide"
-t_s = 3.0
-distance_mm = [6.0, 0.0]
-speed_mm_s = 10.0
-"""
+SCENE = press_scene("short-slide", 5.0, press_t=0.5, press_s=0.4, force_n=8.0, slide_t=3.0)
 
 
 def test_demo_runs_the_whole_chain_and_the_plc_sees_the_slip(tmp_path):
@@ -45,22 +26,7 @@ def test_demo_runs_the_whole_chain_and_the_plc_sees_the_slip(tmp_path):
     assert p99 < 50.0  # loopback write, generous for a loaded machine (the benchmark holds the 5 ms figure)
 
 
-QUICK = """
-[scene]
-name = "quick-press"
-profile = "paper-5x5"
-duration_s = 2.0
-
-[footprint]
-size_mm = [20.0, 20.0]
-centre_mm = [10.0, 10.0]
-
-[[events]]
-kind = "press"
-t_s = 0.3
-duration_s = 0.3
-force_n = 6.0
-"""
+QUICK = press_scene("quick-press", 2.0, press_t=0.3, press_s=0.3, force_n=6.0)
 
 
 def run_in_terminal(args: list[str], cols: int = 80, rows: int = 24, timeout_s: float = 60.0):

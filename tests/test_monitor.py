@@ -22,32 +22,11 @@ from eskin_industrial.pipeline import Pipeline, RawScan
 from eskin_industrial.scenes import render
 from eskin_industrial.view.live import change_line
 
-from conftest import PROFILES
+from conftest import PROFILES, press_scene
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 
-SCENE = """
-[scene]
-name = "short-slide"
-profile = "paper-5x5"
-duration_s = 4.0
-
-[footprint]
-size_mm = [20.0, 20.0]
-centre_mm = [10.0, 10.0]
-
-[[events]]
-kind = "press"
-t_s = 0.5
-duration_s = 0.4
-force_n = 8.0
-
-[[events]]
-kind = "slide"
-t_s = 2.5
-distance_mm = [6.0, 0.0]
-speed_mm_s = 10.0
-"""
+SCENE = press_scene("short-slide", 4.0, press_t=0.5, press_s=0.4, force_n=8.0, slide_t=2.5)
 
 
 @pytest.fixture
