@@ -26,11 +26,11 @@ from .bus.modbus_bridge import ModbusBridge
 from .bus.plc_client import PlcWriter
 from .bus.plc_sim import PlcSimulator
 from .calibration import Calibrator
-from .detect.state import GraspState
 from .detect.updates import Update, UpdateTable
 from .evaluation.metrics import SceneScore, score_scene
 from .profile import Profile
 from .scenes import Rendered
+from .view.live import change_line
 
 
 @dataclass
@@ -82,8 +82,7 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
     def observed(u: Update) -> None:
         if not result.updates or u.state != result.updates[-1].state:
             truth = rec.labels[min(np.searchsorted(rec.t, u.t), len(rec.t) - 1)]
-            say(f"{u.t:7.2f} s  {GraspState(u.state).label:15s} valid={int(u.valid)}  "
-                f"F={u.f_sum:5.2f} N  scores {u.r_coe:6.2f} {u.r_dw:6.2f}   (truth: {truth})")
+            say(f"{change_line(u)}   (truth: {truth})")
         result.updates.append(u)
 
     bridge = ModbusBridge(profile, CanScanPoller(reader, ScanAssembler(layout, rec.rate_hz)), writer,

@@ -23,6 +23,12 @@ from .schema import SchemaError, in_range, non_negative, parse_toml, positive, r
 STALE_PERIODS = 2.5
 
 
+def derived_stale_s(rate_hz: float, poll_hz: float | None) -> float:
+    """The default ``[modbus.plc] stale_s``: 2.5 periods of the slower of the scan
+    rate and the RTU poll rate."""
+    return STALE_PERIODS / min(rate_hz, poll_hz or rate_hz)
+
+
 @dataclass(frozen=True)
 class SensorSection:
     name: str
@@ -270,8 +276,7 @@ class Profile:
 
         if self.modbus.plc.stale_s is None:
             # Resolved here, once, so every consumer reads a number.
-            rate = min(self.sensor.rate_hz, self.modbus.node.poll_hz or self.sensor.rate_hz)
-            plc = replace(self.modbus.plc, stale_s=STALE_PERIODS / rate)
+            plc = replace(self.modbus.plc, stale_s=derived_stale_s(self.sensor.rate_hz, self.modbus.node.poll_hz))
             object.__setattr__(self, "modbus", replace(self.modbus, plc=plc))
 
     @property

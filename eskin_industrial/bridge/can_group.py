@@ -11,7 +11,6 @@ to every node, since a bus error concerns them all; frames of no node are counte
 from __future__ import annotations
 
 import collections
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,6 +19,7 @@ import can
 
 from ..bus.can_layout import ID_RANGE, CanLayout, ScanAssembler
 from ..bus.can_poll import CanScanPoller
+from ..bus.can_source import FrameThread
 from ..errors import EskinError
 from .config import ResolvedNode
 
@@ -93,13 +93,13 @@ class CanGroup:
     @property
     def done(self) -> bool:
         """A replayed log has ended and every frame was handed on."""
-        return bool(getattr(self.reader, "done", False)) and not self.reader.queue
+        return self.reader.done and not self.reader.queue
 
     def stop(self) -> None:
         self.reader.stop()
 
 
-class LogPlayer:
+class LogPlayer(FrameThread):
     """A CAN log replayed at its own pace into a bounded queue, as if received.
 
     Frames keep their relative timing; their timestamps are moved to the replay's
@@ -107,23 +107,14 @@ class LogPlayer:
     stops the replay; the error is kept in ``last_error``.
     """
 
+    thread_name = "can-log-player"
+
     def __init__(self, path: str | Path, messages: Iterator[can.Message], queue_frames: int = 200_000,
                  speed: float = 1.0) -> None:
+        super().__init__(queue_frames, log_frames=0)
         self.path = str(path)
         self._messages = messages
-        self.queue: collections.deque[can.Message] = collections.deque()
-        self.max_frames = queue_frames
         self.speed = speed
-        self.counters = {"rx_queue_drops": 0, "bus_errors": 0, "bus_reopens": 0, "log_frames": 0}
-        self.arrived = threading.Event()
-        self.last_error = ""
-        self.done = False
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="can-log-player", daemon=True)
-
-    def start(self) -> "LogPlayer":
-        self._thread.start()
-        return self
 
     def _run(self) -> None:
         first_log = first_wall = None
@@ -150,8 +141,3 @@ class LogPlayer:
         finally:
             self.done = True
             self.arrived.set()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=2.0)

@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Literal
 
 from ..errors import ProfileError
-from ..profile import STALE_PERIODS, Profile, load_profile
+from ..profile import Profile, derived_stale_s, load_profile
 from ..schema import in_range, parse_toml, positive, read_toml_file
 
 SourceKind = Literal["can", "can-log", "modbus-rtu", "scene"]
@@ -208,12 +208,13 @@ def _apply_overrides(prof: Profile, nc: NodeConfig) -> Profile:
         # A stale limit the profile did not set was derived from the profile's rate;
         # a node running slower must get its own, or it reads stale between two scans.
         poll = prof.modbus.node.poll_hz
-        if plc.stale_s == STALE_PERIODS / min(prof.sensor.rate_hz, poll or prof.sensor.rate_hz):
-            plc = replace(plc, stale_s=STALE_PERIODS / min(nc.rate_hz, poll or nc.rate_hz))
+        if plc.stale_s == derived_stale_s(prof.sensor.rate_hz, poll):
+            plc = replace(plc, stale_s=derived_stale_s(nc.rate_hz, poll))
     return replace(prof, can=can, modbus=replace(prof.modbus, node=node, plc=plc))
 
 
 def _check_together(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
+    from ..bus.can_layout import ID_RANGE
     from ..bus.plc_image import IMAGE_COUNT
 
     src = config.source
@@ -237,9 +238,9 @@ def _check_together(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
     for group in by_bus.values():
         spans = sorted((n.profile.can.base_id, n.profile.can.extended_id, n.name) for n in group)
         for (lo, ext_a, a), (hi, ext_b, b) in zip(spans, spans[1:]):
-            if ext_a == ext_b and hi - lo < 16:
+            if ext_a == ext_b and hi - lo < ID_RANGE:
                 raise ProfileError(f"{src}: [node {b!r}] base_id: {hi:#x} overlaps node {a!r} at {lo:#x} on the same "
-                                   f"bus (a node takes 16 IDs; set base_id)")
+                                   f"bus (a node takes {ID_RANGE} IDs; set base_id)")
     out = config.plc
     if out.transport == "rtu" and _mode(config, nodes) == "client" and len(nodes) > 1:
         raise ProfileError(f"{src}: [plc] transport: a PLC on a serial line takes one node in client mode "

@@ -322,14 +322,11 @@ class Bridge:
                            error=(getattr(stats, "last_error", "") or "-") if not value else "-")
 
     def counters(self) -> dict[str, dict[str, int]]:
-        out = {}
-        for run in self.runs:
-            c = dict(run.bridge.counters())
-            for group, members in self.groups:
-                if run in [self.runs[i] for i in members]:
-                    c["unrouted_frames"] = group.unrouted_frames
-            out[run.name] = c
-        return out
+        out = [dict(run.bridge.counters()) for run in self.runs]
+        for group, members in self.groups:  # frames of no node on a shared bus
+            for i in members:
+                out[i]["unrouted_frames"] = group.unrouted_frames
+        return {run.name: c for run, c in zip(self.runs, out)}
 
     def log_counters(self, event: str) -> None:
         for name, c in self.counters().items():

@@ -30,12 +30,15 @@ import can
 from ..detect.updates import Update, UpdateTable
 from ..errors import EskinError, InputFormatError
 from ..pipeline import Pipeline, RawScan
-from .can_layout import CanLayout, ScanAssembler, decode_messages
+from .can_layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
 
 #: Socket receive buffer asked for on SocketCAN (the kernel default holds a few
 #: hundred frames: a 1 Mbit/s bus fills it in tens of milliseconds).
 DEFAULT_RCVBUF_BYTES = 8 * 1024 * 1024
 DEFAULT_QUEUE_FRAMES = 200_000
+#: For a command whose reader thread needs the interpreter for every frame: a short
+#: switch interval keeps it from waiting behind the detector (the default is 5 ms).
+READER_SWITCH_INTERVAL_S = 0.0002
 
 
 class CanBusError(EskinError):
@@ -99,32 +102,52 @@ def enlarge_rcvbuf(bus: can.BusABC, size: int) -> int | None:
     return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
 
 
-class BusReader:
-    """A thread that reads a bus into a bounded queue and survives bus failures.
+class FrameThread:
+    """A thread that fills a bounded frame queue, what a scan poller reads: ``queue``,
+    ``arrived`` (set after frames were queued: a consumer waits on it instead of
+    polling), ``counters`` (``rx_queue_drops``: frames dropped because the consumer
+    fell behind; ``bus_errors``; ``bus_reopens``), ``last_error`` and ``done`` (the
+    source has ended: never, for a live bus).  Subclasses write ``_run``."""
 
-    ``open`` is called to (re)open the bus.  Counters: ``rx_queue_drops`` (frames
-    dropped because the consumer fell behind), ``bus_errors`` (failed reads or
-    reopens), ``bus_reopens`` (successful reopens after a failure).
-    """
+    done = False
+    thread_name = "can-frames"
+
+    def __init__(self, queue_frames: int, **counters: int) -> None:
+        self.queue: collections.deque[can.Message] = collections.deque()
+        self.max_frames = queue_frames
+        self.counters = {"rx_queue_drops": 0, "bus_errors": 0, "bus_reopens": 0, **counters}
+        self.arrived = threading.Event()
+        self.last_error = ""
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=self.thread_name, daemon=True)
+
+    def start(self):
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        raise NotImplementedError
+
+    def stop(self) -> None:
+        """Stop the thread; safe to call twice."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=2.0)
+
+
+class BusReader(FrameThread):
+    """Reads a bus into the bounded queue and survives bus failures: ``open`` is
+    called to (re)open the bus."""
+
+    thread_name = "can-reader"
 
     def __init__(self, open: Callable[[], can.BusABC], queue_frames: int = DEFAULT_QUEUE_FRAMES,
                  retry_s: float = 0.2) -> None:
+        super().__init__(queue_frames)
         self._open = open
         self.bus: can.BusABC | None = open()
-        self.queue: collections.deque[can.Message] = collections.deque()
-        self.max_frames = queue_frames
         self.retry_s = retry_s
-        self.counters = {"rx_queue_drops": 0, "bus_errors": 0, "bus_reopens": 0}
-        #: Set after frames were queued: a consumer waits on it instead of polling.
-        self.arrived = threading.Event()
         self.bus_up = True
-        self.last_error = ""
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="can-reader", daemon=True)
-
-    def start(self) -> "BusReader":
-        self._thread.start()
-        return self
 
     def _run(self) -> None:
         q, limit, counters = self.queue, self.max_frames, self.counters
@@ -173,9 +196,7 @@ class BusReader:
 
     def stop(self) -> None:
         """Stop reading and close the bus; safe to call twice."""
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=2.0)
+        super().stop()
         bus, self.bus = self.bus, None
         if bus is not None:
             bus.shutdown()
@@ -331,7 +352,7 @@ def log_scans(profile, path: str | Path, rate_hz: float | None = None) -> tuple[
     when the node's frames are FD frames)."""
     messages = list(read_can_log(path))
     lo = profile.can.base_id
-    fd = any(m.is_fd for m in messages[:10_000] if lo <= m.arbitration_id < lo + 16)
+    fd = any(m.is_fd for m in messages[:10_000] if lo <= m.arbitration_id < lo + ID_RANGE)
     layout = CanLayout.from_profile(profile, fd=fd or profile.can.fd)
     return decode_messages(layout, messages, rate_hz or profile.sensor.rate_hz)
 

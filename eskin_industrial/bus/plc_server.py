@@ -131,6 +131,7 @@ class PlcServer:
         units = None if tcp is not None else [settings.unit_id]
         served = self.handler if len(self.handlers) == 1 else PlcBlocks(self.handlers)
         self.server = RegisterServer(served, tcp=tcp, serial=serial, unit_ids=units)
+        self._first = PlcBlockSink(self, self.handler)  # the sink when the server is one
 
     def block(self, index: int) -> "PlcBlockSink":
         return PlcBlockSink(self, self.handlers[index])
@@ -143,19 +144,20 @@ class PlcServer:
         self.server.start()
         return self
 
-    # One block: the server is its sink.
+    # One block: the server is its sink (its first block's, built once: these run
+    # at every scan).
     def publish(self, registers: list[int], image: PlcImage, urgent: bool = False,
                 t_event: float | None = None) -> None:
-        self.handler.publish(registers, image.enabled)
+        self._first.publish(registers, image, urgent, t_event)
 
     def take_commands(self) -> list[Command]:
-        return self.block(0).take_commands()
+        return self._first.take_commands()
 
     def commands_done(self) -> None:
-        self.handler.done()
+        self._first.commands_done()
 
     def stats_dict(self) -> dict[str, int]:
-        return self.block(0).stats_dict()
+        return self._first.stats_dict()
 
     def stop(self, flush_s: float = 0.0) -> None:
         self.server.stop()

@@ -13,6 +13,7 @@ import sys
 import click
 
 from .can_common import bus_options
+from .common import host_port
 
 
 def _split(spec: str, what: str) -> tuple[str, str]:
@@ -21,17 +22,6 @@ def _split(spec: str, what: str) -> tuple[str, str]:
     if not sep and kind not in ("can",):
         raise click.BadParameter(f"expected KIND:WHERE, got {spec!r}", param_hint=what)
     return kind, rest
-
-
-def _host_port(text: str, what: str) -> tuple[str | None, int | None]:
-    if not text:
-        return None, None
-    host, sep, port = text.rpartition(":")
-    if not sep:
-        return text, None
-    if not port.isdigit() or not 0 < int(port) < 65536:
-        raise click.BadParameter(f"expected HOST:PORT, got {text!r}", param_hint=what)
-    return host or None, int(port)
 
 
 def node_from_options(profile_path: str, source: str, interface, channel, bitrate, fd, data_bitrate,
@@ -63,12 +53,12 @@ def plc_from_option(spec: str | None, baud: int):
         return PlcOutput()
     kind, where = _split(spec, "--plc")
     if kind == "tcp":
-        host, port = _host_port(where, "--plc")
+        host, port = host_port(where, "--plc")
         return PlcOutput(mode="client", host=host, port=port)
     if kind == "rtu":
         return PlcOutput(mode="client", transport="rtu", serial_port=where, baudrate=baud)
     if kind == "serve":
-        host, port = _host_port(where, "--plc")
+        host, port = host_port(where, "--plc")
         return PlcOutput(mode="server", host=host, port=port)
     if kind == "serve-rtu":
         return PlcOutput(mode="server", transport="rtu", serial_port=where, baudrate=baud)
@@ -111,6 +101,7 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     from ..bridge.config import BridgeConfig, load_bridge_config, plc_mode, resolve
     from ..bridge.logs import EventLog
     from ..bridge.runtime import Bridge
+    from ..bus.can_layout import ID_RANGE
     from ..bus.modbus_io import quiet_pymodbus
 
     if (config_path is None) == (profile_path is None):
@@ -136,7 +127,7 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
         mode = plc_mode(cfg, nodes)
         for n in nodes:
             c = n.config
-            src = {"can": f"can {c.interface or '(configured)'} {c.channel or ''} ids {n.profile.can.base_id:#x}+16",
+            src = {"can": f"can {c.interface or '(configured)'} {c.channel or ''} ids {n.profile.can.base_id:#x}+{ID_RANGE}",
                    "can-log": f"log {c.path}", "modbus-rtu": f"rtu {c.serial_port} unit {n.profile.modbus.node.unit_id}",
                    "scene": f"scene {c.scene}"}[c.source]
             click.echo(f"{n.name}: {n.profile.name} ({n.profile.source}), {n.rate_hz:g} Hz, {src} -> PLC {mode} "

@@ -9,7 +9,7 @@ import time
 import click
 
 from ..calibration import Calibrator
-from .common import open_profile, profile_option, scene_or_recording
+from .common import host_port, open_profile, profile_option, scene_or_recording
 
 
 @click.command("modbus-node")
@@ -52,10 +52,8 @@ def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, du
 
 
 def _host_port(text: str, what: str) -> tuple[str, int]:
-    host, sep, port = text.rpartition(":")
-    if not sep or not port.isdigit() or not 0 < int(port) < 65536:
-        raise click.BadParameter(f"expected HOST:PORT, got {text!r}", param_hint=what)
-    return host or "127.0.0.1", int(port)
+    host, port = host_port(text, what, require_port=True)
+    return host or "127.0.0.1", port  # type: ignore[return-value]
 
 
 @click.command("modbus-bridge")

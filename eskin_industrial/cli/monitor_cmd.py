@@ -32,7 +32,7 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, rate_hz
     line of counters.  No PLC is contacted."""
     from ..bus.can_layout import CanLayout, ScanAssembler
     from ..bus.can_poll import CanScanPoller
-    from ..bus.can_source import BusReader, bus_kwargs, open_bus
+    from ..bus.can_source import READER_SWITCH_INTERVAL_S, BusReader, bus_kwargs, open_bus
     from ..bus.modbus_bridge import ModbusBridge
     from ..detect.updates import Update
     from ..pipeline import Pipeline
@@ -41,9 +41,7 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, rate_hz
 
     if rate_hz is not None and not rate_hz > 0:
         raise click.BadParameter(f"expected a positive rate, got {rate_hz}", param_hint="--rate")
-    # The reader thread needs the interpreter for every frame; a short switch interval
-    # keeps it from waiting behind the detector and the redraws (the default is 5 ms).
-    sys.setswitchinterval(0.0002)
+    sys.setswitchinterval(READER_SWITCH_INTERVAL_S)  # the reader, not the redraws, comes first
     prof = open_profile(profile_path)
     kw = bus_kwargs(prof, interface, channel, bitrate, fd, data_bitrate)
     layout = CanLayout.from_profile(prof, fd=kw["fd"])

@@ -35,12 +35,10 @@ def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output,
     import can
 
     from ..bus.can_layout import CanLayout, ScanAssembler
-    from ..bus.can_source import BusReader, CanSource, bus_kwargs, open_bus
+    from ..bus.can_source import READER_SWITCH_INTERVAL_S, BusReader, CanSource, bus_kwargs, open_bus
     from ..pipeline import Pipeline
 
-    # The reader thread needs the interpreter for every frame; a short switch interval
-    # keeps it from waiting behind the detector (the default is 5 ms).
-    sys.setswitchinterval(0.0002)
+    sys.setswitchinterval(READER_SWITCH_INTERVAL_S)
     prof = open_profile(profile_path)
     kw = bus_kwargs(prof, interface, channel, bitrate, fd, data_bitrate)
     layout = CanLayout.from_profile(prof, fd=kw["fd"])

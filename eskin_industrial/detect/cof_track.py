@@ -36,7 +36,7 @@ from .settings import DetectorSettings
 
 class CofTrack(ScoredDetector):
     name = "cof-track"
-    columns = ("fast_score", "slow_score")
+    columns = ("onset_score", "slow_score")  # onset: max(a, r)
     #: no vote until the noise has been learnt for a while after the grab settled
     history_s = 0.35
     settle_s = 0.15

@@ -1,9 +1,10 @@
 """What one screen of the live view shows, as plain values: :class:`Snapshot`.
 
 Pure code, no I/O and no clock.  The glue that reads a running chain
-(:mod:`eskin_industrial.view.live`) builds snapshots; the renderer
-(:mod:`eskin_industrial.view.screen`) draws them.  Register decoding lives here so
-the view shows exactly the numbers :meth:`PlcImage.render` produced.
+(:mod:`eskin_industrial.view.live`) builds snapshots, decoding the registers with
+:func:`~eskin_industrial.bus.plc_image.decode_registers` so the view shows exactly the
+numbers :meth:`PlcImage.render` produced; the renderer
+(:mod:`eskin_industrial.view.screen`) draws them.
 """
 
 from __future__ import annotations
