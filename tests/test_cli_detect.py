@@ -44,12 +44,23 @@ def test_detect_writes_one_row_per_update(rec, tmp_path):
     np.testing.assert_allclose(cols["t"][0], 79 / 200.0)
 
 
-def test_stdin_stdout_and_engines_agree(rec):
+def test_stdin_stdout_and_engines_agree(rec, tmp_path):
     text = rec.read_text()
     batch = cli("detect", "-p", PAPER, "--method", "paper", "-", "-q", stdin=text)
     stream = cli("detect", "-p", PAPER, "--method", "paper", "-", "-q", "--engine", "stream", stdin=text)
     assert batch.returncode == 0 and batch.stderr == ""
-    assert batch.stdout == stream.stdout and batch.stdout.count("\n") == 48
+    assert batch.stdout.count("\n") == 48
+    # the same answer to rounding: the engines sum in different orders, so the last of
+    # the ten printed digits may differ (it does under numpy 2.4); states exactly
+    (tmp_path / "batch.csv").write_text(batch.stdout)
+    (tmp_path / "stream.csv").write_text(stream.stdout)
+    a, b = read_updates(tmp_path / "batch.csv"), read_updates(tmp_path / "stream.csv")
+    assert list(a) == list(b)
+    for col in a:
+        if col == "state":
+            assert list(a[col]) == list(b[col])
+        else:
+            np.testing.assert_allclose(a[col], b[col], rtol=1e-8, atol=1e-12, err_msg=col)
 
 
 def test_raw_unit_csv_goes_through_calibration(tmp_path, rec):
