@@ -33,6 +33,7 @@ def run(method, hook, scene="hold", rate=100.0):
     ("light touch", conditions.force_scale(0.05)),
     ("dead taxels", conditions.dead_taxels(8)),
     ("machine vibration", conditions.vibration(2.0)),
+    ("machine starting to shake mid-hold", conditions.vibration_onset(1.0)),
     ("dropped frames", conditions.drop_rate(0.2)),
     ("tiny contact", conditions.contact_size(5.0)),
 ])

@@ -60,6 +60,9 @@ def test_each_sensor_effect_alone(effect):
     elif effect == "vibration":
         out = sensor.machine_vibration(f, t, 0.5, 50.0)
         assert out.sum(axis=1).max() == pytest.approx(10.5, abs=1e-3) and out.mean() == pytest.approx(0.4, abs=1e-3)
+        late = sensor.machine_vibration(f, t, 0.5, 50.0, start_s=1.0)  # the machine starts at 1 s
+        np.testing.assert_array_equal(late[t < 1.0], f[t < 1.0])
+        np.testing.assert_allclose(late[t >= 1.0], out[: int((t >= 1.0).sum())])
     elif effect == "noise":
         assert sensor.noise(f, 0.02, rng).std() == pytest.approx(0.02, rel=0.05)
     elif effect == "quantize":

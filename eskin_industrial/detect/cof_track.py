@@ -30,6 +30,7 @@ import math
 from dataclasses import replace
 
 from .ramp import RampBank
+from .ripple import ForceRipple, ripple_dof, variance_evidence
 from .scored import ScoredDetector, _Lagged
 from .settings import DetectorSettings
 
@@ -61,26 +62,34 @@ class CofTrack(ScoredDetector):
         horizons = tuple(max(2, round(h * rate_hz)) for h in c.ramp_horizons_s)
         base = max(2, round(c.ramp_base_s * rate_hz))
         self._ramp = RampBank(horizons, base, c.ramp_z)
+        # the ripple's lag and window are times, so that it sees the same band at any rate
+        lag = max(1, round(c.ripple_lag_s * rate_hz))
+        window = max(1, round(c.ripple_s * rate_hz))
+        self._ripple = ForceRipple(lag, window) if c.ripple_s > 0 else None
+        self._ripple_dof = ripple_dof(lag, window)
+        self._evidence_cap = 0.5 * max(0.0, c.ramp_z ** 2 - c.ramp_support_z ** 2)
         self.fast_score = self.ramp_score = 0.0  # the two parts of the first column
         self._noise: float | None = None  # learnt CoF noise, in force units (N^2 mm^2)
         self._noise_x = 0.0  # the part of it along x (sigma_x^2 S^2)
         self._fnoise = 0.0  # learnt noise of the total force (N^2)
+        self._rnoise = 0.0  # learnt calm level of the ripple's squared change (N^2)
         super().__init__(settings, x_mm, y_mm, rate_hz, hop_s=c.hop_s, confirm=1)
 
     def reset_scores(self) -> None:
         self._win = _Lagged(self.m, None)
         self._sx = self._sy = self._ss = 0.0
         self._cnt = 0
-        self._fast = _Lagged(self.lf, None)
-        self._slow = _Lagged(self.ls, None)
-        self._half = _Lagged(self.ls // 2, None)
-        self._force = _Lagged(self.lf, None)
+        # one ring of the smoothed (x, y, S), read at the fast, half-slow and slow lags
+        self._hist: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * self.ls
+        self._hn = 0
         self._prev = None
         self._seen = 0
         self._vib = _Lagged(self.vib_n, None)
         self._vib_sum = 0.0
         self._calm_force = 0
         self._ramp.reset()
+        if self._ripple is not None:
+            self._ripple.reset()
 
     def score(self, t, f, s, xc, yc):
         # running mean of the last m centres
@@ -99,10 +108,15 @@ class CofTrack(ScoredDetector):
         mx, my, ms = self._sx / self._cnt, self._sy / self._cnt, self._ss / self._cnt
         prev = self._prev
         self._prev = (xc, yc, s)
-        fast = self._fast.swap((mx, my))
-        slow = self._slow.swap((mx, my))
-        half = self._half.swap((mx, my))
-        old_s = self._force.swap(ms)
+        hist, hn, ls = self._hist, self._hn, self.ls
+        fast = hist[(hn - self.lf) % ls] if hn >= self.lf else None
+        half = hist[(hn - ls // 2) % ls] if hn >= ls // 2 else None
+        slow = hist[hn % ls] if hn >= ls else None
+        hist[hn % ls] = (mx, my, ms)
+        self._hn = hn + 1
+        old_s = fast[2] if fast is not None else None
+        # the total's change over the ripple's lag (a held copy counts as calm)
+        rip_d2 = self._ripple.push(s, self._rnoise if self.filled else None) if self._ripple is not None else None
         # a varying force: the smoothed total changes faster than force_rate, and by
         # more than its own noise (z sigma), which matters when the grip is light
         varying = old_s is not None and abs(ms - old_s) > max(
@@ -156,7 +170,13 @@ class CofTrack(ScoredDetector):
         floor = 0.0025 * self._noise
         # (silent while the force changes and for a second after, like the stick-slip
         # channel: a soft pad's CoF follows its force, and a swaying glass is no slip)
-        r = self._ramp.score(max(qx, floor), max(qy, floor), self.ramp_min) if steady else 0.0
+        # stick-slip shakes the total force: that evidence adds to the ramp's
+        r = 0.0
+        if steady:
+            energy = self._ripple.energy if self._ripple is not None else None
+            evidence = min(variance_evidence(energy / self._rnoise, self._ripple_dof), self._evidence_cap) if (
+                energy is not None and self._rnoise > 0.0) else 0.0
+            r = self._ramp.score(max(qx, floor), max(qy, floor), self.ramp_min, evidence)
         self.fast_score, self.ramp_score = a, r
         slip = a > 1.0 or b > 1.0 or r > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
         if not slip and a < 0.5 and not self.filled:  # learn the noise only while calm
@@ -165,4 +185,6 @@ class CofTrack(ScoredDetector):
             self._noise += gain * (step2 - self._noise)
             self._noise_x += gain * ((xc - prev[0]) ** 2 * 0.5 * s * s - self._noise_x)
             self._fnoise += gain * ((s - prev[2]) ** 2 * 0.5 - self._fnoise)
+            if rip_d2 is not None:
+                self._rnoise += gain * (rip_d2 - self._rnoise)
         return max(a, r), b, slip, varying

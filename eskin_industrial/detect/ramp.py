@@ -17,6 +17,12 @@ over the pooled noise then has a one-dimensional tail, far heavier than Rayleigh
 as (sigma / speed)^(2/3), against (sigma / speed) for a two-window difference:
 docs/evaluation.md.
 
+**Other evidence adds to it.**  ``T^2 / 2`` is the ramp's log-likelihood ratio (nats).
+Evidence the caller has from an independent source (``cof-track``: the stick-slip
+ripple of the total force, detect/ripple.py) comes in the same unit and is added
+before the threshold, ``sqrt(T^2 + 2 e) > z``; the displacement floor still holds.
+With ``e = 0`` it is the ramp test alone.
+
 A centre's noise is the force noise spread over the total force, so it scales as
 1 / S: with each centre the caller pushes that scale (1 / S^2), and the noise used is
 q times its mean over the window (under a machine's vibration S swings by a factor
@@ -50,20 +56,23 @@ def ramp_weights(horizons: tuple[int, ...], base: int) -> tuple[np.ndarray, np.n
 
 
 def ramp_batch(c: np.ndarray, q: np.ndarray, horizons: tuple[int, ...], base: int, z: float,
-               min_mm: float | np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
+               min_mm: float | np.ndarray, scale: np.ndarray | None = None,
+               evidence: np.ndarray | None = None) -> np.ndarray:
     """The score (1 = threshold) at every sample of a (K, 2) CoF series, with no
     streaming state: what :class:`RampBank` must reproduce (NaN until N samples).
     ``q`` (K, 2): each axis' noise variance per unit ``scale``; ``scale`` (K,), each
-    centre's noise scale (1 by default); ``min_mm`` may change per sample (K,)."""
+    centre's noise scale (1 by default); ``min_mm`` may change per sample (K,);
+    ``evidence`` (K,): nats to add to the ramp's (none by default)."""
     floors = np.broadcast_to(np.asarray(min_mm, dtype=float), (len(c),))
     scale = np.ones(len(c)) if scale is None else scale
+    evidence = np.zeros(len(c)) if evidence is None else evidence
     g, sd, disp = ramp_weights(horizons, base)
     n = g.shape[1]
     out = np.full(len(c), np.nan)
     for k in range(n - 1, len(c)):
         num = g @ c[k - n + 1:k + 1]
         sigma = np.sqrt(q[k] * scale[k - n + 1:k + 1].mean())
-        t = np.linalg.norm(num / sigma, axis=1) / sd
+        t = np.sqrt((np.linalg.norm(num / sigma, axis=1) / sd) ** 2 + 2.0 * evidence[k])
         mm = np.linalg.norm(num, axis=1) * disp
         floor = floors[k]
         out[k] = float(np.max(np.minimum(t / z, mm / floor if floor > 0 else np.inf)))
@@ -72,12 +81,13 @@ def ramp_batch(c: np.ndarray, q: np.ndarray, horizons: tuple[int, ...], base: in
 
 class RampBank:
     """Streaming :func:`ramp_batch`: ``push`` a centre and its noise scale, ``score``
-    with the current noise variance per unit scale."""
+    with the current noise variance per unit scale (and any evidence)."""
 
     def __init__(self, horizons: tuple[int, ...], base: int, z: float) -> None:
         self.g, sd, disp = ramp_weights(horizons, base)
         self.n = self.g.shape[1]
-        self._noise_unit = (sd * z).tolist()  # |whitened num| / this: 1 at the threshold
+        self._sd2 = (sd * sd).tolist()  # |whitened num|^2 / this: T^2
+        self._z = z
         self._disp = disp.tolist()  # |num| x this: the displacement in mm
         self.reset()
 
@@ -98,8 +108,9 @@ class RampBank:
         if self._i == 0:  # once a round, against the running sum's rounding drift
             self._scale_sum = math.fsum(self._scale)
 
-    def score(self, q_x: float, q_y: float, min_mm: float) -> float:
-        """Largest over the horizons of min(T / z, d / min_mm); 0 until N centres."""
+    def score(self, q_x: float, q_y: float, min_mm: float, evidence: float = 0.0) -> float:
+        """Largest over the horizons of min(sqrt(T^2 + 2 evidence) / z, d / min_mm); 0
+        until N centres."""
         mean_scale = self._scale_sum / self.n
         if self.count < self.n or not (q_x > 0.0 and q_y > 0.0 and mean_scale > 0.0):
             return 0.0
@@ -108,7 +119,7 @@ class RampBank:
         best = 0.0
         for h, (nx, ny) in enumerate(num):
             wx, wy = nx / sigma_x, ny / sigma_y
-            r = math.sqrt(wx * wx + wy * wy) / self._noise_unit[h]
+            r = math.sqrt((wx * wx + wy * wy) / self._sd2[h] + 2.0 * evidence) / self._z
             if min_mm > 0.0:
                 r = min(r, math.sqrt(nx * nx + ny * ny) * self._disp[h] / min_mm)
             if r > best:

@@ -60,6 +60,12 @@ class CofTrackSettings:
     ramp_z: float = field(default=5.5, metadata=positive())
     #: ... and the displacement it implies over the horizon this many mm.
     ramp_min_mm: float = field(default=0.1, metadata=non_negative())
+    #: Stick-slip evidence added to the ramp's (detect/ripple.py): the energy of the
+    #: total force's change over ``ripple_lag_s``, over the last ``ripple_s`` against
+    #: its calm level, as a likelihood ratio; 0 leaves the ramp on its own.
+    ripple_s: float = field(default=0.05, metadata=non_negative())
+    ripple_lag_s: float = field(default=0.01, metadata=positive())
+    ramp_support_z: float = field(default=4.0, metadata=non_negative())
 
 
 @dataclass(frozen=True)

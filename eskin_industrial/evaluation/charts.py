@@ -124,7 +124,7 @@ def failure_map(out: Path, seeds: tuple[int, ...], log: Any) -> dict[str, dict[s
                 table[cond][m].append(r.score.f1)
             log(f"  {cond:9s} {v:>8g}: " + " ".join(f"{m} {r.score.f1:.2f}" for m, r in res.items()))
     plt = _plt()
-    fig, axes = plt.subplots(2, 4, figsize=(16, 7.5))
+    fig, axes = plt.subplots(3, 3, figsize=(13, 10.5))
     for ax, (cond, (axis, values, _f)) in zip(axes.flat, CONDITIONS.items()):
         for m, f1 in table[cond].items():
             ax.plot(range(len(values)), f1, "o-", color=COLOURS[m], label=m, lw=1.4 if m == "cof-track" else 1.0)
@@ -132,8 +132,8 @@ def failure_map(out: Path, seeds: tuple[int, ...], log: Any) -> dict[str, dict[s
         ax.set_xlabel(axis)
         ax.set_ylim(-0.02, 1.02)
         ax.grid(alpha=0.3)
-    axes[0, 0].set_ylabel("slip F1")
-    axes[1, 0].set_ylabel("slip F1")
+    for row in axes:
+        row[0].set_ylabel("slip F1")
     axes[0, 0].legend(fontsize=7)
     fig.suptitle(f"Failure map: one condition pushed at a time (scenes {', '.join(scenes)}; seeds {seeds[0]}..{seeds[-1]})")
     fig.tight_layout()

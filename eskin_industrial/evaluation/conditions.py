@@ -49,8 +49,15 @@ def drop_rate(rate: float) -> Hook:
     return lambda s: replace(s, sensor=replace(s.sensor, drop_rate=rate))
 
 
-def vibration(amplitude_n: float, freq_hz: float = 37.0) -> Hook:
-    return lambda s: replace(s, sensor=replace(s.sensor, machine_vibration_n=amplitude_n, machine_vibration_hz=freq_hz))
+def vibration(amplitude_n: float, freq_hz: float = 37.0, start_s: float = 0.0) -> Hook:
+    return lambda s: replace(s, sensor=replace(s.sensor, machine_vibration_n=amplitude_n, machine_vibration_hz=freq_hz,
+                                               machine_vibration_start_s=start_s))
+
+
+def vibration_onset(amplitude_n: float) -> Hook:
+    """A machine that starts shaking mid-scene (3 s: the grab has settled, no slide has
+    begun): a new ripple in the total force with nothing moving."""
+    return vibration(amplitude_n, 37.0, start_s=3.0)
 
 
 #: name -> (axis label, values, hook factory or None for the sample rate)
@@ -63,4 +70,5 @@ CONDITIONS: dict[str, tuple[str, tuple[float, ...], Callable[[float], Hook] | No
     "dead": ("dead taxels", (0, 2, 4, 6, 8), lambda v: dead_taxels(int(v))),
     "drops": ("dropped frames (fraction)", (0.0, 0.02, 0.05, 0.1, 0.2), drop_rate),
     "vibration": ("machine vibration at 37 Hz (N)", (0.0, 0.1, 0.3, 1.0, 2.0), vibration),
+    "onset": ("the same, starting mid-hold (N)", (0.0, 0.1, 0.3, 1.0, 2.0), vibration_onset),
 }

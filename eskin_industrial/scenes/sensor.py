@@ -11,11 +11,14 @@ def gain_mismatch(forces: np.ndarray, spread: float, rng: np.random.Generator) -
     return forces * (1.0 + spread * rng.standard_normal(forces.shape[1]))[None, :]
 
 
-def machine_vibration(forces: np.ndarray, t: np.ndarray, amplitude_n: float, freq_hz: float) -> np.ndarray:
-    """The machine shakes the gripper: the loaded taxels share a total-force oscillation."""
+def machine_vibration(forces: np.ndarray, t: np.ndarray, amplitude_n: float, freq_hz: float,
+                      start_s: float = 0.0) -> np.ndarray:
+    """The machine shakes the gripper (from ``start_s`` on): the loaded taxels share a
+    total-force oscillation."""
     total = forces.sum(axis=1, keepdims=True)
     share = np.divide(forces, total, out=np.zeros_like(forces), where=total > 1e-9)
-    return forces + amplitude_n * np.sin(2 * np.pi * freq_hz * t)[:, None] * share
+    shake = np.where(t >= start_s, np.sin(2 * np.pi * freq_hz * (t - start_s)), 0.0)
+    return forces + amplitude_n * shake[:, None] * share
 
 
 def noise(forces: np.ndarray, sigma_n: float, rng: np.random.Generator) -> np.ndarray:
@@ -46,7 +49,7 @@ def apply(forces: np.ndarray, t: np.ndarray, fx: SensorEffects, rng: np.random.G
     """All effects in the order a real chain applies them; returns (kept indices, forces)."""
     out = gain_mismatch(forces, fx.gain_mismatch, rng) if fx.gain_mismatch else forces
     if fx.machine_vibration_n:
-        out = machine_vibration(out, t, fx.machine_vibration_n, fx.machine_vibration_hz)
+        out = machine_vibration(out, t, fx.machine_vibration_n, fx.machine_vibration_hz, fx.machine_vibration_start_s)
     out = noise(out, fx.noise_n, rng) if fx.noise_n else out
     out = np.maximum(out, 0.0)  # a piezoresistive taxel reads no tension
     out = dead_and_stuck(out, fx.dead_taxels, fx.stuck_taxels, fx.stuck_value_n)

@@ -104,6 +104,8 @@ class SensorEffects:
     drop_rate: float = field(default=0.0, metadata=in_range(0.0, 0.9))
     machine_vibration_n: float = field(default=0.0, metadata=non_negative())
     machine_vibration_hz: float = field(default=50.0, metadata=positive())
+    #: The machine starts shaking at this time (0: from the start).
+    machine_vibration_start_s: float = field(default=0.0, metadata=non_negative())
 
 
 @dataclass(frozen=True)
