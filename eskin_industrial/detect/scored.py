@@ -191,21 +191,25 @@ class CofVelocity(ScoredDetector):
 
 class HfEnergy(ScoredDetector):
     """Rival (vibration-based slip detection): energy of the taxels' second difference,
-    relative to its own running baseline; slip when above ``threshold`` times it."""
+    relative to its own running baseline; slip when above ``threshold`` times it.
+    ``total=True`` takes the second difference of the total force instead, where a
+    vibration shared by the taxels adds up coherently and their noise does not."""
 
     name = "hf-energy"
     columns = ("hf_energy_ratio", "unused")
     history_s = 0.3
 
-    def __init__(self, *args, threshold: float = 6.0, smooth_s: float = 0.05, baseline_s: float = 2.0, **kw) -> None:
+    def __init__(self, *args, threshold: float = 6.0, smooth_s: float = 0.05, baseline_s: float = 2.0,
+                 total: bool = False, **kw) -> None:
         self.threshold = threshold
+        self.total = total
         self.smooth_s = smooth_s
         self.baseline_s = baseline_s
         super().__init__(*args, **kw)
 
     def reset_scores(self) -> None:
-        self._p1: np.ndarray | None = None
-        self._p2: np.ndarray | None = None
+        self._p1: np.ndarray | float | None = None  # the last two frames (or totals)
+        self._p2: np.ndarray | float | None = None
         self._fast = 0.0
         self._base = 0.0
         self._a_fast = 1.0 / max(1.0, self.smooth_s * self.rate_hz)
@@ -214,11 +218,12 @@ class HfEnergy(ScoredDetector):
 
     def score(self, t, f, s, xc, yc):
         p1, p2 = self._p1, self._p2
-        self._p2, self._p1 = p1, f
+        cur = s if self.total else f
+        self._p2, self._p1 = p1, cur
         if p2 is None:
             return 0.0, 0.0, False, False
-        d = f - 2.0 * p1 + p2
-        e = float(d @ d) / (s * s)
+        d = cur - 2.0 * p1 + p2
+        e = float(d * d if self.total else d @ d) / (s * s)
         self._fast += self._a_fast * (e - self._fast)
         self._n_seen += 1
         if self._n_seen < 5:

@@ -38,6 +38,8 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
         points.append(("force-rate", f">{thr}/s", partial(ForceRate, threshold_per_s=thr)))
     for thr in (2.0, 6.0, 20.0):
         points.append(("hf-energy", f">{thr}x", partial(HfEnergy, threshold=thr)))
+    for thr in (4.0, 6.0, 10.0):  # the total force's vibration: what cof-track's ripple evidence uses
+        points.append(("hf-energy", f"total >{thr}x", partial(HfEnergy, threshold=thr, total=True)))
     for thr in (2.0, 4.0, 8.0, 16.0):
         points.append(("cof-velocity", f">{thr} mm/s", partial(CofVelocity, threshold_mm_s=thr)))
     for z in (4.0, 5.0, 6.0, 8.0):
@@ -46,6 +48,10 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
     for ramp_z in (4.5, 5.0, 6.0, 7.0, 1e9):  # the ramp channel's threshold (1e9: no ramp)
         label = f"ramp z{ramp_z:g}" if ramp_z < 1e9 else "no ramp"
         points.append(("cof-track", label, partial(CofTrack, ramp_z=ramp_z)))
+    # the stick-slip evidence: off, and the least the ramp must show by itself
+    points.append(("cof-track", "no ripple evidence", partial(CofTrack, ripple_s=0.0)))
+    for support in (0.0, 3.0, 4.5):
+        points.append(("cof-track", f"ramp support z{support:g}", partial(CofTrack, ramp_support_z=support)))
     if importlib.util.find_spec("sklearn") is not None:  # the optional extra: one model, several decision rules
         for p, hops in ((0.5, 1), (0.7, 1), (0.5, 2), (0.7, 2), (0.5, 3), (0.7, 3)):
             points.append(("learned", f"p>{p} x{hops} hops", partial(learned, slip_p=p, confirm_hops=hops)))
