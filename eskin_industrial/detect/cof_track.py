@@ -31,7 +31,7 @@ from dataclasses import replace
 
 from .ramp import RampBank
 from .ripple import ForceRipple, ripple_dof, variance_evidence
-from .scored import ScoredDetector, _Lagged
+from .scored import ScoredDetector
 from .settings import DetectorSettings
 
 
@@ -76,7 +76,7 @@ class CofTrack(ScoredDetector):
         super().__init__(settings, x_mm, y_mm, rate_hz, hop_s=c.hop_s, confirm=1)
 
     def reset_scores(self) -> None:
-        self._win = _Lagged(self.m, None)
+        self._win: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * self.m  # the last m (x, y, S)
         self._sx = self._sy = self._ss = 0.0
         self._cnt = 0
         # one ring of the smoothed (x, y, S), read at the fast, half-slow and slow lags
@@ -84,7 +84,8 @@ class CofTrack(ScoredDetector):
         self._hn = 0
         self._prev = None
         self._seen = 0
-        self._vib = _Lagged(self.vib_n, None)
+        self._vib = [0.0] * self.vib_n  # the last vib_n CoF step energies
+        self._vib_count = 0
         self._vib_sum = 0.0
         self._calm_force = 0
         self._ramp.reset()
@@ -95,20 +96,23 @@ class CofTrack(ScoredDetector):
         # running mean of the last m centres
         # running means of the last m centres and totals (the total is smoothed too,
         # so that sensor noise does not read as a varying force)
-        old = self._win.swap((xc, yc, s))
-        self._sx += xc
-        self._sy += yc
-        self._ss += s
-        if old is None:
+        hn = self._hn  # frames so far (the rings below are indexed by it)
+        slot = hn % self.m
+        old = self._win[slot]
+        self._win[slot] = (xc, yc, s)
+        if hn < self.m:
             self._cnt += 1
+            self._sx += xc
+            self._sy += yc
+            self._ss += s
         else:
-            self._sx -= old[0]
-            self._sy -= old[1]
-            self._ss -= old[2]
+            self._sx += xc - old[0]
+            self._sy += yc - old[1]
+            self._ss += s - old[2]
         mx, my, ms = self._sx / self._cnt, self._sy / self._cnt, self._ss / self._cnt
         prev = self._prev
         self._prev = (xc, yc, s)
-        hist, hn, ls = self._hist, self._hn, self.ls
+        hist, ls = self._hist, self.ls
         fast = hist[(hn - self.lf) % ls] if hn >= self.lf else None
         half = hist[(hn - ls // 2) % ls] if hn >= ls // 2 else None
         slow = hist[hn % ls] if hn >= ls else None
@@ -157,9 +161,12 @@ class CofTrack(ScoredDetector):
             b = min(total / thr, onward / max(0.5 * thr, 0.75 * noise_d))
         # stick-slip excites the CoF's sample-to-sample steps (the band the paper's
         # wavelet detail sees); with some displacement to back it, that is a slip too
-        old_v = self._vib.swap(step2)
-        self._vib_sum += step2 - (old_v if old_v is not None else 0.0)
-        vib = self._vib_sum / (self.vib_n * self._noise) if old_v is not None else 0.0
+        vslot = self._vib_count % self.vib_n
+        old_v = self._vib[vslot]
+        self._vib[vslot] = step2
+        self._vib_sum += step2 - old_v
+        self._vib_count += 1
+        vib = self._vib_sum / (self.vib_n * self._noise) if self._vib_count > self.vib_n else 0.0
         # (not while the force changes, nor for a second after: a squeeze or a swaying
         # load moves a soft contact's CoF in steps too)
         self._calm_force = 0 if varying else self._calm_force + 1

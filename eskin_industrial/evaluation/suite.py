@@ -4,7 +4,7 @@ in the docs rests on.
 Seeds: ``TUNING_SEEDS`` are the only ones any threshold or default was chosen on;
 ``EVALUATION_SEEDS`` are held out and are what the docs report.  False alarms per
 hour need hours of holding, more than the suite holds (0.7 h): the still holds alone
-are scored over many more seeds, ``HOLD_TUNING_SEEDS`` to choose, and
+are scored over many more seeds, ``HOLD_TUNING_SEEDS`` (11.3 h) to choose, and
 ``HOLD_EVALUATION_SEEDS`` (3.8 h) held out to report.
 """
 
@@ -28,7 +28,9 @@ EVALUATION_SEEDS: tuple[int, ...] = tuple(range(1000, 1010))
 
 #: The long-hold check: the still holds only, over many seeds.
 HOLD_SCENES: tuple[str, ...] = ("hold", "hand-hold")
-HOLD_TUNING_SEEDS: tuple[int, ...] = tuple(range(100, 160))
+#: (100-159 at first; 160-399 added when a false alarm every hour and a half on the
+#: light hand grip hid in the 2.3 h of the first sixty: docs/evaluation.md)
+HOLD_TUNING_SEEDS: tuple[int, ...] = tuple(range(100, 400))
 HOLD_EVALUATION_SEEDS: tuple[int, ...] = tuple(range(2000, 2100))
 
 #: The built-in suite: the paper's cases, the hand, and the scenes made to break methods.
