@@ -15,16 +15,18 @@ HORIZONS, BASE = (5, 10, 20), 20
 
 
 def test_streaming_equals_batch() -> None:
+    # 1200 centres: the bank's running sums are recomputed from its ring twice on the way
+    k = 1200
     rng = np.random.default_rng(5)
-    c = np.cumsum(rng.normal(0, 0.05, (400, 2)), axis=0)  # a wandering centre
-    q = (np.abs(rng.normal(0.1, 0.02, (400, 2))) + 0.01) ** 2  # each axis' noise variance
-    scale = rng.uniform(0.2, 5.0, 400)  # each centre's own noise scale (1 / S^2)
+    c = np.cumsum(rng.normal(0, 0.05, (k, 2)), axis=0)  # a wandering centre
+    q = (np.abs(rng.normal(0.1, 0.02, (k, 2))) + 0.01) ** 2  # each axis' noise variance
+    scale = rng.uniform(0.2, 5.0, k)  # each centre's own noise scale (1 / S^2)
     batch = ramp_batch(c, q, HORIZONS, BASE, z=5.0, min_mm=0.1, scale=scale)
     bank = RampBank(HORIZONS, BASE, z=5.0)
     stream = []
-    for k in range(len(c)):
-        bank.push(*c[k], scale[k])
-        stream.append(bank.score(*q[k], 0.1))
+    for i in range(k):
+        bank.push(*c[i], scale[i])
+        stream.append(bank.score(*q[i], 0.1))
     n = max(HORIZONS) + BASE
     assert stream[:n - 1] == [0.0] * (n - 1)
     np.testing.assert_allclose(stream[n - 1:], batch[n - 1:], rtol=1e-12)

@@ -17,11 +17,16 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     r    = the ramp channel (detect/ramp.py): a least-squares ramp in the raw CoF against
            the mean before it, over a bank of horizons, each axis in units of ramp_z of
            its own noise (q_x, q_y learnt like q); only while the force is steady
+    e    = stick-slip evidence (detect/ripple.py): a rise in the energy of the total
+           force's 10 ms change, as a log-likelihood ratio added to the ramp's; capped so
+           that the ramp still needs ramp_support_z of its own
     slip when a > 1, b > 1 or r > 1, or the stick-slip channel fires (below) while the
     force is steady
 
-The cost per frame is one 3-column matrix product, one (3 x N) product for the ramp
-and a few scalar operations.  The score columns hold max(a, r) and b (1 = threshold).
+The cost per frame is one 3-column matrix product, three running sums per ramp horizon,
+a ring of squared changes for the evidence and a few scalar operations: the same at
+100 Hz and at 1 kHz.  The score
+columns hold max(a, r) and b (1 = threshold).
 """
 
 from __future__ import annotations
@@ -93,14 +98,15 @@ class CofTrack(ScoredDetector):
             self._ripple.reset()
 
     def score(self, t, f, s, xc, yc):
-        # running mean of the last m centres
+        # (hot path: one call per frame, so attributes read once into locals)
         # running means of the last m centres and totals (the total is smoothed too,
         # so that sensor noise does not read as a varying force)
         hn = self._hn  # frames so far (the rings below are indexed by it)
-        slot = hn % self.m
+        m = self.m
+        slot = hn % m
         old = self._win[slot]
         self._win[slot] = (xc, yc, s)
-        if hn < self.m:
+        if hn < m:
             self._cnt += 1
             self._sx += xc
             self._sy += yc
@@ -109,7 +115,8 @@ class CofTrack(ScoredDetector):
             self._sx += xc - old[0]
             self._sy += yc - old[1]
             self._ss += s - old[2]
-        mx, my, ms = self._sx / self._cnt, self._sy / self._cnt, self._ss / self._cnt
+        cnt = self._cnt
+        mx, my, ms = self._sx / cnt, self._sy / cnt, self._ss / cnt
         prev = self._prev
         self._prev = (xc, yc, s)
         hist, ls = self._hist, self.ls
@@ -118,36 +125,49 @@ class CofTrack(ScoredDetector):
         slow = hist[hn % ls] if hn >= ls else None
         hist[hn % ls] = (mx, my, ms)
         self._hn = hn + 1
-        old_s = fast[2] if fast is not None else None
+        filled = self.filled
         # the total's change over the ripple's lag (a held copy counts as calm)
-        rip_d2 = self._ripple.push(s, self._rnoise if self.filled else None) if self._ripple is not None else None
+        ripple = self._ripple
+        rip_d2 = ripple.push(s, self._rnoise if filled else None) if ripple is not None else None
         # a varying force: the smoothed total changes faster than force_rate, and by
         # more than its own noise (z sigma), which matters when the grip is light
-        varying = old_s is not None and abs(ms - old_s) > max(
-            self.force_rate * ms * self.fast_s, self.z * math.sqrt(2.0 * self._fnoise / self.m))
-        if prev is None or self._cnt < self.m:
+        z = self.z
+        if fast is None:
+            varying = False
+        else:
+            rate_d = self.force_rate * ms * self.fast_s
+            noise_s = z * math.sqrt(2.0 * self._fnoise / m)
+            varying = abs(ms - fast[2]) > (rate_d if rate_d > noise_s else noise_s)
+        if prev is None or cnt < m:
             return 0.0, 0.0, False, varying
         # CoF noise scales as 1 / S (sigma_F * spread / S): learn it in force units so
         # that a grip that loosens (or tightens) keeps the right threshold
-        step2 = ((xc - prev[0]) ** 2 + (yc - prev[1]) ** 2) * 0.5 * s * s
-        if self.filled:  # a held copy has no step of its own: neither noise nor vibration
-            step2 = self._noise if self._noise is not None else 0.0
+        dx = xc - prev[0]
+        noise = self._noise
+        step2 = (dx * dx + (yc - prev[1]) ** 2) * 0.5 * s * s
+        if filled:  # a held copy has no step of its own: neither noise nor vibration
+            step2 = noise if noise is not None else 0.0
         self._seen += 1
-        if self._noise is None or self._noise <= 0.0:
+        if noise is None or noise <= 0.0:
             # nothing learnt yet: the first frames after a grab still settle, so
             # vote nothing until a running mean over the settling time exists
             if self._seen <= self._settle:
                 return 0.0, 0.0, False, varying
-            if self.filled or step2 <= 0.0:
+            if filled or step2 <= 0.0:
                 return 0.0, 0.0, False, varying
-            self._noise, self._learnt = step2, 1
+            noise = self._noise = step2
+            self._learnt = 1
             self._noise_x = 0.5 * step2
         # the ramp's base must not hold the grab: its centres start once it has settled;
         # a held copy is no sample (repeats would count one noise draw twice)
-        if not self.filled:
+        if not filled:
             self._ramp.push(xc, yc, 1.0 / (s * s))
-        noise_d = self.z * math.sqrt(2.0 * self._noise / self.m) / s
-        a = math.hypot(mx - fast[0], my - fast[1]) / max(noise_d, self.min_fast) if fast is not None else 0.0
+        noise_d = z * math.sqrt(2.0 * noise / m) / s
+        if fast is not None:
+            lim = self.min_fast
+            a = math.hypot(mx - fast[0], my - fast[1]) / (noise_d if noise_d > lim else lim)
+        else:
+            a = 0.0
         b = 0.0
         if slow is not None:
             # only while the motion goes on: the newer half of the horizon moved on in
@@ -155,43 +175,46 @@ class CofTrack(ScoredDetector):
             ux, uy = mx - slow[0], my - slow[1]
             total = math.hypot(ux, uy)
             onward = ((mx - half[0]) * ux + (my - half[1]) * uy) / total if total > 0 else 0.0
-            thr = max(noise_d, self.min_slow)
+            thr = noise_d if noise_d > self.min_slow else self.min_slow
             # the onward half gets a noise margin of its own (4.5 sigma): half the
             # threshold alone would be only 3 sigma, met by noise every few seconds
             b = min(total / thr, onward / max(0.5 * thr, 0.75 * noise_d))
         # stick-slip excites the CoF's sample-to-sample steps (the band the paper's
         # wavelet detail sees); with some displacement to back it, that is a slip too
-        vslot = self._vib_count % self.vib_n
-        old_v = self._vib[vslot]
+        vib_n = self.vib_n
+        vslot = self._vib_count % vib_n
+        self._vib_sum += step2 - self._vib[vslot]
         self._vib[vslot] = step2
-        self._vib_sum += step2 - old_v
         self._vib_count += 1
-        vib = self._vib_sum / (self.vib_n * self._noise) if self._vib_count > self.vib_n else 0.0
+        vib = self._vib_sum / (vib_n * noise) if self._vib_count > vib_n else 0.0
         # (not while the force changes, nor for a second after: a squeeze or a swaying
         # load moves a soft contact's CoF in steps too)
-        self._calm_force = 0 if varying else self._calm_force + 1
-        steady = self._calm_force > self._steady_n
-        # the ramp weighs raw centres, each axis against its own noise (in force units,
-        # like q; the floor keeps a constant axis, a strip's y, harmless)
-        qx, qy = self._noise_x, self._noise - self._noise_x
-        floor = 0.0025 * self._noise
-        # (silent while the force changes and for a second after, like the stick-slip
-        # channel: a soft pad's CoF follows its force, and a swaying glass is no slip)
-        # stick-slip shakes the total force: that evidence adds to the ramp's
+        self._calm_force = calm = 0 if varying else self._calm_force + 1
+        steady = calm > self._steady_n
         r = 0.0
         if steady:
-            energy = self._ripple.energy if self._ripple is not None else None
+            # the ramp weighs raw centres, each axis against its own noise (in force
+            # units, like q; the floor keeps a constant axis, a strip's y, harmless);
+            # silent while the force changes and for a second after, like the
+            # stick-slip channel: a soft pad's CoF follows its force, and a swaying
+            # glass is no slip.  Stick-slip shakes the total force: that evidence adds
+            # to the ramp's
+            qx, qy = self._noise_x, noise - self._noise_x
+            floor = 0.0025 * noise
+            energy = ripple.energy if ripple is not None else None
             evidence = min(variance_evidence(energy / self._rnoise, self._ripple_dof), self._evidence_cap) if (
                 energy is not None and self._rnoise > 0.0) else 0.0
-            r = self._ramp.score(max(qx, floor), max(qy, floor), self.ramp_min, evidence)
+            r = self._ramp.score(qx if qx > floor else floor, qy if qy > floor else floor, self.ramp_min, evidence)
         self.fast_score, self.ramp_score = a, r
         slip = a > 1.0 or b > 1.0 or r > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
-        if not slip and a < 0.5 and not self.filled:  # learn the noise only while calm
+        if not slip and a < 0.5 and not filled:  # learn the noise only while calm
             self._learnt += 1
-            gain = max(self._a_noise, 1.0 / self._learnt)
-            self._noise += gain * (step2 - self._noise)
-            self._noise_x += gain * ((xc - prev[0]) ** 2 * 0.5 * s * s - self._noise_x)
+            gain = 1.0 / self._learnt
+            if gain < self._a_noise:
+                gain = self._a_noise
+            self._noise = noise + gain * (step2 - noise)
+            self._noise_x += gain * (dx * dx * 0.5 * s * s - self._noise_x)
             self._fnoise += gain * ((s - prev[2]) ** 2 * 0.5 - self._fnoise)
             if rip_d2 is not None:
                 self._rnoise += gain * (rip_d2 - self._rnoise)
-        return max(a, r), b, slip, varying
+        return (a if a > r else r), b, slip, varying

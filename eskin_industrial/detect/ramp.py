@@ -28,8 +28,8 @@ A centre's noise is the force noise spread over the total force, so it scales as
 q times its mean over the window (under a machine's vibration S swings by a factor
 of five within the window, and the current frame's S alone misjudged it).
 
-All horizons are one (H x N) matrix product over the last N = max L + B centres,
-kept twice in a flat buffer so that the newest N are always one contiguous slice.
+The batch form is one (H x N) matrix product over the last N = max L + B centres;
+the streaming form keeps running sums per horizon instead (:class:`RampBank`).
 """
 
 from __future__ import annotations
@@ -81,32 +81,64 @@ def ramp_batch(c: np.ndarray, q: np.ndarray, horizons: tuple[int, ...], base: in
 
 class RampBank:
     """Streaming :func:`ramp_batch`: ``push`` a centre and its noise scale, ``score``
-    with the current noise variance per unit scale (and any evidence)."""
+    with the current noise variance per unit scale (and any evidence).
+
+    Each horizon keeps three running sums of the centre (as ``x + iy``, so one complex
+    addition moves both axes): ``w``, the ramp-weighted sum of its newest ``L``; ``p``,
+    their plain sum; ``b``, the sum of the ``B`` before them.  A push moves each by
+    the samples that enter and leave, so the cost per frame is the same at 100 Hz and
+    at 1 kHz (the horizons are times; a matrix product over them grew with the rate).
+    Every few rounds the sums are recomputed from the ring, against rounding drift."""
 
     def __init__(self, horizons: tuple[int, ...], base: int, z: float) -> None:
         self.g, sd, disp = ramp_weights(horizons, base)
         self.n = self.g.shape[1]
+        self.horizons, self.base = tuple(horizons), base
         self._sd2 = (sd * sd).tolist()  # |whitened num|^2 / this: T^2
         self._z = z
         self._disp = disp.tolist()  # |num| x this: the displacement in mm
+        # num = w - (sum of the weights 1..L) / B x b
+        self._kb = [length * (length + 1) / 2.0 / base for length in self.horizons]
+        # recompute the sums every whole number of rounds, about every 500 pushes
+        self._resync_every = self.n * max(1, round(500 / self.n))
         self.reset()
 
     def reset(self) -> None:
-        self._buf = np.zeros((2 * self.n, 2))
+        self._c = [0j] * self.n  # the last n centres, x + iy (zeros before the first)
+        h = len(self.horizons)
+        self._w, self._p, self._b = [0j] * h, [0j] * h, [0j] * h
         self._scale = [0.0] * self.n
         self._scale_sum = 0.0
         self._i = 0
         self.count = 0
 
     def push(self, x: float, y: float, scale: float = 1.0) -> None:
-        i, n = self._i, self.n
-        self._buf[i] = self._buf[i + n] = (x, y)
+        i, n, ring = self._i, self.n, self._c
+        c = complex(x, y)
+        w, p, b = self._w, self._p, self._b
+        for h, length in enumerate(self.horizons):
+            # the centre that leaves the newest L (it joins the base), and the one that
+            # leaves the base; ``i`` holds the oldest of all n, about to be overwritten
+            leave = ring[i - length]
+            w[h] += length * c - p[h]
+            p[h] += c - leave
+            b[h] += leave - ring[i - length - self.base]
+        ring[i] = c
         self._scale_sum += scale - self._scale[i]  # the sample n pushes ago leaves
         self._scale[i] = scale
         self._i = i + 1 if i + 1 < n else 0
         self.count += 1
-        if self._i == 0:  # once a round, against the running sum's rounding drift
-            self._scale_sum = math.fsum(self._scale)
+        if self.count % self._resync_every == 0:  # against the running sums' rounding drift
+            self._resync()
+
+    def _resync(self) -> None:
+        self._scale_sum = math.fsum(self._scale)
+        c = np.array(self._c)  # oldest first: a whole number of rounds has passed
+        for h, length in enumerate(self.horizons):
+            newest = c[self.n - length:]
+            self._w[h] = complex(np.arange(1.0, length + 1.0) @ newest)
+            self._p[h] = complex(newest.sum())
+            self._b[h] = complex(c[self.n - length - self.base:self.n - length].sum())
 
     def score(self, q_x: float, q_y: float, min_mm: float, evidence: float = 0.0) -> float:
         """Largest over the horizons of min(sqrt(T^2 + 2 evidence) / z, d / min_mm); 0
@@ -114,14 +146,15 @@ class RampBank:
         mean_scale = self._scale_sum / self.n
         if self.count < self.n or not (q_x > 0.0 and q_y > 0.0 and mean_scale > 0.0):
             return 0.0
-        sigma_x, sigma_y = math.sqrt(q_x * mean_scale), math.sqrt(q_y * mean_scale)
-        num = (self.g @ self._buf[self._i:self._i + self.n]).tolist()
+        inv_x, inv_y = 1.0 / (q_x * mean_scale), 1.0 / (q_y * mean_scale)
+        extra = 2.0 * evidence
         best = 0.0
-        for h, (nx, ny) in enumerate(num):
-            wx, wy = nx / sigma_x, ny / sigma_y
-            r = math.sqrt((wx * wx + wy * wy) / self._sd2[h] + 2.0 * evidence) / self._z
+        for w, b, kb, sd2, disp in zip(self._w, self._b, self._kb, self._sd2, self._disp):
+            num = w - kb * b
+            nx, ny = num.real, num.imag
+            r = math.sqrt((nx * nx * inv_x + ny * ny * inv_y) / sd2 + extra) / self._z
             if min_mm > 0.0:
-                r = min(r, math.sqrt(nx * nx + ny * ny) * self._disp[h] / min_mm)
+                r = min(r, math.sqrt(nx * nx + ny * ny) * disp / min_mm)
             if r > best:
                 best = r
         return best

@@ -3,7 +3,8 @@ of the same columns for a whole recording (batch)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -11,8 +12,11 @@ import numpy as np
 COLUMNS: tuple[str, ...] = ("t", "r_coe", "r_dw", "state", "valid", "f_sum", "xc", "yc", "flags")
 
 
-@dataclass(frozen=True, slots=True)
-class Update:
+class Update(NamedTuple):
+    """One detector decision.  A named tuple, not a frozen dataclass: a detector that
+    decides every 10 ms builds one per frame at 100 Hz, and a frozen dataclass's
+    ``__init__`` (one ``object.__setattr__`` per field) cost 2.5 us of it."""
+
     t: float  #: time of the newest frame the update used (s)
     r_coe: float  #: correlation indicator (0 when stable)
     r_dw: float  #: wavelet indicator (0 when stable)
@@ -44,7 +48,7 @@ class UpdateTable:
     @classmethod
     def from_updates(cls, updates: list[Update]) -> "UpdateTable":
         cols = {}
-        for f in fields(Update):
-            dtype = np.int64 if f.name in ("state", "flags") else bool if f.name == "valid" else np.float64
-            cols[f.name] = np.array([getattr(u, f.name) for u in updates], dtype=dtype)
+        for name in Update._fields:
+            dtype = np.int64 if name in ("state", "flags") else bool if name == "valid" else np.float64
+            cols[name] = np.array([getattr(u, name) for u in updates], dtype=dtype)
         return cls(**cols)
