@@ -181,3 +181,19 @@ def test_on_held_out_seeds_the_evidence_shortens_the_delay_and_adds_no_false_ala
     assert on.found == on.events == no.found
     assert on.false_alarms == no.false_alarms == 0
     assert np.median(on.delays_s) <= 0.85 * np.median(no.delays_s)
+
+
+def test_slides_without_stick_slip_lose_nothing_but_the_evidence() -> None:
+    """Where a slide does not shake the force (the scenes' stick-slip taken out), the
+    method falls back to the displacement: every slip still found, no false alarm, and
+    no later than without the evidence in the median (tuning seeds)."""
+    smooth = lambda spec: replace(spec, events=tuple(  # noqa: E731
+        replace(e, stick_slip_mm=0.0, stick_slip_force=0.0) if e.kind == "slide" else e for e in spec.events))
+    off = replace(DEFAULT_SETTINGS, cof_track=replace(DEFAULT_SETTINGS.cof_track, ripple_s=0.0))
+    methods = {"with": lambda s, x, y, r: CofTrack(DEFAULT_SETTINGS, x, y, r),
+               "without": lambda s, x, y, r: CofTrack(off, x, y, r)}
+    res = evaluate(methods, scenes=("case3", "case6", "partial"), seeds=(10, 11, 12), spec_hook=smooth)
+    on, no = res["with"].score, res["without"].score
+    assert on.found == on.events == no.found
+    assert on.false_alarms == no.false_alarms == 0
+    assert np.median(on.delays_s) <= np.median(no.delays_s) + 0.01
