@@ -132,3 +132,19 @@ def test_seed_lists_mix_single_seeds_and_ranges():
     assert _seeds("tuning") == TUNING_SEEDS and _seeds("1000") == (1000,)
     res = CliRunner().invoke(main, ["evaluate", "-m", "cof-track", "--seeds", "0..x"])
     assert res.exit_code == 2 and "0..4,7,10..59" in res.output
+
+
+def test_evaluate_prints_the_share_of_events_found_within_a_delay():
+    from click.testing import CliRunner
+
+    from eskin_industrial.cli import main
+
+    res = CliRunner().invoke(main, ["evaluate", "-m", "cof-track", "-s", "case2", "-s", "creep", "--seeds", "1000,1001",
+                                    "--within", "50", "--within", "100000"])
+    assert res.exit_code == 0, res.output
+    line = next(ln for ln in res.output.splitlines() if ln.startswith("# cof-track: of "))
+    score = evaluate(by_name("cof-track"), scenes=("case2", "creep"), seeds=(1000, 1001))["cof-track"].score
+    quick = sum(d <= 0.050 + 1e-9 for d in score.delays_s)
+    assert 0 < quick < score.events  # case2 is faster than 50 ms, creep slower
+    assert line == (f"# cof-track: of {score.events} slip events, {100 * quick / score.events:.0f} % within 50 ms, "
+                    f"{100 * score.found / score.events:.0f} % within 100000 ms")

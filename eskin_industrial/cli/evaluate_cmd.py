@@ -54,8 +54,10 @@ def _seeds(value: str) -> tuple[int, ...]:
                    "about 25 s per 100 seeds and method.")
 @click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None,
               help="Take the detector settings from this profile's [detector] (default: the built-in defaults).")
+@click.option("--within", "within_ms", multiple=True, type=click.IntRange(min=0),
+              help="Also print the share of slip events found within this many ms of onset (repeatable).")
 def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, long_holds,
-                 profile_path) -> None:
+                 profile_path, within_ms) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
     force read as slip, and cost per frame, for each method."""
     if charts_dir is not None:
@@ -94,6 +96,10 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
             for scene, ss in r.per_scene.items():
                 click.echo(f"|   {scene} | {ss.events} | {ss.found} | {ss.f1:.3f} | {ss.false_alarms} | {ss.vf_as_slip} | "
                            f"{_delays(ss)} | | |")
+    for name, r in res.items():
+        if within_ms:
+            shares = ", ".join(f"{_within(r.score, ms):.0f} % within {ms} ms" for ms in within_ms)
+            click.echo(f"# {name}: of {r.score.events} slip events, {shares}")
 
 
 def _num(value: float, unit: str = "", digits: int = 1) -> str:
@@ -103,6 +109,13 @@ def _num(value: float, unit: str = "", digits: int = 1) -> str:
 
 def _delays(score: Any) -> str:
     return f"{_num(score.delay_percentile(50) * 1000, digits=0)} / {_num(score.delay_percentile(90) * 1000, digits=0)}"
+
+
+def _within(score: Any, ms: int) -> float:
+    """Percent of all slip events flagged at most ``ms`` after onset (a missed one never is)."""
+    # (a small tolerance: delays are differences of frame times, ms a whole number)
+    hits = sum(1 for d in score.delays_s if d * 1000.0 <= ms + 1e-6)
+    return 100.0 * hits / score.events if score.events else float("nan")
 
 
 def _prepare_learned(names: tuple[str, ...], explicit: bool) -> tuple[str, ...]:

@@ -91,8 +91,8 @@ class RampBank:
     Every few rounds the sums are recomputed from the ring, against rounding drift."""
 
     def __init__(self, horizons: tuple[int, ...], base: int, z: float) -> None:
-        self.g, sd, disp = ramp_weights(horizons, base)
-        self.n = self.g.shape[1]
+        _, sd, disp = ramp_weights(horizons, base)  # (the weights are the batch form's)
+        self.n = max(horizons) + base
         self.horizons, self.base = tuple(horizons), base
         self._sd2 = (sd * sd).tolist()  # |whitened num|^2 / this: T^2
         self._z = z

@@ -68,7 +68,7 @@ class CofTrackSettings:
     ripple_lag_s: float = field(default=0.01, metadata=positive())
     #: However strong that evidence, the ramp must reach this many of its own standard
     #: deviations: a force that ripples with nothing moving (a machine starting to
-    #: shake) is no slip.  (0 flagged 22-27 of 40 such still grips, 4 one of 40, at 45 %
+    #: shake) is no slip.  (0 flagged 19-22 of 30 such still grips, 4 one of 30, at 44 %
     #: of the tuning events within 40 ms against 50 %: docs/evaluation.md.)
     ramp_support_z: float = field(default=4.0, metadata=non_negative())
 
