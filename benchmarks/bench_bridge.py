@@ -76,8 +76,8 @@ def slip_train_toml(duration_s: float, every_s: float = 1.2) -> str:
 
 def capture_main(port: int, out: str) -> None:
     """Serve the PLC's registers; note (time, STATE) of every write."""
-    from eskin_industrial.bus.modbus_io import RegisterServer, quiet_pymodbus
-    from eskin_industrial.bus.plc_image import IMAGE_COUNT, REG
+    from eskin_industrial.bus.modbus.io import RegisterServer, quiet_pymodbus
+    from eskin_industrial.plc.image import IMAGE_COUNT, REG
 
     quiet_pymodbus()
     seen: list[tuple[float, int]] = []
@@ -251,11 +251,11 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
 
 def start_can_node(profile, scene_file: Path, rate: float, fd: bool, interface: str, channel: str,
                    repeat: int = 1) -> threading.Thread:
-    from eskin_industrial.bus.can_layout import CanLayout
-    from eskin_industrial.bus.can_node import CanNode, Faults
-    from eskin_industrial.bus.can_source import open_bus
+    from eskin_industrial.bus.can.layout import CanLayout
+    from eskin_industrial.bus.can.reader import open_bus
     from eskin_industrial.calibration import Calibrator
     from eskin_industrial.scenes import render
+    from eskin_industrial.sim.can_node import CanNode, Faults
 
     rec = render(str(scene_file), rate, 0)
     raw = np.rint(Calibrator.from_section(profile.calibration, profile.taxels).to_raw(rec.forces))
@@ -282,10 +282,10 @@ def run_reference(path: str, decisions: list[tuple[int, int]], scene_file: Path,
     import can
 
     from eskin_industrial import load_profile
-    from eskin_industrial.bus.can_layout import CanLayout
-    from eskin_industrial.bus.can_source import open_bus
-    from eskin_industrial.bus.modbus_io import TcpMaster
-    from eskin_industrial.bus.plc_image import REG
+    from eskin_industrial.bus.can.layout import CanLayout
+    from eskin_industrial.bus.can.reader import open_bus
+    from eskin_industrial.bus.modbus.io import TcpMaster
+    from eskin_industrial.plc.image import REG
 
     rate = 1000.0 if path.endswith("1k") else 100.0
     fd = rate > 500
@@ -338,8 +338,9 @@ def main() -> None:
     if args.capture:
         capture_main(int(args.capture[0]), args.capture[1])
         return
-    from eskin_industrial.bus.modbus_io import quiet_pymodbus
     from machine import describe
+
+    from eskin_industrial.bus.modbus.io import quiet_pymodbus
 
     quiet_pymodbus()
     cmd = f".venv/bin/python benchmarks/bench_bridge.py --paths {args.paths} --duration {args.duration:g}"

@@ -26,10 +26,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from eskin_industrial import Calibrator, load_profile  # noqa: E402
-from eskin_industrial.bus.can_layout import CanLayout, ScanAssembler  # noqa: E402
-from eskin_industrial.pipeline import Pipeline  # noqa: E402
 from machine import describe  # noqa: E402  (benchmarks/machine.py)
+
+from eskin_industrial import Calibrator, load_profile  # noqa: E402
+from eskin_industrial.bus.can.layout import CanLayout, ScanAssembler  # noqa: E402
+from eskin_industrial.pipeline import Pipeline  # noqa: E402
 
 CLASSIC_LIMIT = 9_000  # eight-byte frames per second at 1 Mbit/s, no stuffing (7,400 worst case)
 FD_LIMIT = 5_900  # 64-byte frames per second at 1/5 Mbit/s
@@ -104,7 +105,7 @@ def write_candump(path: Path, profile, seconds: float, scan_rate: float) -> int:
     k = int(round(seconds * scan_rate))
     raw = grasp_raw(profile, min(k, 4096))
     every = max(1, int(round(profile.can.heartbeat_s * scan_rate)))
-    from eskin_industrial.bus.can_layout import NodeState, NodeStatus
+    from eskin_industrial.bus.can.layout import NodeState, NodeStatus
 
     frames = layout.encode(np.arange(len(raw)), raw)
     n = 0
@@ -191,8 +192,8 @@ def virtual_burst(seconds: float, profile: str, rate: float | None) -> int:
     thread, the receiver's reader thread and the detector in this process."""
     import threading
 
-    from eskin_industrial.bus.can_node import CanNode
-    from eskin_industrial.bus.can_source import BusReader, CanSource, open_bus
+    from eskin_industrial.bus.can.reader import BusReader, CanSource, open_bus
+    from eskin_industrial.sim.can_node import CanNode
 
     prof = load_profile(ROOT / profile)
     layout = CanLayout.from_profile(prof)

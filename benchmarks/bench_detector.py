@@ -23,12 +23,12 @@ import time
 from dataclasses import replace
 
 import numpy as np
+from machine import describe  # noqa: E402  (benchmarks/machine.py)
 
 from eskin_industrial.detect import PaperDetector, paper_batch
 from eskin_industrial.detect.cof_track import CofTrack
 from eskin_industrial.detect.reference import reference_window_sums
 from eskin_industrial.detect.settings import DetectorSettings
-from machine import describe  # noqa: E402  (benchmarks/machine.py)
 
 RATE = 1000.0
 

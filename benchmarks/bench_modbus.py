@@ -37,17 +37,19 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
+from machine import describe  # noqa: E402  (benchmarks/machine.py)
+from modbus_support import free_port, slip_recording  # noqa: E402
+
 from eskin_industrial import load_profile  # noqa: E402
-from eskin_industrial.bus.modbus_io import TcpMaster, quiet_pymodbus, rtu_transaction_s  # noqa: E402
-from eskin_industrial.bus.modbus_node import NodeSimulator  # noqa: E402
-from eskin_industrial.bus.modbus_source import RtuPoller  # noqa: E402
-from eskin_industrial.bus.plc_client import PlcWriter  # noqa: E402
-from eskin_industrial.bus.plc_image import STATUS_COUNT, Health, PlcImage  # noqa: E402
+from eskin_industrial.bus.modbus.io import TcpMaster, quiet_pymodbus, rtu_transaction_s  # noqa: E402
+from eskin_industrial.bus.modbus.rtu import RtuPoller  # noqa: E402
 from eskin_industrial.calibration import Calibrator  # noqa: E402
 from eskin_industrial.detect.state import GraspState  # noqa: E402
-from eskin_industrial.pipeline import Pipeline, RawScan  # noqa: E402
-from modbus_support import free_port, slip_recording  # noqa: E402
-from machine import describe  # noqa: E402  (benchmarks/machine.py)
+from eskin_industrial.frames import RawScan  # noqa: E402
+from eskin_industrial.pipeline import Pipeline
+from eskin_industrial.plc.client import PlcWriter  # noqa: E402
+from eskin_industrial.plc.image import STATUS_COUNT, Health, PlcImage  # noqa: E402
+from eskin_industrial.sim.modbus_node import NodeSimulator  # noqa: E402
 
 PROFILE = ROOT / "profiles" / "paper-5x5.toml"
 

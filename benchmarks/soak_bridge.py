@@ -65,7 +65,7 @@ def main() -> None:
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, PlcOutput, resolve
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
-    from eskin_industrial.bus.modbus_io import quiet_pymodbus
+    from eskin_industrial.bus.modbus.io import quiet_pymodbus
     from eskin_industrial.scenes import render
 
     quiet_pymodbus()

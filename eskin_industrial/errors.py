@@ -30,3 +30,36 @@ class InputFormatError(EskinError):
 
 class DecodeError(EskinError):
     """A frame from a transport does not decode; sources count and drop these."""
+
+
+class MissingExtra(EskinError):
+    """An optional dependency the chosen command or method needs is not installed."""
+
+
+class TransportError(EskinError):
+    """A bus or a peer cannot be reached or answers wrongly (sources and sinks)."""
+
+    exit_code = 3
+
+
+class CanBusError(TransportError):
+    """The CAN bus cannot be opened (unknown interface, missing channel, no driver)."""
+
+
+class ModbusFault(TransportError):
+    """A Modbus transaction failed; ``kind`` is ``timeout``, ``crc``, ``exception`` or
+    ``connection``; ``code`` is the exception code for ``exception``."""
+
+    def __init__(self, kind: str, message: str, code: int = 0) -> None:
+        super().__init__(message)
+        self.kind = kind
+        self.code = code
+
+
+class Refused(EskinError):
+    """A PLC write the register image does not accept; ``code`` is the Modbus
+    exception code to answer with."""
+
+    def __init__(self, code: int, message: str) -> None:
+        super().__init__(message)
+        self.code = code

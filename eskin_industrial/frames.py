@@ -9,6 +9,7 @@ row-major order, and :class:`FrameFlag` bits.  Flags are plain ints on the hot p
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,3 +42,19 @@ class Frame:
     t: float
     forces: np.ndarray
     flags: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class RawScan:
+    """One scan as a transport delivered it, before calibration.
+
+    ``t`` is the scan's time on the node's clock when the transport carries one
+    (sequence counter x scan period), otherwise the receipt time; ``rx_time`` is
+    always the host's monotonic receipt time (for staleness and latency).
+    """
+
+    seq: int
+    t: float
+    raw: np.ndarray
+    flags: int = 0
+    rx_time: float = math.nan

@@ -5,35 +5,16 @@ image, views) consume :class:`~eskin_industrial.detect.updates.Update`.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
-
-import numpy as np
 
 from .calibration import Calibrator
 from .detect.methods import get_method
 from .detect.updates import Update
-from .frames import Frame, FrameFlag
+from .frames import Frame, FrameFlag, RawScan
 from .profile import Profile
 
 _INVALID = int(FrameFlag.INVALID)  # plain ints: IntFlag arithmetic costs microseconds per scan
 _SATURATED = int(FrameFlag.SATURATED)
-
-
-@dataclass(frozen=True, slots=True)
-class RawScan:
-    """One scan as a transport delivered it, before calibration.
-
-    ``t`` is the scan's time on the node's clock when the transport carries one
-    (sequence counter x scan period), otherwise the receipt time; ``rx_time`` is
-    always the host's monotonic receipt time (for staleness and latency).
-    """
-
-    seq: int
-    t: float
-    raw: np.ndarray
-    flags: int = 0
-    rx_time: float = math.nan
 
 
 @dataclass

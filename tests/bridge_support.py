@@ -15,22 +15,21 @@ from dataclasses import dataclass, field, replace
 
 import can
 import numpy as np
+from conftest import PROFILES, grasp
+from modbus_support import free_port, slip_recording
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, PlcOutput, resolve
 from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
-from eskin_industrial.bus.can_layout import CanLayout
-from eskin_industrial.bus.can_node import CanNode, Faults
-from eskin_industrial.bus.can_source import open_bus
-from eskin_industrial.bus.modbus_io import RegisterServer
-from eskin_industrial.bus.plc_image import REG, STATUS_COUNT, Status
-from eskin_industrial.bus.plc_image import decode_registers as decode
-from eskin_industrial.bus.plc_sim import PlcMemory
+from eskin_industrial.bus.can.layout import CanLayout
+from eskin_industrial.bus.can.reader import open_bus
+from eskin_industrial.bus.modbus.io import RegisterServer
 from eskin_industrial.calibration import Calibrator
+from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
+from eskin_industrial.plc.image import decode_registers as decode
 from eskin_industrial.profile import Profile
-
-from conftest import PROFILES, grasp
-from modbus_support import free_port, slip_recording
+from eskin_industrial.sim.can_node import CanNode, Faults
+from eskin_industrial.sim.plc import PlcMemory
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 #: Bits that claim a verdict: none may be set without fresh, valid data.

@@ -9,15 +9,15 @@ import os
 import threading
 import time
 
-from eskin_industrial.bridge.logs import QUEUE_RECORDS, EventLog
-from eskin_industrial.bus.can_layout import CanLayout
-from eskin_industrial.bus.can_node import CanNode
-from eskin_industrial.bus.can_source import open_bus
-from eskin_industrial.bus.modbus_io import TcpMaster
-from eskin_industrial.bus.plc_image import IMAGE_COUNT
-from eskin_industrial.bus.plc_image import decode_registers as decode
-
 from bridge_support import can_node, channel, hold_raw, running_bridge, server_config, wait_for
+
+from eskin_industrial.bridge.logs import QUEUE_RECORDS, EventLog
+from eskin_industrial.bus.can.layout import CanLayout
+from eskin_industrial.bus.can.reader import open_bus
+from eskin_industrial.bus.modbus.io import TcpMaster
+from eskin_industrial.plc.image import IMAGE_COUNT
+from eskin_industrial.plc.image import decode_registers as decode
+from eskin_industrial.sim.can_node import CanNode
 
 QUEUE_FRAMES = 50
 

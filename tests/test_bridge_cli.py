@@ -13,12 +13,12 @@ import threading
 import time
 
 import pytest
-
-from eskin_industrial.bus.modbus_io import ModbusFault, TcpMaster
-from eskin_industrial.bus.plc_image import IMAGE_COUNT, Status
-
 from bridge_support import PAPER, TimedPlc, wait_for
 from modbus_support import free_port
+
+from eskin_industrial.bus.modbus.io import TcpMaster
+from eskin_industrial.errors import ModbusFault
+from eskin_industrial.plc.image import IMAGE_COUNT, Status
 
 
 def start_bridge(*args: str) -> subprocess.Popen:

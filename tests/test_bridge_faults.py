@@ -9,16 +9,23 @@ import threading
 import time
 
 import numpy as np
-
-from eskin_industrial.bus.can_node import Faults
-from eskin_industrial.bus.can_source import CanBusError
-from eskin_industrial.bus.plc_image import Status
-
 from bridge_support import (
-    CLAIMS, TimedPlc, can_node, channel, client_config, hold_raw, node_thread, running_bridge, server_config,
+    CLAIMS,
+    TimedPlc,
+    can_node,
+    channel,
+    client_config,
+    hold_raw,
+    node_thread,
+    running_bridge,
+    server_config,
     wait_for,
 )
 from modbus_support import free_port
+
+from eskin_industrial.errors import CanBusError
+from eskin_industrial.plc.image import Status
+from eskin_industrial.sim.can_node import Faults
 
 RATE_HZ = 100.0
 PERIOD_S = 1.0 / RATE_HZ

@@ -11,20 +11,28 @@ import time
 from collections import Counter
 
 import can
-from hypothesis import given
-from hypothesis import strategies as st
-
-from eskin_industrial import load_profile
-from eskin_industrial.bus.can_layout import HEADER_BYTES, ID_RANGE, SEQ_BITS, STATUS_LENGTH, CanLayout
-from eskin_industrial.bus.can_node import Faults
-from eskin_industrial.bus.can_source import open_bus
-from eskin_industrial.bus.plc_image import Status
-
 from bridge_support import (
-    CLAIMS, PAPER, TimedPlc, can_node, channel, client_config, hold_raw, node_thread, running_bridge, wait_for,
+    CLAIMS,
+    PAPER,
+    TimedPlc,
+    can_node,
+    channel,
+    client_config,
+    hold_raw,
+    node_thread,
+    running_bridge,
+    wait_for,
 )
 from fuzz_support import fuzz
+from hypothesis import given
+from hypothesis import strategies as st
 from modbus_support import free_port
+
+from eskin_industrial import load_profile
+from eskin_industrial.bus.can.layout import HEADER_BYTES, ID_RANGE, SEQ_BITS, STATUS_LENGTH, CanLayout
+from eskin_industrial.bus.can.reader import open_bus
+from eskin_industrial.plc.image import Status
+from eskin_industrial.sim.can_node import Faults
 
 PROFILE = load_profile(PAPER)
 LAYOUT = CanLayout.from_profile(PROFILE)

@@ -6,15 +6,21 @@ from __future__ import annotations
 import threading
 
 import can
-
-from eskin_industrial.bus.can_source import open_bus
-from eskin_industrial.bus.modbus_io import TcpMaster
-from eskin_industrial.bus.plc_image import IMAGE_COUNT, Status
-from eskin_industrial.bus.plc_image import decode_registers as decode
-
 from bridge_support import (
-    can_node, channel, hold_raw, node_thread, running_bridge, server_config, slip_raw, wait_for,
+    can_node,
+    channel,
+    hold_raw,
+    node_thread,
+    running_bridge,
+    server_config,
+    slip_raw,
+    wait_for,
 )
+
+from eskin_industrial.bus.can.reader import open_bus
+from eskin_industrial.bus.modbus.io import TcpMaster
+from eskin_industrial.plc.image import IMAGE_COUNT, Status
+from eskin_industrial.plc.image import decode_registers as decode
 
 RIGHT_BASE = 100
 

@@ -8,10 +8,10 @@ from __future__ import annotations
 import socket
 import time
 
-from eskin_industrial.bus.plc_image import Status
-
 from bridge_support import TimedPlc, can_node, channel, client_config, hold_raw, node_thread, running_bridge, wait_for
 from modbus_support import free_port
+
+from eskin_industrial.plc.image import Status
 
 RATE_HZ = 100.0
 #: Scans in flight between the node's counter and the bridge's (routing, one loop

@@ -9,11 +9,11 @@ import subprocess
 import sys
 import time
 
-from eskin_industrial.bus.plc_image import REG, Status, join32
-from eskin_industrial.recording import write_recording
-
 from conftest import PROFILES
 from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
+
+from eskin_industrial.plc.image import REG, Status, join32
+from eskin_industrial.recording import write_recording
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 

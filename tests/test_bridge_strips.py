@@ -8,23 +8,23 @@ import uuid
 from pathlib import Path
 
 import numpy as np
+from bridge_support import wait_for
+from modbus_support import free_port
 
 from eskin_industrial import load_profile
 from eskin_industrial.bridge.config import load_bridge_config, resolve
 from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
-from eskin_industrial.bus.can_layout import CanLayout
-from eskin_industrial.bus.can_node import CanNode, Faults
-from eskin_industrial.bus.can_source import open_bus
-from eskin_industrial.bus.modbus_io import TcpMaster
-from eskin_industrial.bus.plc_image import REG, join32
+from eskin_industrial.bus.can.layout import CanLayout
+from eskin_industrial.bus.can.reader import open_bus
+from eskin_industrial.bus.modbus.io import TcpMaster
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
-from eskin_industrial.pipeline import Pipeline, RawScan
+from eskin_industrial.frames import RawScan
+from eskin_industrial.pipeline import Pipeline
+from eskin_industrial.plc.image import REG, join32
 from eskin_industrial.scenes import render
-
-from bridge_support import wait_for
-from modbus_support import free_port
+from eskin_industrial.sim.can_node import CanNode, Faults
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "deploy" / "hand-strips.toml"

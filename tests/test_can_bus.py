@@ -12,17 +12,17 @@ import uuid
 import can
 import numpy as np
 import pytest
+from conftest import PROFILES, grasp
 
-from eskin_industrial.bus.can_layout import CanLayout, ScanAssembler
-from eskin_industrial.bus.can_node import CanNode, Faults
-from eskin_industrial.bus.can_source import BusReader, CanBusError, CanSource, open_bus
+from eskin_industrial.bus.can.layout import CanLayout, ScanAssembler
+from eskin_industrial.bus.can.reader import BusReader, CanSource, open_bus
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect import get_method
 from eskin_industrial.detect.updates import UpdateTable
+from eskin_industrial.errors import CanBusError
 from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.recording import write_recording, write_updates
-
-from conftest import PROFILES, grasp
+from eskin_industrial.sim.can_node import CanNode, Faults
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 

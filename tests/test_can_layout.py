@@ -9,9 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from eskin_industrial.bus.can_layout import (
-    SEQ_MODULO, CanLayout, NodeState, NodeStatus, ScanAssembler, decode_messages,
-)
+from eskin_industrial.bus.can.layout import SEQ_MODULO, CanLayout, NodeState, NodeStatus, ScanAssembler, decode_messages
 from eskin_industrial.errors import ProfileError
 
 

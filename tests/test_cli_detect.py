@@ -7,10 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PROFILES, grasp
 
 from eskin_industrial.recording import read_updates, write_recording
-
-from conftest import PROFILES, grasp
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 

@@ -7,7 +7,14 @@ import pytest
 from eskin_industrial.detect import GraspState, UpdateTable
 from eskin_industrial.evaluation.metrics import score_scene
 from eskin_industrial.evaluation.suite import (
-    DEFAULT_SETTINGS, EVALUATION_SEEDS, HOLD_EVALUATION_SEEDS, HOLD_SCENES, HOLD_TUNING_SEEDS, SUITE, TUNING_SEEDS, by_name,
+    DEFAULT_SETTINGS,
+    EVALUATION_SEEDS,
+    HOLD_EVALUATION_SEEDS,
+    HOLD_SCENES,
+    HOLD_TUNING_SEEDS,
+    SUITE,
+    TUNING_SEEDS,
+    by_name,
     evaluate,
 )
 

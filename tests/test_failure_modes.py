@@ -7,11 +7,11 @@ import pytest
 
 from eskin_industrial import FrameFlag
 from eskin_industrial.detect import GraspState
+from eskin_industrial.detect.methods import get_method
 from eskin_industrial.detect.settings import DetectorSettings
 from eskin_industrial.evaluation import conditions
 from eskin_industrial.evaluation.metrics import score_scene
 from eskin_industrial.evaluation.suite import run_one
-from eskin_industrial.detect.methods import get_method
 from eskin_industrial.scenes import load_scene, render
 
 SEED = 1002  # an evaluation seed

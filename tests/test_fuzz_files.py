@@ -14,17 +14,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PROFILES
+from fuzz_support import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
 
-from eskin_industrial.bus.can_layout import CanLayout, decode_messages
-from eskin_industrial.bus.can_source import read_can_log
+from eskin_industrial.bus.can.layout import CanLayout, decode_messages
+from eskin_industrial.bus.can.log import read_can_log
 from eskin_industrial.errors import InputFormatError, ProfileError
 from eskin_industrial.profile import Profile, parse_profile
 from eskin_industrial.recording import read_recording
-
-from conftest import PROFILES
-from fuzz_support import fuzz
 
 
 def _write(name: str, content: bytes) -> Path:

@@ -12,18 +12,19 @@ import dataclasses
 import math
 
 import numpy as np
+from conftest import PROFILES
+from fuzz_support import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
 from pymodbus.framer.rtu import FramerRTU
 
 from eskin_industrial import load_profile
-from eskin_industrial.bus.modbus_io import ModbusFault, _valid_frame
-from eskin_industrial.bus.modbus_node import NodeRegisters, decode_scans, encode_scan, register_count
-from eskin_industrial.bus.modbus_source import RtuPoller
+from eskin_industrial.bus.modbus.codec import decode_scans, encode_scan, register_count
+from eskin_industrial.bus.modbus.io import _valid_frame
+from eskin_industrial.bus.modbus.rtu import RtuPoller
+from eskin_industrial.errors import ModbusFault
 from eskin_industrial.profile import ModbusNodeSection
-
-from conftest import PROFILES
-from fuzz_support import fuzz
+from eskin_industrial.sim.modbus_node import NodeRegisters
 
 PAPER = load_profile(PROFILES / "paper-5x5.toml")
 HAND = load_profile(PROFILES / "hand-4x5.toml")

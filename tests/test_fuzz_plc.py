@@ -8,20 +8,28 @@ from __future__ import annotations
 
 import dataclasses
 
+from conftest import PROFILES
+from fuzz_support import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
 
 from eskin_industrial import load_profile
-from eskin_industrial.bus.plc_image import (
-    COILS, IMAGE_COUNT, REG, STATUS_COUNT, Command, Health, PlcImage, Refused, Status, parse_coil_write,
-    parse_register_write,
-)
-from eskin_industrial.bus.plc_server import PlcRegisterHandler
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.detect.updates import Update
-
-from conftest import PROFILES
-from fuzz_support import fuzz
+from eskin_industrial.errors import Refused
+from eskin_industrial.plc.image import (
+    COILS,
+    IMAGE_COUNT,
+    REG,
+    STATUS_COUNT,
+    Command,
+    Health,
+    PlcImage,
+    Status,
+    parse_coil_write,
+    parse_register_write,
+)
+from eskin_industrial.plc.server import PlcRegisterHandler
 
 PLC = load_profile(PROFILES / "paper-5x5.toml").modbus.plc
 COMMAND_NAMES = {"ack", "tare", "enable", "disable"}

@@ -10,12 +10,12 @@ import pytest
 
 pytest.importorskip("sklearn")
 
+from conftest import grasp  # noqa: E402
+
 from eskin_industrial.detect import GraspState, get_method  # noqa: E402
 from eskin_industrial.detect.learned import CLASSES, FEATURES, Learned  # noqa: E402
 from eskin_industrial.evaluation.suite import EVALUATION_SEEDS, SUITE, TUNING_SEEDS, evaluate  # noqa: E402
 from eskin_industrial.evaluation.train import TrainConfig, default_model  # noqa: E402
-
-from conftest import grasp  # noqa: E402
 
 RATE = 100.0
 

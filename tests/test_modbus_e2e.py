@@ -10,16 +10,16 @@ import sys
 import threading
 import time
 
-from eskin_industrial.bus.modbus_bridge import ModbusBridge
-from eskin_industrial.bus.modbus_node import NodeSimulator
-from eskin_industrial.bus.modbus_source import RtuPoller
-from eskin_industrial.bus.plc_client import PlcWriter
-from eskin_industrial.bus.plc_image import Status
-from eskin_industrial.bus.plc_sim import PlcSimulator
-from eskin_industrial.recording import write_recording
-
 from conftest import PROFILES
 from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
+
+from eskin_industrial.bridge.loop import ModbusBridge
+from eskin_industrial.bus.modbus.rtu import RtuPoller
+from eskin_industrial.plc.client import PlcWriter
+from eskin_industrial.plc.image import Status
+from eskin_industrial.recording import write_recording
+from eskin_industrial.sim.modbus_node import NodeSimulator
+from eskin_industrial.sim.plc import PlcSimulator
 
 #: Detection delay allowed after the slip starts.  The detector decides on the
 #: first hop after the slip enters its window (~0.1 s), or, when polling at the

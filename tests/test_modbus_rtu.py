@@ -10,15 +10,15 @@ import time
 import numpy as np
 import pytest
 import serial
-
-from eskin_industrial.bus.modbus_bridge import ModbusBridge
-from eskin_industrial.bus.modbus_node import NodeSimulator, decode_scans, encode_scan
-from eskin_industrial.bus.modbus_source import RtuPoller
-from eskin_industrial.bus.plc_image import Status
-from eskin_industrial.calibration import Calibrator
-from eskin_industrial.profile import ModbusNodeSection
-
 from modbus_support import mbpoll, mbpoll_values, pty_pair, slip_recording
+
+from eskin_industrial.bridge.loop import ModbusBridge
+from eskin_industrial.bus.modbus.codec import decode_scans, encode_scan
+from eskin_industrial.bus.modbus.rtu import RtuPoller
+from eskin_industrial.calibration import Calibrator
+from eskin_industrial.plc.image import Status
+from eskin_industrial.profile import ModbusNodeSection
+from eskin_industrial.sim.modbus_node import NodeSimulator
 
 
 def with_node(profile, **changes):

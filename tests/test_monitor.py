@@ -12,17 +12,17 @@ import can.interfaces.virtual
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from conftest import PROFILES, press_scene
 
-from eskin_industrial.bus.can_layout import CanLayout
-from eskin_industrial.bus.can_node import CanNode, Faults
-from eskin_industrial.bus.can_source import open_bus
+from eskin_industrial.bus.can.layout import CanLayout
+from eskin_industrial.bus.can.reader import open_bus
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.cli import main
-from eskin_industrial.pipeline import Pipeline, RawScan
+from eskin_industrial.frames import RawScan
+from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.scenes import render
+from eskin_industrial.sim.can_node import CanNode, Faults
 from eskin_industrial.view.live import change_line
-
-from conftest import PROFILES, press_scene
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 

@@ -1,12 +1,12 @@
 from __future__ import annotations
 
 import numpy as np
+from conftest import grasp
 
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect import GraspState, paper_batch
-from eskin_industrial.pipeline import Pipeline, RawScan
-
-from conftest import grasp
+from eskin_industrial.frames import RawScan
+from eskin_industrial.pipeline import Pipeline
 
 
 def test_raw_scans_give_the_offline_answer(paper_profile):

@@ -6,15 +6,16 @@ from __future__ import annotations
 import socket
 import time
 
-from eskin_industrial.bus.modbus_bridge import ModbusBridge, ReplaySource
-from eskin_industrial.bus.plc_client import PlcWriter
-from eskin_industrial.bus.plc_image import REG, STATUS_COUNT, Status
-from eskin_industrial.bus.plc_image import decode_registers as decode
-from eskin_industrial.bus.plc_sim import PlcSimulator
+from modbus_support import free_port, slip_recording
+
+from eskin_industrial.bridge.loop import ModbusBridge
+from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
-
-from modbus_support import free_port, slip_recording
+from eskin_industrial.plc.client import PlcWriter
+from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
+from eskin_industrial.plc.image import decode_registers as decode
+from eskin_industrial.sim.plc import PlcSimulator
 
 
 def wait_for(cond, timeout_s: float = 5.0, step=None) -> None:
@@ -99,9 +100,9 @@ def test_plc_drops_and_comes_back_while_detection_runs(paper_profile):
 
 
 def test_client_mode_over_rtu(paper_profile, tmp_path):
-    from eskin_industrial.bus.modbus_io import SerialSettings
-
     from modbus_support import pty_pair
+
+    from eskin_industrial.bus.modbus.io import SerialSettings
 
     settings = paper_profile.modbus.plc
     with pty_pair(tmp_path) as (a, b):

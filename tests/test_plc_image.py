@@ -5,15 +5,26 @@ import math
 
 import pytest
 from click.testing import CliRunner
+from conftest import PROFILES
 
-from eskin_industrial.bus.plc_image import (
-    IMAGE_COUNT, REG, REGISTERS, STATUS_COUNT, Command, Health, PlcImage, Refused, Status, join32, map_rows,
-    parse_coil_write, parse_register_write, split32,
-)
 from eskin_industrial.cli import main
 from eskin_industrial.detect.updates import Update
-
-from conftest import PROFILES
+from eskin_industrial.errors import Refused
+from eskin_industrial.plc.image import (
+    IMAGE_COUNT,
+    REG,
+    REGISTERS,
+    STATUS_COUNT,
+    Command,
+    Health,
+    PlcImage,
+    Status,
+    join32,
+    map_rows,
+    parse_coil_write,
+    parse_register_write,
+    split32,
+)
 
 FRESH = Health(frame_age_s=0.01)
 

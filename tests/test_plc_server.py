@@ -6,15 +6,15 @@ import time
 
 import numpy as np
 import pytest
+from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
 
-from eskin_industrial.bus.modbus_bridge import ModbusBridge, ReplaySource
-from eskin_industrial.bus.modbus_io import SerialSettings
-from eskin_industrial.bus.plc_image import REG, STATUS_COUNT, Status
-from eskin_industrial.bus.plc_server import PlcServer
+from eskin_industrial.bridge.loop import ModbusBridge
+from eskin_industrial.bus.modbus.io import SerialSettings
+from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
-
-from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
+from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
+from eskin_industrial.plc.server import PlcServer
 
 
 def run_bridge(bridge: ModbusBridge, until, timeout_s: float = 10.0) -> None:

@@ -28,7 +28,7 @@ def test_plot_draws_a_can_log_through_the_receivers_decoding(tmp_path):
     import numpy as np
 
     from eskin_industrial import Calibrator, load_profile
-    from eskin_industrial.bus.can_layout import CanLayout
+    from eskin_industrial.bus.can.layout import CanLayout
     from eskin_industrial.recording import read_recording
 
     prof = load_profile(PROFILES / "paper-5x5.toml")

@@ -6,9 +6,9 @@ import re
 import numpy as np
 import pytest
 
-from eskin_industrial.bus.plc_image import Health, PlcImage
 from eskin_industrial.detect.settings import DetectorSettings
 from eskin_industrial.detect.updates import Update
+from eskin_industrial.plc.image import Health, PlcImage
 from eskin_industrial.profile import ModbusPlcSection
 from eskin_industrial.view import IndicatorScale, Snapshot, decode_registers, indicator_scale, render
 from eskin_industrial.view.screen import HEAT_COLORS, RAMP, fit_number
@@ -198,11 +198,12 @@ def test_numbers_fit_their_cells():
 
 
 def test_a_watch_snapshots_the_newest_values_of_a_running_pipeline(hand_profile):
-    from eskin_industrial.calibration import Calibrator
-    from eskin_industrial.pipeline import Pipeline, RawScan
-    from eskin_industrial.view.live import Watch
-
     from conftest import grasp
+
+    from eskin_industrial.calibration import Calibrator
+    from eskin_industrial.frames import RawScan
+    from eskin_industrial.pipeline import Pipeline
+    from eskin_industrial.view.live import Watch
 
     pipe = Pipeline(hand_profile, rate_hz=100.0)
     image = PlcImage(hand_profile.modbus.plc)

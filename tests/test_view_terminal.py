@@ -10,8 +10,16 @@ import time
 
 import pytest
 
-from eskin_industrial.view.terminal import (ENTER, HOME, LEAVE, LiveScreen, RedrawError, color_wanted, frame_text,
-                                            visible_width)
+from eskin_industrial.view.terminal import (
+    ENTER,
+    HOME,
+    LEAVE,
+    LiveScreen,
+    RedrawError,
+    color_wanted,
+    frame_text,
+    visible_width,
+)
 
 
 def size(cols: int = 80, rows: int = 24):

@@ -214,8 +214,8 @@ def _apply_overrides(prof: Profile, nc: NodeConfig) -> Profile:
 
 
 def _check_together(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
-    from ..bus.can_layout import ID_RANGE
-    from ..bus.plc_image import IMAGE_COUNT
+    from ..bus.can.layout import ID_RANGE
+    from ..plc.image import IMAGE_COUNT
 
     src = config.source
     names = [n.name for n in nodes]

@@ -26,13 +26,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..bus.modbus_bridge import ModbusBridge
-from ..bus.plc_image import Status
 from ..detect.state import GraspState
 from ..detect.updates import Update
 from ..errors import EskinError
+from ..plc.image import Status
 from .config import BridgeConfig, ResolvedNode, plc_mode
 from .logs import EventLog
+from .loop import ModbusBridge
 
 #: The interpreter hands the GIL between threads every 5 ms by default; a reader
 #: thread waiting that long would add 5 ms to a 1 kHz scan's latency.
@@ -91,9 +91,9 @@ class Bridge:
         return self
 
     def _open_sinks(self) -> list:
-        from ..bus.modbus_io import SerialSettings
-        from ..bus.plc_client import PlcWriter
-        from ..bus.plc_server import PlcServer
+        from ..bus.modbus.io import SerialSettings
+        from ..plc.client import PlcWriter
+        from ..plc.server import PlcServer
 
         out = self.config.plc
         first = self.nodes[0].profile.modbus.plc
@@ -112,7 +112,7 @@ class Bridge:
         return sinks
 
     def _open_sources(self) -> list:
-        from .can_group import CanGroup
+        from ..bus.can.group import CanGroup
 
         by_key: dict[tuple, list[int]] = {}
         sources: list = [None] * len(self.nodes)
@@ -135,12 +135,11 @@ class Bridge:
     def _can_reader(self, n: ResolvedNode):
         c = n.config
         if c.source == "can-log":
-            from ..bus.can_source import read_can_log
-            from .can_group import LogPlayer
+            from ..bus.can.log import LogPlayer, read_can_log
 
             reader = LogPlayer(c.path, read_can_log(c.path), self.config.queue_frames)  # type: ignore[arg-type]
         else:
-            from ..bus.can_source import BusReader, bus_kwargs, open_bus
+            from ..bus.can.reader import BusReader, bus_kwargs, open_bus
 
             kw = bus_kwargs(n.profile, c.interface, c.channel, c.bitrate_bps, c.fd, c.data_bitrate_bps)
             reader = BusReader(lambda: open_bus(**kw), self.config.queue_frames)
@@ -148,7 +147,7 @@ class Bridge:
         return reader
 
     def _rtu_source(self, n: ResolvedNode):
-        from ..bus.modbus_source import RtuPoller
+        from ..bus.modbus.rtu import RtuPoller
 
         poller = RtuPoller(n.profile, n.config.serial_port, baudrate=n.config.baudrate)  # type: ignore[arg-type]
         poller.open()
@@ -156,7 +155,7 @@ class Bridge:
         return poller
 
     def _scene_source(self, n: ResolvedNode):
-        from ..bus.modbus_bridge import ReplaySource
+        from ..bus.replay import ReplaySource
         from ..calibration import Calibrator
         from ..scenes import render
 

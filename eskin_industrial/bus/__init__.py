@@ -1,2 +1,3 @@
-"""Transports: each source turns CAN, Modbus RTU or a recorded log into raw scans and
-counts what it lost; sinks publish the register image to a PLC."""
+"""Sources: the input seam.  Each kind turns a transport (CAN, Modbus RTU, a CAN log,
+a recording or scene replay) into raw scans and reports its health and counters;
+see :mod:`.source` for the contract and the registry of kinds."""

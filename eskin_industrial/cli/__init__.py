@@ -11,16 +11,16 @@ from ..errors import EskinError
 from .bridge_cmd import bridge
 from .demo_cmd import demo
 from .detect_cmd import detect
-from .node_cmd import node
+from .evaluate_cmd import evaluate_cmd
 from .modbus_cmd import modbus_bridge, modbus_node
+from .monitor_cmd import monitor
+from .node_cmd import node
 from .plc_cmd import plc
 from .plc_sim_cmd import plc_sim
-from .profile_cmd import profile
-from .monitor_cmd import monitor
-from .receive_cmd import receive
 from .plot_cmd import plot
+from .profile_cmd import profile
+from .receive_cmd import receive
 from .simulate_cmd import simulate
-from .evaluate_cmd import evaluate_cmd
 
 
 class _Group(click.Group):

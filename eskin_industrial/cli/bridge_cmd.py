@@ -101,8 +101,8 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     from ..bridge.config import BridgeConfig, load_bridge_config, plc_mode, resolve
     from ..bridge.logs import EventLog
     from ..bridge.runtime import Bridge
-    from ..bus.can_layout import ID_RANGE
-    from ..bus.modbus_io import quiet_pymodbus
+    from ..bus.can.layout import ID_RANGE
+    from ..bus.modbus.io import quiet_pymodbus
 
     if (config_path is None) == (profile_path is None):
         raise click.UsageError("give --config FILE, or --profile P for one node")

@@ -12,9 +12,9 @@ import numpy as np
 from .common import open_profile
 
 if TYPE_CHECKING:
-    from ..demo import DemoResult
     from ..profile import Profile
     from ..scenes import Rendered
+    from ..sim.demo import DemoResult
     from ..view.terminal import LiveScreen
 
 #: the shipped profiles, next to the package in a checkout
@@ -36,8 +36,8 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
     stand-in.  In a terminal: a live view (taxel heat map, scores against their
     thresholds, state, the PLC's registers), then the state changes and a summary;
     piped or with --plain: each state change as it comes, then the summary."""
-    from ..demo import run_demo
     from ..scenes import render
+    from ..sim.demo import run_demo
 
     rec = render(scene, rate_hz, seed)
     prof = open_profile(profile_path or str(PROFILES / f"{rec.profile_name}.toml"))
@@ -67,8 +67,8 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
 def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> DemoResult:
     """The demo under the live view; the lines it would have printed are kept and
     printed once the view has left the screen."""
-    from ..bus.plc_image import STATUS_COUNT
-    from ..demo import DemoParts, run_demo
+    from ..plc.image import STATUS_COUNT
+    from ..sim.demo import DemoParts, run_demo
     from ..view.live import Watch, live_screen
     from ..view.terminal import color_wanted
 

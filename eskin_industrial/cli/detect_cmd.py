@@ -40,7 +40,7 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
     if (input_path is None) == (can_log is None):
         raise click.UsageError("give exactly one of INPUT.csv or --can-log LOG")
     if can_log is not None:  # the live receiver's path, on recorded traffic: same output
-        from ..bus.can_source import detect_log
+        from ..bus.can.log import detect_log
 
         table = detect_log(prof, can_log, rate_hz, method, quiet)
     else:

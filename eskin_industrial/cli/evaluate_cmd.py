@@ -4,15 +4,22 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
 from pathlib import Path
+from typing import Any
 
 import click
 
 from ..detect.methods import METHODS
 from ..evaluation.suite import (
-    DEFAULT_SETTINGS, EVALUATION_SEEDS, HOLD_EVALUATION_SEEDS, HOLD_SCENES, HOLD_TUNING_SEEDS, SUITE, TUNING_SEEDS,
-    by_name, evaluate,
+    DEFAULT_SETTINGS,
+    EVALUATION_SEEDS,
+    HOLD_EVALUATION_SEEDS,
+    HOLD_SCENES,
+    HOLD_TUNING_SEEDS,
+    SUITE,
+    TUNING_SEEDS,
+    by_name,
+    evaluate,
 )
 from .common import open_profile
 
@@ -122,7 +129,7 @@ def _prepare_learned(names: tuple[str, ...], explicit: bool) -> tuple[str, ...]:
     """Train the learned method's model up front (tuning seeds only), so that its
     time is reported apart; without scikit-learn, asking for it is an error (one
     line, from the CLI's error handler) and the default run leaves it out."""
-    from ..detect.learned import MissingExtra
+    from ..errors import MissingExtra
     from ..evaluation.train import INSTALL_HINT, default_model, require_sklearn
 
     try:

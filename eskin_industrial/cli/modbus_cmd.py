@@ -31,8 +31,8 @@ def modbus_node(profile_path, port, scene, recording, rate_hz, baudrate, seed, o
 
 def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, duration_s) -> None:
     """The RTU node, shared by ``modbus-node`` and ``node --modbus-rtu``."""
-    from ..bus.modbus_io import quiet_pymodbus
-    from ..bus.modbus_node import serve_scene_rtu
+    from ..bus.modbus.io import quiet_pymodbus
+    from ..sim.modbus_node import serve_scene_rtu
 
     quiet_pymodbus()
     scans = scene_or_recording(prof, scene, recording, rate_hz, seed)
@@ -79,11 +79,12 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
     """Poll the node over Modbus RTU, detect, and publish the PLC register image:
     written to the PLC (client mode, the default when the profile says so) or served
     (--serve / --serve-rtu)."""
-    from ..bus.modbus_bridge import ModbusBridge, ReplaySource
-    from ..bus.modbus_io import SerialSettings, quiet_pymodbus
-    from ..bus.modbus_source import RtuPoller
-    from ..bus.plc_client import PlcWriter
-    from ..bus.plc_server import PlcServer
+    from ..bridge.loop import ModbusBridge
+    from ..bus.modbus.io import SerialSettings, quiet_pymodbus
+    from ..bus.modbus.rtu import RtuPoller
+    from ..bus.replay import ReplaySource
+    from ..plc.client import PlcWriter
+    from ..plc.server import PlcServer
 
     quiet_pymodbus()
     prof = open_profile(profile_path)

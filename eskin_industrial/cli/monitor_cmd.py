@@ -30,10 +30,10 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, rate_hz
     (taxel heat map, scores against their thresholds, state, the register image the
     bridge would publish, counters) until Ctrl-C, --duration or --idle-exit; then one
     line of counters.  No PLC is contacted."""
-    from ..bus.can_layout import CanLayout, ScanAssembler
-    from ..bus.can_poll import CanScanPoller
-    from ..bus.can_source import READER_SWITCH_INTERVAL_S, BusReader, bus_kwargs, open_bus
-    from ..bus.modbus_bridge import ModbusBridge
+    from ..bridge.loop import ModbusBridge
+    from ..bus.can.layout import CanLayout, ScanAssembler
+    from ..bus.can.reader import READER_SWITCH_INTERVAL_S, BusReader, bus_kwargs, open_bus
+    from ..bus.can.source import CanScanPoller
     from ..detect.updates import Update
     from ..pipeline import Pipeline
     from ..view.live import KeptImage, Watch, change_line, live_screen

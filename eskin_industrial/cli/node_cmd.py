@@ -40,9 +40,9 @@ def node(profile_path, interface, channel, bitrate, fd, data_bitrate, scene, rec
     deadlines, no drift), with the node's heartbeat and optional faults; or, with
     --modbus-rtu PORT, serve them as a Modbus RTU slave (the scene loops until
     --duration or Ctrl-C)."""
-    from ..bus.can_layout import CanLayout
-    from ..bus.can_node import CanNode, Faults
-    from ..bus.can_source import bus_kwargs, open_bus
+    from ..bus.can.layout import CanLayout
+    from ..bus.can.reader import bus_kwargs, open_bus
+    from ..sim.can_node import CanNode, Faults
 
     prof = open_profile(profile_path)
     if modbus_rtu is not None:

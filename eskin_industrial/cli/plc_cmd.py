@@ -7,7 +7,7 @@ import sys
 
 import click
 
-from ..bus.plc_image import map_rows
+from ..plc.image import map_rows
 from .common import open_profile, profile_option
 
 _COLUMNS = ("table", "name", "address", "ref", "type", "unit", "access", "description")

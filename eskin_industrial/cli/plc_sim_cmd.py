@@ -25,11 +25,11 @@ def plc_sim(profile_path: str, host: str, port: int | None, rtu_port: str | None
     mode), print every status change, and run the example gripper logic: raise the
     grip force when the slip flag comes, acknowledge the latch, hold when the data
     is not valid."""
-    from ..bus.plc_sim import Gripper, PlcSimulator
+    from ..sim.plc import Gripper, PlcSimulator
 
     prof = open_profile(profile_path)
     plc = prof.modbus.plc
-    from ..bus.modbus_io import SerialSettings, quiet_pymodbus
+    from ..bus.modbus.io import SerialSettings, quiet_pymodbus
 
     quiet_pymodbus()
     serial = SerialSettings(rtu_port, baudrate) if rtu_port else None

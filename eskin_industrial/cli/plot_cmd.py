@@ -41,7 +41,7 @@ def plot(profile_path: str, input_path: str | None, can_log: str | None, output:
     prof = open_profile(profile_path)
     cal = Calibrator.from_section(prof.calibration, prof.taxels)
     if can_log is not None:
-        from ..bus.can_source import log_scans
+        from ..bus.can.log import log_scans
 
         rate = prof.sensor.rate_hz
         scans, _ = log_scans(prof, can_log, rate)

@@ -30,7 +30,7 @@ def check(files: tuple[str, ...]) -> None:
             continue
         click.echo(f"{path}: ok ({_brief(p)})")
         try:  # the transports' own checks; only the commands that use them refuse
-            from ..bus.can_layout import CanLayout
+            from ..bus.can.layout import CanLayout
 
             CanLayout.from_profile(p)
         except ProfileError as exc:
@@ -71,8 +71,8 @@ def show(file: str, fmt: str) -> None:
 @click.option("--fd/--no-fd", "fd", default=None, help="Describe CAN FD frames (default: the profile's).")
 def dbc(file: str, fd: bool | None) -> None:
     """Write a DBC describing the profile's CAN frames (taxels scaled to newtons)."""
-    from ..bus.can_dbc import dbc_text
-    from ..bus.can_layout import CanLayout
+    from ..bus.can.dbc import dbc_text
+    from ..bus.can.layout import CanLayout
 
     p = load_profile(file)
     click.echo(dbc_text(p, CanLayout.from_profile(p, fd=fd)), nl=False)

@@ -34,8 +34,8 @@ def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output,
     --scans), run the detector, and report the transport counters as JSON on stderr."""
     import can
 
-    from ..bus.can_layout import CanLayout, ScanAssembler
-    from ..bus.can_source import READER_SWITCH_INTERVAL_S, BusReader, CanSource, bus_kwargs, open_bus
+    from ..bus.can.layout import CanLayout, ScanAssembler
+    from ..bus.can.reader import READER_SWITCH_INTERVAL_S, BusReader, CanSource, bus_kwargs, open_bus
     from ..pipeline import Pipeline
 
     sys.setswitchinterval(READER_SWITCH_INTERVAL_S)

@@ -26,7 +26,6 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..errors import EskinError
 from .cof_track import CofTrack
 from .scored import ForceRate, HfEnergy, _Lagged
 from .settings import DetectorSettings
@@ -53,10 +52,6 @@ CLASSES: tuple[str, ...] = ("stable", "variable_force", "slip")
 
 class Model(Protocol):
     def __call__(self, x: np.ndarray) -> np.ndarray: ...
-
-
-class MissingExtra(EskinError):
-    """An optional dependency the chosen method needs is not installed."""
 
 
 @dataclass(frozen=True)

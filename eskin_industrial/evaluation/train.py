@@ -15,8 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from ..detect.learned import CLASSES, FEATURES, Learned, MissingExtra, TreeEnsemble
+from ..detect.learned import CLASSES, FEATURES, Learned, TreeEnsemble
 from ..detect.settings import DetectorSettings
+from ..errors import MissingExtra
 from ..scenes import load_scene, render
 from .suite import EVALUATION_SEEDS, SUITE, TUNING_SEEDS, coordinates
 

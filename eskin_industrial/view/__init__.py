@@ -6,7 +6,7 @@
 - :mod:`.live`: snapshots from a running chain's newest values.
 """
 
-from ..bus.plc_image import decode_registers
+from ..plc.image import decode_registers
 from .screen import render
 from .snapshot import IndicatorScale, Snapshot, indicator_scale, status_names
 from .terminal import LiveScreen, color_wanted

@@ -16,10 +16,10 @@ from typing import TextIO
 
 import numpy as np
 
-from ..bus.plc_image import Command, PlcImage, decode_registers
 from ..detect.state import GraspState
 from ..detect.updates import Update
 from ..pipeline import Pipeline
+from ..plc.image import Command, PlcImage, decode_registers
 from ..profile import Profile
 from .screen import render
 from .snapshot import Snapshot, indicator_scale, status_names

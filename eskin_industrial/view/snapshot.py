@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..bus.plc_image import Status
 from ..detect.settings import DetectorSettings
+from ..plc.image import Status
 
 
 @dataclass(frozen=True, slots=True)

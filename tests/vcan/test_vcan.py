@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from eskin_industrial import Calibrator, load_profile
-from eskin_industrial.bus.can_layout import CanLayout, NodeState, NodeStatus, ScanAssembler, decode_messages
-from eskin_industrial.bus.can_source import BusReader, CanSource, open_bus, read_can_log
+from eskin_industrial.bus.can.layout import CanLayout, NodeState, NodeStatus, ScanAssembler, decode_messages
+from eskin_industrial.bus.can.log import read_can_log
+from eskin_industrial.bus.can.reader import BusReader, CanSource, open_bus
 from eskin_industrial.detect import get_method
 from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.recording import write_recording

@@ -20,9 +20,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from ..bus.modbus.io import RtuMaster, SerialSettings, TcpMaster
+from ..errors import ModbusFault, Refused
 from ..profile import ModbusPlcSection
-from .modbus_io import ModbusFault, RtuMaster, SerialSettings, TcpMaster
-from .plc_image import REG, Command, PlcImage, Refused, parse_register_write
+from .image import REG, Command, PlcImage, parse_register_write
 
 
 @dataclass

@@ -11,17 +11,12 @@ to every node, since a bus error concerns them all; frames of no node are counte
 from __future__ import annotations
 
 import collections
-import time
-from collections.abc import Iterator
-from pathlib import Path
 
 import can
 
-from ..bus.can_layout import ID_RANGE, CanLayout, ScanAssembler
-from ..bus.can_poll import CanScanPoller
-from ..bus.can_source import FrameThread
-from ..errors import EskinError
-from .config import ResolvedNode
+from ...bridge.config import ResolvedNode
+from .layout import ID_RANGE, CanLayout, ScanAssembler
+from .source import CanScanPoller
 
 
 class _NoWait:
@@ -99,45 +94,3 @@ class CanGroup:
         self.reader.stop()
 
 
-class LogPlayer(FrameThread):
-    """A CAN log replayed at its own pace into a bounded queue, as if received.
-
-    Frames keep their relative timing; their timestamps are moved to the replay's
-    clock (the assembler times scans by them).  A log that fails to parse half-way
-    stops the replay; the error is kept in ``last_error``.
-    """
-
-    thread_name = "can-log-player"
-
-    def __init__(self, path: str | Path, messages: Iterator[can.Message], queue_frames: int = 200_000,
-                 speed: float = 1.0) -> None:
-        super().__init__(queue_frames, log_frames=0)
-        self.path = str(path)
-        self._messages = messages
-        self.speed = speed
-
-    def _run(self) -> None:
-        first_log = first_wall = None
-        try:
-            for msg in self._messages:
-                if self._stop.is_set():
-                    break
-                if first_log is None:
-                    first_log, first_wall = msg.timestamp, time.time()
-                due = first_wall + (msg.timestamp - first_log) / self.speed
-                delay = due - time.time()
-                if delay > 0 and self._stop.wait(delay):
-                    break
-                msg.timestamp = max(due, time.time() - 1.0)
-                if len(self.queue) >= self.max_frames:
-                    self.counters["rx_queue_drops"] += 1
-                    continue
-                self.queue.append(msg)
-                self.counters["log_frames"] += 1
-                self.arrived.set()
-        except EskinError as exc:
-            self.last_error = str(exc)
-            self.counters["bus_errors"] += 1
-        finally:
-            self.done = True
-            self.arrived.set()

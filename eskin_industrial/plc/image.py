@@ -14,8 +14,10 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+from ..bus.modbus.codec import ILLEGAL_ADDRESS, ILLEGAL_VALUE
 from ..detect.state import GraspState
 from ..detect.updates import Update
+from ..errors import Refused
 from ..profile import ModbusPlcSection
 
 
@@ -105,17 +107,6 @@ COILS: tuple[tuple[str, str], ...] = (
 #: Discrete inputs: bit i = Status bit i.
 BITS: tuple[Status, ...] = tuple(Status)
 
-
-class Refused(Exception):
-    """A PLC write the image does not accept; ``code`` is the Modbus exception code."""
-
-    def __init__(self, code: int, message: str) -> None:
-        super().__init__(message)
-        self.code = code
-
-
-ILLEGAL_ADDRESS = 2
-ILLEGAL_VALUE = 3
 
 
 @dataclass(frozen=True)

@@ -15,10 +15,11 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from ..pipeline import RawScan
-from ..profile import Profile
-from .modbus_io import ModbusFault, RtuMaster, SerialSettings
-from .modbus_node import decode_scans, register_count
+from ...errors import ModbusFault
+from ...frames import RawScan
+from ...profile import Profile
+from .codec import decode_scans, register_count
+from .io import RtuMaster, SerialSettings
 
 
 @dataclass

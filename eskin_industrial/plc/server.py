@@ -12,10 +12,20 @@ from __future__ import annotations
 import queue
 import threading
 
+from ..bus.modbus.codec import ILLEGAL_ADDRESS
+from ..bus.modbus.io import RegisterServer, SerialSettings
+from ..errors import Refused
 from ..profile import ModbusPlcSection
-from .modbus_io import ILLEGAL_ADDRESS, RegisterServer, SerialSettings
-from .plc_image import (
-    BITS, COILS, IMAGE_COUNT, REG, STATUS_COUNT, Command, PlcImage, Refused, bits_of, parse_coil_write,
+from .image import (
+    BITS,
+    COILS,
+    IMAGE_COUNT,
+    REG,
+    STATUS_COUNT,
+    Command,
+    PlcImage,
+    bits_of,
+    parse_coil_write,
     parse_register_write,
 )
 

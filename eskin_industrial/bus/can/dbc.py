@@ -10,9 +10,9 @@ The heartbeat is a message too, with its node states as a value table.
 
 from __future__ import annotations
 
-from ..calibration import Calibrator
-from ..profile import Profile
-from .can_layout import HEADER_BYTES, SEQ_BITS, STATUS_LENGTH, CanLayout, NodeState
+from ...calibration import Calibrator
+from ...profile import Profile
+from .layout import HEADER_BYTES, SEQ_BITS, STATUS_LENGTH, CanLayout, NodeState
 
 
 def _start_bit(layout: CanLayout, first_bit: int, length: int) -> tuple[int, str]:

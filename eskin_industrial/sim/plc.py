@@ -15,10 +15,11 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from ..bus.modbus.codec import ILLEGAL_ADDRESS
+from ..bus.modbus.io import RegisterServer, SerialSettings
 from ..detect.state import GraspState
+from ..plc.image import CMD_ACK, IMAGE_COUNT, REG, STATUS_COUNT, Status, decode_registers
 from ..profile import ModbusPlcSection
-from .modbus_io import ILLEGAL_ADDRESS, RegisterServer, SerialSettings
-from .plc_image import CMD_ACK, IMAGE_COUNT, REG, STATUS_COUNT, Status, decode_registers
 
 
 @dataclass

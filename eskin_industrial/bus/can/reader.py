@@ -15,22 +15,19 @@ from __future__ import annotations
 
 import collections
 import errno
-import json
 import select
 import socket
 import struct
-import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
-from pathlib import Path
+from collections.abc import Callable
 
 import can
 
-from ..detect.updates import Update, UpdateTable
-from ..errors import EskinError, InputFormatError
-from ..pipeline import Pipeline, RawScan
-from .can_layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
+from ...detect.updates import Update
+from ...errors import CanBusError, EskinError
+from ...pipeline import Pipeline
+from .layout import ScanAssembler
 
 #: Socket receive buffer asked for on SocketCAN (the kernel default holds a few
 #: hundred frames: a 1 Mbit/s bus fills it in tens of milliseconds).
@@ -39,12 +36,6 @@ DEFAULT_QUEUE_FRAMES = 200_000
 #: For a command whose reader thread needs the interpreter for every frame: a short
 #: switch interval keeps it from waiting behind the detector (the default is 5 ms).
 READER_SWITCH_INTERVAL_S = 0.0002
-
-
-class CanBusError(EskinError):
-    """The CAN bus cannot be opened (unknown interface, missing channel, no driver)."""
-
-    exit_code = 3
 
 
 def open_bus(interface: str | None = None, channel: str | None = None, bitrate: int | None = None,
@@ -320,53 +311,3 @@ class CanSource:
             self.counters()
 
 
-def read_can_log(path: str | Path) -> Iterator[can.Message]:
-    """Messages of a CAN log in any format python-can reads (``.log``, ``.blf``,
-    ``.asc``, ``.trc``, ``.csv``, ...); a file that does not parse is one line."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputFormatError(f"{path}: cannot read CAN log: no such file")
-    try:
-        reader = can.LogReader(path)
-    except (ValueError, OSError) as exc:
-        raise InputFormatError(f"{path}: cannot read CAN log: {exc}") from None
-    count = 0
-    try:
-        with reader:
-            for msg in reader:
-                count += 1
-                yield msg
-    except (ValueError, IndexError, OSError, can.CanError) as exc:
-        raise InputFormatError(f"{path}: message {count + 1}: not a valid log entry: {exc}") from None
-
-
-def replay(scans: list[RawScan], pipeline: Pipeline) -> list[Update]:
-    updates: list[Update] = []
-    for scan in scans:
-        updates += pipeline.push(scan)
-    return updates
-
-
-def log_scans(profile, path: str | Path, rate_hz: float | None = None) -> tuple[list[RawScan], ScanAssembler]:
-    """The node's scans in a CAN log, through the live path's assembler (the FD layout
-    when the node's frames are FD frames)."""
-    messages = list(read_can_log(path))
-    lo = profile.can.base_id
-    fd = any(m.is_fd for m in messages[:10_000] if lo <= m.arbitration_id < lo + ID_RANGE)
-    layout = CanLayout.from_profile(profile, fd=fd or profile.can.fd)
-    return decode_messages(layout, messages, rate_hz or profile.sensor.rate_hz)
-
-
-def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: str | None = None,
-               quiet: bool = True):
-    """A CAN log through the live path's assembler and pipeline: the updates as a
-    table, and (unless ``quiet``) the counters on stderr."""
-    rate = rate_hz or profile.sensor.rate_hz
-    scans, asm = log_scans(profile, path, rate)
-    pipeline = Pipeline(profile, rate_hz=rate, method=method)
-    table = UpdateTable.from_updates(replay(scans, pipeline))
-    if not quiet:
-        c = pipeline.counters
-        summary = {k: v for k, v in vars(c).items() if k != "extra"} | asm.counters
-        print(f"{path}: " + json.dumps(summary), file=sys.stderr)
-    return table

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import can
 import numpy as np
 
-from .can_layout import CanLayout, NodeState, NodeStatus
+from ..bus.can.layout import CanLayout, NodeState, NodeStatus
 
 
 @dataclass(frozen=True)

@@ -18,19 +18,19 @@ from typing import Callable
 
 import numpy as np
 
-from .bus.can_layout import CanLayout, ScanAssembler
-from .bus.can_node import CanNode, Faults
-from .bus.can_poll import CanScanPoller
-from .bus.can_source import BusReader, open_bus
-from .bus.modbus_bridge import ModbusBridge
-from .bus.plc_client import PlcWriter
-from .bus.plc_sim import PlcSimulator
-from .calibration import Calibrator
-from .detect.updates import Update, UpdateTable
-from .evaluation.metrics import SceneScore, score_scene
-from .profile import Profile
-from .scenes import Rendered
-from .view.live import change_line
+from ..bridge.loop import ModbusBridge
+from ..bus.can.layout import CanLayout, ScanAssembler
+from ..bus.can.reader import BusReader, open_bus
+from ..bus.can.source import CanScanPoller
+from ..calibration import Calibrator
+from ..detect.updates import Update, UpdateTable
+from ..evaluation.metrics import SceneScore, score_scene
+from ..plc.client import PlcWriter
+from ..profile import Profile
+from ..scenes import Rendered
+from ..view.live import change_line
+from .can_node import CanNode, Faults
+from .plc import PlcSimulator
 
 
 @dataclass

@@ -28,14 +28,10 @@ from pymodbus.exceptions import ModbusException, NoSuchIdException
 from pymodbus.framer.rtu import FramerRTU
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
-from ..errors import EskinError
+from ...errors import EskinError, ModbusFault
 
 Table = Literal["coils", "discrete", "holding", "input"]
 
-#: Modbus exception codes used by the handlers.
-ILLEGAL_FUNCTION = int(ExcCodes.ILLEGAL_FUNCTION)
-ILLEGAL_ADDRESS = int(ExcCodes.ILLEGAL_ADDRESS)
-ILLEGAL_VALUE = int(ExcCodes.ILLEGAL_VALUE)
 
 _TABLE_OF_FC: dict[int, Table] = {1: "coils", 5: "coils", 15: "coils", 2: "discrete", 3: "holding", 6: "holding",
                                   16: "holding", 22: "holding", 23: "holding", 4: "input"}
@@ -47,16 +43,6 @@ def quiet_pymodbus() -> None:
     at ERROR (through Python's last-resort handler when nothing is configured); the
     package counts those itself and reports them in one line."""
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-
-
-class ModbusFault(EskinError):
-    """A Modbus transaction failed; ``kind`` is ``timeout``, ``crc``, ``exception`` or
-    ``connection``; ``code`` is the exception code for ``exception``."""
-
-    def __init__(self, kind: str, message: str, code: int = 0) -> None:
-        super().__init__(message)
-        self.kind = kind
-        self.code = code
 
 
 class RegisterHandler(Protocol):

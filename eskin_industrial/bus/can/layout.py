@@ -24,9 +24,9 @@ from functools import cached_property
 
 import numpy as np
 
-from ..errors import DecodeError, ProfileError
-from ..pipeline import RawScan
-from ..profile import Profile
+from ...errors import DecodeError, ProfileError
+from ...frames import RawScan
+from ...profile import Profile
 
 SEQ_BITS = 12
 SEQ_MODULO = 1 << SEQ_BITS

@@ -10,9 +10,9 @@ from __future__ import annotations
 import collections
 import time
 
-from ..pipeline import RawScan
-from .can_layout import ScanAssembler
-from .can_source import BusReader
+from ...frames import RawScan
+from .layout import ScanAssembler
+from .reader import BusReader
 
 
 class _Counters:

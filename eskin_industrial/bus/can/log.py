@@ -1,0 +1,115 @@
+"""CAN logs: read any format python-can reads, replay one in real time as if received,
+and decode a node's scans from one through the live path's assembler and pipeline."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import can
+
+from ...detect.updates import Update, UpdateTable
+from ...errors import EskinError, InputFormatError
+from ...frames import RawScan
+from ...pipeline import Pipeline
+from .layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
+from .reader import FrameThread
+
+
+class LogPlayer(FrameThread):
+    """A CAN log replayed at its own pace into a bounded queue, as if received.
+
+    Frames keep their relative timing; their timestamps are moved to the replay's
+    clock (the assembler times scans by them).  A log that fails to parse half-way
+    stops the replay; the error is kept in ``last_error``.
+    """
+
+    thread_name = "can-log-player"
+
+    def __init__(self, path: str | Path, messages: Iterator[can.Message], queue_frames: int = 200_000,
+                 speed: float = 1.0) -> None:
+        super().__init__(queue_frames, log_frames=0)
+        self.path = str(path)
+        self._messages = messages
+        self.speed = speed
+
+    def _run(self) -> None:
+        first_log = first_wall = None
+        try:
+            for msg in self._messages:
+                if self._stop.is_set():
+                    break
+                if first_log is None:
+                    first_log, first_wall = msg.timestamp, time.time()
+                due = first_wall + (msg.timestamp - first_log) / self.speed
+                delay = due - time.time()
+                if delay > 0 and self._stop.wait(delay):
+                    break
+                msg.timestamp = max(due, time.time() - 1.0)
+                if len(self.queue) >= self.max_frames:
+                    self.counters["rx_queue_drops"] += 1
+                    continue
+                self.queue.append(msg)
+                self.counters["log_frames"] += 1
+                self.arrived.set()
+        except EskinError as exc:
+            self.last_error = str(exc)
+            self.counters["bus_errors"] += 1
+        finally:
+            self.done = True
+            self.arrived.set()
+
+
+def read_can_log(path: str | Path) -> Iterator[can.Message]:
+    """Messages of a CAN log in any format python-can reads (``.log``, ``.blf``,
+    ``.asc``, ``.trc``, ``.csv``, ...); a file that does not parse is one line."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputFormatError(f"{path}: cannot read CAN log: no such file")
+    try:
+        reader = can.LogReader(path)
+    except (ValueError, OSError) as exc:
+        raise InputFormatError(f"{path}: cannot read CAN log: {exc}") from None
+    count = 0
+    try:
+        with reader:
+            for msg in reader:
+                count += 1
+                yield msg
+    except (ValueError, IndexError, OSError, can.CanError) as exc:
+        raise InputFormatError(f"{path}: message {count + 1}: not a valid log entry: {exc}") from None
+
+
+def replay(scans: list[RawScan], pipeline: Pipeline) -> list[Update]:
+    updates: list[Update] = []
+    for scan in scans:
+        updates += pipeline.push(scan)
+    return updates
+
+
+def log_scans(profile, path: str | Path, rate_hz: float | None = None) -> tuple[list[RawScan], ScanAssembler]:
+    """The node's scans in a CAN log, through the live path's assembler (the FD layout
+    when the node's frames are FD frames)."""
+    messages = list(read_can_log(path))
+    lo = profile.can.base_id
+    fd = any(m.is_fd for m in messages[:10_000] if lo <= m.arbitration_id < lo + ID_RANGE)
+    layout = CanLayout.from_profile(profile, fd=fd or profile.can.fd)
+    return decode_messages(layout, messages, rate_hz or profile.sensor.rate_hz)
+
+
+def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: str | None = None,
+               quiet: bool = True):
+    """A CAN log through the live path's assembler and pipeline: the updates as a
+    table, and (unless ``quiet``) the counters on stderr."""
+    rate = rate_hz or profile.sensor.rate_hz
+    scans, asm = log_scans(profile, path, rate)
+    pipeline = Pipeline(profile, rate_hz=rate, method=method)
+    table = UpdateTable.from_updates(replay(scans, pipeline))
+    if not quiet:
+        c = pipeline.counters
+        summary = {k: v for k, v in vars(c).items() if k != "extra"} | asm.counters
+        print(f"{path}: " + json.dumps(summary), file=sys.stderr)
+    return table
