@@ -42,7 +42,7 @@ from modbus_support import free_port, slip_recording  # noqa: E402
 
 from eskin_industrial import load_profile  # noqa: E402
 from eskin_industrial.bus.modbus.io import TcpMaster, quiet_pymodbus, rtu_transaction_s  # noqa: E402
-from eskin_industrial.bus.modbus.rtu import RtuPoller  # noqa: E402
+from eskin_industrial.bus.modbus.rtu import RtuSource  # noqa: E402
 from eskin_industrial.calibration import Calibrator  # noqa: E402
 from eskin_industrial.detect.state import GraspState  # noqa: E402
 from eskin_industrial.frames import RawScan  # noqa: E402
@@ -220,13 +220,13 @@ def bench_rtu_unpaced(prof, seconds: float) -> float:
         p, a, b = pty_pair(Path(tmp), "bare")
         try:
             with NodeSimulator(prof, a, f, 100.0):
-                poller = RtuPoller(prof, b).open()
+                poller = RtuSource(prof, b).open()
                 try:
                     poller.poll_once()
-                    c0, t0 = poller.counters.scans, time.perf_counter()
+                    c0, t0 = poller.stats.scans, time.perf_counter()
                     while time.perf_counter() - t0 < seconds:
                         poller.poll_once()
-                    return (poller.counters.scans - c0) / (time.perf_counter() - t0)
+                    return (poller.stats.scans - c0) / (time.perf_counter() - t0)
                 finally:
                     poller.close()
         finally:
@@ -243,17 +243,17 @@ def bench_rtu(prof, baud: int, seconds: float) -> dict:
         try:
             with NodeSimulator(prof, node_end, f, 100.0, baudrate=baud):
                 relay = WireRelay(relay_left, relay_right, baud)
-                poller = RtuPoller(prof, poll_end, baudrate=baud).open()
+                poller = RtuSource(prof, poll_end, baudrate=baud).open()
                 try:
                     for _ in range(5):
                         poller.poll_once()
-                    c0 = poller.counters.scans
+                    c0 = poller.stats.scans
                     t0 = time.perf_counter()
                     while time.perf_counter() - t0 < seconds:
                         poller.poll_once()
                     el = time.perf_counter() - t0
-                    rate = (poller.counters.scans - c0) / el
-                    errors = poller.counters.bus_errors
+                    rate = (poller.stats.scans - c0) / el
+                    errors = poller.stats.bus_errors
                 finally:
                     poller.close()
                     relay.close()

@@ -20,7 +20,7 @@ from typing import IO, Literal
 import numpy as np
 
 from .detect.state import GraspState
-from .detect.updates import COLUMNS, UpdateTable
+from .detect.updates import COLUMNS, Update, UpdateTable
 from .errors import InputFormatError
 
 Unit = Literal["newton", "raw"]
@@ -122,6 +122,12 @@ def write_updates(dest: str | Path | IO[str], table: UpdateTable) -> None:
                 f"{t[i]:.6f},{rc[i]:.9g},{rd[i]:.9g},{st[i]},{va[i]},{table.f_sum[i]:.9g},"
                 f"{table.xc[i]:.9g},{table.yc[i]:.9g},{table.flags[i]}\n"
             )
+
+
+def update_row(u: Update, label: str) -> str:
+    """One update as :func:`write_updates` writes it (streaming writers: the recorder)."""
+    return (f"{u.t:.6f},{u.r_coe:.9g},{u.r_dw:.9g},{label},{int(u.valid)},{u.f_sum:.9g},"
+            f"{u.xc:.9g},{u.yc:.9g},{u.flags}\n")
 
 
 def read_updates(source: str | Path) -> dict[str, np.ndarray]:

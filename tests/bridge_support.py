@@ -18,7 +18,7 @@ import numpy as np
 from conftest import PROFILES, grasp
 from modbus_support import free_port, slip_recording
 
-from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, PlcOutput, resolve
+from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
 from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
 from eskin_industrial.bus.can.layout import CanLayout
@@ -26,6 +26,7 @@ from eskin_industrial.bus.can.reader import open_bus
 from eskin_industrial.bus.modbus.io import RegisterServer
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
+from eskin_industrial.plc.sink import PlcOptions
 from eskin_industrial.plc.image import decode_registers as decode
 from eskin_industrial.profile import Profile
 from eskin_industrial.sim.can_node import CanNode, Faults
@@ -49,19 +50,19 @@ def wait_for(cond: Callable[[], object], timeout_s: float = 5.0, what: str = "co
 
 
 def can_node(name: str, ch: str, *, base_id: int | None = None, base_address: int = 0, **kw) -> NodeConfig:
-    return NodeConfig(name=name, profile=PAPER, interface="virtual", channel=ch, base_id=base_id,
-                      base_address=base_address, **kw)
+    return NodeConfig.of(name, PAPER, "can", interface="virtual", channel=ch, base_id=base_id,
+                         base_address=base_address, **kw)
 
 
 def server_config(*nodes: NodeConfig, port: int | None = None, linger_s: float = 0.0,
                   queue_frames: int = 200_000) -> BridgeConfig:
-    return BridgeConfig(node=nodes, plc=PlcOutput(mode="server", host="127.0.0.1", port=port or free_port(),
-                                                   offline_linger_s=linger_s),
+    return BridgeConfig(node=nodes, outputs={"plc": PlcOptions(mode="server", host="127.0.0.1", port=port or free_port(),
+                                                               offline_linger_s=linger_s)},
                         log=LogSettings(format="json", status_every_s=0), queue_frames=queue_frames)
 
 
 def client_config(*nodes: NodeConfig, port: int, queue_frames: int = 200_000) -> BridgeConfig:
-    return BridgeConfig(node=nodes, plc=PlcOutput(mode="client", host="127.0.0.1", port=port),
+    return BridgeConfig(node=nodes, outputs={"plc": PlcOptions(mode="client", host="127.0.0.1", port=port)},
                         log=LogSettings(format="json", status_every_s=0), queue_frames=queue_frames)
 
 

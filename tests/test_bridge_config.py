@@ -59,13 +59,13 @@ def bad(tmp_path: Path, old: str, new: str) -> Path:
 def test_a_valid_two_node_file_loads_with_each_nodes_overrides(tmp_path):
     path = write(tmp_path, TWO_NODES)
     cfg = load_bridge_config(path)
-    assert cfg.source == str(path) and cfg.log.format == "json" and cfg.plc.mode == "server"
+    assert cfg.source == str(path) and cfg.log.format == "json" and cfg.outputs["plc"].mode == "server"
     nodes = resolve(cfg)
     assert [n.name for n in nodes] == ["left", "right"]
     assert [n.profile.can.base_id for n in nodes] == [0x200, 0x210]
     assert [n.profile.can.node_id for n in nodes] == [1, 2]
     assert [n.profile.modbus.plc.base_address for n in nodes] == [0, 100]
-    assert nodes[0].bus_key == nodes[1].bus_key  # one bus, one reader
+    assert nodes[0].share_key == nodes[1].share_key  # one bus, one reader
     # the profile keeps its own path through the overrides (messages name it)
     assert all(n.profile.source == PAPER for n in nodes)
 

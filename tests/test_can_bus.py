@@ -12,15 +12,15 @@ import uuid
 import can
 import numpy as np
 import pytest
+from can_support import Receiver
 from conftest import PROFILES, grasp
 
 from eskin_industrial.bus.can.layout import CanLayout, ScanAssembler
-from eskin_industrial.bus.can.reader import BusReader, CanSource, open_bus
+from eskin_industrial.bus.can.reader import BusReader, open_bus
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect import get_method
 from eskin_industrial.detect.updates import UpdateTable
 from eskin_industrial.errors import CanBusError
-from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.recording import write_recording, write_updates
 from eskin_industrial.sim.can_node import CanNode, Faults
 
@@ -48,8 +48,8 @@ def channel() -> str:
 def send_and_receive(profile, raw, faults=Faults(), fd=False, log=None, rate=100.0, ch: str | None = None):
     ch = ch or channel()
     layout = CanLayout.from_profile(profile, fd=fd)
-    reader = BusReader(lambda: open_bus("virtual", ch)).start()
-    source = CanSource(reader, ScanAssembler(layout, rate), Pipeline(profile, rate_hz=rate), log)
+    reader = BusReader(lambda: open_bus("virtual", ch))
+    source = Receiver(profile, reader, layout, rate, log)
     with open_bus("virtual", ch) as tx:
         node = CanNode(layout, tx, raw, rate, profile.can.heartbeat_s, faults, burst=True)
         th = threading.Thread(target=node.run)
@@ -143,7 +143,7 @@ def test_receiver_survives_a_failing_bus_and_recovers(hand_profile):
 
     layout = CanLayout.from_profile(hand_profile)
     reader = BusReader(open_, retry_s=0.02).start()
-    source = CanSource(reader, ScanAssembler(layout, 100.0), Pipeline(hand_profile))
+    source = Receiver(hand_profile, reader, layout, 100.0)
     deadline = time.monotonic() + 5
     while reader.counters["bus_reopens"] == 0 and time.monotonic() < deadline:
         time.sleep(0.01)

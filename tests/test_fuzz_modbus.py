@@ -2,7 +2,7 @@
 poller's handling of whatever a read returns, and the RTU frame check.
 
 pymodbus does the RTU framing itself; what is ours is fuzzed here without a serial
-line: the codec (:func:`encode_scan` / :func:`decode_scans`), :class:`RtuPoller`
+line: the codec (:func:`encode_scan` / :func:`decode_scans`), :class:`RtuSource`
 with a stand-in master that answers each read with random words, wrong counts or
 faults, and the CRC check that tells garbled frames from timeouts.
 """
@@ -21,7 +21,7 @@ from pymodbus.framer.rtu import FramerRTU
 from eskin_industrial import load_profile
 from eskin_industrial.bus.modbus.codec import decode_scans, encode_scan, register_count
 from eskin_industrial.bus.modbus.io import _valid_frame
-from eskin_industrial.bus.modbus.rtu import RtuPoller
+from eskin_industrial.bus.modbus.rtu import RtuSource
 from eskin_industrial.errors import ModbusFault
 from eskin_industrial.profile import ModbusNodeSection
 from eskin_industrial.sim.modbus_node import NodeRegisters
@@ -109,7 +109,7 @@ def test_the_poller_survives_any_answer_and_counts_every_attempt(data):
     base = data.draw(st.sampled_from([PAPER, HAND]))
     node = dataclasses.replace(data.draw(nodes), retries=data.draw(st.integers(0, 2)), fault_after_failures=2)
     profile = dataclasses.replace(base, modbus=dataclasses.replace(base.modbus, node=node))
-    poller = RtuPoller(profile, "/dev/null-not-opened")  # the master is replaced, never opened
+    poller = RtuSource(profile, "/dev/null-not-opened")  # the master is replaced, never opened
     n = poller.count
     good = st.lists(words, min_size=n, max_size=n)
     if node.counter_register:
@@ -129,7 +129,7 @@ def test_the_poller_survives_any_answer_and_counts_every_attempt(data):
             assert scan.raw.shape == (profile.taxels,) and np.all(np.isfinite(scan.raw))
             assert math.isfinite(scan.t)
         assert poller.bus_fault == (poller.consecutive_failures >= 2)
-    c = poller.counters
+    c = poller.stats
     assert c.polls == polls == c.scans + c.repeats + c.failed_polls
     assert c.scans == len(scans)
     attempts = c.polls + c.retries

@@ -13,8 +13,8 @@ import time
 from conftest import PROFILES
 from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
 
-from eskin_industrial.bridge.loop import ModbusBridge
-from eskin_industrial.bus.modbus.rtu import RtuPoller
+from eskin_industrial.bridge.loop import NodeLoop
+from eskin_industrial.bus.modbus.rtu import RtuSource
 from eskin_industrial.plc.client import PlcWriter
 from eskin_industrial.plc.image import Status
 from eskin_industrial.recording import write_recording
@@ -40,9 +40,9 @@ def test_rtu_node_to_bridge_to_plc_sets_the_slip_bit_in_time(paper_profile, tmp_
         writer = PlcWriter(settings, "127.0.0.1", port).start()
         # A generous timeout: a loaded test machine must not turn into bus errors here.
         node_cfg = dataclasses.replace(paper_profile.modbus.node, timeout_s=1.0)
-        poller = RtuPoller(dataclasses.replace(paper_profile, modbus=dataclasses.replace(
+        poller = RtuSource(dataclasses.replace(paper_profile, modbus=dataclasses.replace(
             paper_profile.modbus, node=node_cfg)), b).open()
-        bridge = ModbusBridge(paper_profile, poller, writer)
+        bridge = NodeLoop(paper_profile, poller, [writer])
         stop = threading.Event()
         decided: list[float] = []
 
@@ -80,7 +80,7 @@ def test_rtu_node_to_bridge_to_plc_sets_the_slip_bit_in_time(paper_profile, tmp_
         assert all(not s & Status.SLIP for tt, s in plc.status_changes if tt < slip_start)
         assert any(s & Status.DATA_VALID and s & Status.STABLE for _, s in plc.status_changes)
         assert plc.gripper.raises == 1
-        assert poller.counters.bus_errors == 0
+        assert poller.stats.bus_errors == 0
 
 
 def test_the_cli_path_end_to_end(paper_profile, tmp_path):

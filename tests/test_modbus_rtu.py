@@ -12,9 +12,11 @@ import pytest
 import serial
 from modbus_support import mbpoll, mbpoll_values, pty_pair, slip_recording
 
-from eskin_industrial.bridge.loop import ModbusBridge
+from eskin_industrial.bridge.loop import NodeLoop
+from eskin_industrial.bus.source import Source
+from eskin_industrial.sinks.base import Sink
 from eskin_industrial.bus.modbus.codec import decode_scans, encode_scan
-from eskin_industrial.bus.modbus.rtu import RtuPoller
+from eskin_industrial.bus.modbus.rtu import RtuSource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.plc.image import Status
 from eskin_industrial.profile import ModbusNodeSection
@@ -36,18 +38,19 @@ def crc16(data: bytes) -> bytes:
     return bytes([crc & 0xFF, crc >> 8])
 
 
-class RecordingSink:
+class RecordingSink(Sink):
+    """Keeps every publication's registers."""
+
     def __init__(self):
+        super().__init__()
         self.published: list[list[int]] = []
 
-    def publish(self, registers, image, urgent=False, t_event=None):
-        self.published.append(list(registers))
+    def _publish(self, publication):
+        self.published.append(list(publication.registers))
 
-    def take_commands(self):
-        return []
-
-    def commands_done(self):
-        pass
+    @classmethod
+    def open_nodes(cls, options, nodes, context):
+        return [cls() for _ in nodes]
 
 
 @pytest.mark.parametrize("value_type", ["uint16", "int16", "uint32", "int32"])
@@ -70,13 +73,13 @@ def test_poller_reads_the_node_and_mbpoll_agrees(paper_profile, tmp_path):
         with NodeSimulator(paper_profile, a, f, 100.0) as node:
             expected = {tuple(s) for s in node.scans}
             # A generous timeout: a loaded test machine must not turn into bus errors here.
-            poller = RtuPoller(with_node(paper_profile, timeout_s=1.0), b).open()
+            poller = RtuSource(with_node(paper_profile, timeout_s=1.0), b).open()
             try:
                 scans = [poller.poll_once() for _ in range(20)]
             finally:
                 poller.close()
-            assert all(s is not None for s in scans) and poller.counters.scans == 20
-            assert poller.counters.bus_errors == 0 and not poller.bus_fault
+            assert all(s is not None for s in scans) and poller.stats.scans == 20
+            assert poller.stats.bus_errors == 0 and not poller.bus_fault
             for s in scans:
                 assert tuple(int(v) for v in s.raw) in expected
             forces, flags = cal.to_newtons(scans[-1].raw)
@@ -98,9 +101,9 @@ def test_silent_node_sets_stale_and_fault_and_never_stalls(paper_profile, tmp_pa
     node_cfg = paper_profile.modbus.node
     with pty_pair(tmp_path) as (a, b):
         node = NodeSimulator(paper_profile, a, f, 100.0).start()
-        poller = RtuPoller(paper_profile, b).open()
+        poller = RtuSource(paper_profile, b).open()
         sink = RecordingSink()
-        bridge = ModbusBridge(paper_profile, poller, sink)
+        bridge = NodeLoop(paper_profile, poller, [sink])
         try:
             deadline = time.monotonic() + 5
             while not (bridge.pipeline.last_update is not None and bridge.pipeline.last_update.valid):
@@ -121,10 +124,10 @@ def test_silent_node_sets_stale_and_fault_and_never_stalls(paper_profile, tmp_pa
             status = Status(sink.published[-1][0])
             assert status & Status.SENSOR_STALE and status & Status.BUS_FAULT
             assert not status & (Status.DATA_VALID | Status.STABLE | Status.SLIP | Status.CONTACT)
-            c = poller.counters
+            c = poller.stats
             assert c.timeouts >= node_cfg.fault_after_failures and c.failed_polls >= steps - 1
             assert bridge.pipeline.counters.scans == c.scans  # failed polls are not scans
-            assert bridge.pipeline.counters.extra["rtu_timeouts"] == c.timeouts
+            assert bridge.counters()["rtu_timeouts"] == c.timeouts
             assert sink.published[-1][17] == c.bus_errors  # BUS_ERRORS, low word (big word order)
             # The node comes back: fault and stale clear at once, DATA_VALID after the warm-up.
             node = NodeSimulator(paper_profile, a, f, 100.0).start()
@@ -142,7 +145,7 @@ def test_silent_node_sets_stale_and_fault_and_never_stalls(paper_profile, tmp_pa
 def test_garbled_frames_and_exceptions_are_counted_and_survived(paper_profile, tmp_path):
     prof = with_node(paper_profile, retries=0, timeout_s=0.1)
     with pty_pair(tmp_path) as (a, b):
-        poller = RtuPoller(prof, b).open()
+        poller = RtuSource(prof, b).open()
         fake = serial.Serial(a, 115200, timeout=1.0)
         try:
             def answer(reply: bytes) -> None:
@@ -160,7 +163,7 @@ def test_garbled_frames_and_exceptions_are_counted_and_survived(paper_profile, t
             th.start()
             results = [poller.poll_once() for _ in replies]
             th.join(timeout=5)
-            c = poller.counters
+            c = poller.stats
             assert results[:3] == [None, None, None]
             assert results[3] is not None and list(results[3].raw[:3]) == [0x0001, 0x0203, 0x0405]
             assert c.crc_errors >= 1 and c.exceptions == 1
@@ -175,11 +178,11 @@ def test_exception_responses_from_a_misconfigured_node(paper_profile, tmp_path):
     with pty_pair(tmp_path) as (a, b):
         t, f, _ = slip_recording(still_s=0.2, slip_s=0.0, after_s=0.0)
         with NodeSimulator(node_prof, a, f, 100.0):
-            poller = RtuPoller(paper_profile, b).open()  # asks for address 0
+            poller = RtuSource(paper_profile, b).open()  # asks for address 0
             try:
                 assert poller.poll_once() is None
-                assert poller.counters.exceptions == paper_profile.modbus.node.retries + 1
-                assert poller.counters.timeouts == 0
+                assert poller.stats.exceptions == paper_profile.modbus.node.retries + 1
+                assert poller.stats.timeouts == 0
             finally:
                 poller.close()
 
@@ -190,7 +193,7 @@ def test_hand_profile_holding_registers_unit_2(hand_profile, tmp_path):
     f[:, 7] = 4.0
     with pty_pair(tmp_path) as (a, b):
         with NodeSimulator(hand_profile, a, f, 100.0) as node:
-            poller = RtuPoller(hand_profile, b).open()
+            poller = RtuSource(hand_profile, b).open()
             try:
                 scan = poller.poll_once()
             finally:
@@ -222,7 +225,7 @@ def test_line_noise_never_becomes_data(paper_profile, tmp_path):
 
             th = threading.Thread(target=inject, daemon=True)
             th.start()
-            poller = RtuPoller(prof, b).open()
+            poller = RtuSource(prof, b).open()
             try:
                 scans = [poller.poll_once() for _ in range(60)]
             finally:
@@ -235,7 +238,7 @@ def test_line_noise_never_becomes_data(paper_profile, tmp_path):
             finally:
                 poller.close()
     good = [s for s in scans if s is not None]
-    c = poller.counters
+    c = poller.stats
     assert c.failed_polls + len(good) == 60 and c.scans == len(good) + sum(s is not None for s in after)
     for s in good + [s for s in after if s is not None]:
         assert tuple(int(v) for v in s.raw) in expected
@@ -249,19 +252,19 @@ def test_stale_is_published_at_once_not_at_the_next_refresh(paper_profile):
     slow = dc.replace(paper_profile, modbus=dc.replace(paper_profile.modbus, plc=dc.replace(
         paper_profile.modbus.plc, refresh_s=60.0, stale_s=0.05)))
 
-    class Frozen:
-        bus_fault = False
-        last_rx = time.monotonic()
+    class Frozen(Source):
+        """A source whose one scan came just now, and then nothing."""
 
-        def poll(self, timeout_s=None):
+        def __init__(self):
+            super().__init__()
+            self._last_rx = time.monotonic()
+
+        def _poll(self, timeout_s):
             time.sleep(0.005)
             return None
 
-        def frame_age(self, now=None):
-            return (time.monotonic() if now is None else now) - self.last_rx
-
     sink = RecordingSink()
-    bridge = ModbusBridge(slow, Frozen(), sink)
+    bridge = NodeLoop(slow, Frozen(), [sink])
     bridge.step()
     assert len(sink.published) == 1 and not Status(sink.published[0][0]) & Status.SENSOR_STALE
     deadline = time.monotonic() + 1.0
@@ -276,14 +279,14 @@ def test_scan_counter_gives_node_time_and_drops_repeats(paper_profile, tmp_path)
     f = np.tile(np.linspace(0.5, 5.0, 40)[:, None], (1, 25))  # scan k is recognisable by its force
     with pty_pair(tmp_path) as (a, b):
         with NodeSimulator(prof, a, f, 100.0) as node:  # the node scans at 100 Hz, we poll at 250 Hz
-            poller = RtuPoller(prof, b).open()
+            poller = RtuSource(prof, b).open()
             try:
                 scans = [s for s in (poller.poll() for _ in range(150)) if s is not None]
             finally:
                 poller.close()
             first_counter = poller._counter - scans[-1].seq
             table = node.scans
-    c = poller.counters
+    c = poller.stats
     assert c.repeats > 0 and c.scans == len(scans) and c.failed_polls == 0
     seqs = [s.seq for s in scans]
     assert seqs == sorted(set(seqs))  # each node scan once, in order

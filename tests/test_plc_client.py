@@ -8,7 +8,7 @@ import time
 
 from modbus_support import free_port, slip_recording
 
-from eskin_industrial.bridge.loop import ModbusBridge
+from eskin_industrial.bridge.loop import NodeLoop
 from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
@@ -72,7 +72,7 @@ def test_plc_drops_and_comes_back_while_detection_runs(paper_profile):
     raw = Calibrator.from_section(paper_profile.calibration, 25).to_raw(f)
     source = ReplaySource(paper_profile, t, raw, 1000.0)  # 10x real time
     writer = PlcWriter(settings, "127.0.0.1", port).start()
-    bridge = ModbusBridge(paper_profile, source, writer)
+    bridge = NodeLoop(paper_profile, source, [writer])
     plc = PlcSimulator(settings, "127.0.0.1", port, echo=None).start()
     try:
         wait_for(lambda: plc.memory.writes > 0, step=bridge.step)

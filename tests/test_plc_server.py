@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
 
-from eskin_industrial.bridge.loop import ModbusBridge
+from eskin_industrial.bridge.loop import NodeLoop
 from eskin_industrial.bus.modbus.io import SerialSettings
 from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
@@ -17,7 +17,7 @@ from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
 from eskin_industrial.plc.server import PlcServer
 
 
-def run_bridge(bridge: ModbusBridge, until, timeout_s: float = 10.0) -> None:
+def run_bridge(bridge: NodeLoop, until, timeout_s: float = 10.0) -> None:
     deadline = time.monotonic() + timeout_s
     while not until():
         assert time.monotonic() < deadline, "bridge did not reach the expected state"
@@ -28,7 +28,7 @@ def still_bridge(profile, sink):
     t, f, _ = slip_recording()
     k = int(1.4 * 100)  # the still part only
     raw = Calibrator.from_section(profile.calibration, profile.taxels).to_raw(f[:k])
-    return ModbusBridge(profile, ReplaySource(profile, t[:k], raw, 400.0, loop=True), sink)
+    return NodeLoop(profile, ReplaySource(profile, t[:k], raw, 400.0, loop=True), [sink.block(0)])
 
 
 def settle(bridge) -> None:

@@ -1,10 +1,19 @@
-"""The bridge's configuration: which nodes, from which source, into which PLC block.
+"""The bridge's configuration: which nodes, from which source, into which outputs.
 
 One TOML file (``eskin-bus bridge --config FILE``), or the same built from the
 command line for a single node.  Like profiles, it is validated into frozen
 dataclasses before anything starts: an unknown key, a wrong type, a node profile
 that does not load, two nodes on the same CAN IDs or the same register block are
 each one line naming the file and the key.
+
+Nothing here knows the kinds: a ``[[node]]`` table has the keys every node has
+(:class:`NodeConfig`) plus the keys of its ``source`` kind (that kind's ``Options``,
+see :mod:`eskin_industrial.bus.source`); every other top-level section names an
+output kind (``[plc]``, ``[recorder]``, see :mod:`eskin_industrial.sinks.base`).
+
+Where a setting can come from, the first that gives it wins: the command line, the
+bridge configuration, the node's profile, the defaults (``bridge --check`` prints
+each node's resolved values).
 
 Example (two grippers on one CAN bus, written into the PLC over Modbus TCP)::
 
@@ -35,78 +44,52 @@ Example (two grippers on one CAN bus, written into the PLC over Modbus TCP)::
 
 from __future__ import annotations
 
+import dataclasses
+import difflib
+import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
+from ..bus.source import SOURCES, Source, source_class
 from ..errors import ProfileError
 from ..profile import Profile, derived_stale_s, load_profile
-from ..schema import in_range, parse_toml, positive, read_toml_file
+from ..schema import SchemaError, build, in_range, positive, read_toml_file
+from ..sinks.base import DEFAULT_OUTPUT, SINKS, Sink, sink_class
 
-SourceKind = Literal["can", "can-log", "modbus-rtu", "scene"]
+COMMAND_LINE = "<command line>"
 
 
 @dataclass(frozen=True)
 class NodeConfig:
-    """One sensor node: where its scans come from and where its register block goes."""
+    """One sensor node: the keys every node has, and its source kind's own options."""
 
-    #: A short name, used in logs and counters.
+    #: A short name, used in logs, counters and output names.
     name: str
     #: The node's profile; a relative path is taken from the configuration file's folder.
     profile: str
-    source: SourceKind = "can"
-    # -- source = "can": python-can's own names; unset ones are left to python-can's
-    # configuration (file, CAN_INTERFACE, CAN_CHANNEL)
-    interface: str | None = None
-    channel: str | None = None
-    bitrate_bps: int | None = field(default=None, metadata=positive())
-    fd: bool | None = None
-    data_bitrate_bps: int | None = field(default=None, metadata=positive())
-    #: Override the profile's ``[can] base_id`` / ``node_id`` (several nodes, one bus).
-    base_id: int | None = field(default=None, metadata=in_range(0, 0x1FFFFFFF))
-    node_id: int | None = field(default=None, metadata=in_range(0, 255))
-    # -- source = "can-log": a candump/asc/blf log replayed at its own pace, once
-    path: str | None = None
-    # -- source = "scene": a built-in scene (or scene .toml) played in real time
-    scene: str | None = None
-    seed: int = 0
-    loop: bool = True
-    # -- source = "modbus-rtu": the node's serial port; unit id and baud rate
-    # default to the profile's [modbus.node]
-    serial_port: str | None = None
-    unit_id: int | None = field(default=None, metadata=in_range(1, 247))
-    baudrate: int | None = field(default=None, metadata=positive())
+    #: The source kind (``eskin_industrial.bus.source.SOURCES``).
+    source: str = "can"
+    #: The kind's keys (an instance of its ``Options``), validated.
+    options: Any = None
     #: Scan rate; default: the profile's ``[sensor] rate_hz``.
     rate_hz: float | None = field(default=None, metadata=positive())
     #: The node's register block in the PLC; default: the profile's ``[modbus.plc] base_address``.
     base_address: int | None = field(default=None, metadata=in_range(0, 65000))
 
-    def __post_init__(self) -> None:
-        need = {"can-log": "path", "scene": "scene", "modbus-rtu": "serial_port"}.get(self.source)
-        if need is not None and getattr(self, need) is None:
-            raise ValueError(f"{need}: missing key (source = {self.source!r} needs it)")
+    @staticmethod
+    def of(name: str, profile: str, source: str = "can", *, rate_hz: float | None = None,
+           base_address: int | None = None, **keys: Any) -> "NodeConfig":
+        """A node from keyword keys, the kind's ones checked as in a file."""
+        cls = source_class(source)
+        try:
+            options = build(cls.Options, keys)
+        except SchemaError as exc:
+            raise ProfileError(f"{COMMAND_LINE}: [node {name!r}] {exc}") from None
+        return NodeConfig(name, profile, cls.kind, options, rate_hz, base_address)
 
 
-@dataclass(frozen=True)
-class PlcOutput:
-    """Where the register blocks go; unset keys come from the first node's profile."""
-
-    #: ``client``: write into the PLC; ``server``: serve the blocks, the PLC reads.
-    mode: Literal["client", "server"] | None = None
-    transport: Literal["tcp", "rtu"] = "tcp"
-    #: Client over TCP: the PLC.  Server over TCP: ``host`` is the address to listen on.
-    host: str | None = None
-    port: int | None = field(default=None, metadata=in_range(1, 65535))
-    #: Over RTU: the serial port (client: the PLC is the slave; server: we are).
-    serial_port: str | None = None
-    baudrate: int = field(default=115200, metadata=positive())
-    #: Server mode, on shutdown: keep serving the "bridge offline" image this long,
-    #: so that a polling PLC reads it before the connection goes.
-    offline_linger_s: float = field(default=0.5, metadata=in_range(0, 60))
-
-    def __post_init__(self) -> None:
-        if self.transport == "rtu" and self.serial_port is None:
-            raise ValueError("serial_port: missing key (transport = 'rtu' needs it)")
+_COMMON = [f.name for f in dataclasses.fields(NodeConfig) if f.name not in ("options",)]
 
 
 @dataclass(frozen=True)
@@ -118,18 +101,33 @@ class LogSettings:
 
 
 @dataclass(frozen=True)
-class BridgeConfig:
-    node: tuple[NodeConfig, ...]
-    plc: PlcOutput = field(default_factory=PlcOutput)
+class _Top:
+    """The top-level keys that are not an output kind's section."""
+
     log: LogSettings = field(default_factory=LogSettings)
     #: Received CAN frames held per bus before the oldest are dropped (counted).
     queue_frames: int = field(default=200_000, metadata=positive("an integer >= 1"))
-    #: The file it came from, for messages (not a TOML key).
-    source: str = field(default="<command line>", init=False, compare=False)
+
+
+@dataclass(frozen=True)
+class BridgeConfig:
+    node: tuple[NodeConfig, ...]
+    #: Output kind -> its options, in :data:`SINKS` order; empty: the default output.
+    outputs: dict[str, Any] = field(default_factory=dict)
+    log: LogSettings = field(default_factory=LogSettings)
+    queue_frames: int = 200_000
+    #: The file it came from, for messages.
+    source: str = COMMAND_LINE
 
     def __post_init__(self) -> None:
         if not self.node:
             raise ValueError("node: expected at least one [[node]] table")
+
+    def output_kinds(self, default_output: bool = True) -> dict[str, Any]:
+        """The outputs to open: the configured ones, or the default one."""
+        if self.outputs or not default_output:
+            return {k: self.outputs[k] for k in SINKS if k in self.outputs}
+        return {DEFAULT_OUTPUT: sink_class(DEFAULT_OUTPUT).default_options()}
 
 
 @dataclass(frozen=True)
@@ -148,32 +146,114 @@ class ResolvedNode:
         return self.config.rate_hz or self.profile.sensor.rate_hz
 
     @property
-    def bus_key(self) -> tuple:
-        """Nodes with the same key share one CAN bus (one reader)."""
-        c = self.config
-        if c.source == "can-log":
-            return ("can-log", c.path)
-        return ("can", c.interface, c.channel, c.bitrate_bps, self.fd, c.data_bitrate_bps)
+    def options(self) -> Any:
+        return self.config.options
 
     @property
-    def fd(self) -> bool:
-        return self.profile.can.fd if self.config.fd is None else self.config.fd
+    def kind(self) -> type[Source]:
+        return source_class(self.config.source)
+
+    @property
+    def share_key(self) -> tuple | None:
+        """Nodes with the same key share one transport (one CAN bus, one reader)."""
+        return self.kind.share_key(self)
 
 
 def load_bridge_config(path: str | Path) -> BridgeConfig:
     path = Path(path)
     text = read_toml_file(path, "bridge configuration")
-    config = parse_toml(BridgeConfig, text, str(path))
-    object.__setattr__(config, "source", str(path))
-    return config
+    return parse_bridge_config(text, str(path))
+
+
+def parse_bridge_config(text: str, source: str) -> BridgeConfig:
+    """TOML text to a :class:`BridgeConfig`; any problem is one :class:`ProfileError`
+    line: ``SOURCE: [section] key: what was expected``."""
+    try:
+        table = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ProfileError(f"{source}: not valid TOML: {exc}") from None
+    nodes_raw = table.pop("node", None)
+    outputs: dict[str, Any] = {}
+    for kind in SINKS:
+        if kind in table:
+            outputs[kind] = _section(sink_class(kind).Options, table.pop(kind), kind, source)
+    try:
+        top = build(_Top, table)
+    except SchemaError as exc:
+        if exc.message.startswith("unknown key"):
+            valid = ["node", *SINKS, *(f.name for f in dataclasses.fields(_Top))]
+            near = difflib.get_close_matches(exc.key, valid, n=1, cutoff=0.6)
+            hint = f"did you mean {near[0]!r}?" if near else f"valid sections: {', '.join(valid)}"
+            raise ProfileError(f"{source}: [{exc.key}]: unknown section; {hint}") from None
+        section, _, key = exc.key.partition(".")
+        raise ProfileError(f"{source}: [{section}]{' ' + key if key else ''}: {exc.message}") from None
+    if not isinstance(nodes_raw, list) or not nodes_raw:
+        raise ProfileError(f"{source}: [node]: expected at least one [[node]] table")
+    nodes = tuple(_node(raw, i, source) for i, raw in enumerate(nodes_raw))
+    return BridgeConfig(nodes, outputs, top.log, top.queue_frames, source)
+
+
+def _section(cls: type, raw: Any, name: str, source: str) -> Any:
+    if not isinstance(raw, dict):
+        raise ProfileError(f"{source}: [{name}]: expected a table")
+    try:
+        return build(cls, raw)
+    except SchemaError as exc:
+        raise ProfileError(f"{source}: [{name}] {exc}") from None
+
+
+def _node(raw: Any, index: int, source: str) -> NodeConfig:
+    label = f"[node[{index}]]"  # the table's place, as for any key of the file
+    if not isinstance(raw, dict):
+        raise ProfileError(f"{source}: {label}: expected a table")
+    kind_name = raw.get("source", "can")
+    if not isinstance(kind_name, str) or kind_name not in SOURCES:
+        near = difflib.get_close_matches(str(kind_name), list(SOURCES), n=1)
+        hint = f" (did you mean {near[0]!r}?)" if near else ""
+        raise ProfileError(f"{source}: {label} source: expected one of {', '.join(repr(k) for k in SOURCES)}, "
+                           f"got {kind_name!r}{hint}")
+    kind = source_class(kind_name)
+    common = {k: v for k, v in raw.items() if k in _COMMON}
+    own = {k: v for k, v in raw.items() if k not in _COMMON}
+    try:
+        options = build(kind.Options, own)
+    except SchemaError as exc:
+        if exc.message.startswith("unknown key"):
+            valid = _COMMON + [f.name for f in dataclasses.fields(kind.Options) if f.init]
+            near = difflib.get_close_matches(exc.key, valid, n=1, cutoff=0.6)
+            hint = f"did you mean {near[0]!r}?" if near else f"valid keys for source = {kind_name!r}: {', '.join(valid)}"
+            raise ProfileError(f"{source}: {label} {exc.key}: unknown key; {hint}") from None
+        if exc.message.startswith("missing key"):
+            raise ProfileError(f"{source}: {label} {exc.key}: missing key (source = {kind_name!r} needs it)") from None
+        raise ProfileError(f"{source}: {label} {exc}") from None
+    try:
+        return _common(common, options)
+    except SchemaError as exc:
+        raise ProfileError(f"{source}: {label} {exc}") from None
+
+
+@dataclass(frozen=True)
+class _NodeKeys:
+    """The keys of :class:`NodeConfig` as they appear in a ``[[node]]`` table."""
+
+    name: str
+    profile: str
+    source: str = "can"
+    rate_hz: float | None = field(default=None, metadata=positive())
+    base_address: int | None = field(default=None, metadata=in_range(0, 65000))
+
+
+def _common(common: dict[str, Any], options: Any) -> NodeConfig:
+    keys = build(_NodeKeys, common)
+    return NodeConfig(keys.name, keys.profile, keys.source, options, keys.rate_hz, keys.base_address)
 
 
 def resolve(config: BridgeConfig) -> list[ResolvedNode]:
-    """Load every node's profile, apply the overrides, and check the nodes against
-    each other; the first problem is one :class:`ProfileError` line."""
-    base = Path(config.source).parent if config.source != "<command line>" else Path(".")
+    """Load every node's profile, apply the overrides, and check the nodes and the
+    outputs against each other; the first problem is one :class:`ProfileError` line."""
+    base = Path(config.source).parent if config.source != COMMAND_LINE else Path(".")
     nodes: list[ResolvedNode] = []
-    for i, nc in enumerate(config.node):
+    for nc in config.node:
         where = f"{config.source}: [node {nc.name!r}]"
         path = Path(nc.profile)
         try:
@@ -193,14 +273,19 @@ def resolve(config: BridgeConfig) -> list[ResolvedNode]:
     return nodes
 
 
+def check_sources(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
+    """What each source kind can check before anything opens (``--check``, and the
+    bridge before it starts): a missing log file, an unknown scene."""
+    base = str(Path(config.source).parent) if config.source != COMMAND_LINE else "."
+    for n in nodes:
+        try:
+            n.kind.check(n, base)
+        except ValueError as exc:
+            raise ProfileError(f"{config.source}: [node {n.name!r}] {exc}") from None
+
+
 def _apply_overrides(prof: Profile, nc: NodeConfig) -> Profile:
-    can = prof.can
-    if nc.base_id is not None or nc.node_id is not None:
-        can = replace(can, base_id=can.base_id if nc.base_id is None else nc.base_id,
-                      node_id=can.node_id if nc.node_id is None else nc.node_id)
-    node = prof.modbus.node
-    if nc.unit_id is not None or nc.baudrate is not None:
-        node = replace(node, unit_id=nc.unit_id or node.unit_id, baudrate=nc.baudrate or node.baudrate)
+    prof = source_class(nc.source).adapt_profile(prof, nc.options)
     plc = prof.modbus.plc
     if nc.base_address is not None:
         plc = replace(plc, base_address=nc.base_address)
@@ -210,11 +295,10 @@ def _apply_overrides(prof: Profile, nc: NodeConfig) -> Profile:
         poll = prof.modbus.node.poll_hz
         if plc.stale_s == derived_stale_s(prof.sensor.rate_hz, poll):
             plc = replace(plc, stale_s=derived_stale_s(nc.rate_hz, poll))
-    return replace(prof, can=can, modbus=replace(prof.modbus, node=node, plc=plc))
+    return replace(prof, modbus=replace(prof.modbus, plc=plc))
 
 
 def _check_together(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
-    from ..bus.can.layout import ID_RANGE
     from ..plc.image import IMAGE_COUNT
 
     src = config.source
@@ -227,29 +311,20 @@ def _check_together(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
         if hi - lo < IMAGE_COUNT:
             raise ProfileError(f"{src}: [node {b!r}] base_address: {hi} overlaps the block of node {a!r} at {lo} "
                                f"(a block takes {IMAGE_COUNT} registers)")
-    ports = [n.config.serial_port for n in nodes if n.config.source == "modbus-rtu"]
-    for port in ports:
-        if ports.count(port) > 1:
-            raise ProfileError(f"{src}: [node] serial_port: {port!r} is used by two nodes (one node per line)")
-    by_bus: dict[tuple, list[ResolvedNode]] = {}
+    by_kind: dict[type[Source], list[ResolvedNode]] = {}
     for n in nodes:
-        if n.config.source in ("can", "can-log"):
-            by_bus.setdefault(n.bus_key, []).append(n)
-    for group in by_bus.values():
-        spans = sorted((n.profile.can.base_id, n.profile.can.extended_id, n.name) for n in group)
-        for (lo, ext_a, a), (hi, ext_b, b) in zip(spans, spans[1:]):
-            if ext_a == ext_b and hi - lo < ID_RANGE:
-                raise ProfileError(f"{src}: [node {b!r}] base_id: {hi:#x} overlaps node {a!r} at {lo:#x} on the same "
-                                   f"bus (a node takes {ID_RANGE} IDs; set base_id)")
-    out = config.plc
-    if out.transport == "rtu" and _mode(config, nodes) == "client" and len(nodes) > 1:
-        raise ProfileError(f"{src}: [plc] transport: a PLC on a serial line takes one node in client mode "
-                           f"(use server mode, or TCP)")
+        by_kind.setdefault(n.kind, []).append(n)
+    for kind, members in by_kind.items():
+        try:
+            kind.check_together(members)
+        except ValueError as exc:  # the kind's message starts with "[node ...]"
+            raise ProfileError(f"{src}: {exc}") from None
+    for kind, options in config.output_kinds().items():
+        try:
+            sink_class(kind).check(options, nodes)
+        except ValueError as exc:
+            raise ProfileError(f"{src}: [{kind}] {exc}") from None
 
 
-def _mode(config: BridgeConfig, nodes: list[ResolvedNode]) -> str:
-    return config.plc.mode or nodes[0].profile.modbus.plc.mode
-
-
-def plc_mode(config: BridgeConfig, nodes: list[ResolvedNode]) -> Literal["client", "server"]:
-    return "client" if _mode(config, nodes) == "client" else "server"
+def output_classes(config: BridgeConfig, default_output: bool = True) -> list[tuple[type[Sink], Any]]:
+    return [(sink_class(kind), options) for kind, options in config.output_kinds(default_output).items()]

@@ -1,12 +1,13 @@
-"""The bridge loop for one sensor node: source -> pipeline -> register image -> PLC sink.
+"""The per-node loop: source -> pipeline -> register image -> sinks.
 
-The source is anything with ``poll(timeout_s) -> RawScan | None`` (the RTU poller,
-the CAN scan poller, a recording replay), ``bus_fault``, ``frame_age()`` and
-bus-error counters.  The sink is a :class:`~eskin_industrial.bus.plc_server.PlcServer`
-(or one block of it) or a :class:`~eskin_industrial.bus.plc_client.PlcWriter`; both
-take ``publish`` and hand back the PLC's commands.  A state change is published at
-once, a status bit change (stale, bus fault) as soon as it happens, otherwise every
-``refresh_s``.  :meth:`ModbusBridge.shutdown` leaves the PLC reading BRIDGE_OFFLINE.
+One loop per sensor node, the same in every command (``bridge``, ``modbus-bridge``,
+``receive``, ``monitor``, ``demo``).  :meth:`NodeLoop.step` polls the source once,
+runs each scan through the pipeline (calibration, detector), hands every update to
+every sink, applies the commands the sinks took (acknowledge, tare, enable), and
+publishes the image when due: a state change at once, a status bit change (stale, bus
+fault) as soon as it happens, otherwise every ``refresh_s``.
+:meth:`NodeLoop.shutdown` publishes the last image, BRIDGE_OFFLINE with no state
+claimed.  Nothing here knows which kind of source or sink it drives.
 """
 
 from __future__ import annotations
@@ -14,75 +15,62 @@ from __future__ import annotations
 import collections
 import threading
 import time
-from collections.abc import Callable
-from typing import Protocol
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from ..bus.source import Source
 from ..detect.updates import Update
-from ..frames import RawScan
 from ..pipeline import Pipeline
-from ..plc.image import Command, Health, PlcImage, Status
+from ..plc.image import Health, PlcImage, Status
 from ..profile import Profile
+from ..sinks.base import Publication, Sink
 
 _QUIET = ~int(Status.BRIDGE_ALIVE)  # the life bit changes at every publication
 
 
-class Source(Protocol):
-    bus_fault: bool
-
-    def poll(self, timeout_s: float | None = None) -> RawScan | None: ...
-
-    def frame_age(self, now: float | None = None) -> float | None: ...
-
-
-class Sink(Protocol):
-    def publish(self, registers: list[int], image: PlcImage, urgent: bool = False,
-                t_event: float | None = None) -> None: ...
-
-    def take_commands(self) -> list[Command]: ...
-
-    def commands_done(self) -> None: ...
-
-
-class ModbusBridge:
+class NodeLoop:
     #: Unloaded scans kept for a tare.
     TARE_SCANS = 50
 
     #: Longest wait for traffic before the loop looks at the time again.
     MAX_WAIT_S = 0.05
 
-    def __init__(self, profile: Profile, source, sink, *, rate_hz: float | None = None,
-                 on_update: Callable[[Update], None] | None = None,
+    def __init__(self, profile: Profile, source: Source, sinks: Sequence[Sink], *, rate_hz: float | None = None,
+                 method: str | None = None, on_update: Callable[[Update], None] | None = None,
                  on_command: Callable[[str], None] | None = None) -> None:
         self.profile = profile
         self.source = source
-        self.sink = sink
-        self.pipeline = Pipeline(profile, rate_hz=rate_hz)
+        self.sinks = list(sinks)
+        self.pipeline = Pipeline(profile, rate_hz=rate_hz, method=method)
         self.image = PlcImage(profile.modbus.plc)
         self.recent_raw: collections.deque[np.ndarray] = collections.deque(maxlen=self.TARE_SCANS)
         self.tares = 0
         self.publications = 0
         self._last_pub = float("-inf")
         self._last_status = -1
+        self._refresh_s = profile.modbus.plc.refresh_s
         self._stop = threading.Event()
         self.on_update = on_update
         self.on_command = on_command
         self.offline = False
+        self.refresh_sinks()
+
+    def refresh_sinks(self) -> None:
+        """(Re)read which sinks take updates and commands (after ``sinks`` changed):
+        only the sinks that override them are called, so the per-scan path stays a few
+        attribute reads."""
+        self._update_sinks = [s.on_update for s in self.sinks if type(s).on_update is not Sink.on_update]
+        self._command_sinks = [s for s in self.sinks if type(s).take_commands is not Sink.take_commands]
 
     def health(self, now: float | None = None) -> Health:
         src = self.source
-        counters = getattr(src, "counters", None)
-        return Health(
-            frame_age_s=src.frame_age(now),
-            bus_fault=bool(src.bus_fault),
-            lost_scans=self.pipeline.counters.lost_scans,
-            bus_errors=int(getattr(counters, "bus_errors", 0)),
-        )
+        return Health(frame_age_s=src.frame_age(now), bus_fault=src.bus_fault,
+                      lost_scans=self.pipeline.counters.lost_scans, bus_errors=src.bus_errors())
 
     def step(self, timeout_s: float | None = None) -> bool:
         """One poll (waiting up to ``timeout_s`` for traffic, default: until a
-        publication falls due), its updates, the PLC's commands and, when due, a
+        publication falls due), its updates, the commands and, when due, a
         publication.  Returns whether it published."""
         scan = self.source.poll(self.wait_budget() if timeout_s is None else timeout_s)
         t_event = time.perf_counter()  # after the wait: the event is now
@@ -90,26 +78,36 @@ class ModbusBridge:
         if scan is not None:
             self.recent_raw.append(scan.raw)
             hook = self.on_update
+            observe = self.image.observe
             for u in self.pipeline.push(scan):
-                urgent |= self.image.observe(u)
+                urgent |= observe(u)
+                for on_update in self._update_sinks:
+                    on_update(u)
                 if hook is not None:
                     hook(u)
-        commands = self.sink.take_commands()
-        for cmd in commands:
-            before = (self.image.enabled, self.image.latched)
-            if cmd.name == "tare":
-                self._tare()
-            else:
-                self.image.apply(cmd)
-                # A client-mode PLC's ENABLE is read back every refresh: only a change counts.
-                if (self.image.enabled, self.image.latched) == before:
-                    continue
-            if self.on_command is not None:
-                self.on_command(cmd.name)
+        if self._command_sinks and self._apply_commands():
             urgent = True
-        if commands:
-            self.sink.commands_done()
         return self.publish_if_due(urgent, t_event)
+
+    def _apply_commands(self) -> bool:
+        acted = False
+        for sink in self._command_sinks:
+            commands = sink.take_commands()
+            for cmd in commands:
+                before = (self.image.enabled, self.image.latched)
+                if cmd.name == "tare":
+                    self._tare()
+                else:
+                    self.image.apply(cmd)
+                    # A client-mode PLC's ENABLE is read back every refresh: only a change counts.
+                    if (self.image.enabled, self.image.latched) == before:
+                        continue
+                if self.on_command is not None:
+                    self.on_command(cmd.name)
+                acted = True
+            if commands:
+                sink.commands_done()
+        return acted
 
     def publish_if_due(self, urgent: bool, t_event: float | None = None) -> bool:
         """Publish when urgent, when a status bit other than the life bit changed
@@ -117,13 +115,12 @@ class ModbusBridge:
         now = time.monotonic()
         health = self.health(now)
         status = self.image.status(health) & _QUIET
-        if not urgent and status == self._last_status and now - self._last_pub < self.profile.modbus.plc.refresh_s:
+        if not urgent and status == self._last_status and now - self._last_pub < self._refresh_s:
             return False
-        src_counters = getattr(self.source, "counters", None)
-        if src_counters is not None and hasattr(src_counters, "as_dict"):
-            self.pipeline.counters.extra.update(src_counters.as_dict())
-        regs = self.image.render(health)
-        self.sink.publish(regs, self.image, urgent or status != self._last_status, t_event)
+        pub = Publication(self.image.render(health), self.image, urgent or status != self._last_status,
+                          time.perf_counter() if t_event is None else t_event)
+        for sink in self.sinks:
+            sink.publish(pub)
         self._last_status = status
         self._last_pub = now
         self.publications += 1
@@ -133,7 +130,7 @@ class ModbusBridge:
         """How long the loop may wait for traffic before a publication falls due:
         the next refresh, or the moment the newest frame turns stale."""
         now = time.monotonic() if now is None else now
-        budget = min(self.MAX_WAIT_S, self._last_pub + self.profile.modbus.plc.refresh_s - now)
+        budget = min(self.MAX_WAIT_S, self._last_pub + self._refresh_s - now)
         age = self.source.frame_age(now)
         stale_s = self.image.stale_limit_s
         if age is not None and age <= stale_s:
@@ -141,13 +138,14 @@ class ModbusBridge:
         return max(budget, 0.0)
 
     def shutdown(self) -> None:
-        """Publish the last image, BRIDGE_OFFLINE with no state claimed, and stop the sink
-        (a client-mode writer writes it before it lets go)."""
+        """Publish the last image, BRIDGE_OFFLINE with no state claimed (a client-mode
+        writer writes it before it lets go).  Safe to call twice."""
         if self.offline:
             return
         self.offline = True
-        regs = self.image.render_offline(self.health())
-        self.sink.publish(regs, self.image, True, time.perf_counter())
+        pub = Publication(self.image.render_offline(self.health()), self.image, True, time.perf_counter(), True)
+        for sink in self.sinks:
+            sink.publish(pub)
         self.publications += 1
 
     def _tare(self) -> None:
@@ -158,10 +156,25 @@ class ModbusBridge:
         pipe.calibrator = pipe.calibrator.tared(np.stack(list(self.recent_raw)))
         self.tares += 1
 
-    def run(self, duration_s: float | None = None) -> None:
+    def run(self, duration_s: float | None = None, idle_timeout_s: float | None = None,
+            max_scans: int | None = None) -> str:
+        """Step until :meth:`stop`, ``duration_s``, no scan for ``idle_timeout_s`` (after
+        the first), ``max_scans`` scans, or a finite source's end; returns which."""
         end = None if duration_s is None else time.monotonic() + duration_s
-        while not self._stop.is_set() and (end is None or time.monotonic() < end):
+        source, counters = self.source, self.pipeline.counters
+        while not self._stop.is_set():
             self.step()
+            if end is not None and time.monotonic() >= end:
+                return "duration"
+            if idle_timeout_s is not None:
+                age = source.frame_age()
+                if age is not None and age >= idle_timeout_s:
+                    return "idle"
+            if max_scans is not None and counters.scans >= max_scans:
+                return "scans"
+            if source.done:
+                return "done"
+        return "stopped"
 
     def stop(self) -> None:
         self._stop.set()
@@ -170,12 +183,7 @@ class ModbusBridge:
         c = self.pipeline.counters
         out = {"scans": c.scans, "updates": c.updates, "lost_scans": c.lost_scans,
                "state_changes": c.state_changes, "publications": self.publications, "tares": self.tares}
-        src_counters = getattr(self.source, "counters", None)
-        if src_counters is not None and hasattr(src_counters, "as_dict"):
-            out.update(src_counters.as_dict())
-        stats = getattr(self.sink, "stats_dict", None)
-        if stats is not None:
-            out.update(stats())
+        out.update(self.source.counters())
+        for sink in self.sinks:
+            out.update(sink.counters())
         return out
-
-

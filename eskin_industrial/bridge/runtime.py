@@ -1,17 +1,18 @@
-"""The bridge process: every node's source -> detector -> its PLC register block.
+"""The bridge process: every node's source -> its loop -> its sinks.
 
 Threads, and why each exists:
 
 - one reader per CAN bus (or replayed log): ``recv`` into a bounded queue, so a busy
   detector never makes the kernel drop frames, and a full queue drops and counts;
-- one loop per CAN bus, serving every node on it (route frames, assemble, detect,
-  publish), or one loop per RTU node / scene replay (its source keeps the pace);
-- one writer per node in client mode (a slow or absent PLC never stalls detection),
-  or one Modbus server for all blocks in server mode;
-- the caller's thread supervises: it logs what changed (sensor stale, bus fault, PLC
-  connection) and the counters, and handles the stop.
+- one loop thread per transport: the nodes whose sources share one feeder (a CAN bus)
+  are stepped by one thread, which waits once a round; any other node (an RTU line, a
+  scene) has its own loop thread, paced by its source;
+- whatever the sinks run themselves: a writer per node in PLC client mode (a slow or
+  absent PLC never stalls detection), one Modbus server for all blocks in server mode;
+- the caller's thread supervises: it logs what changed (sensor stale, bus fault, an
+  output's connection) and the counters, and handles the stop.
 
-:meth:`Bridge.stop` stops the loops, then leaves every block reading BRIDGE_OFFLINE
+:meth:`Bridge.stop` stops the loops, then leaves every output reading BRIDGE_OFFLINE
 (written to the PLC before the writer lets go, or served for ``offline_linger_s``).
 Nothing grows with time: queues are bounded, latencies kept in a ring.
 """
@@ -21,37 +22,102 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
-import numpy as np
-
+from ..bus.source import OpenContext, Source
 from ..detect.state import GraspState
 from ..detect.updates import Update
-from ..errors import EskinError
 from ..plc.image import Status
-from .config import BridgeConfig, ResolvedNode, plc_mode
+from ..sinks.base import Sink
+from .config import BridgeConfig, ResolvedNode, output_classes
 from .logs import EventLog
-from .loop import ModbusBridge
+from .loop import NodeLoop
 
 #: The interpreter hands the GIL between threads every 5 ms by default; a reader
-#: thread waiting that long would add 5 ms to a 1 kHz scan's latency.
-SWITCH_INTERVAL_S = 0.0005
+#: thread waiting that long would add 5 ms to a 1 kHz scan's latency.  Every command
+#: that runs a reader thread beside its loop uses this one value.
+SWITCH_INTERVAL_S = 0.0002
 
 
 @dataclass
 class NodeRun:
-    """One node inside the bridge: its loop (``bridge``) and what was last logged."""
+    """One node inside the bridge: its loop and what was last logged."""
 
     node: ResolvedNode
-    bridge: ModbusBridge
-    sink: object
+    loop: NodeLoop
     last_state: tuple[int, bool] | None = None
     logged: dict[str, object] = field(default_factory=dict)
 
     @property
     def name(self) -> str:
         return self.node.name
+
+    @property
+    def sinks(self) -> list[Sink]:
+        return self.loop.sinks
+
+
+def open_nodes(config: BridgeConfig, nodes: list[ResolvedNode], closers: list[Callable[[], None]],
+               default_output: bool = True, all_frames: bool = False, **loop_kw: Any) -> list[NodeLoop]:
+    """Open every output and every source, and build one loop per node; what must be
+    closed is appended to ``closers`` (also when a later one fails to open).  The one
+    wiring path of every command."""
+    context = OpenContext(queue_frames=config.queue_frames, all_frames=all_frames, closers=closers)
+    per_node: list[list[Sink]] = [[] for _ in nodes]
+    for cls, options in output_classes(config, default_output):
+        for i, sink in enumerate(cls.open_nodes(options, nodes, context)):
+            per_node[i].append(sink)
+    sources: list[Source | None] = [None] * len(nodes)
+    by_kind: dict[type[Source], list[int]] = {}
+    for i, n in enumerate(nodes):
+        by_kind.setdefault(n.kind, []).append(i)
+    for kind, members in by_kind.items():
+        for i, src in zip(members, kind.open_nodes([nodes[i] for i in members], context)):
+            sources[i] = src
+    loops = []
+    for n, src, sinks in zip(nodes, sources, per_node):
+        assert src is not None
+        loops.append(NodeLoop(n.profile, src, sinks, rate_hz=n.rate_hz, **loop_kw))
+    return loops
+
+
+class SingleNode:
+    """One node's loop on the caller's thread, for the commands that run one node in
+    the foreground (``modbus-bridge``, ``receive``, ``monitor``, ``demo``): the same
+    configuration, the same wiring and the same loop as the bridge."""
+
+    def __init__(self, config: BridgeConfig, node: ResolvedNode, *, extra_sinks: Sequence[Sink] = (),
+                 default_output: bool = True, all_frames: bool = False, **loop_kw: Any) -> None:
+        self.closers: list[Callable[[], None]] = []
+        try:
+            (self.loop,) = open_nodes(config, [node], self.closers, default_output, all_frames, **loop_kw)
+        except BaseException:
+            self.close()
+            raise
+        self.loop.sinks.extend(extra_sinks)
+        self.loop.refresh_sinks()
+        self.source = self.loop.source
+
+    def __enter__(self) -> "SingleNode":
+        self._switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_INTERVAL_S)  # the reader thread, not the loop, comes first
+        self.source.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.loop.shutdown()
+        for sink in self.loop.sinks:
+            sink.flush()
+        self.close()
+        sys.setswitchinterval(self._switch_interval)
+
+    def close(self) -> None:
+        """Close everything opened; safe to call twice."""
+        for close in reversed(self.closers):
+            close()
+        self.closers.clear()
 
 
 class Bridge:
@@ -61,10 +127,9 @@ class Bridge:
         self.nodes = nodes
         self.log = log
         self.on_update = on_update
-        self.mode = plc_mode(config, nodes)
         self.runs: list[NodeRun] = []
-        self.groups: list = []
-        self.server = None
+        #: Nodes stepped together: (feeder, indices of their runs).
+        self.groups: list[tuple[Any, list[int]]] = []
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._closers: list[Callable[[], None]] = []
@@ -76,95 +141,39 @@ class Bridge:
 
     # -- building: everything is opened before anything runs ----------------------
     def open(self) -> "Bridge":
-        """Open sources and the PLC side; an error here stops before any loop runs."""
+        """Open outputs and sources; an error here stops before any loop runs."""
         try:
-            sinks = self._open_sinks()
-            sources = self._open_sources()
+            loops = open_nodes(self.config, self.nodes, self._closers)
         except BaseException:
             self._close_all()
             raise
-        for node, sink, source in zip(self.nodes, sinks, sources):
-            run = NodeRun(node, None, sink)  # type: ignore[arg-type]
-            run.bridge = ModbusBridge(node.profile, source, sink, rate_hz=node.rate_hz,
-                                      on_update=self._update_hook(run), on_command=self._command_hook(run))
+        for node, loop in zip(self.nodes, loops):
+            run = NodeRun(node, loop)
+            loop.on_update = self._update_hook(run)
+            loop.on_command = self._command_hook(run)
             self.runs.append(run)
+        feeders: dict[int, tuple[Any, list[int]]] = {}
+        for i, run in enumerate(self.runs):
+            feeder = run.loop.source.feeder
+            if feeder is not None:
+                feeders.setdefault(id(feeder), (feeder, []))[1].append(i)
+        self.groups = list(feeders.values())
         return self
 
-    def _open_sinks(self) -> list:
-        from ..bus.modbus.io import SerialSettings
-        from ..plc.client import PlcWriter
-        from ..plc.server import PlcServer
+    @property
+    def server(self) -> Any:
+        """The PLC server of server mode (shared by every node's block), or None."""
+        for run in self.runs:
+            for sink in run.sinks:
+                server = getattr(sink, "server", None)
+                if server is not None:
+                    return server
+        return None
 
-        out = self.config.plc
-        first = self.nodes[0].profile.modbus.plc
-        serial = SerialSettings(out.serial_port, out.baudrate) if out.transport == "rtu" else None
-        if self.mode == "server":
-            tcp = None if serial else (out.host or first.bind, out.port or first.port)
-            self.server = PlcServer(first, tcp=tcp, serial=serial,
-                                    blocks=[n.profile.modbus.plc for n in self.nodes]).start()
-            self._closers.append(self.server.stop)
-            return [self.server.block(i) for i in range(len(self.nodes))]
-        sinks = []
-        for n in self.nodes:
-            w = PlcWriter(n.profile.modbus.plc, out.host, out.port, serial=serial).start()
-            self._closers.append(w.stop)
-            sinks.append(w)
-        return sinks
-
-    def _open_sources(self) -> list:
-        from ..bus.can.group import CanGroup
-
-        by_key: dict[tuple, list[int]] = {}
-        sources: list = [None] * len(self.nodes)
-        for i, n in enumerate(self.nodes):
-            kind = n.config.source
-            if kind in ("can", "can-log"):
-                by_key.setdefault(n.bus_key, []).append(i)
-            elif kind == "modbus-rtu":
-                sources[i] = self._rtu_source(n)
-            else:
-                sources[i] = self._scene_source(n)
-        for key, members in by_key.items():
-            reader = self._can_reader(self.nodes[members[0]])
-            group = CanGroup(reader, [self.nodes[i] for i in members])
-            self.groups.append((group, members))
-            for i, poller in zip(members, group.pollers):
-                sources[i] = poller
-        return sources
-
-    def _can_reader(self, n: ResolvedNode):
-        c = n.config
-        if c.source == "can-log":
-            from ..bus.can.log import LogPlayer, read_can_log
-
-            reader = LogPlayer(c.path, read_can_log(c.path), self.config.queue_frames)  # type: ignore[arg-type]
-        else:
-            from ..bus.can.reader import BusReader, bus_kwargs, open_bus
-
-            kw = bus_kwargs(n.profile, c.interface, c.channel, c.bitrate_bps, c.fd, c.data_bitrate_bps)
-            reader = BusReader(lambda: open_bus(**kw), self.config.queue_frames)
-        self._closers.append(reader.stop)
-        return reader
-
-    def _rtu_source(self, n: ResolvedNode):
-        from ..bus.modbus.rtu import RtuPoller
-
-        poller = RtuPoller(n.profile, n.config.serial_port, baudrate=n.config.baudrate)  # type: ignore[arg-type]
-        poller.open()
-        self._closers.append(poller.close)
-        return poller
-
-    def _scene_source(self, n: ResolvedNode):
-        from ..bus.replay import ReplaySource
-        from ..calibration import Calibrator
-        from ..scenes import render
-
-        rec = render(n.config.scene, n.rate_hz, n.config.seed)  # type: ignore[arg-type]
-        if rec.forces.shape[1] != n.profile.taxels:
-            raise EskinError(f"node {n.name!r}: scene {n.config.scene} has {rec.forces.shape[1]} taxels, "
-                             f"profile {n.profile.name} has {n.profile.taxels}")
-        raw = np.rint(Calibrator.from_section(n.profile.calibration, n.profile.taxels).to_raw(rec.forces))
-        return ReplaySource(n.profile, rec.t, raw, n.rate_hz, loop=n.config.loop)
+    @property
+    def where(self) -> str:
+        sinks = self.runs[0].sinks if self.runs else []
+        return "; ".join(s.where for s in sinks) or "-"
 
     # -- hooks called from the loops: cheap, never blocking ------------------------
     def _update_hook(self, run: NodeRun) -> Callable[[Update], None]:
@@ -189,15 +198,13 @@ class Bridge:
     def start(self) -> "Bridge":
         self._switch_interval = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
-        self.log.event("start", nodes=",".join(r.name for r in self.runs), plc=self.where, mode=self.mode,
-                       sources=",".join(_describe_source(r.node) for r in self.runs))
-        for group, members in self.groups:
+        self.log.event("start", nodes=",".join(r.name for r in self.runs), outputs=self.where,
+                       sources=",".join(r.node.kind.describe(r.node) for r in self.runs))
+        for run in self.runs:
+            run.loop.source.start()  # a shared reader starts once, here: a replayed log does not run ahead
+        for feeder, members in self.groups:
             runs = [self.runs[i] for i in members]
-            # The reader (BusReader or LogPlayer) is only built by open(): without this
-            # no frame ever reached a CAN node's loop.  Started here, not in open(), so
-            # that a replayed log does not run ahead of its loop.
-            group.reader.start()
-            self._spawn(f"can-{'+'.join(r.name for r in runs)}", self._group_loop, group, runs)
+            self._spawn(f"feed-{'+'.join(r.name for r in runs)}", self._group_loop, feeder, runs)
         grouped = {i for _, members in self.groups for i in members}
         for i, run in enumerate(self.runs):
             if i not in grouped:
@@ -205,19 +212,13 @@ class Bridge:
         self.started = True
         return self
 
-    @property
-    def where(self) -> str:
-        if self.server is not None:
-            return self.server.where
-        return self.runs[0].sink.where if self.runs else "-"  # type: ignore[attr-defined]
-
-    def _spawn(self, name: str, target, *args) -> None:
+    def _spawn(self, name: str, target: Callable[..., None], *args: Any) -> None:
         t = threading.Thread(target=self._guard, args=(target, *args), name=name, daemon=True)
         self._threads.append(t)
         t.start()
 
-    def _guard(self, target, *args) -> None:
-        """A loop that fails stops the bridge (and its PLC blocks go offline) rather
+    def _guard(self, target: Callable[..., None], *args: Any) -> None:
+        """A loop that fails stops the bridge (and its outputs go offline) rather
         than leaving a stale image behind a live heartbeat."""
         try:
             target(*args)
@@ -228,27 +229,27 @@ class Bridge:
             self._stop.set()
 
     def _node_loop(self, run: NodeRun) -> None:
-        step, stop = run.bridge.step, self._stop
-        source = run.bridge.source
+        step, stop = run.loop.step, self._stop
+        source = run.loop.source
         while not stop.is_set():
             step()
-            if getattr(source, "done", False):
-                self.log.event("source_ended", node=run.name)
+            if source.done:
+                self.log.event("source_ended", node=run.name, error=source.last_error or "-")
                 break
 
-    def _group_loop(self, group, runs: list[NodeRun]) -> None:
+    def _group_loop(self, feeder: Any, runs: list[NodeRun]) -> None:
         stop = self._stop
-        bridges = [r.bridge for r in runs]
-        pollers = group.pollers
+        loops = [r.loop for r in runs]
+        sources = [lp.source for lp in loops]
         while not stop.is_set():
-            group.route(min(b.wait_budget() for b in bridges))  # the round's one wait
-            for b, p in zip(bridges, pollers):
-                b.step(0.0)
-                while p.pending:  # every scan routed in this round
-                    b.step(0.0)
-            if group.done:
+            feeder.route(min(lp.wait_budget() for lp in loops))  # the round's one wait
+            for lp, src in zip(loops, sources):
+                lp.step(0.0)
+                while src.pending:  # every scan routed in this round
+                    lp.step(0.0)
+            if feeder.done:
                 self.log.event("source_ended", node=",".join(r.name for r in runs),
-                               error=getattr(group.reader, "last_error", "") or "-")
+                               error=sources[0].last_error or "-")
                 break
 
     def wait(self, duration_s: float | None = None, tick_s: float = 0.1) -> None:
@@ -274,58 +275,51 @@ class Bridge:
         self._stop.set()
 
     def check_health(self) -> None:
-        """Log what changed since the last look: stale, bus fault, PLC connection."""
+        """Log what changed since the last look: stale, bus fault, each output's connection."""
         now = time.monotonic()
         for run in self.runs:
-            b = run.bridge
-            health = b.health(now)
-            status = b.image.status(health)
-            seen = {
-                "stale": bool(status & Status.SENSOR_STALE),
-                "bus_fault": bool(status & Status.BUS_FAULT),
+            lp = run.loop
+            status = lp.image.status(lp.health(now))
+            seen: dict[str, tuple[bool, Sink | None]] = {
+                "stale": (bool(status & Status.SENSOR_STALE), None),
+                "bus_fault": (bool(status & Status.BUS_FAULT), None),
             }
-            connected = getattr(run.sink, "connected", None)
-            if connected is not None:
-                seen["plc_connected"] = bool(connected)
-            for key, value in seen.items():
+            for sink in run.sinks:
+                health = sink.health()
+                if health.connected is not None:
+                    seen[f"{sink.kind}_connected"] = (health.connected, sink)
+            for key, (value, sink) in seen.items():
                 before = run.logged.get(key)
                 if before == value:
                     continue
                 if before is None:
-                    # At start, no frame yet and no PLC connection yet are normal: wait
-                    # for the first frame, the first connection or the first refusal.
-                    stats = getattr(run.sink, "stats", None)
-                    if (key == "stale" and value) or (key == "plc_connected" and not value and not (
-                            stats is not None and stats.failures)):
+                    # At start, no frame yet and no connection yet are normal: wait for
+                    # the first frame, the first connection or the first refusal.
+                    if (key == "stale" and value) or (sink is not None and not value and not sink.health().failures):
                         continue
                 run.logged[key] = value
-                # A healthy start is not news; a PLC refusing from the start is (the
+                # A healthy start is not news; an output refusing from the start is (the
                 # first refusal reaches here only after a failed write).
-                if before is not None or value or key == "plc_connected":
-                    self._log_change(run, key, value)
+                if before is not None or value or sink is not None:
+                    self._log_change(run, key, value, sink)
 
-    def _log_change(self, run: NodeRun, key: str, value: bool) -> None:
-        b = run.bridge
+    def _log_change(self, run: NodeRun, key: str, value: bool, sink: Sink | None) -> None:
+        source = run.loop.source
         if key == "stale":
-            age = b.source.frame_age()
+            age = source.frame_age()
             self.log.event("sensor_stale" if value else "sensor_fresh", level="warning" if value else "info",
                            node=run.name, frame_age_ms=None if age is None else round(age * 1000, 1))
         elif key == "bus_fault":
-            err = getattr(getattr(b.source, "reader", None), "last_error", "") or "-"
             self.log.event("bus_fault" if value else "bus_ok", level="warning" if value else "info",
-                           node=run.name, error=err)
-        else:
-            stats = getattr(run.sink, "stats", None)
-            self.log.event("plc_connected" if value else "plc_unreachable", level="info" if value else "warning",
-                           node=run.name, plc=run.sink.where,  # type: ignore[attr-defined]
-                           error=(getattr(stats, "last_error", "") or "-") if not value else "-")
+                           node=run.name, error=source.last_error or "-")
+        elif sink is not None:
+            error = (sink.health().last_error or "-") if not value else "-"
+            self.log.event(f"{sink.kind}_connected" if value else f"{sink.kind}_unreachable",
+                           level="info" if value else "warning", node=run.name, error=error,
+                           **{sink.kind: sink.where})
 
     def counters(self) -> dict[str, dict[str, int]]:
-        out = [dict(run.bridge.counters()) for run in self.runs]
-        for group, members in self.groups:  # frames of no node on a shared bus
-            for i in members:
-                out[i]["unrouted_frames"] = group.unrouted_frames
-        return {run.name: c for run, c in zip(self.runs, out)}
+        return {run.name: run.loop.counters() for run in self.runs}
 
     def log_counters(self, event: str) -> None:
         for name, c in self.counters().items():
@@ -334,7 +328,7 @@ class Bridge:
             self.log.event("log_drops", level="warning", dropped=self.log.drops)
 
     def stop(self) -> None:
-        """Stop the loops, publish BRIDGE_OFFLINE in every block, close everything.
+        """Stop the loops, publish BRIDGE_OFFLINE to every output, close everything.
         Safe to call twice."""
         if self.stopped:
             return
@@ -343,13 +337,15 @@ class Bridge:
         for t in self._threads:
             t.join(timeout=5.0)
         for run in self.runs:
-            run.bridge.shutdown()
-        if self.server is not None and self.runs:
-            time.sleep(self.config.plc.offline_linger_s)  # let a polling PLC read "offline"
+            run.loop.shutdown()
+        offline = []
+        for run in self.runs:
+            # every sink flushed (a writer wrote the offline image, a server served it)
+            if all([sink.flush() for sink in run.sinks]):
+                offline.append(run.name)
         self._close_all()
         if self._switch_interval is not None:  # the process's setting, as it was
             sys.setswitchinterval(self._switch_interval)
-        offline = [r.name for r in self.runs if getattr(r.sink, "flushed", True)]
         self.log.event("stopped", reason=self.stop_reason or ("failure" if self.failure else "end"),
                        offline_written=",".join(offline) or "-")
 
@@ -360,10 +356,3 @@ class Bridge:
             except Exception as exc:  # noqa: BLE001 - closing must go on for the others
                 self.log.event("close_failed", level="warning", error=f"{type(exc).__name__}: {exc}")
         self._closers.clear()
-
-
-def _describe_source(n: ResolvedNode) -> str:
-    c = n.config
-    if c.source == "can":
-        return f"can:{c.interface or 'configured'}:{c.channel or '-'}@{n.profile.can.base_id:#x}"
-    return {"can-log": f"log:{c.path}", "modbus-rtu": f"rtu:{c.serial_port}", "scene": f"scene:{c.scene}"}[c.source]

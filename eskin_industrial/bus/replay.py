@@ -1,31 +1,39 @@
-"""A recording's (or a rendered scene's) raw scans replayed in real time, as if polled."""
+"""Scans replayed in real time, as if polled: a recording CSV, or a scene rendered by
+the scene simulator (``eskin-bus bridge --source scene:case2``: the whole chain with
+no hardware)."""
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from ..calibration import Calibrator
+from ..errors import EskinError
 from ..frames import RawScan
 from ..profile import Profile
+from .source import NodeLike, OpenContext, Source
 
 
-class ReplaySource:
-    """A recording's raw scans played at ``rate_hz`` (any speed), as if polled; scan
-    times are the recording's."""
+class ReplaySource(Source):
+    """Raw scans played at ``rate_hz`` (any speed), as if polled; scan times are the
+    recording's (each loop continues them)."""
 
-    def __init__(self, profile: Profile, t: np.ndarray, raw: np.ndarray, rate_hz: float, *, loop: bool = False) -> None:
+    def __init__(self, profile: Profile, t: np.ndarray, raw: np.ndarray, rate_hz: float, *, loop: bool = False,
+                 where: str = "replay") -> None:
+        super().__init__()
         self.t, self.raw, self.rate_hz, self.loop = t, raw, rate_hz, loop
         self.k = 0
-        self.bus_fault = False
-        self.last_rx: float | None = None
+        self.where = where
         self._next = time.monotonic()
 
     @property
     def done(self) -> bool:
         return not self.loop and self.k >= len(self.t)
 
-    def poll(self, timeout_s: float | None = None) -> RawScan | None:
+    def _poll(self, timeout_s: float | None) -> RawScan | None:
         now = time.monotonic()
         if self._next > now:
             time.sleep(self._next - now)
@@ -34,13 +42,102 @@ class ReplaySource:
             return None
         lap, i = divmod(self.k, len(self.t))
         self.k += 1
-        rx = time.monotonic()
-        self.last_rx = rx
         # The recording's own time (each loop continues it), whatever the replay speed.
         t = float(self.t[i]) + lap * (float(self.t[-1] - self.t[0]) + 1.0 / self.rate_hz)
-        return RawScan(self.k - 1, t, self.raw[i], 0, rx)
+        return RawScan(self.k - 1, t, self.raw[i], 0, time.monotonic())
 
-    def frame_age(self, now: float | None = None) -> float | None:
-        if self.last_rx is None:
-            return None
-        return (time.monotonic() if now is None else now) - self.last_rx
+    def describe_where(self) -> str:
+        return self.where
+
+
+@dataclass(frozen=True)
+class SceneOptions:
+    """``[[node]]`` keys of ``source = "scene"``: a built-in scene (or a scene .toml)
+    rendered at the node's rate and played in real time."""
+
+    scene: str
+    seed: int = 0
+    loop: bool = True
+
+
+class SceneSource(ReplaySource):
+    kind = "scene"
+    spec = "scene:NAME"
+    Options = SceneOptions
+
+    @classmethod
+    def options_from_spec(cls, where: str, bus: dict[str, Any]) -> dict[str, Any]:
+        if not where:
+            raise ValueError("expected scene:NAME (eskin-bus simulate --list names them)")
+        return {"scene": where}
+
+    @classmethod
+    def describe(cls, node: NodeLike) -> str:
+        return f"scene {node.options.scene}"
+
+    @classmethod
+    def check(cls, node: NodeLike, base_dir: str) -> None:
+        from ..scenes import load_scene
+
+        try:
+            load_scene(node.options.scene)
+        except EskinError as exc:
+            raise ValueError(f"scene: {exc}") from None
+
+    @classmethod
+    def open_node(cls, node: NodeLike, context: OpenContext) -> "SceneSource":
+        from ..scenes import render
+
+        o, prof = node.options, node.profile
+        rec = render(o.scene, node.rate_hz, o.seed)
+        if rec.forces.shape[1] != prof.taxels:
+            raise EskinError(f"node {node.name!r}: scene {o.scene} has {rec.forces.shape[1]} taxels, "
+                             f"profile {prof.name} has {prof.taxels}")
+        raw = np.rint(Calibrator.from_section(prof.calibration, prof.taxels).to_raw(rec.forces))
+        return cls(prof, rec.t, raw, node.rate_hz, loop=o.loop, where=f"scene {o.scene}")
+
+
+@dataclass(frozen=True)
+class RecordingOptions:
+    """``[[node]]`` keys of ``source = "recording"``: a recording CSV (``t,f0,...`` in
+    newtons or ``t,raw0,...``) played at the node's rate."""
+
+    path: str
+    loop: bool = True
+
+
+class RecordingSource(ReplaySource):
+    kind = "recording"
+    spec = "recording:FILE.csv"
+    Options = RecordingOptions
+
+    @classmethod
+    def options_from_spec(cls, where: str, bus: dict[str, Any]) -> dict[str, Any]:
+        if not where:
+            raise ValueError("expected recording:FILE.csv")
+        return {"path": where}
+
+    @classmethod
+    def describe(cls, node: NodeLike) -> str:
+        return f"recording {node.options.path}"
+
+    @classmethod
+    def check(cls, node: NodeLike, base_dir: str) -> None:
+        from ..recording import read_recording
+
+        try:
+            read_recording(node.options.path, node.profile.taxels)
+        except EskinError as exc:
+            raise ValueError(f"path: {exc}") from None
+
+    @classmethod
+    def open_node(cls, node: NodeLike, context: OpenContext) -> "RecordingSource":
+        from ..recording import read_recording
+
+        prof = node.profile
+        rec = read_recording(node.options.path, prof.taxels)
+        raw = rec.values if rec.unit == "raw" else \
+            Calibrator.from_section(prof.calibration, prof.taxels).to_raw(rec.values)
+        # played at the pace its timestamps show (the detector runs at the node's rate)
+        return cls(prof, rec.t, raw, rec.rate_hz(node.rate_hz), loop=node.options.loop,
+                   where=f"recording {node.options.path}")

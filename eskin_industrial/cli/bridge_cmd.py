@@ -1,69 +1,43 @@
-"""``eskin-bus bridge``: sensor nodes -> detector -> PLC register blocks, for months.
+"""``eskin-bus bridge``: sensor nodes -> detector -> outputs (the PLC's register
+blocks, a recorder, ...), for months.
 
-One node from the command line (``--profile``, ``--source``, ``--plc``), or several
-from a configuration file (``--config``).  SIGTERM and SIGINT stop it cleanly: every
-block is left reading BRIDGE_OFFLINE.
+One node from the command line (``--profile``, ``--source``, the outputs' options),
+or several from a configuration file (``--config``).  The source kinds and the output
+kinds, and their options, come from their registries.  SIGTERM and SIGINT stop it
+cleanly: every output is left reading BRIDGE_OFFLINE.
 """
 
 from __future__ import annotations
 
 import signal
 import sys
+from typing import Any
 
 import click
 
 from .can_common import bus_options
-from .common import host_port
+from .outputs import given_output_options, output_options, outputs_from_cli
 
 
-def _split(spec: str, what: str) -> tuple[str, str]:
-    kind, sep, rest = spec.partition(":")
-    rest = rest[2:] if rest.startswith("//") else rest  # tcp://host:port reads as tcp:host:port
-    if not sep and kind not in ("can",):
-        raise click.BadParameter(f"expected KIND:WHERE, got {spec!r}", param_hint=what)
-    return kind, rest
-
-
-def node_from_options(profile_path: str, source: str, interface, channel, bitrate, fd, data_bitrate,
-                      base_address: int | None, rate_hz: float | None, name: str):
+def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_address: int | None,
+                      rate_hz: float | None, name: str):
+    """One ``[[node]]`` from ``--source KIND:WHERE`` and python-can's bus options."""
     from ..bridge.config import NodeConfig
+    from ..bus.source import SOURCES, source_class
+    from ..errors import ProfileError
 
-    kind, where = _split(source, "--source")
-    common = dict(name=name, profile=profile_path, base_address=base_address, rate_hz=rate_hz)
-    if kind == "can":
-        return NodeConfig(source="can", interface=interface, channel=channel, bitrate_bps=bitrate, fd=fd,
-                          data_bitrate_bps=data_bitrate, **common)
-    if kind in ("log", "can-log"):
-        return NodeConfig(source="can-log", path=where, fd=fd, **common)
-    if kind in ("rtu", "modbus-rtu"):
-        port, _, baud = where.partition("@")
-        if baud and not baud.isdigit():
-            raise click.BadParameter(f"expected rtu:PORT[@BAUD], got {source!r}", param_hint="--source")
-        return NodeConfig(source="modbus-rtu", serial_port=port, baudrate=int(baud) if baud else None, **common)
-    if kind == "scene":
-        return NodeConfig(source="scene", scene=where, **common)
-    raise click.BadParameter(f"unknown source kind {kind!r}; expected can, log:FILE, rtu:PORT[@BAUD] or "
-                             f"scene:NAME", param_hint="--source")
-
-
-def plc_from_option(spec: str | None, baud: int):
-    from ..bridge.config import PlcOutput
-
-    if spec is None:
-        return PlcOutput()
-    kind, where = _split(spec, "--plc")
-    if kind == "tcp":
-        host, port = host_port(where, "--plc")
-        return PlcOutput(mode="client", host=host, port=port)
-    if kind == "rtu":
-        return PlcOutput(mode="client", transport="rtu", serial_port=where, baudrate=baud)
-    if kind == "serve":
-        host, port = host_port(where, "--plc")
-        return PlcOutput(mode="server", host=host, port=port)
-    if kind == "serve-rtu":
-        return PlcOutput(mode="server", transport="rtu", serial_port=where, baudrate=baud)
-    raise click.BadParameter(f"unknown PLC kind {kind!r}; expected tcp:HOST:PORT, rtu:PORT, serve:HOST:PORT or "
-                             f"serve-rtu:PORT", param_hint="--plc")
+    kind, _, where = source.partition(":")
+    where = where[2:] if where.startswith("//") else where
+    try:
+        cls = source_class(kind)
+    except ProfileError as exc:
+        specs = ", ".join(source_class(k).spec for k in SOURCES)
+        raise click.BadParameter(f"{exc}; expected {specs}", param_hint="--source") from None
+    try:
+        keys = cls.options_from_spec(where, bus)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--source") from None
+    return NodeConfig.of(name, profile_path, cls.kind, rate_hz=rate_hz, base_address=base_address, **keys)
 
 
 @click.command()
@@ -73,12 +47,10 @@ def plc_from_option(spec: str | None, baud: int):
               help="One node: its sensor profile (instead of --config).")
 @click.option("--source", default="can", show_default=True, metavar="SPEC",
               help="One node's scans: can (python-can bus, -i/-c), log:FILE (replay a CAN log), "
-                   "rtu:PORT[@BAUD] (poll a Modbus RTU node), scene:NAME (a built-in scene in real time).")
+                   "rtu:PORT[@BAUD] (poll a Modbus RTU node), scene:NAME (a built-in scene in real time), "
+                   "recording:FILE.csv.")
 @bus_options
-@click.option("--plc", "plc_spec", default=None, metavar="SPEC",
-              help="tcp:HOST:PORT (write into the PLC), rtu:PORT (PLC as RTU slave), serve:HOST:PORT "
-                   "(serve, the PLC reads), serve-rtu:PORT; default: the profile's [modbus.plc].")
-@click.option("--plc-baud", type=int, default=115200, show_default=True, help="Baud rate for rtu: and serve-rtu:.")
+@output_options
 @click.option("--base-address", type=click.IntRange(0, 65000), default=None,
               help="One node: its register block (default: the profile's).")
 @click.option("--rate", "rate_hz", type=click.FloatRange(min=0.1), default=None,
@@ -92,46 +64,45 @@ def plc_from_option(spec: str | None, baud: int):
 @click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,
               help="Stop after this many seconds (default: until SIGTERM/SIGINT).")
 @click.option("--check", is_flag=True, help="Validate the configuration and profiles, print the plan, exit.")
-def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, plc_spec, plc_baud,
-           base_address, rate_hz, name, log_format, log_level, status_every, duration_s, check) -> None:
-    """Run the bridge: decode each node's scans, detect, and keep the PLC's register
-    blocks up to date, until SIGTERM or SIGINT (then every block reads BRIDGE_OFFLINE)."""
+def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, base_address, rate_hz,
+           name, log_format, log_level, status_every, duration_s, check, **output_values) -> None:
+    """Run the bridge: decode each node's scans, detect, and keep the outputs (by
+    default the PLC's register blocks) up to date, until SIGTERM or SIGINT (then every
+    block reads BRIDGE_OFFLINE).  With no output given, the PLC as the profile
+    describes it; --plc keeps it beside another output."""
     from dataclasses import replace
 
-    from ..bridge.config import BridgeConfig, load_bridge_config, plc_mode, resolve
+    from ..bridge.config import BridgeConfig, check_sources, load_bridge_config, output_classes, resolve
     from ..bridge.logs import EventLog
     from ..bridge.runtime import Bridge
-    from ..bus.can.layout import ID_RANGE
     from ..bus.modbus.io import quiet_pymodbus
 
     if (config_path is None) == (profile_path is None):
         raise click.UsageError("give --config FILE, or --profile P for one node")
+    bus = dict(interface=interface, channel=channel, bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate)
     if config_path is not None:
         given = [opt for opt, value in (("--source", source != "can"), ("-i", interface), ("-c", channel),
                                         ("-b", bitrate), ("--fd", fd is not None), ("--data-bitrate", data_bitrate),
-                                        ("--plc", plc_spec), ("--base-address", base_address is not None),
+                                        ("--base-address", base_address is not None),
                                         ("--rate", rate_hz), ("--name", name != "node")) if value]
+        given += given_output_options(output_values)
         if given:  # never silently ignored: the file says it all
             raise click.UsageError(f"{', '.join(given)}: one-node options; with --config the file gives them")
         cfg = load_bridge_config(config_path)
     else:
-        node = node_from_options(profile_path, source, interface, channel, bitrate, fd, data_bitrate, base_address,
-                                 rate_hz, name)
-        cfg = BridgeConfig(node=(node,), plc=plc_from_option(plc_spec, plc_baud))
+        node = node_from_options(profile_path, source, bus, base_address, rate_hz, name)
+        cfg = BridgeConfig(node=(node,), outputs=outputs_from_cli(output_values))
     logs = replace(cfg.log, **{k: v for k, v in (("format", log_format), ("level", log_level),
                                                    ("status_every_s", status_every)) if v is not None})
     cfg = replace(cfg, log=logs)
-    object.__setattr__(cfg, "source", config_path or "<command line>")
     nodes = resolve(cfg)  # every profile loads and the nodes fit together, or one line and exit 2
+    check_sources(cfg, nodes)  # files and scenes the sources need exist
     if check:
-        mode = plc_mode(cfg, nodes)
+        outputs = output_classes(cfg)
         for n in nodes:
-            c = n.config
-            src = {"can": f"can {c.interface or '(configured)'} {c.channel or ''} ids {n.profile.can.base_id:#x}+{ID_RANGE}",
-                   "can-log": f"log {c.path}", "modbus-rtu": f"rtu {c.serial_port} unit {n.profile.modbus.node.unit_id}",
-                   "scene": f"scene {c.scene}"}[c.source]
-            click.echo(f"{n.name}: {n.profile.name} ({n.profile.source}), {n.rate_hz:g} Hz, {src} -> PLC {mode} "
-                       f"block at {n.profile.modbus.plc.base_address}")
+            where = ", ".join(cls.describe(options, n) for cls, options in outputs)
+            click.echo(f"{n.name}: {n.profile.name} ({n.profile.source}), {n.rate_hz:g} Hz, "
+                       f"{n.kind.describe(n)} -> {where}")
         return
     quiet_pymodbus()
     log = EventLog(sys.stderr, logs.format, logs.level)

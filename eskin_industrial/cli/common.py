@@ -23,12 +23,12 @@ def profile_option(required: bool = True):
 def host_port(text: str, what: str, require_port: bool = False) -> tuple[str | None, int | None]:
     """``HOST:PORT`` (``HOST``, ``:PORT`` or nothing when the port is not required):
     None for what is left out, for the caller's default."""
-    host, sep, port = text.rpartition(":")
-    if not sep:
-        host, port = text, ""
-    if (sep or require_port) and not (port.isdigit() and 0 < int(port) < 65536):
-        raise click.BadParameter(f"expected HOST:PORT, got {text!r}", param_hint=what)
-    return host or None, int(port) if port else None
+    from ..plc.sink import parse_host_port
+
+    try:
+        return parse_host_port(text, require_port)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint=what) from None
 
 
 def open_profile(path: str) -> Profile:

@@ -81,10 +81,10 @@ def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> De
             watches[0].note(line)
 
     def view(parts: DemoParts) -> LiveScreen:
-        bridge, plc = parts.bridge, parts.plc
-        watch = Watch(parts.profile, bridge.pipeline, method=parts.profile.detector.method,
+        loop, plc = parts.loop, parts.plc
+        watch = Watch(parts.profile, loop.pipeline, method=parts.profile.detector.method,
                       registers=lambda: plc.memory.regs[:STATUS_COUNT], registers_from="as the PLC reads them",
-                      counters=bridge.counters, title="eskin-bus demo",
+                      counters=loop.counters, title="eskin-bus demo",
                       source=f"{rec.name} | {parts.profile.name} | {parts.profile.detector.method}",
                       started=parts.started)
         watches.append(watch)

@@ -51,11 +51,6 @@ def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, du
     click.echo(f"modbus-node: answered {sim.registers.reads} reads", err=True)
 
 
-def _host_port(text: str, what: str) -> tuple[str, int]:
-    host, port = host_port(text, what, require_port=True)
-    return host or "127.0.0.1", port  # type: ignore[return-value]
-
-
 @click.command("modbus-bridge")
 @profile_option()
 @click.option("--rtu", "rtu_port", default=None, help="Serial port of the sensor node (Modbus RTU master).")
@@ -78,13 +73,11 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
                   serve_rtu, serve_baud, duration_s, status_every) -> None:
     """Poll the node over Modbus RTU, detect, and publish the PLC register image:
     written to the PLC (client mode, the default when the profile says so) or served
-    (--serve / --serve-rtu)."""
-    from ..bridge.loop import ModbusBridge
-    from ..bus.modbus.io import SerialSettings, quiet_pymodbus
-    from ..bus.modbus.rtu import RtuPoller
-    from ..bus.replay import ReplaySource
-    from ..plc.client import PlcWriter
-    from ..plc.server import PlcServer
+    (--serve / --serve-rtu).  The same loop as ``eskin-bus bridge --source rtu:PORT``."""
+    from ..bridge.config import BridgeConfig, NodeConfig, resolve
+    from ..bridge.runtime import SingleNode
+    from ..bus.modbus.io import quiet_pymodbus
+    from ..plc.sink import PlcOptions
 
     quiet_pymodbus()
     prof = open_profile(profile_path)
@@ -96,42 +89,39 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
     client_asked = plc_host is not None or plc_port is not None or plc_rtu is not None
     if client_asked and (serve or serve_rtu):
         raise click.UsageError("client options (--plc-*) and server options (--serve*) exclude each other")
-    server_mode = bool(serve or serve_rtu) or (plc.mode == "server" and not client_asked)
+    if serve_rtu:
+        out = PlcOptions(mode="server", transport="rtu", serial_port=serve_rtu, baudrate=serve_baud)
+    elif serve:
+        host, port = host_port(serve, "--serve", require_port=True)
+        out = PlcOptions(mode="server", host=host or "127.0.0.1", port=port)
+    elif plc_rtu:
+        out = PlcOptions(mode="client", transport="rtu", serial_port=plc_rtu, baudrate=plc_baud)
+    else:
+        out = PlcOptions(mode="client" if client_asked else None, host=plc_host, port=plc_port)
     if rtu_port is not None:
-        source = RtuPoller(prof, rtu_port, baudrate=baudrate).open()
+        node = NodeConfig.of("node", profile_path, "modbus-rtu", serial_port=rtu_port, baudrate=baudrate)
     else:
-        scans = scene_or_recording(prof, None, recording, None)
-        t, forces, rate = scans.t, scans.forces, scans.rate_hz
-        raw = Calibrator.from_section(prof.calibration, prof.taxels).to_raw(forces)
-        source = ReplaySource(prof, t, raw, rate, loop=True)
-    if server_mode:
-        if serve_rtu:
-            sink = PlcServer(plc, serial=SerialSettings(serve_rtu, serve_baud))
-        else:
-            sink = PlcServer(plc, tcp=_host_port(serve, "--serve") if serve else (plc.bind, plc.port))
-        sink.start()
-    else:
-        serial = SerialSettings(plc_rtu, plc_baud) if plc_rtu else None
-        sink = PlcWriter(plc, plc_host, plc_port, serial=serial).start()
-    bridge = ModbusBridge(prof, source, sink)
-    click.echo(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {sink.where}, base address "
+        node = NodeConfig.of("node", profile_path, "recording", path=recording)
+    cfg = BridgeConfig(node=(node,), outputs={"plc": out})
+    (resolved,) = resolve(cfg)
+    single = SingleNode(cfg, resolved)
+    loop = single.loop
+    where = "; ".join(s.where for s in loop.sinks)
+    click.echo(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {where}, base address "
                f"{plc.base_address}", err=True)
     end = None if duration_s is None else time.monotonic() + duration_s
     next_status = time.monotonic() + status_every if status_every else None
-    try:
-        while end is None or time.monotonic() < end:
-            bridge.step()
-            if next_status is not None and time.monotonic() >= next_status:
-                next_status += status_every
-                click.echo(_counters(bridge), err=True)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        sink.stop()
-        if hasattr(source, "close"):
-            source.close()
-    click.echo(_counters(bridge), err=True)
+    with single:
+        try:
+            while end is None or time.monotonic() < end:
+                loop.step()
+                if next_status is not None and time.monotonic() >= next_status:
+                    next_status += status_every
+                    click.echo(_counters(loop), err=True)
+        except KeyboardInterrupt:
+            pass
+    click.echo(_counters(loop), err=True)
 
 
-def _counters(bridge) -> str:
-    return "modbus-bridge: " + " ".join(f"{k}={v}" for k, v in bridge.counters().items())
+def _counters(loop) -> str:
+    return "modbus-bridge: " + " ".join(f"{k}={v}" for k, v in loop.counters().items())

@@ -10,7 +10,7 @@ import click
 
 from ..detect.methods import METHODS
 from .can_common import bus_options
-from .common import open_profile, profile_option
+from .common import profile_option
 
 
 @click.command()
@@ -30,33 +30,29 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, rate_hz
     (taxel heat map, scores against their thresholds, state, the register image the
     bridge would publish, counters) until Ctrl-C, --duration or --idle-exit; then one
     line of counters.  No PLC is contacted."""
-    from ..bridge.loop import ModbusBridge
-    from ..bus.can.layout import CanLayout, ScanAssembler
-    from ..bus.can.reader import READER_SWITCH_INTERVAL_S, BusReader, bus_kwargs, open_bus
-    from ..bus.can.source import CanScanPoller
+    from ..bridge.config import BridgeConfig, NodeConfig, resolve
+    from ..bridge.runtime import SingleNode
     from ..detect.updates import Update
-    from ..pipeline import Pipeline
     from ..view.live import KeptImage, Watch, change_line, live_screen
     from ..view.terminal import color_wanted
 
     if rate_hz is not None and not rate_hz > 0:
         raise click.BadParameter(f"expected a positive rate, got {rate_hz}", param_hint="--rate")
-    sys.setswitchinterval(READER_SWITCH_INTERVAL_S)  # the reader, not the redraws, comes first
-    prof = open_profile(profile_path)
-    kw = bus_kwargs(prof, interface, channel, bitrate, fd, data_bitrate)
-    layout = CanLayout.from_profile(prof, fd=kw["fd"])
-    rate = rate_hz or prof.sensor.rate_hz
+    node = NodeConfig.of("node", profile_path, "can", rate_hz=rate_hz, interface=interface, channel=channel,
+                         bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate)
+    cfg = BridgeConfig(node=(node,))
+    (resolved,) = resolve(cfg)
+    prof = resolved.profile
     chosen = method or prof.detector.method
-    reader = BusReader(lambda: open_bus(**kw))  # a bus that cannot be opened: one line, exit 3
     sink = KeptImage()
-    bridge = ModbusBridge(prof, CanScanPoller(reader, ScanAssembler(layout, rate)), sink, rate_hz=rate)
-    if method is not None:
-        bridge.pipeline = Pipeline(prof, rate_hz=rate, method=method)
-    where = str(getattr(reader.bus, "channel_info", None) or channel or "?")
+    # a bus that cannot be opened: one line, exit 3
+    single = SingleNode(cfg, resolved, extra_sinks=[sink], default_output=False, all_frames=True, method=method)
+    loop = single.loop
+    where = loop.source.describe_where() if channel is None else channel
     stdout = sys.stdout
     live = not plain and stdout.isatty()
-    watch = Watch(prof, bridge.pipeline, method=chosen, registers=lambda: sink.registers,
-                  registers_from="as the bridge would publish them", counters=bridge.counters,
+    watch = Watch(prof, loop.pipeline, method=chosen, registers=lambda: sink.registers,
+                  registers_from="as the bridge would publish them", counters=loop.counters,
                   title="eskin-bus monitor", source=f"{prof.name} | {chosen} | {where}", started=time.monotonic())
 
     last_state: int | None = None
@@ -70,25 +66,18 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, rate_hz
             if not live:
                 click.echo(line)
 
-    bridge.on_update = observed
+    loop.on_update = observed
     if not live:
         click.echo(f"eskin-bus monitor: {prof.name} on {where}, method {chosen}; Ctrl-C ends", err=True)
     start = time.monotonic()
-    end = None if duration_s is None else start + duration_s
     interrupted = False
-    reader.start()
-    try:
-        with live_screen(watch, stdout, color_wanted()) if live else nullcontext():
-            while end is None or time.monotonic() < end:
-                bridge.step()
-                age = bridge.source.frame_age()
-                if idle_s is not None and age is not None and age >= idle_s:
-                    break
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        reader.stop()
-    c = bridge.counters()
+    with single:
+        try:
+            with live_screen(watch, stdout, color_wanted()) if live else nullcontext():
+                loop.run(duration_s=duration_s, idle_timeout_s=idle_s)
+        except KeyboardInterrupt:
+            interrupted = True
+    c = loop.counters()
     click.echo(f"monitor: {time.monotonic() - start:.1f} s{' (interrupted)' if interrupted else ''}, "
                f"scans {c.get('scans', 0)}, lost {c.get('lost_scans', 0)}, torn {c.get('torn_scans', 0)}, "
                f"malformed {c.get('malformed_frames', 0)}, rx queue drops {c.get('rx_queue_drops', 0)}, "

@@ -3,27 +3,24 @@
 from __future__ import annotations
 
 import json
-import sys
 
 import click
 
-from ..detect.updates import UpdateTable
-from ..recording import write_updates
 from .can_common import bus_options
-from .common import open_profile, profile_option
+from .common import profile_option
 
 
 @click.command()
 @profile_option()
 @bus_options
 @click.option("-o", "--output", default=None, type=click.Path(dir_okay=False, allow_dash=True),
-              help="Write the detector updates here (CSV, '-' for stdout) when receiving ends.")
+              help="Write the detector updates here as they come (CSV, '-' for stdout; .jsonl: JSON lines).")
 @click.option("--log", "log_path", default=None, type=click.Path(dir_okay=False),
               help="Record the raw traffic (python-can writer by suffix: .log candump, .blf, .asc, ...).")
 @click.option("--rate", "rate_hz", type=float, default=None, help="The node's scan rate in Hz (default: the profile's).")
 @click.option("--duration", "duration_s", type=float, default=None, help="Stop after this many seconds.")
 @click.option("--idle-exit", "idle_s", type=float, default=None,
-              help="Stop once no frame came for this many seconds (after the first).")
+              help="Stop once no scan came for this many seconds (after the first).")
 @click.option("--scans", "max_scans", type=int, default=None, help="Stop after this many scans.")
 @click.option("--queue-frames", type=int, default=200_000, show_default=True,
               help="Frames the reader may queue ahead of the detector before dropping.")
@@ -31,35 +28,35 @@ from .common import open_profile, profile_option
 def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output, log_path, rate_hz, duration_s,
             idle_s, max_scans, queue_frames, quiet) -> None:
     """Receive scans from a CAN bus until stopped (Ctrl-C, --duration, --idle-exit,
-    --scans), run the detector, and report the transport counters as JSON on stderr."""
-    import can
+    --scans), run the detector, and report the transport counters as JSON on stderr.
+    The same source and loop as ``eskin-bus bridge --source can``."""
+    from ..bridge.config import BridgeConfig, NodeConfig, resolve
+    from ..bridge.runtime import SingleNode
+    from ..sinks.recorder import RecorderOptions
 
-    from ..bus.can.layout import CanLayout, ScanAssembler
-    from ..bus.can.reader import READER_SWITCH_INTERVAL_S, BusReader, CanSource, bus_kwargs, open_bus
-    from ..pipeline import Pipeline
-
-    sys.setswitchinterval(READER_SWITCH_INTERVAL_S)
-    prof = open_profile(profile_path)
-    kw = bus_kwargs(prof, interface, channel, bitrate, fd, data_bitrate)
-    layout = CanLayout.from_profile(prof, fd=kw["fd"])
-    rate = rate_hz or prof.sensor.rate_hz
-    pipeline = Pipeline(prof, rate_hz=rate)
-    reader = BusReader(lambda: open_bus(**kw), queue_frames=queue_frames)
-    log = can.Logger(log_path) if log_path else None
-    source = CanSource(reader.start(), ScanAssembler(layout, rate), pipeline, log, keep_updates=output is not None)
+    node = NodeConfig.of("node", profile_path, "can", rate_hz=rate_hz, interface=interface, channel=channel,
+                         bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate, log=log_path)
+    outputs = {"recorder": RecorderOptions(path=output)} if output is not None else {}
+    cfg = BridgeConfig(node=(node,), outputs=outputs, queue_frames=queue_frames)
+    (resolved,) = resolve(cfg)
+    single = SingleNode(cfg, resolved, default_output=False, all_frames=True)  # a bus that cannot be opened: one line, exit 3
+    loop, source = single.loop, single.loop.source
     if not quiet:
-        bus = reader.bus
-        click.echo(f"eskin-bus: receiving {prof.name} on {getattr(bus, 'channel_info', '?')} "
+        layout = source.assembler.layout
+        click.echo(f"eskin-bus: receiving {resolved.profile.name} on {source.describe_where()} "
                    f"({layout.segments} frame{'s' if layout.segments > 1 else ''} per scan)", err=True)
-    try:
-        source.run(duration_s=duration_s, idle_timeout_s=idle_s, max_scans=max_scans)
-    finally:
-        if log is not None:
-            log.stop()
-    if output is not None:
-        write_updates(output, UpdateTable.from_updates(source.updates))
+    with single:
+        try:
+            loop.run(duration_s=duration_s, idle_timeout_s=idle_s, max_scans=max_scans)
+        except KeyboardInterrupt:
+            pass
+        # The reader stops; what it had queued is still recorded and decoded.
+        source.reader.stop()
+        while source.pending or source.reader.queue:
+            loop.step(0.0)
+        source.assembler.flush()
     if not quiet:
-        c = pipeline.counters
+        c = loop.pipeline.counters
         summary = {k: v for k, v in vars(c).items() if k != "extra"} | source.counters()
         if source.assembler.status is not None:
             summary["node_rate_hz"] = source.assembler.status.rate_hz

@@ -23,7 +23,9 @@ from dataclasses import dataclass, field
 from ..bus.modbus.io import RtuMaster, SerialSettings, TcpMaster
 from ..errors import ModbusFault, Refused
 from ..profile import ModbusPlcSection
+from ..sinks.base import Publication, SinkHealth
 from .image import REG, Command, PlcImage, parse_register_write
+from .sink import PlcSink
 
 
 @dataclass
@@ -39,10 +41,11 @@ class WriterStats:
     latencies_s: collections.deque[float] = field(default_factory=lambda: collections.deque(maxlen=100_000))
 
 
-class PlcWriter:
+class PlcWriter(PlcSink):
     def __init__(self, settings: ModbusPlcSection, host: str | None = None, port: int | None = None,
                  *, timeout_s: float = 0.5, poll_commands: bool = True, serial: SerialSettings | None = None,
                  on_written: Callable[[float, float], None] | None = None) -> None:
+        super().__init__()
         self.settings = settings
         self.host = host or settings.host
         self.port = port or settings.port
@@ -63,20 +66,18 @@ class PlcWriter:
         self._thread: threading.Thread | None = None
         self.connected = False
 
-    @property
-    def where(self) -> str:
-        if self.serial is not None:
-            return f"rtu {self.serial.port} at {self.serial.baudrate} baud, unit {self.settings.unit_id} (client)"
-        return f"tcp {self.host}:{self.port} (client)"
+        if serial is not None:
+            self.where = f"rtu {serial.port} at {serial.baudrate} baud, unit {settings.unit_id} (client)"
+        else:
+            self.where = f"tcp {self.host}:{self.port} (client)"
 
     def start(self) -> "PlcWriter":
         self._thread = threading.Thread(target=self._run, name="plc-writer", daemon=True)
         self._thread.start()
         return self
 
-    def publish(self, registers: list[int], image: PlcImage | None = None, urgent: bool = False,
-                t_event: float | None = None) -> None:
-        self.offer(registers, urgent, t_event)
+    def _publish(self, publication: Publication) -> None:
+        self.offer(publication.registers, publication.urgent, publication.t_event)
 
     def offer(self, registers: list[int], urgent: bool = False, t_event: float | None = None) -> None:
         """Hand over the newest image; ``t_event`` (perf_counter) dates an urgent one."""
@@ -96,9 +97,6 @@ class PlcWriter:
                 out.append(self.commands.get_nowait())
             except queue.Empty:
                 return out
-
-    def commands_done(self) -> None:
-        pass  # COMMAND is cleared in the PLC by the writer itself
 
     def _run(self) -> None:
         s = self.settings
@@ -186,6 +184,14 @@ class PlcWriter:
         if command:
             self.master.write_registers(at, [0])
 
+    def flush(self, timeout_s: float = 1.0) -> bool:
+        """Stop the writer once the pending image is written (or ``timeout_s`` passed)."""
+        self.stop(timeout_s)
+        return self.flushed
+
+    def _close(self) -> None:
+        self.stop()
+
     def stop(self, flush_s: float = 1.0) -> None:
         """Stop the writer; an image still pending (the bridge's last, "offline") is
         written first if the PLC answers within ``flush_s``."""
@@ -203,7 +209,10 @@ class PlcWriter:
         with self._cond:
             return self._pending is None
 
-    def stats_dict(self) -> dict[str, int]:
+    def health(self) -> SinkHealth:
+        return SinkHealth(self.connected, self.stats.failures, self.stats.last_error)
+
+    def counters(self) -> dict[str, int]:
         st = self.stats
         return {"plc_writes": st.writes, "plc_write_failures": st.failures, "plc_connects": st.connects,
                 "plc_superseded": st.superseded}

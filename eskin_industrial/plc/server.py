@@ -11,10 +11,13 @@ from __future__ import annotations
 
 import queue
 import threading
+import time
 
 from ..bus.modbus.codec import ILLEGAL_ADDRESS
 from ..bus.modbus.io import RegisterServer, SerialSettings
 from ..errors import Refused
+from ..sinks.base import Publication
+from .sink import PlcSink
 from ..profile import ModbusPlcSection
 from .image import (
     BITS,
@@ -130,21 +133,24 @@ class PlcServer:
     """The register image served over TCP (``host:port``) or RTU (``serial``).
 
     ``blocks``: one register block per sensor node (each its own ``base_address``);
-    :meth:`block` gives each node's bridge loop its sink.  Default: one block, and the
-    server is itself that block's sink.
+    :meth:`block` gives each node's loop its sink.  Default: one block, and the server
+    answers for that block's sink itself (:meth:`take_commands`, ...).
     """
 
     def __init__(self, settings: ModbusPlcSection, *, tcp: tuple[str, int] | None = None,
-                 serial: SerialSettings | None = None, blocks: list[ModbusPlcSection] | None = None) -> None:
+                 serial: SerialSettings | None = None, blocks: list[ModbusPlcSection] | None = None,
+                 linger_s: float = 0.0) -> None:
         self.handlers = [PlcRegisterHandler(b) for b in (blocks or [settings])]
         self.handler = self.handlers[0]
         units = None if tcp is not None else [settings.unit_id]
         served = self.handler if len(self.handlers) == 1 else PlcBlocks(self.handlers)
         self.server = RegisterServer(served, tcp=tcp, serial=serial, unit_ids=units)
-        self._first = PlcBlockSink(self, self.handler)  # the sink when the server is one
+        self.linger_s = linger_s
+        self._lingered = False
+        self._blocks = [PlcBlockSink(self, h) for h in self.handlers]  # built once: used at every scan
 
     def block(self, index: int) -> "PlcBlockSink":
-        return PlcBlockSink(self, self.handlers[index])
+        return self._blocks[index]
 
     @property
     def where(self) -> str:
@@ -154,39 +160,39 @@ class PlcServer:
         self.server.start()
         return self
 
-    # One block: the server is its sink (its first block's, built once: these run
-    # at every scan).
+    def linger(self) -> None:
+        """On shutdown, once for all blocks: keep serving the offline image for
+        ``linger_s``, so that a polling PLC reads it before the connection goes."""
+        if not self._lingered:
+            self._lingered = True
+            time.sleep(self.linger_s)
+
+    # One block: the server answers for its block's sink.
     def publish(self, registers: list[int], image: PlcImage, urgent: bool = False,
                 t_event: float | None = None) -> None:
-        self._first.publish(registers, image, urgent, t_event)
+        self._blocks[0].publish(Publication(registers, image, urgent, t_event or 0.0))
 
     def take_commands(self) -> list[Command]:
-        return self._first.take_commands()
+        return self._blocks[0].take_commands()
 
     def commands_done(self) -> None:
-        self._first.commands_done()
+        self._blocks[0].commands_done()
 
-    def stats_dict(self) -> dict[str, int]:
-        return self._first.stats_dict()
-
-    def stop(self, flush_s: float = 0.0) -> None:
+    def stop(self) -> None:
         self.server.stop()
 
 
-class PlcBlockSink:
+class PlcBlockSink(PlcSink):
     """One node's block of a shared :class:`PlcServer`, as that node's sink."""
 
     def __init__(self, server: PlcServer, handler: PlcRegisterHandler) -> None:
+        super().__init__()
         self.server = server
         self.handler = handler
+        self.where = f"{server.where}, base address {handler.base}"
 
-    @property
-    def where(self) -> str:
-        return f"{self.server.where}, base address {self.handler.base}"
-
-    def publish(self, registers: list[int], image: PlcImage, urgent: bool = False,
-                t_event: float | None = None) -> None:
-        self.handler.publish(registers, image.enabled)
+    def _publish(self, publication: Publication) -> None:
+        self.handler.publish(publication.registers, publication.image.enabled)
 
     def take_commands(self) -> list[Command]:
         out = []
@@ -199,8 +205,9 @@ class PlcBlockSink:
     def commands_done(self) -> None:
         self.handler.done()
 
-    def stats_dict(self) -> dict[str, int]:
+    def counters(self) -> dict[str, int]:
         return {"plc_reads": self.handler.reads, "plc_refused_writes": self.handler.refused}
 
-    def stop(self, flush_s: float = 0.0) -> None:
-        pass  # the shared server is stopped once, by its owner
+    def flush(self, timeout_s: float = 1.0) -> bool:
+        self.server.linger()
+        return True

@@ -18,14 +18,15 @@ from typing import Callable
 
 import numpy as np
 
-from ..bridge.loop import ModbusBridge
-from ..bus.can.layout import CanLayout, ScanAssembler
-from ..bus.can.reader import BusReader, open_bus
-from ..bus.can.source import CanScanPoller
+from ..bridge.config import BridgeConfig, NodeConfig, ResolvedNode
+from ..bridge.loop import NodeLoop
+from ..bridge.runtime import SingleNode
+from ..bus.can.layout import CanLayout
+from ..bus.can.reader import open_bus
 from ..calibration import Calibrator
 from ..detect.updates import Update, UpdateTable
 from ..evaluation.metrics import SceneScore, score_scene
-from ..plc.client import PlcWriter
+from ..plc.sink import PlcOptions
 from ..profile import Profile
 from ..scenes import Rendered
 from ..view.live import change_line
@@ -48,7 +49,7 @@ class DemoParts:
     """The running chain, for a live view that watches it (``run_demo(live=...)``)."""
 
     profile: Profile
-    bridge: ModbusBridge
+    loop: NodeLoop
     plc: PlcSimulator
     channel: str
     started: float  #: ``time.monotonic()`` at the start
@@ -65,9 +66,10 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
              live: Callable[[DemoParts], AbstractContextManager[object]] | None = None) -> DemoResult:
     """Run the chain until the node has played ``rec`` and ``drain_s`` more.
 
-    ``live``, when given, is entered once the chain is up and left before it is torn
-    down (also on Ctrl-C or an error): a live view that only reads the chain's newest
-    values.
+    The bridge side is the product's own: the CAN source and the PLC client sink of a
+    one-node bridge configuration, and the per-node loop, on this thread.  ``live``,
+    when given, is entered once the chain is up and left before it is torn down (also
+    on Ctrl-C or an error): a live view that only reads the chain's newest values.
     """
     layout = CanLayout.from_profile(profile, fd=False)
     raw = np.rint(Calibrator.from_section(profile.calibration, profile.taxels).to_raw(rec.forces))
@@ -75,37 +77,42 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
     channel = f"eskin-demo-{os.getpid()}-{port}"
     result = DemoResult()
 
-    plc = PlcSimulator(profile.modbus.plc, "127.0.0.1", port, echo=plc_echo).start()
-    reader = BusReader(lambda: open_bus("virtual", channel)).start()
-    writer = PlcWriter(profile.modbus.plc, "127.0.0.1", port).start()
-
     def observed(u: Update) -> None:
         if not result.updates or u.state != result.updates[-1].state:
             truth = rec.labels[min(np.searchsorted(rec.t, u.t), len(rec.t) - 1)]
             say(f"{change_line(u)}   (truth: {truth})")
         result.updates.append(u)
 
-    bridge = ModbusBridge(profile, CanScanPoller(reader, ScanAssembler(layout, rec.rate_hz)), writer,
-                          rate_hz=rec.rate_hz, on_update=observed)
-    tx = open_bus("virtual", channel)
-    node = CanNode(layout, tx, raw, rec.rate_hz, profile.can.heartbeat_s, Faults(), False, 1, None)
-    node_thread = threading.Thread(target=node.run, name="demo-node", daemon=True)
-    parts = DemoParts(profile, bridge, plc, channel, time.monotonic())
+    node = NodeConfig.of("demo", profile.source, "can", rate_hz=rec.rate_hz, interface="virtual", channel=channel,
+                         fd=False)
+    cfg = BridgeConfig(node=(node,), outputs={"plc": PlcOptions(mode="client", host="127.0.0.1", port=port)})
+    plc = PlcSimulator(profile.modbus.plc, "127.0.0.1", port, echo=plc_echo).start()
     try:
-        with live(parts) if live is not None else nullcontext():
+        single = SingleNode(cfg, ResolvedNode(node, profile), on_update=observed)
+    except BaseException:
+        plc.stop()
+        raise
+    loop = single.loop
+    writer = loop.sinks[0]
+    tx = open_bus("virtual", channel)
+    sim = CanNode(layout, tx, raw, rec.rate_hz, profile.can.heartbeat_s, Faults(), False, 1, None)
+    node_thread = threading.Thread(target=sim.run, name="demo-node", daemon=True)
+    parts = DemoParts(profile, loop, plc, channel, time.monotonic())
+    try:
+        with single, live(parts) if live is not None else nullcontext():
             node_thread.start()
             while node_thread.is_alive():
-                bridge.step()
+                loop.step()
             end = time.monotonic() + drain_s
             while time.monotonic() < end:
-                bridge.step()
+                loop.step()
     finally:
+        node_thread.join(timeout=5)
         tx.shutdown()
-        reader.stop()
-        writer.stop()
+        single.close()
         plc.stop()
-    result.counters = bridge.counters()
-    result.latencies_s = list(writer.stats.latencies_s)
+    result.counters = loop.counters()
+    result.latencies_s = list(writer.stats.latencies_s)  # type: ignore[attr-defined]
     result.plc_status_changes = len(plc.status_changes)
     result.grip_raises = plc.gripper.raises
     if result.updates:

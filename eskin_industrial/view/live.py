@@ -11,19 +11,23 @@ from __future__ import annotations
 
 import collections
 import time
-from collections.abc import Callable, Mapping
-from typing import TextIO
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
 from ..detect.state import GraspState
 from ..detect.updates import Update
 from ..pipeline import Pipeline
-from ..plc.image import Command, PlcImage, decode_registers
+from ..plc.image import decode_registers
 from ..profile import Profile
+from ..sinks.base import Publication, Sink
 from .screen import render
 from .snapshot import Snapshot, indicator_scale, status_names
 from .terminal import DEFAULT_FPS, LiveScreen
+
+if TYPE_CHECKING:
+    from ..bus.source import NodeLike, OpenContext
 
 #: Counters the view shows, in this order, under these names.
 COUNTER_LABELS: tuple[tuple[str, str], ...] = (
@@ -44,24 +48,25 @@ def change_line(u: Update) -> str:
             f"F={u.f_sum:6.2f} N  scores {u.r_coe:6.2f} {u.r_dw:6.2f}")
 
 
-class KeptImage:
-    """A bridge sink that keeps the newest register image instead of sending it: the
+class KeptImage(Sink):
+    """A sink that keeps the newest register image instead of sending it: the
     registers the bridge would publish, with no PLC connected (``monitor``)."""
 
+    kind = "view"
+
     def __init__(self) -> None:
+        super().__init__()
+        self.where = "the live view"
         self.registers: list[int] | None = None
         self.publications = 0
 
-    def publish(self, registers: list[int], image: PlcImage | None = None, urgent: bool = False,
-                t_event: float | None = None) -> None:
-        self.registers = list(registers)
+    def _publish(self, publication: Publication) -> None:
+        self.registers = list(publication.registers)
         self.publications += 1
 
-    def take_commands(self) -> list[Command]:
-        return []
-
-    def commands_done(self) -> None:
-        pass
+    @classmethod
+    def open_nodes(cls, options: object, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
+        return [cls() for _ in nodes]
 
 
 class Watch:

@@ -13,12 +13,13 @@ import can
 import numpy as np
 import pytest
 
+from can_support import Receiver
+
 from eskin_industrial import Calibrator, load_profile
 from eskin_industrial.bus.can.layout import CanLayout, NodeState, NodeStatus, ScanAssembler, decode_messages
 from eskin_industrial.bus.can.log import read_can_log
-from eskin_industrial.bus.can.reader import BusReader, CanSource, open_bus
+from eskin_industrial.bus.can.reader import BusReader, open_bus
 from eskin_industrial.detect import get_method
-from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.recording import write_recording
 
 PROFILES = Path(__file__).resolve().parents[2] / "profiles"
@@ -40,10 +41,10 @@ def eskin(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
                           timeout=timeout)
 
 
-def start_source(profile, channel: str, fd: bool = False, rate: float = 100.0) -> CanSource:
+def start_source(profile, channel: str, fd: bool = False, rate: float = 100.0) -> Receiver:
     layout = CanLayout.from_profile(profile, fd=fd)
     reader = BusReader(lambda: open_bus("socketcan", channel, fd=fd)).start()
-    return CanSource(reader, ScanAssembler(layout, rate), Pipeline(profile, rate_hz=rate))
+    return Receiver(profile, reader, layout, rate)
 
 
 @pytest.mark.parametrize("fd", [False, True], ids=["classic", "fd"])

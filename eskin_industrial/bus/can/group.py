@@ -1,89 +1,99 @@
-"""Several sensor nodes on one CAN bus: one reader, frames routed by arbitration ID.
+"""Frames of one CAN bus (or one replayed log) for the nodes on it.
 
-The bus (or a replayed log) is read by one thread into one bounded queue
-(:class:`~eskin_industrial.bus.can_source.BusReader`, or :class:`LogPlayer` for a
-log).  :class:`CanGroup` moves each frame into the queue of the node that owns its
-ID (16 IDs from the node's ``base_id``), where that node's
-:class:`~eskin_industrial.bus.can_poll.CanScanPoller` assembles it; error frames go
-to every node, since a bus error concerns them all; frames of no node are counted.
+The bus is read by one thread into one bounded queue
+(:class:`~eskin_industrial.bus.can.reader.BusReader`, or
+:class:`~eskin_industrial.bus.can.log.LogPlayer` for a log).  :meth:`CanGroup.route`
+waits for frames and moves each into the queue of the node that owns its ID (16 IDs
+from the node's ``base_id``); error frames go to every node, since a bus error
+concerns them all; frames of no node are counted.  With ``all_frames`` (a receiver
+watching one node), the lone node also gets every other frame, which its assembler
+counts as foreign.  A recording of the
+traffic (``receive --log``) gets every frame read, before any routing.
 """
 
 from __future__ import annotations
 
 import collections
+import struct
+from collections.abc import Sequence
 
 import can
 
-from ...bridge.config import ResolvedNode
-from .layout import ID_RANGE, CanLayout, ScanAssembler
-from .source import CanScanPoller
-
-
-class _NoWait:
-    """A node's queue is filled by the group loop itself: nothing to wait for."""
-
-    def clear(self) -> None:
-        pass
-
-    def wait(self, timeout: float | None = None) -> bool:
-        return False
-
-
-class _NodeQueue:
-    """What a node's poller reads: its own frames, the bus's counters."""
-
-    def __init__(self, reader) -> None:
-        self.queue: collections.deque[can.Message] = collections.deque()
-        self.counters = reader.counters
-        self.arrived = _NoWait()
-        self._reader = reader
-
-    @property
-    def last_error(self) -> str:
-        """The shared bus's last error: the bridge's ``bus_fault`` log line reads it
-        from the node's reader, which would otherwise always say ``-``."""
-        return getattr(self._reader, "last_error", "")
+from .layout import ID_RANGE, CanLayout
+from .reader import FrameThread
 
 
 class CanGroup:
-    def __init__(self, reader, nodes: list[ResolvedNode]) -> None:
+    """The feeder of the nodes on one bus: ``route`` once a round, then each node's
+    source assembles its own frames."""
+
+    def __init__(self, reader: FrameThread, layouts: Sequence[CanLayout],
+                 log: can.Listener | None = None, all_frames: bool = False) -> None:
         self.reader = reader
-        self.names = [n.name for n in nodes]
-        self.pollers: list[CanScanPoller] = []
-        self._route: dict[tuple[bool, int], collections.deque] = {}
-        self._queues: list[collections.deque] = []
-        self.unrouted_frames = 0
-        for n in nodes:
-            layout = CanLayout.from_profile(n.profile, fd=n.fd)
-            nq = _NodeQueue(reader)
-            self.pollers.append(CanScanPoller(nq, ScanAssembler(layout, n.rate_hz)))  # type: ignore[arg-type]
-            self._queues.append(nq.queue)
+        self.log = log
+        self.queues: list[collections.deque[can.Message]] = [collections.deque() for _ in layouts]
+        self._route: dict[tuple[bool, int], collections.deque[can.Message]] = {}
+        self._single = self.queues[0] if len(layouts) == 1 and all_frames else None
+        for layout, q in zip(layouts, self.queues):
             for can_id in range(layout.base_id, layout.base_id + ID_RANGE):
-                self._route[(layout.extended_id, can_id)] = nq.queue
+                self._route[(layout.extended_id, can_id)] = q
+        self.unrouted_frames = 0
+        self.log_write_errors = 0
+        self._started = False
+
+    def start(self) -> "CanGroup":
+        """Start the reader (once: several sources share it)."""
+        if not self._started:
+            self._started = True
+            self.reader.start()
+        return self
 
     def route(self, timeout_s: float) -> int:
         """Wait up to ``timeout_s`` for frames, then hand every queued frame to its
         node; returns how many."""
         q, arrived = self.reader.queue, self.reader.arrived
         if not q:
+            # Cleared before the second look, so a frame queued in between is seen.
             arrived.clear()
             if not q:
                 arrived.wait(timeout_s)
         n = 0
-        route = self._route
+        log, single, route = self.log, self._single, self._route
         while q:
             msg = q.popleft()
             n += 1
-            if msg.is_error_frame:
-                for nq in self._queues:
+            if log is not None:
+                self._record(log, msg)
+            if single is not None:
+                # a receiver watching one node: it sees every frame
+                if not msg.is_error_frame and (msg.is_extended_id, msg.arbitration_id) not in route:
+                    self.unrouted_frames += 1
+                single.append(msg)
+            elif msg.is_error_frame:
+                for nq in self.queues:
                     nq.append(msg)
-                continue
-            dest = route.get((msg.is_extended_id, msg.arbitration_id))
-            if dest is None:
-                self.unrouted_frames += 1
             else:
-                dest.append(msg)
+                dest = route.get((msg.is_extended_id, msg.arbitration_id))
+                if dest is None:
+                    self.unrouted_frames += 1
+                else:
+                    dest.append(msg)
         return n
+
+    def _record(self, log: can.Listener, msg: can.Message) -> None:
+        try:
+            log.on_message_received(msg)
+        except (OSError, ValueError, TypeError, struct.error):
+            # a full disk or a frame the format cannot hold: the recording has a gap
+            # (counted), the reception goes on
+            self.log_write_errors += 1
+
+    def counters(self) -> dict[str, int]:
+        out = dict(self.reader.counters)
+        out["unrouted_frames"] = self.unrouted_frames
+        if self.log is not None:
+            out["log_write_errors"] = self.log_write_errors
+        return out
 
     @property
     def done(self) -> bool:
@@ -91,6 +101,5 @@ class CanGroup:
         return self.reader.done and not self.reader.queue
 
     def stop(self) -> None:
+        """Stop the reader (the recording is its opener's to close); safe to call twice."""
         self.reader.stop()
-
-

@@ -7,7 +7,9 @@ import json
 import sys
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import can
 
@@ -16,7 +18,10 @@ from ...errors import EskinError, InputFormatError
 from ...frames import RawScan
 from ...pipeline import Pipeline
 from .layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
+from ...schema import in_range
+from ..source import NodeLike, OpenContext
 from .reader import FrameThread
+from .source import CanSource
 
 
 class LogPlayer(FrameThread):
@@ -113,3 +118,51 @@ def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: 
         summary = {k: v for k, v in vars(c).items() if k != "extra"} | asm.counters
         print(f"{path}: " + json.dumps(summary), file=sys.stderr)
     return table
+
+
+@dataclass(frozen=True)
+class CanLogOptions:
+    """``[[node]]`` keys of ``source = "can-log"``: a candump/asc/blf/... log replayed
+    at its own pace, once."""
+
+    path: str
+    fd: bool | None = None
+    base_id: int | None = field(default=None, metadata=in_range(0, 0x1FFFFFFF))
+    node_id: int | None = field(default=None, metadata=in_range(0, 255))
+    log: None = None  # a replay is not recorded again
+
+
+class CanLogSource(CanSource):
+    """A node's scans from a CAN log replayed in real time (several nodes of one log
+    share its player)."""
+
+    kind = "can-log"
+    spec = "log:FILE"
+    Options = CanLogOptions
+
+    @classmethod
+    def options_from_spec(cls, where: str, bus: dict[str, Any]) -> dict[str, Any]:
+        if not where:
+            raise ValueError("expected log:FILE")
+        return {"path": where, **({"fd": bus["fd"]} if bus.get("fd") is not None else {})}
+
+    @classmethod
+    def describe(cls, node: NodeLike) -> str:
+        return f"log {node.options.path}"
+
+    @classmethod
+    def check(cls, node: NodeLike, base_dir: str) -> None:
+        if not Path(node.options.path).is_file():
+            raise ValueError(f"path: {node.options.path}: no such file")
+
+    @classmethod
+    def share_key(cls, node: NodeLike) -> tuple:
+        return ("can-log", node.options.path)
+
+    @classmethod
+    def _reader(cls, node: NodeLike, context: OpenContext) -> FrameThread:
+        path = node.options.path
+        return LogPlayer(path, read_can_log(path), context.queue_frames)
+
+    def describe_where(self) -> str:
+        return f"log {getattr(self.reader, 'path', '?')}"

@@ -1,14 +1,13 @@
-"""Receive a sensor node's scans from any python-can bus, and replay CAN logs.
+"""Read a python-can bus into a bounded queue, on a thread of its own.
 
 The bus is opened by python-can itself (:func:`open_bus`), so its interface names,
 its configuration file and ``CAN_INTERFACE`` / ``CAN_CHANNEL`` all apply.  A reader
 thread (:class:`BusReader`) does nothing but ``recv`` into a bounded queue: it never
 waits on the detector.  When the queue is full the frame is dropped and counted.  A
 bus that fails (interface down, adapter unplugged) is counted, closed and reopened
-until it answers again.  The consumer (:class:`CanSource`) assembles scans with the
-pure :class:`~eskin_industrial.bus.can_layout.ScanAssembler` and runs them through the
-same :class:`~eskin_industrial.pipeline.Pipeline` as every other path; a log replayed
-with :func:`read_can_log` goes through the same two steps, so it gives the same output.
+until it answers again.  The node's source (:mod:`.source`) assembles scans from the
+queue; a log replayed (:mod:`.log`) fills the same kind of queue, so it gives the same
+output.
 """
 
 from __future__ import annotations
@@ -33,9 +32,6 @@ from .layout import ScanAssembler
 #: hundred frames: a 1 Mbit/s bus fills it in tens of milliseconds).
 DEFAULT_RCVBUF_BYTES = 8 * 1024 * 1024
 DEFAULT_QUEUE_FRAMES = 200_000
-#: For a command whose reader thread needs the interpreter for every frame: a short
-#: switch interval keeps it from waiting behind the detector (the default is 5 ms).
-READER_SWITCH_INTERVAL_S = 0.0002
 
 
 def open_bus(interface: str | None = None, channel: str | None = None, bitrate: int | None = None,
@@ -113,7 +109,9 @@ class FrameThread:
         self._thread = threading.Thread(target=self._run, name=self.thread_name, daemon=True)
 
     def start(self):
-        self._thread.start()
+        """Start the thread (once: a second call does nothing)."""
+        if self._thread.ident is None:
+            self._thread.start()
         return self
 
     def _run(self) -> None:
@@ -230,84 +228,3 @@ def _drain_socketcan(bus: can.BusABC, wait_s: float = 0.1, most: int = 4096) -> 
             msg.channel = channel
         out.append(msg)
     return out
-
-
-class CanSource:
-    """Frames from a :class:`BusReader` -> scans -> pipeline updates, with counters.
-
-    ``log`` (optional) is a python-can writer (``can.Logger(path)``: ``.log`` candump,
-    ``.blf``, ``.asc``, ...) that gets every frame the assembler sees, so replaying
-    it gives the same scans.
-    """
-
-    def __init__(self, reader: BusReader, assembler: ScanAssembler, pipeline: Pipeline,
-                 log: can.Listener | None = None, keep_updates: bool = True) -> None:
-        self.reader = reader
-        self.assembler = assembler
-        self.pipeline = pipeline
-        self.log = log
-        #: every update, when ``keep_updates`` (for an output file); else only the
-        #: pipeline's newest (a bridge running for days must not grow)
-        self.updates: list[Update] = []
-        self.keep_updates = keep_updates
-
-    def counters(self) -> dict[str, int]:
-        extra = self.pipeline.counters.extra
-        extra.update(self.assembler.counters)
-        extra.update(self.reader.counters)
-        return extra
-
-    def poll(self) -> int:
-        """Process every queued frame; returns how many."""
-        q, asm, pipe, log = self.reader.queue, self.assembler, self.pipeline, self.log
-        n = 0
-        while q:
-            msg = q.popleft()
-            n += 1
-            if log is not None:
-                try:
-                    log.on_message_received(msg)
-                except (OSError, ValueError, TypeError, struct.error):
-                    # a full disk or a frame the format cannot hold: the recording has a
-                    # gap (counted), the reception goes on
-                    extra = pipe.counters.extra
-                    extra["log_write_errors"] = extra.get("log_write_errors", 0) + 1
-            scan = asm.feed(msg)
-            if scan is not None:
-                updates = pipe.push(scan)
-                if self.keep_updates:
-                    self.updates += updates
-                time.sleep(0)  # hand the interpreter to the reader thread once per scan
-        return n
-
-    def run(self, duration_s: float | None = None, idle_timeout_s: float | None = None,
-            max_scans: int | None = None, on_tick: Callable[["CanSource"], None] | None = None) -> None:
-        """Process until ``duration_s`` has passed, no frame came for ``idle_timeout_s``
-        (after the first one), ``max_scans`` scans were decoded, or Ctrl-C."""
-        start = last = time.monotonic()
-        seen = False
-        try:
-            while True:
-                n = self.poll()
-                now = time.monotonic()
-                if n:
-                    seen, last = True, now
-                    if on_tick is not None:
-                        on_tick(self)
-                else:
-                    time.sleep(0.001)
-                if duration_s is not None and now - start >= duration_s:
-                    break
-                if idle_timeout_s is not None and seen and now - last >= idle_timeout_s:
-                    break
-                if max_scans is not None and self.pipeline.counters.scans >= max_scans:
-                    break
-        except KeyboardInterrupt:
-            pass
-        finally:
-            self.reader.stop()
-            self.poll()
-            self.assembler.flush()
-            self.counters()
-
-

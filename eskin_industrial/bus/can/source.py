@@ -1,77 +1,178 @@
-"""CAN scans one at a time, for loops that poll a source (the Modbus bridge loop).
+"""The CAN source: one node's scans from a python-can bus.
 
-:class:`~eskin_industrial.bus.can_source.CanSource` runs its own loop into a
-pipeline; this adapter instead hands out one :class:`RawScan` per ``poll()``, with
-the health a bridge publishes (frame age, bus fault) and the CAN counters.
+Nodes on the same bus (same interface, channel and bit rates) share one reader and
+one :class:`~eskin_industrial.bus.can.group.CanGroup` that routes frames by ID; each
+node's :class:`CanSource` assembles its own frames into scans with the pure
+:class:`~eskin_industrial.bus.can.layout.ScanAssembler`.  A node polled alone waits
+on the bus through its group; several nodes on one bus are stepped by one loop
+thread, which waits once a round (``feeder.route``).
 """
 
 from __future__ import annotations
 
 import collections
-import time
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import can
 
 from ...frames import RawScan
-from .layout import ScanAssembler
-from .reader import BusReader
+from ...profile import Profile
+from ...schema import in_range, positive
+from ..source import NodeLike, OpenContext, Source
+from .group import CanGroup
+from .layout import ID_RANGE, CanLayout, ScanAssembler
+from .reader import BusReader, FrameThread, bus_kwargs, open_bus
 
 
-class _Counters:
-    def __init__(self, poller: "CanScanPoller") -> None:
-        self._p = poller
+@dataclass(frozen=True)
+class CanOptions:
+    """``[[node]]`` keys of ``source = "can"``: python-can's own names; unset ones are
+    left to python-can's configuration (file, ``CAN_INTERFACE``, ``CAN_CHANNEL``), bit
+    rates to the profile's ``[can]``."""
+
+    interface: str | None = None
+    channel: str | None = None
+    bitrate_bps: int | None = field(default=None, metadata=positive())
+    fd: bool | None = None
+    data_bitrate_bps: int | None = field(default=None, metadata=positive())
+    #: Override the profile's ``[can] base_id`` / ``node_id`` (several nodes, one bus).
+    base_id: int | None = field(default=None, metadata=in_range(0, 0x1FFFFFFF))
+    node_id: int | None = field(default=None, metadata=in_range(0, 255))
+    #: Record the bus traffic to this file (python-can writer by suffix: .log candump,
+    #: .blf, .asc, ...); replaying it gives the same scans.
+    log: str | None = None
+
+
+class CanSource(Source):
+    kind = "can"
+    spec = "can"
+    Options = CanOptions
+
+    def __init__(self, feeder: CanGroup, queue: collections.deque[can.Message], assembler: ScanAssembler,
+                 idle_wait_s: float = 0.0005) -> None:
+        super().__init__()
+        self.feeder = feeder
+        self.assembler = assembler
+        self.reader: FrameThread = feeder.reader
+        self._queue = queue
+        self._ready: collections.deque[RawScan] = collections.deque()
+        self._errors_seen = 0
+        self._idle_wait_s = idle_wait_s
+
+    def _poll(self, timeout_s: float | None) -> RawScan | None:
+        q = self._queue
+        if not self._ready and not q:
+            self.feeder.route(self._idle_wait_s if timeout_s is None else timeout_s)
+        ready = self._ready
+        while not ready and q:
+            scan = self.assembler.feed(q.popleft())
+            self._errors_seen = self.reader.counters["bus_errors"]  # a frame arrived: the bus works
+            if scan is not None:
+                ready.append(scan)
+        return ready.popleft() if ready else None
 
     @property
-    def bus_errors(self) -> int:
-        return self._p.reader.counters.get("bus_errors", 0)
-
-    def as_dict(self) -> dict[str, int]:
-        return {**self._p.assembler.counters, **self._p.reader.counters}
-
-
-class CanScanPoller:
-    def __init__(self, reader: BusReader, assembler: ScanAssembler, idle_sleep_s: float = 0.0005) -> None:
-        self.reader = reader
-        self.assembler = assembler
-        self.idle_sleep_s = idle_sleep_s
-        self.counters = _Counters(self)
-        self._ready: collections.deque[RawScan] = collections.deque()
-        self._last_rx: float | None = None
-        self._errors_seen = 0
+    def pending(self) -> bool:
+        return bool(self._ready or self._queue)
 
     @property
     def bus_fault(self) -> bool:
         """Bus errors were reported and no frame has arrived since."""
-        return self.counters.bus_errors > self._errors_seen
-
-    def poll(self, timeout_s: float | None = None) -> RawScan | None:
-        """The next complete scan, or None after waiting up to ``timeout_s`` (default
-        ``idle_sleep_s``) for frames."""
-        q = self.reader.queue
-        if not self._ready and not q:
-            arrived = getattr(self.reader, "arrived", None)
-            wait = self.idle_sleep_s if timeout_s is None else timeout_s
-            if arrived is None:
-                time.sleep(wait)
-            else:
-                # Cleared before the second look, so a frame queued in between is seen.
-                arrived.clear()
-                if not q:
-                    arrived.wait(wait)
-        while not self._ready and q:
-            scan = self.assembler.feed(q.popleft())
-            self._errors_seen = self.counters.bus_errors  # a frame arrived: the bus works
-            if scan is not None:
-                self._ready.append(scan)
-        if self._ready:
-            self._last_rx = time.monotonic()
-            return self._ready.popleft()
-        return None
+        return self.reader.counters["bus_errors"] > self._errors_seen
 
     @property
-    def pending(self) -> bool:
-        """Frames or scans are waiting: another ``poll`` returns at once."""
-        return bool(self._ready or self.reader.queue)
+    def done(self) -> bool:
+        return self.feeder.done and not self.pending
 
-    def frame_age(self, now: float | None = None) -> float | None:
-        if self._last_rx is None:
-            return None
-        return (time.monotonic() if now is None else now) - self._last_rx
+    @property
+    def last_error(self) -> str:
+        return self.reader.last_error
+
+    def bus_errors(self) -> int:
+        return self.reader.counters["bus_errors"]
+
+    def counters(self) -> dict[str, int]:
+        return {**self.assembler.counters, **self.feeder.counters()}
+
+    def start(self) -> "CanSource":
+        self.feeder.start()
+        return self
+
+    def _close(self) -> None:
+        self.feeder.stop()
+
+    # -- the kind ------------------------------------------------------------------
+    @classmethod
+    def options_from_spec(cls, where: str, bus: dict[str, Any]) -> dict[str, Any]:
+        if where:
+            raise ValueError(f"expected 'can' with -i/-c, got 'can:{where}'")
+        return {k: v for k, v in bus.items() if v is not None}
+
+    @classmethod
+    def adapt_profile(cls, profile: Profile, options: Any) -> Profile:
+        if options.base_id is None and options.node_id is None:
+            return profile
+        c = profile.can
+        can_section = replace(c, base_id=c.base_id if options.base_id is None else options.base_id,
+                              node_id=c.node_id if options.node_id is None else options.node_id)
+        return replace(profile, can=can_section)
+
+    @classmethod
+    def fd(cls, node: NodeLike) -> bool:
+        return node.profile.can.fd if node.options.fd is None else node.options.fd
+
+    @classmethod
+    def describe(cls, node: NodeLike) -> str:
+        o = node.options
+        return f"can {o.interface or '(configured)'} {o.channel or ''} ids {node.profile.can.base_id:#x}+{ID_RANGE}"
+
+    @classmethod
+    def check_together(cls, nodes: Sequence[NodeLike]) -> None:
+        """Nodes on one bus must not share IDs."""
+        by_bus: dict[tuple, list[NodeLike]] = {}
+        for n in nodes:
+            by_bus.setdefault(cls.share_key(n), []).append(n)
+        for group in by_bus.values():
+            spans = sorted((n.profile.can.base_id, n.profile.can.extended_id, n.name) for n in group)
+            for (lo, ext_a, a), (hi, ext_b, b) in zip(spans, spans[1:]):
+                if ext_a == ext_b and hi - lo < ID_RANGE:
+                    raise ValueError(f"[node {b!r}] base_id: {hi:#x} overlaps node {a!r} at {lo:#x} on the same bus "
+                                     f"(a node takes {ID_RANGE} IDs; set base_id)")
+
+    @classmethod
+    def share_key(cls, node: NodeLike) -> tuple:
+        o = node.options
+        return ("can", o.interface, o.channel, o.bitrate_bps, cls.fd(node), o.data_bitrate_bps)
+
+    @classmethod
+    def open_nodes(cls, nodes: Sequence[NodeLike], context: OpenContext) -> list[Source]:
+        groups: dict[tuple, list[int]] = {}
+        for i, n in enumerate(nodes):
+            groups.setdefault(cls.share_key(n), []).append(i)
+        out: list[Source | None] = [None] * len(nodes)
+        for members in groups.values():
+            first = nodes[members[0]]
+            reader = cls._reader(first, context)
+            logs = [nodes[i].options.log for i in members if getattr(nodes[i].options, "log", None)]
+            log = can.Logger(logs[0]) if logs else None
+            if log is not None:
+                context.closers.append(log.stop)  # after the reader has stopped (closers run in reverse)
+            layouts = [CanLayout.from_profile(nodes[i].profile, fd=cls.fd(nodes[i])) for i in members]
+            group = CanGroup(reader, layouts, log, context.all_frames)
+            context.closers.append(group.stop)
+            for i, layout, q in zip(members, layouts, group.queues):
+                out[i] = cls(group, q, ScanAssembler(layout, nodes[i].rate_hz))
+        return [s for s in out if s is not None]
+
+    @classmethod
+    def _reader(cls, node: NodeLike, context: OpenContext) -> FrameThread:
+        o = node.options
+        kw = bus_kwargs(node.profile, o.interface, o.channel, o.bitrate_bps, o.fd, o.data_bitrate_bps)
+        return BusReader(lambda: open_bus(**kw), context.queue_frames)
+
+    def describe_where(self) -> str:
+        bus = getattr(self.reader, "bus", None)
+        return str(getattr(bus, "channel_info", None) or "can")

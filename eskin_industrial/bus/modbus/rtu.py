@@ -13,11 +13,15 @@ consecutive failed polls and cleared by the next good one.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 from ...errors import ModbusFault
 from ...frames import RawScan
 from ...profile import Profile
+from ...schema import in_range, positive
+from ..source import NodeLike, OpenContext, Source
 from .codec import decode_scans, register_count
 from .io import RtuMaster, SerialSettings
 
@@ -42,17 +46,33 @@ class RtuCounters:
         return {f"rtu_{k}": v for k, v in vars(self).items()}
 
 
-class RtuPoller:
+@dataclass(frozen=True)
+class RtuOptions:
+    """``[[node]]`` keys of ``source = "modbus-rtu"``: the node's serial port; unit id and
+    baud rate default to the profile's ``[modbus.node]``."""
+
+    serial_port: str
+    unit_id: int | None = field(default=None, metadata=in_range(1, 247))
+    baudrate: int | None = field(default=None, metadata=positive())
+
+
+class RtuSource(Source):
+    """Polls one RTU sensor node at its pace; one scan per poll."""
+
+    kind = "modbus-rtu"
+    spec = "rtu:PORT[@BAUD]"
+    Options = RtuOptions
+
     def __init__(self, profile: Profile, port: str, *, baudrate: int | None = None,
                  poll_hz: float | None = None) -> None:
+        super().__init__()
         self.node = node = profile.modbus.node
         self.settings = SerialSettings(port, baudrate or node.baudrate, node.parity, node.stopbits)
         self.count = register_count(node, profile.taxels)
         self.poll_hz = poll_hz or node.poll_hz or profile.sensor.rate_hz
         self.master = RtuMaster(self.settings, node.unit_id, node.timeout_s)
-        self.counters = RtuCounters()
+        self.stats = RtuCounters()
         self.consecutive_failures = 0
-        self.last_rx: float | None = None  #: monotonic time of the newest good scan
         self.t0 = time.monotonic()
         self.node_rate_hz = profile.sensor.rate_hz
         self._seq = -1
@@ -60,11 +80,11 @@ class RtuPoller:
         self._last_node_seq = 0
         self._next = time.monotonic()
 
-    def open(self) -> "RtuPoller":
+    def open(self) -> "RtuSource":
         self.master.connect()
         return self
 
-    def close(self) -> None:
+    def _close(self) -> None:
         self.master.close()
 
     @property
@@ -73,7 +93,7 @@ class RtuPoller:
 
     def poll_once(self) -> RawScan | None:
         """One poll (with retries), now; None when it failed (counted)."""
-        c = self.counters
+        c = self.stats
         c.polls += 1
         self._seq += 1
         for attempt in range(self.node.retries + 1):
@@ -95,7 +115,7 @@ class RtuPoller:
                 c.crc_errors += 1
                 continue
             self.consecutive_failures = 0
-            self.last_rx = rx
+            self._last_rx = rx  # a good answer, even a repeated scan: the node is alive
             if self.node.counter_register:
                 return self._counted(regs, rx)
             c.scans += 1
@@ -112,17 +132,17 @@ class RtuPoller:
         else:
             step = (counter - self._counter) & 0xFFFF
             if step == 0:
-                self.counters.repeats += 1
+                self.stats.repeats += 1
                 return None
             if step >= 0x8000:  # the counter went back: the node restarted
-                self.counters.counter_resets += 1
+                self.stats.counter_resets += 1
                 step = 1
             seq = self._last_node_seq + step
         self._counter, self._last_node_seq = counter, seq
-        self.counters.scans += 1
+        self.stats.scans += 1
         return RawScan(seq, seq / self.node_rate_hz, decode_scans(self.node, regs[1:]), 0, rx)
 
-    def poll(self, timeout_s: float | None = None) -> RawScan | None:
+    def _poll(self, timeout_s: float | None) -> RawScan | None:
         """Wait for the next poll time (``poll_hz``), then poll; a late poll does not
         try to catch up.  (``timeout_s`` is for sources that wait for traffic; the
         poller keeps its own pace.)"""
@@ -135,7 +155,42 @@ class RtuPoller:
         self._next += period
         return self.poll_once()
 
-    def frame_age(self, now: float | None = None) -> float | None:
-        if self.last_rx is None:
-            return None
-        return (time.monotonic() if now is None else now) - self.last_rx
+    def bus_errors(self) -> int:
+        return self.stats.bus_errors
+
+    def counters(self) -> dict[str, int]:
+        return self.stats.as_dict()
+
+    def describe_where(self) -> str:
+        return f"rtu {self.settings.port}"
+
+    # -- the kind ------------------------------------------------------------------
+    @classmethod
+    def options_from_spec(cls, where: str, bus: dict[str, Any]) -> dict[str, Any]:
+        port, _, baud = where.partition("@")
+        if not port or (baud and not baud.isdigit()):
+            raise ValueError(f"expected rtu:PORT[@BAUD], got 'rtu:{where}'")
+        return {"serial_port": port, **({"baudrate": int(baud)} if baud else {})}
+
+    @classmethod
+    def adapt_profile(cls, profile: Profile, options: Any) -> Profile:
+        node = profile.modbus.node
+        if options.unit_id is None and options.baudrate is None:
+            return profile
+        node = replace(node, unit_id=options.unit_id or node.unit_id, baudrate=options.baudrate or node.baudrate)
+        return replace(profile, modbus=replace(profile.modbus, node=node))
+
+    @classmethod
+    def describe(cls, node: NodeLike) -> str:
+        return f"rtu {node.options.serial_port} unit {node.profile.modbus.node.unit_id}"
+
+    @classmethod
+    def check_together(cls, nodes: Sequence[NodeLike]) -> None:
+        ports = [n.options.serial_port for n in nodes]
+        for port in ports:
+            if ports.count(port) > 1:
+                raise ValueError(f"[node] serial_port: {port!r} is used by two nodes (one node per line)")
+
+    @classmethod
+    def open_node(cls, node: NodeLike, context: OpenContext) -> "RtuSource":
+        return cls(node.profile, node.options.serial_port, baudrate=node.options.baudrate).open()

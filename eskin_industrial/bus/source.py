@@ -1,0 +1,278 @@
+"""The input seam: what every source of raw scans does, and the registry of kinds.
+
+A :class:`Source` hands out one :class:`~eskin_industrial.frames.RawScan` per
+:meth:`Source.poll` and tells its health and counters; the per-node loop
+(:mod:`eskin_industrial.bridge.loop`) asks nothing else of it.  As in python-can's
+``BusABC.recv`` over ``_recv_internal``, the public method is written once here and
+a kind overrides one private hook, :meth:`Source._poll`; the receipt time, the frame
+age and a safe double :meth:`Source.close` come with the base.
+
+A *kind* is one module plus one entry in :data:`SOURCES` (name -> ``module:Class``,
+imported only when used).  The class declares everything the bridge configuration,
+the command line and ``--check`` need, so that none of them branches on the kind:
+
+- ``kind`` and ``spec``: its name in ``[[node]] source = ...`` and in
+  ``--source KIND:WHERE``;
+- ``Options``: a frozen dataclass of its own ``[[node]]`` keys (typed, checked, unknown
+  keys refused with the nearest valid one, like every TOML section);
+- :meth:`Source.options_from_spec`: those options from ``--source`` and the shared
+  bus options;
+- :meth:`Source.describe` and :meth:`Source.check`: the ``--check`` line and the
+  problems that can be found before anything starts;
+- :meth:`Source.open_nodes`: open the sources of every node of this kind (a CAN bus
+  shared by several nodes is opened once).
+
+Example, a source of a constant scan (a test stand-in)::
+
+    @dataclass(frozen=True)
+    class ConstOptions:
+        value: float = 0.0
+
+    class ConstSource(Source):
+        kind = "const"
+        Options = ConstOptions
+
+        def __init__(self, taxels: int, value: float) -> None:
+            super().__init__()
+            self.raw, self.seq = np.full(taxels, value), -1
+
+        def _poll(self, timeout_s):
+            time.sleep(0.01)
+            self.seq += 1
+            return RawScan(self.seq, self.seq * 0.01, self.raw, 0, time.monotonic())
+
+        @classmethod
+        def open_node(cls, node, context):
+            return cls(node.profile.taxels, node.options.value)
+
+    SOURCES["const"] = "mymodule:ConstSource"
+"""
+
+from __future__ import annotations
+
+import abc
+import difflib
+import importlib
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+
+from ..errors import ProfileError
+from ..frames import RawScan
+
+if TYPE_CHECKING:
+    from ..profile import Profile
+
+#: name -> "module:Class", imported on first use (a kind's dependencies load only
+#: when a node uses it).
+SOURCES: dict[str, str] = {
+    "can": "eskin_industrial.bus.can.source:CanSource",
+    "can-log": "eskin_industrial.bus.can.log:CanLogSource",
+    "modbus-rtu": "eskin_industrial.bus.modbus.rtu:RtuSource",
+    "scene": "eskin_industrial.bus.replay:SceneSource",
+    "recording": "eskin_industrial.bus.replay:RecordingSource",
+}
+#: Shorter spellings accepted on ``--source`` (``log:FILE``, ``rtu:PORT``).
+ALIASES: dict[str, str] = {"log": "can-log", "rtu": "modbus-rtu"}
+
+
+def frame_age(last_rx: float | None, now: float | None = None) -> float | None:
+    """Seconds since ``last_rx`` (``time.monotonic``), None when nothing came yet:
+    the one definition of a frame's age (sources, the loop, the register image)."""
+    if last_rx is None:
+        return None
+    return (time.monotonic() if now is None else now) - last_rx
+
+
+@dataclass(frozen=True)
+class SourceHealth:
+    """What a source knows of itself, for the register image and the logs."""
+
+    frame_age_s: float | None  #: None: no scan yet
+    bus_fault: bool = False  #: the bus or the node fails now
+    bus_errors: int = 0  #: counted since start
+    last_error: str = ""
+    done: bool = False  #: a finite source (a log, a recording played once) has ended
+
+
+class NodeLike(Protocol):
+    """What a kind is handed to open a node: a resolved ``[[node]]`` (see
+    :class:`eskin_industrial.bridge.config.ResolvedNode`)."""
+
+    name: str
+    profile: Profile
+    rate_hz: float
+    options: Any
+
+
+@dataclass
+class OpenContext:
+    """Bridge-wide settings and the place to register what must be closed at the end."""
+
+    queue_frames: int = 200_000
+    #: A receiver watching one node: it also gets the other frames of its bus (counted
+    #: as foreign), where a bridge routes each frame to its node only.
+    all_frames: bool = False
+    closers: list[Callable[[], None]] = field(default_factory=list)
+
+
+class Source(abc.ABC):
+    """Raw scans from one sensor node, polled by one loop thread."""
+
+    #: The kind's name (``[[node]] source``, ``--source KIND:...``).
+    kind: ClassVar[str] = ""
+    #: ``--source`` syntax, for help and messages.
+    spec: ClassVar[str] = ""
+    #: The kind's own ``[[node]]`` keys (a frozen dataclass).
+    Options: ClassVar[type] = type(None)
+
+    #: Set when this source is fed by a transport shared with other nodes' sources.
+    feeder: "Feeder | None" = None
+
+    def __init__(self) -> None:
+        self._last_rx: float | None = None
+        self._closed = False
+
+    # -- the one public surface -------------------------------------------------------
+    def poll(self, timeout_s: float | None = None) -> RawScan | None:
+        """The next scan, or None after waiting up to ``timeout_s`` (None: the kind's
+        own pace) for one."""
+        scan = self._poll(timeout_s)
+        if scan is not None:
+            self._last_rx = time.monotonic()
+        return scan
+
+    @abc.abstractmethod
+    def _poll(self, timeout_s: float | None) -> RawScan | None:
+        """The kind's hook: one scan or None; must not block much past ``timeout_s``."""
+
+    def frame_age(self, now: float | None = None) -> float | None:
+        return frame_age(self._last_rx, now)
+
+    @property
+    def pending(self) -> bool:
+        """Another :meth:`poll` would return a scan at once (frames already queued)."""
+        return False
+
+    @property
+    def bus_fault(self) -> bool:
+        return False
+
+    @property
+    def done(self) -> bool:
+        """A finite source has nothing more to give (never, for a live bus)."""
+        return False
+
+    @property
+    def last_error(self) -> str:
+        return ""
+
+    def bus_errors(self) -> int:
+        """Bus errors counted since start (the register image's BUS_ERRORS)."""
+        return 0
+
+    def health(self, now: float | None = None) -> SourceHealth:
+        return SourceHealth(self.frame_age(now), self.bus_fault, self.bus_errors(), self.last_error, self.done)
+
+    def counters(self) -> dict[str, int]:
+        """The kind's own counters (names unique across kinds: ``rtu_timeouts``, ...)."""
+        return {}
+
+    def describe_where(self) -> str:
+        """Where the scans come from, for the start log line."""
+        return self.kind
+
+    def start(self) -> "Source":
+        """Start what runs in the background (a reader thread); default: nothing."""
+        return self
+
+    def close(self) -> None:
+        """Release the transport; safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        self._close()
+
+    def _close(self) -> None:
+        pass
+
+    def __enter__(self) -> "Source":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- what the configuration, the CLI and --check ask of a kind ---------------------
+    @classmethod
+    def options_from_spec(cls, where: str, bus: dict[str, Any]) -> dict[str, Any]:
+        """``[[node]]`` keys from ``--source KIND:WHERE`` and python-can's shared
+        options (``interface``, ``channel``, ``bitrate_bps``, ``fd``,
+        ``data_bitrate_bps``; None when not given).  ValueError names what is wrong."""
+        return {}
+
+    @classmethod
+    def adapt_profile(cls, profile: Profile, options: Any) -> Profile:
+        """The node's profile with the kind's overrides applied (a CAN node's
+        ``base_id``, an RTU node's ``unit_id``); ValueError when they break it."""
+        return profile
+
+    @classmethod
+    def describe(cls, node: NodeLike) -> str:
+        """One line for ``--check`` and the start log: where this node's scans come from."""
+        return cls.kind
+
+    @classmethod
+    def check(cls, node: NodeLike, base_dir: str) -> None:
+        """Problems found before anything opens (a missing file, an unknown scene);
+        ValueError ``key: what is wrong``."""
+
+    @classmethod
+    def check_together(cls, nodes: Sequence[NodeLike]) -> None:
+        """Problems between the nodes of this kind (one serial line, two nodes);
+        ValueError ``key: what is wrong``."""
+
+    @classmethod
+    def share_key(cls, node: NodeLike) -> tuple | None:
+        """Nodes of this kind with the same key share one transport (one CAN bus); None:
+        each node has its own."""
+        return None
+
+    @classmethod
+    def open_nodes(cls, nodes: Sequence[NodeLike], context: OpenContext) -> list["Source"]:
+        """Open one source per node (a kind that shares a transport overrides this)."""
+        out = []
+        for n in nodes:
+            src = cls.open_node(n, context)
+            context.closers.append(src.close)
+            out.append(src)
+        return out
+
+    @classmethod
+    def open_node(cls, node: NodeLike, context: OpenContext) -> "Source":
+        raise NotImplementedError(f"source kind {cls.kind!r} opens no single node")
+
+
+class Feeder(Protocol):
+    """Several nodes' sources fed by one transport read (a CAN bus shared by ID): the
+    loop waits on the feeder once a round, then polls each node's source."""
+
+    def route(self, timeout_s: float) -> int: ...
+
+    @property
+    def done(self) -> bool: ...
+
+    def start(self) -> Any: ...
+
+
+def source_class(kind: str) -> type[Source]:
+    """The class of a kind by name or alias; an unknown one is one line with the valid names."""
+    target = SOURCES.get(ALIASES.get(kind, kind))
+    if target is None:
+        near = difflib.get_close_matches(kind, [*SOURCES, *ALIASES], n=1)
+        hint = f" (did you mean {near[0]!r}?)" if near else ""
+        raise ProfileError(f"unknown source kind {kind!r}{hint}; valid kinds: {', '.join(sorted(SOURCES))}")
+    module, _, name = target.partition(":")
+    cls = getattr(importlib.import_module(module), name)
+    assert issubclass(cls, Source), target
+    return cls

@@ -1,0 +1,61 @@
+"""Command-line options of the output kinds, built from what each kind declares
+(:attr:`eskin_industrial.sinks.base.Sink.cli_options`), and read back into options."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import click
+
+from ..sinks.base import SINKS, sink_class
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def output_option_dests() -> list[str]:
+    return [o.dest for kind in SINKS for o in sink_class(kind).cli_options]
+
+
+def output_options(func: F) -> F:
+    """Every output kind's options, in registry order."""
+    opts = []
+    for kind in SINKS:
+        for o in sink_class(kind).cli_options:
+            if o.secret:
+                continue  # secrets come from files or the environment, never argv
+            if o.type is bool:
+                opts.append(click.option(o.flag, o.dest, is_flag=True, default=bool(o.default), help=o.help))
+                continue
+            typ: Any = click.Choice(list(o.choices)) if o.choices else o.type
+            opts.append(click.option(o.flag, o.dest, type=typ, default=o.default, metavar=o.metavar,
+                                     show_default=o.default is not None, help=o.help))
+    for opt in reversed(opts):
+        func = opt(func)
+    return func
+
+
+def outputs_from_cli(values: dict[str, Any]) -> dict[str, Any]:
+    """``kind -> options`` for every kind asked for on the command line."""
+    out = {}
+    for kind in SINKS:
+        cls = sink_class(kind)
+        try:
+            options = cls.options_from_cli(values)
+        except ValueError as exc:
+            flag = cls.cli_options[0].flag if cls.cli_options else f"[{kind}]"
+            raise click.BadParameter(str(exc), param_hint=flag) from None
+        if options is not None:
+            out[kind] = options
+    return out
+
+
+def given_output_options(values: dict[str, Any]) -> list[str]:
+    """The output flags given a value other than their default (for refusing them next
+    to ``--config``)."""
+    given = []
+    for kind in SINKS:
+        for o in sink_class(kind).cli_options:
+            if values.get(o.dest) not in (None, o.default, False):
+                given.append(o.flag)
+    return given

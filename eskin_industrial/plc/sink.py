@@ -1,0 +1,128 @@
+"""The PLC as an output kind (``[plc]`` in the bridge configuration, ``--plc`` on the
+command line): each node's register image, written into the PLC (client mode, one
+:class:`~eskin_industrial.plc.client.PlcWriter` per node) or served to it (server
+mode, one :class:`~eskin_industrial.plc.server.PlcServer` with one block per node).
+
+Where a setting can come from, the first that gives it wins: the command line
+(``--plc``), the bridge configuration's ``[plc]``, the node profile's ``[modbus.plc]``
+(the first node's, for the connection), the defaults.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal
+
+from ..schema import in_range, positive
+from ..sinks.base import CliOption, Sink
+
+if TYPE_CHECKING:
+    from ..bus.source import NodeLike, OpenContext
+
+
+@dataclass(frozen=True)
+class PlcOptions:
+    """``[plc]``: where the register blocks go; unset keys come from the first node's
+    profile ``[modbus.plc]``."""
+
+    #: ``client``: write into the PLC; ``server``: serve the blocks, the PLC reads.
+    mode: Literal["client", "server"] | None = None
+    transport: Literal["tcp", "rtu"] = "tcp"
+    #: Client over TCP: the PLC.  Server over TCP: ``host`` is the address to listen on.
+    host: str | None = None
+    port: int | None = field(default=None, metadata=in_range(1, 65535))
+    #: Over RTU: the serial port (client: the PLC is the slave; server: we are).
+    serial_port: str | None = None
+    baudrate: int = field(default=115200, metadata=positive())
+    #: Server mode, on shutdown: keep serving the "bridge offline" image this long,
+    #: so that a polling PLC reads it before the connection goes.
+    offline_linger_s: float = field(default=0.5, metadata=in_range(0, 60))
+
+    def __post_init__(self) -> None:
+        if self.transport == "rtu" and self.serial_port is None:
+            raise ValueError("serial_port: missing key (transport = 'rtu' needs it)")
+
+
+def plc_mode(options: PlcOptions, nodes: Sequence[NodeLike]) -> Literal["client", "server"]:
+    mode = options.mode or nodes[0].profile.modbus.plc.mode
+    return "client" if mode == "client" else "server"
+
+
+def parse_plc_spec(spec: str, baud: int) -> PlcOptions:
+    """``tcp:HOST:PORT``, ``rtu:PORT``, ``serve:HOST:PORT``, ``serve-rtu:PORT``
+    (``KIND://...`` reads the same); ValueError names what is wrong."""
+    kind, sep, where = spec.partition(":")
+    where = where[2:] if where.startswith("//") else where
+    if not sep:
+        raise ValueError(f"expected KIND:WHERE, got {spec!r}")
+    if kind in ("tcp", "serve"):
+        host, port = parse_host_port(where)
+        return PlcOptions(mode="client" if kind == "tcp" else "server", host=host, port=port)
+    if kind in ("rtu", "serve-rtu"):
+        if not where:
+            raise ValueError(f"expected {kind}:PORT, got {spec!r}")
+        return PlcOptions(mode="client" if kind == "rtu" else "server", transport="rtu", serial_port=where,
+                          baudrate=baud)
+    raise ValueError(f"unknown PLC kind {kind!r}; expected tcp:HOST:PORT, rtu:PORT, serve:HOST:PORT or "
+                     f"serve-rtu:PORT")
+
+
+def parse_host_port(text: str, require_port: bool = False) -> tuple[str | None, int | None]:
+    """``HOST:PORT`` (``HOST``, ``:PORT`` or nothing when the port is not required):
+    None for what is left out, for the caller's default; ValueError when malformed."""
+    host, sep, port = text.rpartition(":")
+    if not sep:
+        host, port = text, ""
+    if (sep or require_port) and not (port.isdigit() and 0 < int(port) < 65536):
+        raise ValueError(f"expected HOST:PORT, got {text!r}")
+    return host or None, int(port) if port else None
+
+
+class PlcSink(Sink):
+    """The output kind "plc"; its sinks are :class:`PlcWriter` (client mode) and
+    :class:`PlcBlockSink` (one node's block of the server)."""
+
+    kind = "plc"
+    Options = PlcOptions
+    cli_options = (
+        CliOption("--plc", "plc", "tcp:HOST:PORT (write into the PLC), rtu:PORT (PLC as RTU slave), serve:HOST:PORT "
+                  "(serve, the PLC reads), serve-rtu:PORT; default: the profile's [modbus.plc].", metavar="SPEC"),
+        CliOption("--plc-baud", "plc_baud", "Baud rate for rtu: and serve-rtu:.", type=int, default=115200),
+    )
+
+    @classmethod
+    def options_from_cli(cls, values: dict[str, Any]) -> PlcOptions | None:
+        spec = values.get("plc")
+        return None if spec is None else parse_plc_spec(spec, values.get("plc_baud") or 115200)
+
+    @classmethod
+    def describe(cls, options: PlcOptions, node: NodeLike) -> str:
+        return f"PLC {plc_mode(options, [node])} block at {node.profile.modbus.plc.base_address}"
+
+    @classmethod
+    def check(cls, options: PlcOptions, nodes: Sequence[NodeLike]) -> None:
+        if options.transport == "rtu" and plc_mode(options, nodes) == "client" and len(nodes) > 1:
+            raise ValueError("transport: a PLC on a serial line takes one node in client mode "
+                             "(use server mode, or TCP)")
+
+    @classmethod
+    def open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
+        from ..bus.modbus.io import SerialSettings
+        from .client import PlcWriter
+        from .server import PlcServer
+
+        first = nodes[0].profile.modbus.plc
+        serial = SerialSettings(options.serial_port, options.baudrate) if options.transport == "rtu" else None
+        if plc_mode(options, nodes) == "server":
+            tcp = None if serial else (options.host or first.bind, options.port or first.port)
+            server = PlcServer(first, tcp=tcp, serial=serial, blocks=[n.profile.modbus.plc for n in nodes],
+                               linger_s=options.offline_linger_s).start()
+            context.closers.append(server.stop)
+            return [server.block(i) for i in range(len(nodes))]
+        sinks: list[Sink] = []
+        for n in nodes:
+            w = PlcWriter(n.profile.modbus.plc, options.host, options.port, serial=serial).start()
+            context.closers.append(w.close)
+            sinks.append(w)
+        return sinks

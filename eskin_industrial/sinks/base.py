@@ -1,0 +1,200 @@
+"""The output seam: what every sink does, and the registry of output kinds.
+
+A node's loop hands each of its sinks every detector update (:meth:`Sink.on_update`,
+cheap, for a recorder) and every publication of the register image
+(:meth:`Sink.publish`: the registers as rendered, the image they came from, whether
+it is urgent, and when the deciding scan arrived).  A sink that can be commanded (the
+PLC: acknowledge, tare, enable) hands the commands back through
+:meth:`Sink.take_commands`.  Each sink reports :meth:`Sink.health` (connected,
+failures, last error) and :meth:`Sink.counters`, and :meth:`Sink.flush` /
+:meth:`Sink.close` end it (close is safe to call twice).
+
+The public methods are written once here over private hooks (``_publish``,
+``_close``), as python-can's ``BusABC.send`` over its backend's hook.
+
+An *output kind* is one module plus one entry in :data:`SINKS` (section name ->
+``module:Class``, imported on first use).  The class declares what the bridge
+configuration (its own ``[SECTION]`` of ``bridge.toml``), the command line
+(:attr:`Sink.cli_options`) and ``--check`` need, and opens one sink per node
+(:meth:`Sink.open_nodes`; a kind may share one connection between its nodes, as the
+PLC server serves every node's block).
+
+Example, a sink that prints slips (one module and one registry entry)::
+
+    @dataclass(frozen=True)
+    class SlipPrinterOptions:
+        prefix: str = "slip"
+
+    class SlipPrinter(Sink):
+        kind = "slip-printer"
+        Options = SlipPrinterOptions
+        cli_options = (CliOption("--print-slips", "prefix", "Print each slip.", metavar="PREFIX"),)
+
+        def __init__(self, node_name: str, prefix: str) -> None:
+            super().__init__()
+            self.where, self.prefix, self.node_name = "stdout", prefix, node_name
+
+        def on_update(self, update):
+            if update.state == GraspState.SLIP:
+                print(self.prefix, self.node_name, update.t)
+
+        @classmethod
+        def open_nodes(cls, options, nodes, context):
+            return [cls(n.name, options.prefix) for n in nodes]
+
+    SINKS["slip-printer"] = "mymodule:SlipPrinter"
+"""
+
+from __future__ import annotations
+
+import abc
+import difflib
+import importlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
+
+from ..errors import ProfileError
+
+if TYPE_CHECKING:
+    from ..bus.source import NodeLike, OpenContext
+    from ..detect.updates import Update
+    from ..plc.image import Command, PlcImage
+
+#: section name -> "module:Class", imported on first use.  The order is the order of
+#: the outputs in logs and ``--check``.
+SINKS: dict[str, str] = {
+    "plc": "eskin_industrial.plc.sink:PlcSink",
+    "recorder": "eskin_industrial.sinks.recorder:Recorder",
+}
+#: With no output configured at all, the bridge publishes to this one (the PLC as
+#: each node's profile describes it).
+DEFAULT_OUTPUT = "plc"
+
+
+class Publication(NamedTuple):
+    """One publication of a node's register image (a named tuple: built at every
+    publication, up to once a scan)."""
+
+    registers: list[int]  #: STATUS..FLAGS as rendered (``plc.image.STATUS_COUNT`` values)
+    image: PlcImage  #: the image they were rendered from (enable, latch, newest update)
+    urgent: bool  #: a state or status change: to be written at once
+    t_event: float  #: ``time.perf_counter()`` when the deciding scan arrived
+    offline: bool = False  #: the bridge's last image (BRIDGE_OFFLINE)
+
+
+@dataclass(frozen=True)
+class SinkHealth:
+    connected: bool | None = None  #: None: the sink has no connection to lose (a file, a server)
+    failures: int = 0
+    last_error: str = ""
+
+
+@dataclass(frozen=True)
+class CliOption:
+    """One command-line option of an output kind, as plain data (the CLI turns it into
+    a click option; the kind's module stays free of the CLI)."""
+
+    flag: str  #: ``--plc``
+    dest: str  #: the name its value is handed to :meth:`Sink.options_from_cli` under
+    help: str
+    metavar: str | None = None
+    type: type = str  #: str, int or float; bool makes a flag
+    default: Any = None
+    choices: tuple[str, ...] | None = None
+    secret: bool = False  #: never taken from the command line (files or environment only)
+
+
+class Sink(abc.ABC):
+    """Where one node's results go."""
+
+    #: The output kind: its ``[SECTION]`` in the bridge configuration, its log events.
+    kind: ClassVar[str] = ""
+    #: The kind's configuration section (a frozen dataclass).
+    Options: ClassVar[type] = type(None)
+    #: The kind's command-line options.
+    cli_options: ClassVar[tuple[CliOption, ...]] = ()
+
+    def __init__(self) -> None:
+        self._closed = False
+        #: Where the results go, for logs (``tcp 10.0.0.5:502 (client)``, a file path).
+        self.where = self.kind
+
+    # -- the data path --------------------------------------------------------------
+    def on_update(self, update: Update) -> None:
+        """Every detector update, in order, on the loop's thread: keep it short."""
+
+    def publish(self, publication: Publication) -> None:
+        """A publication of the register image, on the loop's thread: never block."""
+        self._publish(publication)
+
+    def _publish(self, publication: Publication) -> None:
+        """The kind's hook for :meth:`publish`; default: nothing."""
+
+    def take_commands(self) -> list[Command]:
+        """Commands received since the last call (acknowledge, tare, enable)."""
+        return []
+
+    def commands_done(self) -> None:
+        """The loop has applied the commands it took."""
+
+    # -- health -----------------------------------------------------------------------
+    def health(self) -> SinkHealth:
+        return SinkHealth()
+
+    def counters(self) -> dict[str, int]:
+        """The kind's counters, with names unique across kinds (``plc_writes``)."""
+        return {}
+
+    # -- the end ----------------------------------------------------------------------
+    def flush(self, timeout_s: float = 1.0) -> bool:
+        """Write what is still pending, for up to ``timeout_s``; True when nothing is left."""
+        return True
+
+    def close(self) -> None:
+        """Stop and release; safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        self._close()
+
+    def _close(self) -> None:
+        pass
+
+    # -- what the configuration, the CLI and --check ask of a kind ---------------------
+    @classmethod
+    def options_from_cli(cls, values: dict[str, Any]) -> Any | None:
+        """The kind's options from its command-line values (None: not asked for);
+        ValueError / click's BadParameter-like one line for a bad value."""
+        return None
+
+    @classmethod
+    def default_options(cls) -> Any:
+        """The options when the kind is the default output and nothing was given."""
+        return cls.Options()
+
+    @classmethod
+    def describe(cls, options: Any, node: NodeLike) -> str:
+        """One line for ``--check``: where this node's results go."""
+        return cls.kind
+
+    @classmethod
+    def check(cls, options: Any, nodes: Sequence[NodeLike]) -> None:
+        """Problems across nodes found before anything opens; ValueError ``key: what``."""
+
+    @classmethod
+    @abc.abstractmethod
+    def open_nodes(cls, options: Any, nodes: Sequence[NodeLike], context: OpenContext) -> list["Sink"]:
+        """One sink per node (in order); what must be closed goes to ``context.closers``."""
+
+
+def sink_class(kind: str) -> type[Sink]:
+    target = SINKS.get(kind)
+    if target is None:
+        near = difflib.get_close_matches(kind, list(SINKS), n=1)
+        hint = f" (did you mean {near[0]!r}?)" if near else ""
+        raise ProfileError(f"unknown output kind {kind!r}{hint}; valid kinds: {', '.join(SINKS)}")
+    module, _, name = target.partition(":")
+    cls = getattr(importlib.import_module(module), name)
+    assert issubclass(cls, Sink), target
+    return cls

@@ -1,0 +1,175 @@
+"""The recorder: every detector update of a node, as CSV (the columns of ``eskin-bus
+detect``'s output) or JSON lines, to a file or standard output.
+
+Configured as ``[recorder]`` in the bridge configuration or ``--record PATH`` on the
+command line.  With several nodes, ``{node}`` in the path names each node's file.  A
+write that fails (a full disk) is counted and the bridge goes on; the file is
+flushed every ``flush_every_s`` so that a reader following it sees recent updates.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, TYPE_CHECKING, Any, Literal
+
+from ..detect.state import LABELS
+from ..detect.updates import COLUMNS, Update
+from ..recording import update_row
+from ..schema import in_range
+from .base import CliOption, Sink, SinkHealth
+
+if TYPE_CHECKING:
+    from ..bus.source import NodeLike, OpenContext
+
+
+@dataclass(frozen=True)
+class RecorderOptions:
+    #: Output file; ``-`` is standard output; ``{node}`` is replaced by the node's name.
+    path: str
+    #: ``csv`` or ``jsonl``; default: ``jsonl`` for a ``.jsonl`` / ``.ndjson`` path, else ``csv``.
+    format: Literal["csv", "jsonl"] | None = None
+    #: Longest time an update stays in the write buffer.
+    flush_every_s: float = field(default=1.0, metadata=in_range(0, 3600))
+
+    @property
+    def resolved_format(self) -> str:
+        if self.format is not None:
+            return self.format
+        return "jsonl" if Path(self.path).suffix in (".jsonl", ".ndjson") else "csv"
+
+
+class Recorder(Sink):
+    kind = "recorder"
+    Options = RecorderOptions
+    cli_options = (
+        CliOption("--record", "record", "Record every detector update to this file ('-': stdout; {node}: the "
+                  "node's name), as CSV or JSON lines (by suffix, or --record-format).", metavar="PATH"),
+        CliOption("--record-format", "record_format", "Format of --record (default: by the file's suffix).",
+                  choices=("csv", "jsonl")),
+    )
+
+    def __init__(self, stream: IO[str], fmt: str, node: str, *, where: str, owned: bool,
+                 flush_every_s: float = 1.0) -> None:
+        super().__init__()
+        self.where = where
+        self._out = stream
+        self._owned = owned
+        self._node = node
+        self._jsonl = fmt == "jsonl"
+        self._flush_every_s = flush_every_s
+        self._next_flush = time.monotonic() + flush_every_s
+        self.records = 0
+        self.write_errors = 0
+        self.last_error = ""
+        if not self._jsonl:
+            self._write(",".join(COLUMNS) + "\n")
+
+    def on_update(self, update: Update) -> None:
+        if self._jsonl:
+            u = update
+            line = json.dumps({"node": self._node, "t": _num(u.t), "r_coe": _num(u.r_coe), "r_dw": _num(u.r_dw),
+                               "state": LABELS[u.state], "valid": int(u.valid), "f_sum": _num(u.f_sum),
+                               "xc": _num(u.xc), "yc": _num(u.yc), "flags": int(u.flags)}) + "\n"
+        else:
+            line = update_row(update, LABELS[update.state])
+        if self._write(line):
+            self.records += 1
+        now = time.monotonic()
+        if now >= self._next_flush:
+            self._next_flush = now + self._flush_every_s
+            self._flush_stream()
+
+    def _write(self, text: str) -> bool:
+        try:
+            self._out.write(text)
+            return True
+        except (OSError, ValueError) as exc:  # a full disk, a closed pipe: counted, never fatal
+            self.write_errors += 1
+            self.last_error = str(exc)
+            return False
+
+    def _flush_stream(self) -> None:
+        try:
+            self._out.flush()
+        except (OSError, ValueError) as exc:
+            self.write_errors += 1
+            self.last_error = str(exc)
+
+    def health(self) -> SinkHealth:
+        return SinkHealth(None, self.write_errors, self.last_error)
+
+    def counters(self) -> dict[str, int]:
+        return {"recorded_updates": self.records, "record_write_errors": self.write_errors}
+
+    def flush(self, timeout_s: float = 1.0) -> bool:
+        self._flush_stream()
+        return True
+
+    def _close(self) -> None:
+        self._flush_stream()
+        if self._owned:
+            try:
+                self._out.close()
+            except OSError as exc:
+                self.write_errors += 1
+                self.last_error = str(exc)
+
+    # -- the kind ------------------------------------------------------------------
+    @classmethod
+    def options_from_cli(cls, values: dict[str, Any]) -> RecorderOptions | None:
+        path = values.get("record")
+        if path is None:
+            if values.get("record_format") is not None:
+                raise ValueError("--record-format: give --record PATH too")
+            return None
+        return RecorderOptions(path=path, format=values.get("record_format"))
+
+    @classmethod
+    def describe(cls, options: RecorderOptions, node: NodeLike) -> str:
+        return f"record {options.resolved_format} {_path_for(options.path, node.name)}"
+
+    @classmethod
+    def check(cls, options: RecorderOptions, nodes: Sequence[NodeLike]) -> None:
+        paths = [_path_for(options.path, n.name) for n in nodes]
+        if len(nodes) > 1 and len(set(paths)) < len(paths):
+            raise ValueError("path: several nodes would write one file; put {node} in the path")
+        for p in paths:
+            if p != "-" and not Path(p).parent.is_dir():
+                raise ValueError(f"path: {p}: no such directory")
+
+    @classmethod
+    def open_nodes(cls, options: RecorderOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
+        from ..errors import EskinError
+
+        out: list[Sink] = []
+        for n in nodes:
+            path = _path_for(options.path, n.name)
+            if path == "-":
+                rec = cls(sys.stdout, options.resolved_format, n.name, where="stdout", owned=False,
+                          flush_every_s=options.flush_every_s)
+            else:
+                try:
+                    stream = open(path, "w", encoding="utf-8", newline="")
+                except OSError as exc:
+                    raise EskinError(f"{path}: cannot write the record: {exc.strerror or exc}") from None
+                rec = cls(stream, options.resolved_format, n.name, where=path, owned=True,
+                          flush_every_s=options.flush_every_s)
+            context.closers.append(rec.close)
+            out.append(rec)
+        return out
+
+
+def _path_for(path: str, node: str) -> str:
+    return path.replace("{node}", node)
+
+
+def _num(x: float) -> float | None:
+    """A JSON number; NaN and infinities (no JSON for them) as null."""
+    x = float(x)
+    return x if math.isfinite(x) else None

@@ -1,0 +1,43 @@
+"""What ``eskin-bus receive`` runs, for the CAN tests that drive it in-process."""
+
+from __future__ import annotations
+
+from eskin_industrial.bridge.loop import NodeLoop
+from eskin_industrial.bus.can.group import CanGroup
+from eskin_industrial.bus.can.layout import ScanAssembler
+from eskin_industrial.bus.can.source import CanSource
+
+
+class Receiver:
+    """What ``eskin-bus receive`` runs: a CAN source (reader, group, assembler) and the
+    per-node loop, with every update kept."""
+
+    def __init__(self, profile, reader, layout, rate, log=None) -> None:
+        group = CanGroup(reader, [layout], log, all_frames=True)
+        self.source = CanSource(group, group.queues[0], ScanAssembler(layout, rate))
+        self.updates: list = []
+        self.loop = NodeLoop(profile, self.source, [], rate_hz=rate, on_update=self.updates.append)
+        self.pipeline, self.assembler = self.loop.pipeline, self.source.assembler
+
+    def run(self, **until) -> None:
+        """As the command: until a stop condition, then the reader stops and what it
+        had queued is still decoded."""
+        self.source.start()
+        try:
+            self.loop.run(**until)
+        finally:
+            self.source.reader.stop()
+            while self.source.pending or self.source.reader.queue:
+                self.loop.step(0.0)
+            self.assembler.flush()
+            self.source.close()
+
+    def poll(self) -> None:
+        """Decode whatever the reader has queued."""
+        self.source.start()
+        self.loop.step(0.0)
+        while self.source.pending:
+            self.loop.step(0.0)
+
+    def counters(self) -> dict[str, int]:
+        return self.source.counters()
