@@ -172,7 +172,8 @@ def latencies(decisions: list[tuple[int, int]], arrival: dict[int, float], write
 # -- our bridge -------------------------------------------------------------------------
 
 def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, channel: str):
-    from eskin_industrial.bridge.config import BridgeConfig, NodeConfig, PlcOutput, resolve
+    from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
+    from eskin_industrial.plc.sink import PlcOptions
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
 
@@ -190,13 +191,11 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
                                          "--port", str(a), "--scene", str(scene_file), "--rate", str(rate)],
                                         stderr=subprocess.DEVNULL)
             time.sleep(1.0)
-            node_cfg = NodeConfig(name="n1", profile=str(PROFILE), source="modbus-rtu", serial_port=str(b),
-                                  rate_hz=rate)
+            node_cfg = NodeConfig.of("n1", str(PROFILE), "modbus-rtu", serial_port=str(b), rate_hz=rate)
         else:
-            node_cfg = NodeConfig(name="n1", profile=str(PROFILE), source="can", interface=interface,
-                                  channel=channel, fd=fd, rate_hz=rate)
-        cfg = BridgeConfig(node=(node_cfg,), plc=PlcOutput(mode="client", host="127.0.0.1", port=plc.port),
-                           log=replace(BridgeConfig.__dataclass_fields__["log"].default_factory(), status_every_s=0))
+            node_cfg = NodeConfig.of("n1", str(PROFILE), "can", interface=interface, channel=channel, fd=fd, rate_hz=rate)
+        cfg = BridgeConfig(node=(node_cfg,), outputs={"plc": PlcOptions(mode="client", host="127.0.0.1", port=plc.port)},
+                           log=LogSettings(status_every_s=0))
         nodes = resolve(cfg)
         decisions: list[tuple[int, int]] = []
         last = [-1]
@@ -210,7 +209,7 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
         log = EventLog(open(os.devnull, "w"), "plain", "warning")
         br = Bridge(cfg, nodes, log, on_update=on_update).open()
         arrival: dict[int, float] = {}
-        source = br.runs[0].bridge.source
+        source = br.runs[0].loop.source
         poll = source.poll
         mono_to_wall = time.time() - time.monotonic()
 

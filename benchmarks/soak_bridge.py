@@ -62,7 +62,8 @@ def main() -> None:
     ap.add_argument("--lap", type=float, default=60.0, help="seconds of scene per lap (default 60)")
     args = ap.parse_args()
 
-    from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, PlcOutput, resolve
+    from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
+    from eskin_industrial.plc.sink import PlcOptions
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
     from eskin_industrial.bus.modbus.io import quiet_pymodbus
@@ -82,9 +83,8 @@ def main() -> None:
 
     plc = PlcCapture()
     channel = f"soak-{os.getpid()}"
-    node_cfg = NodeConfig(name="n1", profile=str(PROFILE), source="can", interface="virtual", channel=channel,
-                          fd=fd, rate_hz=rate)
-    cfg = BridgeConfig(node=(node_cfg,), plc=PlcOutput(mode="client", host="127.0.0.1", port=plc.port),
+    node_cfg = NodeConfig.of("n1", str(PROFILE), "can", interface="virtual", channel=channel, fd=fd, rate_hz=rate)
+    cfg = BridgeConfig(node=(node_cfg,), outputs={"plc": PlcOptions(mode="client", host="127.0.0.1", port=plc.port)},
                        log=LogSettings(status_every_s=0))
     nodes = resolve(cfg)
     slips: list[float] = []  # node time of every entry into slip
@@ -107,7 +107,7 @@ def main() -> None:
     arrival: dict[int, float] = {}
     recent: collections.deque[int] = collections.deque()
     kept: dict[int, float] = {}
-    source = br.runs[0].bridge.source
+    source = br.runs[0].loop.source
     poll = source.poll
 
     def timed_poll(timeout_s=None):
