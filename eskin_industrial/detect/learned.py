@@ -11,11 +11,11 @@ The paper's R_coe and R_dw are not among the features: with them the classifier
 did no better on the tuning seeds (docs/evaluation.md), at the cost of a second
 indicator stream.
 
-The model is passed in (``model=``): anything with ``__call__(x) -> probabilities``;
-:class:`TreeEnsemble` is the numpy-only form the training code
-(``eskin_industrial.evaluation.train``, which needs scikit-learn) fills.  The
-registry's factory :func:`learned` asks that module for the default model, trained
-on the tuning seeds only; nothing here imports scikit-learn.
+The model is handed in (``model=``): anything with ``__call__(x) -> probabilities``;
+:class:`TreeEnsemble` is the numpy-only form the training code fills.  Nothing in
+``detect/`` trains, loads or imports scikit-learn: the layers that build detectors by
+name (the pipeline, the CLI, the evaluation) see the registry's ``needs_model`` and
+hand the default model over (``eskin_industrial.evaluation.train.ready``).
 """
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ class Learned(CofTrack):
     name = "learned"
     columns = ("p_slip", "p_variable_force")
 
-    def __init__(self, settings: DetectorSettings, x_mm, y_mm, rate_hz: float, model: Model | None = None,
+    def __init__(self, settings: DetectorSettings, x_mm, y_mm, rate_hz: float, *, model: Model,
                  slip_p: float = 0.5, confirm_hops: int = 3) -> None:
         self.model = model
         self.slip_p = slip_p
@@ -126,7 +126,7 @@ class Learned(CofTrack):
         old20 = self._ring20.swap((mx, my))
         old50 = self._ring50.swap((mx, my))
         # only the last frame of a hop is classified: the cost is per hop, not per frame
-        if (self._k + 1) % self.hop or self._contact_run <= self.history or self.model is None:
+        if (self._k + 1) % self.hop or self._contact_run <= self.history:
             return 0.0, 0.0, False, False
         noise = self._noise
         sd = math.sqrt(2.0 * noise / self.m) / s if noise else 0.0  # one sigma of a smoothed displacement
@@ -149,13 +149,3 @@ class Learned(CofTrack):
 
 def _dist(mx: float, my: float, old: Any) -> float:
     return math.hypot(mx - old[0], my - old[1]) if old is not None else 0.0
-
-
-def learned(settings: DetectorSettings, x_mm, y_mm, rate_hz: float, **kw: Any) -> Learned:
-    """The registry's factory: :class:`Learned` with the default model (trained on the
-    tuning seeds of the built-in scenes, once per process) unless ``model=`` is given."""
-    if kw.get("model") is None:
-        from ..evaluation.train import default_model  # needs scikit-learn; trains once
-
-        kw["model"] = default_model()
-    return Learned(settings, x_mm, y_mm, rate_hz, **kw)
