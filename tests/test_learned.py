@@ -134,3 +134,19 @@ def test_every_path_that_builds_by_name_hands_the_default_model(paper_profile, m
                           "--method", "learned", str(path), "-o", str(out)], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     assert read_updates(out)["state"].tolist() == [GraspState(u.state).label for u in direct]
+
+
+def test_the_features_ignore_the_rivals_profile_sections(paper_profile, model):
+    # the model was trained on the rivals' scores at their defaults: a profile that
+    # retunes the rivals must not change what the learned method sees
+    from dataclasses import replace
+
+    from eskin_industrial.detect.settings import ForceRateSettings, HfEnergySettings
+
+    f = grasp(600, seed=5)
+    f[:100] = 0.0
+    f[300:380] = np.roll(f[300:380], 1, axis=1)
+    retuned = replace(paper_profile, detector=replace(
+        paper_profile.detector, force_rate=ForceRateSettings(lag_s=0.03), hf_energy=HfEnergySettings(smooth_s=0.2)))
+    a, b = run(paper_profile, model, f), run(retuned, model, f)
+    assert [u.r_coe for u in a] == [u.r_coe for u in b] and [u.state for u in a] == [u.state for u in b]

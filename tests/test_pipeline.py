@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import ast
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +10,7 @@ from conftest import grasp
 
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect import GraspState, get_method, paper_batch
+from eskin_industrial.detect.settings import LearnedSettings
 from eskin_industrial.frames import RawScan
 from eskin_industrial.pipeline import Pipeline
 
@@ -55,6 +57,22 @@ def test_a_method_that_needs_a_model_is_handed_it(paper_profile):
     states = [u.state for k in range(300) for u in pipe.push(RawScan(seq=k, t=k / 100.0, raw=raw[k]))]
     assert states[0] == GraspState.STABLE and states[-1] == GraspState.SLIP
 
+
+
+def test_the_learned_decision_rule_comes_from_the_profile(paper_profile):
+    # a model 60 % sure of slip: slip at the default slip_p 0.5, never at 0.7
+    unsure = lambda _x: np.array([0.2, 0.2, 0.6])  # noqa: E731
+    f = grasp(300, seed=9)
+    raw = np.rint(Calibrator.from_section(paper_profile.calibration, 25).to_raw(f))
+
+    def states(profile):
+        pipe = Pipeline(profile, method="learned", model=unsure)
+        return {u.state for k in range(300) for u in pipe.push(RawScan(seq=k, t=k / 100.0, raw=raw[k]))}
+
+    strict = replace(paper_profile, detector=replace(paper_profile.detector,
+                                                      learned=LearnedSettings(slip_p=0.7)))
+    assert GraspState.SLIP in states(paper_profile)
+    assert GraspState.SLIP not in states(strict)
 
 ROOT = Path(__file__).resolve().parent.parent / "eskin_industrial"
 

@@ -21,14 +21,14 @@ hand the default model over (``eskin_industrial.evaluation.train.ready``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
 
 from .cof_track import CofTrack
 from .scored import ForceRate, HfEnergy, _Lagged
-from .settings import DetectorSettings
+from .settings import DetectorSettings, ForceRateSettings, HfEnergySettings
 
 #: Feature names, in the order of the vector the model sees.
 FEATURES: tuple[str, ...] = (
@@ -86,8 +86,9 @@ class TreeEnsemble:
 
 class Learned(CofTrack):
     """Slip when the model's slip probability exceeds ``slip_p`` in ``confirm_hops``
-    consecutive hops; varying force when ``variable_force`` is more likely than
-    ``stable``.  The score columns hold P(slip) and P(variable_force).
+    consecutive hops (``[detector.learned]``; keyword arguments override them, for
+    sweeps); varying force when ``variable_force`` is more likely than ``stable``.
+    The score columns hold P(slip) and P(variable_force).
 
     The defaults (0.5, three hops) were chosen on the tuning seeds by two-fold
     cross-validation (seeds 0-2 against 3, 4, 7): the lightest rule with no false
@@ -97,13 +98,17 @@ class Learned(CofTrack):
     columns = ("p_slip", "p_variable_force")
 
     def __init__(self, settings: DetectorSettings, x_mm, y_mm, rate_hz: float, *, model: Model,
-                 slip_p: float = 0.5, confirm_hops: int = 3) -> None:
+                 **overrides: float) -> None:
+        c = replace(settings.learned, **overrides) if overrides else settings.learned
         self.model = model
-        self.slip_p = slip_p
-        self.confirm_hops = confirm_hops
-        # the streaming pieces of the other methods, fed the same clean frames
-        self._rate_score = ForceRate(settings, x_mm, y_mm, rate_hz)
-        self._hf_score = HfEnergy(settings, x_mm, y_mm, rate_hz)
+        self.slip_p = c.slip_p
+        self.confirm_hops = c.confirm_hops
+        # the streaming pieces of the other methods, fed the same clean frames; their
+        # scores are features, defined at the rivals' default settings (the model was
+        # trained on those), whatever a profile sets for the rivals themselves
+        features = replace(settings, force_rate=ForceRateSettings(), hf_energy=HfEnergySettings())
+        self._rate_score = ForceRate(features, x_mm, y_mm, rate_hz)
+        self._hf_score = HfEnergy(features, x_mm, y_mm, rate_hz)
         self._l20 = max(1, round(0.02 * rate_hz))
         self._l50 = max(1, round(0.05 * rate_hz))
         self._x = np.zeros(len(FEATURES))

@@ -9,11 +9,16 @@ frame of the hop voted slip (for ``confirm`` consecutive frames), varying eviden
 if any voted varying.  The update carries the hop's largest scores; what the two
 score columns mean is each class's ``columns``; they are written where the paper
 detector writes R_coe and R_dw.
+
+The rivals' thresholds are profile settings (``[detector.force_rate]``,
+``[detector.cof_velocity]``, ``[detector.hf_energy]``); keyword arguments override
+single fields, for parameter sweeps.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -138,15 +143,18 @@ class _Lagged:
 
 
 class ForceRate(ScoredDetector):
-    """Rival: slip when the total force changes fast: |dS/dt| / S above ``threshold`` (1/s)."""
+    """Rival: slip when the total force changes fast: |dS/dt| / S above ``threshold_per_s``
+    (``[detector.force_rate]``)."""
 
     name = "force-rate"
     columns = ("force_rate_per_s", "unused")
 
-    def __init__(self, *args, threshold_per_s: float = 1.0, lag_s: float = 0.1, **kw) -> None:
-        self.threshold = threshold_per_s
-        self.lag_s = lag_s
-        super().__init__(*args, **kw)
+    def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
+                 hop_s: float | None = None, confirm: int = 1, **overrides: float) -> None:
+        c = replace(settings.force_rate, **overrides) if overrides else settings.force_rate
+        self.threshold = c.threshold_per_s
+        self.lag_s = c.lag_s
+        super().__init__(settings, x_mm, y_mm, rate_hz, hop_s, confirm)
 
     def reset_scores(self) -> None:
         self._ring = _Lagged(max(1, round(self.lag_s * self.rate_hz)), None)
@@ -160,15 +168,18 @@ class ForceRate(ScoredDetector):
 
 
 class CofVelocity(ScoredDetector):
-    """Rival: slip when the centre of force moves faster than ``threshold_mm_s``."""
+    """Rival: slip when the centre of force moves faster than ``threshold_mm_s``
+    (``[detector.cof_velocity]``)."""
 
     name = "cof-velocity"
     columns = ("cof_speed_mm_s", "unused")
 
-    def __init__(self, *args, threshold_mm_s: float = 4.0, lag_s: float = 0.1, **kw) -> None:
-        self.threshold = threshold_mm_s
-        self.lag_s = lag_s
-        super().__init__(*args, **kw)
+    def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
+                 hop_s: float | None = None, confirm: int = 1, **overrides: float) -> None:
+        c = replace(settings.cof_velocity, **overrides) if overrides else settings.cof_velocity
+        self.threshold = c.threshold_mm_s
+        self.lag_s = c.lag_s
+        super().__init__(settings, x_mm, y_mm, rate_hz, hop_s, confirm)
 
     def reset_scores(self) -> None:
         self._ring = _Lagged(max(1, round(self.lag_s * self.rate_hz)), None)
@@ -185,19 +196,21 @@ class HfEnergy(ScoredDetector):
     """Rival (vibration-based slip detection): energy of the taxels' second difference,
     relative to its own running baseline; slip when above ``threshold`` times it.
     ``total=True`` takes the second difference of the total force instead, where a
-    vibration shared by the taxels adds up coherently and their noise does not."""
+    vibration shared by the taxels adds up coherently and their noise does not
+    (``[detector.hf_energy]``)."""
 
     name = "hf-energy"
     columns = ("hf_energy_ratio", "unused")
     history_s = 0.3
 
-    def __init__(self, *args, threshold: float = 6.0, smooth_s: float = 0.05, baseline_s: float = 2.0,
-                 total: bool = False, **kw) -> None:
-        self.threshold = threshold
-        self.total = total
-        self.smooth_s = smooth_s
-        self.baseline_s = baseline_s
-        super().__init__(*args, **kw)
+    def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
+                 hop_s: float | None = None, confirm: int = 1, **overrides: float | bool) -> None:
+        c = replace(settings.hf_energy, **overrides) if overrides else settings.hf_energy
+        self.threshold = c.threshold
+        self.total = c.total
+        self.smooth_s = c.smooth_s
+        self.baseline_s = c.baseline_s
+        super().__init__(settings, x_mm, y_mm, rate_hz, hop_s, confirm)
 
     def reset_scores(self) -> None:
         self._p1: np.ndarray | float | None = None  # the last two frames (or totals)
