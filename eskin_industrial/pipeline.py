@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .calibration import Calibrator
+from .detect.learned import Model
 from .detect.methods import get_method
 from .detect.updates import Update
 from .frames import Frame, FrameFlag, RawScan
@@ -32,12 +33,24 @@ class Counters:
 class Pipeline:
     """Calibrate and detect, one scan at a time; keeps the newest frame and update."""
 
-    def __init__(self, profile: Profile, rate_hz: float | None = None, method: str | None = None) -> None:
+    def __init__(self, profile: Profile, rate_hz: float | None = None, method: str | None = None,
+                 model: Model | None = None) -> None:
+        """``method`` overrides the profile's; a method that needs a model (``learned``)
+        gets ``model``, or else the default one (trained on first use)."""
         self.profile = profile
         self.calibrator = Calibrator.from_section(profile.calibration, profile.taxels)
         self.rate_hz = rate_hz or profile.sensor.rate_hz
         x, y = profile.coordinates_mm
-        self.detector = get_method(method or profile.detector.method).stream(profile.detector, x, y, self.rate_hz)
+        chosen = get_method(method or profile.detector.method)
+        if chosen.needs_model:
+            if model is None:
+                # imported only here: the training code (and the scenes it renders) is
+                # no part of a bridge that runs any other method
+                from .evaluation.train import default_model
+
+                model = default_model()
+            chosen = chosen.with_model(model)
+        self.detector = chosen.stream(profile.detector, x, y, self.rate_hz)
         self.counters = Counters()
         self.last_frame: Frame | None = None
         self.last_update: Update | None = None

@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("sklearn")
 
-from conftest import grasp  # noqa: E402
+from conftest import PROFILES, grasp  # noqa: E402
 
 from eskin_industrial.detect import GraspState, get_method  # noqa: E402
 from eskin_industrial.detect.learned import CLASSES, FEATURES, Learned  # noqa: E402
@@ -109,3 +109,44 @@ def test_nothing_imports_sklearn_at_import_time():
     code = "import sys, eskin_industrial.cli, eskin_industrial.evaluation.charts; print('sklearn' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_every_path_that_builds_by_name_hands_the_default_model(paper_profile, model, tmp_path):
+    from eskin_industrial.calibration import Calibrator
+    from eskin_industrial.frames import RawScan
+    from eskin_industrial.pipeline import Pipeline
+    from eskin_industrial.recording import read_updates, write_recording
+
+    f = grasp(600, seed=3)
+    f[:100] = 0.0
+    direct = run(paper_profile, model, f)
+    # the bridge's path
+    cal = Calibrator.from_section(paper_profile.calibration, 25)
+    pipe = Pipeline(paper_profile, method="learned")
+    raw = cal.to_raw(f)
+    live = [u for k in range(600) for u in pipe.push(RawScan(seq=k, t=k / RATE, raw=raw[k]))]
+    assert [u.state for u in live] == [u.state for u in direct]
+    np.testing.assert_allclose([u.r_coe for u in live], [u.r_coe for u in direct], atol=1e-6)
+    # the CLI's detect command
+    path, out = tmp_path / "rec.csv", tmp_path / "out.csv"
+    write_recording(path, np.arange(600) / RATE, f)
+    res = subprocess.run([sys.executable, "-m", "eskin_industrial", "detect", "-p", str(PROFILES / "paper-5x5.toml"),
+                          "--method", "learned", str(path), "-o", str(out)], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert read_updates(out)["state"].tolist() == [GraspState(u.state).label for u in direct]
+
+
+def test_the_features_ignore_the_rivals_profile_sections(paper_profile, model):
+    # the model was trained on the rivals' scores at their defaults: a profile that
+    # retunes the rivals must not change what the learned method sees
+    from dataclasses import replace
+
+    from eskin_industrial.detect.settings import ForceRateSettings, HfEnergySettings
+
+    f = grasp(600, seed=5)
+    f[:100] = 0.0
+    f[300:380] = np.roll(f[300:380], 1, axis=1)
+    retuned = replace(paper_profile, detector=replace(
+        paper_profile.detector, force_rate=ForceRateSettings(lag_s=0.03), hf_energy=HfEnergySettings(smooth_s=0.2)))
+    a, b = run(paper_profile, model, f), run(retuned, model, f)
+    assert [u.r_coe for u in a] == [u.r_coe for u in b] and [u.state for u in a] == [u.state for u in b]

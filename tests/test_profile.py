@@ -126,3 +126,22 @@ def test_check_warns_when_raw_values_do_not_fit_the_can_bits(tmp_path):
     res = run_cli("profile", "check", str(path))
     assert res.returncode == 0 and "ok" in res.stdout
     assert "warning" in res.stderr and "[can] taxel_bits" in res.stderr and res.stderr.count("\n") == 1
+
+
+@pytest.mark.parametrize("section,key,near", [
+    ("force_rate", "threshold", "threshold_per_s"),
+    ("cof_velocity", "threshold_mm", "threshold_mm_s"),
+    ("hf_energy", "baseline", "baseline_s"),
+    ("learned", "slip_prob", "slip_p"),
+])
+def test_an_unknown_key_in_a_method_section_is_refused(section, key, near):
+    msg = refused(BASE + f"[detector.{section}]\n{key} = 2.0\n")
+    assert f"[detector] {section}.{key}: unknown key" in msg and repr(near) in msg
+
+
+def test_method_sections_are_typed_and_checked():
+    assert "expected true or false" in refused(BASE + "[detector.hf_energy]\ntotal = 1\n")
+    assert "[detector] force_rate.lag_s: expected a number > 0" in refused(BASE + "[detector.force_rate]\nlag_s = 0.0\n")
+    prof = parse_profile(BASE + "[detector.force_rate]\nthreshold_per_s = 2.5\n[detector.learned]\nconfirm_hops = 2\n")
+    assert prof.detector.force_rate.threshold_per_s == 2.5 and prof.detector.force_rate.lag_s == 0.1
+    assert prof.detector.learned.confirm_hops == 2

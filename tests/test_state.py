@@ -2,9 +2,13 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from eskin_industrial.detect import GraspState, StateMachine
+from eskin_industrial.detect import GraspState, StateMachine, get_method
+from eskin_industrial.detect.state import ContactRule, Decision
 
 S = GraspState
 
@@ -42,3 +46,56 @@ def test_unknown_never_becomes_confident(paper_profile):
 def test_labels_round_trip(state):
     assert S.from_label(state.label) is state
     assert state.label in ("no_contact", "stable", "variable_force", "slip")
+
+
+def test_decision_rules():
+    d = Decision(hold_s=1.0, confirm=2)
+    assert d.decide(0.0, True, False, True, True) == S.STABLE  # contact, no verdict yet: never slip
+    assert d.decide(0.1, True, True, True, False) == S.VARIABLE_FORCE  # slip evidence, not yet confirmed
+    assert d.decide(0.2, True, True, True, False) == S.SLIP
+    assert d.decide(0.3, True, True, False, False) == S.SLIP  # held for hold_s after entry
+    assert d.decide(0.4, True, False, False, False) == S.SLIP  # not valid: kept
+    assert d.decide(1.2, True, True, False, True) == S.VARIABLE_FORCE  # down once the hold is over
+    assert d.decide(1.3, False, True, True, True) == S.NO_CONTACT  # out of contact: at once, hold or not
+
+
+def test_contact_rule_enters_at_the_threshold_and_stays_above_half_of_it():
+    rule = ContactRule(0.2)
+    totals = [0.15, 0.2, 0.15, 0.11, 0.09, 0.15, 0.25, 0.0, 0.1]
+    was, got = False, []
+    for s in totals:
+        was = rule.touching(s, was)
+        got.append(was)
+    assert got == [False, True, True, True, False, False, True, False, False]
+    assert rule.mask(np.array(totals)).tolist() == got
+    assert not ContactRule(0.0).touching(0.0, True)  # a zero total is never contact
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(0.0, 0.4), max_size=200), st.floats(0.0, 0.3))
+def test_contact_mask_is_the_per_frame_rule(totals, threshold):
+    rule = ContactRule(threshold)
+    was, expected = False, []
+    for s in totals:
+        was = rule.touching(s, was)
+        expected.append(was)
+    assert rule.mask(np.asarray(totals, float)).tolist() == expected
+
+
+def hovering_touch(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The total force wobbles around contact_threshold_n (0.2 N) for two seconds."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(300) / 100.0
+    total = np.where(t < 0.5, 0.0, 0.2 + 0.03 * rng.standard_normal(300))
+    return t, np.tile(total[:, None] / 25.0, (1, 25)) * (1 + 0.1 * rng.standard_normal((300, 25)))
+
+
+@pytest.mark.parametrize("method", ["paper", "paper-dw", "force-rate", "hf-energy", "cof-velocity", "cof-track"])
+def test_every_method_uses_the_one_contact_rule(paper_profile, method):
+    # a first touch hovering at the threshold: once touching, no method flickers back
+    t, f = hovering_touch()
+    x, y = paper_profile.coordinates_mm
+    cfg = replace(paper_profile.detector, hop_s=0.05, window_s=0.2)  # updates often enough to see a flicker
+    states = get_method(method).batch(cfg, x, y, 100.0, t, f).state
+    touched = np.flatnonzero(states != S.NO_CONTACT)
+    assert touched.size and not (states[touched[0]:] == S.NO_CONTACT).any()

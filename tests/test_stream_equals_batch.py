@@ -81,3 +81,24 @@ def test_any_geometry_streams_like_batch(hand_profile, seed, hop_samples, blocks
     batch = paper_batch(cfg, x, y, rate, t, f)
     sizes = np.random.default_rng(seed).integers(1, 30, 40)
     assert_same(batch, stream_in_chunks(PaperDetector(cfg, x, y, rate), t, f, sizes))
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_contact_at_the_threshold_streams_like_batch(paper_profile, seed):
+    # the total wanders through the contact rule's band (0.1-0.2 N), where contact
+    # depends on the frames before: both engines must carry that memory alike,
+    # across a long gap (restart: out of contact again) too
+    rng = np.random.default_rng(seed)
+    k = 1200
+    t = np.arange(k) / 100.0
+    t[700:] += 1.0
+    total = np.clip(0.15 + 0.1 * np.sin(t * 3.0) + 0.04 * rng.standard_normal(k), 0.0, None)
+    f = np.tile(total[:, None] / 25.0, (1, 25)) * (1 + 0.3 * rng.random((k, 25)))
+    x, y = paper_profile.coordinates_mm
+    cfg = replace(paper_profile.detector, hop_s=0.05, window_s=0.2)
+    batch = paper_batch(cfg, x, y, 100.0, t, f)
+    assert_same(batch, stream_in_chunks(PaperDetector(cfg, x, y, 100.0), t, f, rng.integers(1, 40, 80)))
+    s = batch.f_sum
+    band = (s > 0.1) & (s < 0.2)
+    # the band holds updates in contact and out of it: the memory mattered
+    assert (batch.state[band] == 0).any() and (batch.state[band] != 0).any()

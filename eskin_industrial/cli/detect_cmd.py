@@ -54,6 +54,10 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
             raise InputFormatError(f"--rate: expected a positive sample rate, got {rate}")
         settings = prof.detector
         chosen = get_method(method or settings.method)
+        if chosen.needs_model:  # learned: the default model, trained on the tuning seeds
+            from ..evaluation.train import ready
+
+            chosen = ready(chosen)
         x, y = prof.coordinates_mm
         if engine == "batch":
             table = chosen.batch(settings, x, y, rate, rec.t, values, flags)

@@ -24,6 +24,7 @@ import numpy as np
 from ..frames import FrameFlag
 from .regularize import forward_fill_rows
 from .settings import DetectorSettings, Geometry
+from .state import ContactRule
 
 _EPS = 1e-12  # keeps 0/0 ratios at 1 when a floor is set to 0
 _ZERO_VAR = 1e-12  # relative variance below which a distribution counts as uniform
@@ -42,6 +43,7 @@ class IndicatorColumns:
     flags: np.ndarray
     coe_sum: np.ndarray  #: Sum_coe of each window, before the floor
     dw_sum: np.ndarray  #: Sum_dw of each window, before the floor
+    contact: np.ndarray  #: the newest frame of each update in contact (:class:`ContactRule`)
 
 
 def decorrelation_pair(
@@ -87,7 +89,7 @@ def segment_indicators(
     sums = forces @ mat  # S, S*X, S*Y
     s = sums[:, 0]
     ss = np.einsum("ij,ij->i", forces, forces)
-    contact = (s >= cfg.contact_threshold_n) & (s > 0)
+    contact = ContactRule.from_settings(cfg).mask(s)
     with np.errstate(invalid="ignore", divide="ignore"):
         cof = sums[:, 1:] / s[:, None]
     centre = mat[:, 1:].mean(axis=0)
@@ -110,7 +112,7 @@ def segment_indicators(
 
     n_blocks = k_total // hop
     empty = IndicatorColumns(np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0, bool), np.zeros(0, np.int64),
-                             np.zeros(0), np.zeros(0))
+                             np.zeros(0), np.zeros(0), np.zeros(0, bool))
     if n_blocks < blocks:
         return empty, sums, cof
     used = n_blocks * hop
@@ -158,4 +160,4 @@ def segment_indicators(
     up_flags[0] |= np.bitwise_or.reduce(f_blk[:blocks])
     r_dw = np.where(short, 0.0, r_dw)
     end = start + window - 1
-    return IndicatorColumns(end, r_coe, r_dw, valid, up_flags.astype(np.int64), c_win, dw), sums, cof
+    return IndicatorColumns(end, r_coe, r_dw, valid, up_flags.astype(np.int64), c_win, dw, contact[end]), sums, cof

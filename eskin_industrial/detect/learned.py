@@ -11,24 +11,24 @@ The paper's R_coe and R_dw are not among the features: with them the classifier
 did no better on the tuning seeds (docs/evaluation.md), at the cost of a second
 indicator stream.
 
-The model is passed in (``model=``): anything with ``__call__(x) -> probabilities``;
-:class:`TreeEnsemble` is the numpy-only form the training code
-(``eskin_industrial.evaluation.train``, which needs scikit-learn) fills.  The
-registry's factory :func:`learned` asks that module for the default model, trained
-on the tuning seeds only; nothing here imports scikit-learn.
+The model is handed in (``model=``): anything with ``__call__(x) -> probabilities``;
+:class:`TreeEnsemble` is the numpy-only form the training code fills.  Nothing in
+``detect/`` trains, loads or imports scikit-learn: the layers that build detectors by
+name (the pipeline, the CLI, the evaluation) see the registry's ``needs_model`` and
+hand the default model over (``eskin_industrial.evaluation.train.ready``).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
 
 from .cof_track import CofTrack
 from .scored import ForceRate, HfEnergy, _Lagged
-from .settings import DetectorSettings
+from .settings import DetectorSettings, ForceRateSettings, HfEnergySettings
 
 #: Feature names, in the order of the vector the model sees.
 FEATURES: tuple[str, ...] = (
@@ -86,8 +86,9 @@ class TreeEnsemble:
 
 class Learned(CofTrack):
     """Slip when the model's slip probability exceeds ``slip_p`` in ``confirm_hops``
-    consecutive hops; varying force when ``variable_force`` is more likely than
-    ``stable``.  The score columns hold P(slip) and P(variable_force).
+    consecutive hops (``[detector.learned]``; keyword arguments override them, for
+    sweeps); varying force when ``variable_force`` is more likely than ``stable``.
+    The score columns hold P(slip) and P(variable_force).
 
     The defaults (0.5, three hops) were chosen on the tuning seeds by two-fold
     cross-validation (seeds 0-2 against 3, 4, 7): the lightest rule with no false
@@ -96,14 +97,18 @@ class Learned(CofTrack):
     name = "learned"
     columns = ("p_slip", "p_variable_force")
 
-    def __init__(self, settings: DetectorSettings, x_mm, y_mm, rate_hz: float, model: Model | None = None,
-                 slip_p: float = 0.5, confirm_hops: int = 3) -> None:
+    def __init__(self, settings: DetectorSettings, x_mm, y_mm, rate_hz: float, *, model: Model,
+                 **overrides: float) -> None:
+        c = replace(settings.learned, **overrides) if overrides else settings.learned
         self.model = model
-        self.slip_p = slip_p
-        self.confirm_hops = confirm_hops
-        # the streaming pieces of the other methods, fed the same clean frames
-        self._rate_score = ForceRate(settings, x_mm, y_mm, rate_hz)
-        self._hf_score = HfEnergy(settings, x_mm, y_mm, rate_hz)
+        self.slip_p = c.slip_p
+        self.confirm_hops = c.confirm_hops
+        # the streaming pieces of the other methods, fed the same clean frames; their
+        # scores are features, defined at the rivals' default settings (the model was
+        # trained on those), whatever a profile sets for the rivals themselves
+        features = replace(settings, force_rate=ForceRateSettings(), hf_energy=HfEnergySettings())
+        self._rate_score = ForceRate(features, x_mm, y_mm, rate_hz)
+        self._hf_score = HfEnergy(features, x_mm, y_mm, rate_hz)
         self._l20 = max(1, round(0.02 * rate_hz))
         self._l50 = max(1, round(0.05 * rate_hz))
         self._x = np.zeros(len(FEATURES))
@@ -126,7 +131,7 @@ class Learned(CofTrack):
         old20 = self._ring20.swap((mx, my))
         old50 = self._ring50.swap((mx, my))
         # only the last frame of a hop is classified: the cost is per hop, not per frame
-        if (self._k + 1) % self.hop or self._contact_run <= self.history or self.model is None:
+        if (self._k + 1) % self.hop or self._contact_run <= self.history:
             return 0.0, 0.0, False, False
         noise = self._noise
         sd = math.sqrt(2.0 * noise / self.m) / s if noise else 0.0  # one sigma of a smoothed displacement
@@ -149,13 +154,3 @@ class Learned(CofTrack):
 
 def _dist(mx: float, my: float, old: Any) -> float:
     return math.hypot(mx - old[0], my - old[1]) if old is not None else 0.0
-
-
-def learned(settings: DetectorSettings, x_mm, y_mm, rate_hz: float, **kw: Any) -> Learned:
-    """The registry's factory: :class:`Learned` with the default model (trained on the
-    tuning seeds of the built-in scenes, once per process) unless ``model=`` is given."""
-    if kw.get("model") is None:
-        from ..evaluation.train import default_model  # needs scikit-learn; trains once
-
-        kw["model"] = default_model()
-    return Learned(settings, x_mm, y_mm, rate_hz, **kw)

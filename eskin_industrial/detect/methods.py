@@ -4,17 +4,23 @@ any of them through one loop (the way python-can finds an interface by name).
 Each entry gives a streaming factory ``(settings, x_mm, y_mm, rate_hz) -> detector``
 (with ``push(t, forces, flags) -> list[Update]``) and a batch function
 ``(settings, x_mm, y_mm, rate_hz, t, forces, flags) -> UpdateTable``.
+
+A method with ``needs_model`` (``learned``) must also be handed ``model=``; the
+registry does not know where models come from.  :meth:`Method.with_model` binds one;
+the layers that build detectors by name do so with the default model
+(``eskin_industrial.evaluation.train.ready``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any, Callable
 
 import numpy as np
 
 from .cof_track import CofTrack
-from .learned import learned
+from .learned import Learned, Model
 from .paper import PaperDetector, paper_batch
 from .scored import CofVelocity, ForceRate, HfEnergy
 from .updates import UpdateTable
@@ -26,6 +32,13 @@ class Method:
     summary: str
     stream: Callable[..., Any]
     batch: Callable[..., Any]
+    #: The factories also need ``model=`` (see :meth:`with_model`).
+    needs_model: bool = False
+
+    def with_model(self, model: Model) -> "Method":
+        """This method with ``model`` bound into both factories."""
+        stream = partial(self.stream, model=model)
+        return Method(self.name, self.summary, stream, batch_via_stream(stream))
 
 
 def batch_via_stream(factory: Callable[..., Any]) -> Callable[..., UpdateTable]:
@@ -45,8 +58,8 @@ def _paper_rule(rule: str) -> Callable[..., Any]:
     return make
 
 
-def _method(name: str, summary: str, stream: Callable[..., Any]) -> Method:
-    return Method(name, summary, stream, batch_via_stream(stream))
+def _method(name: str, summary: str, stream: Callable[..., Any], needs_model: bool = False) -> Method:
+    return Method(name, summary, stream, batch_via_stream(stream), needs_model)
 
 
 METHODS: dict[str, Method] = {
@@ -57,7 +70,8 @@ METHODS: dict[str, Method] = {
     "hf-energy": _method("hf-energy", "rival: high-frequency energy of the taxel signals over its baseline", HfEnergy),
     "cof-velocity": _method("cof-velocity", "rival: centre-of-force speed above a threshold", CofVelocity),
     "cof-track": _method("cof-track", "ours: centre-of-force displacement against its learnt noise", CofTrack),
-    "learned": _method("learned", "accuracy ceiling: a small classifier on the other methods' features (extra: learn)", learned),
+    "learned": _method("learned", "accuracy ceiling: a small classifier on the other methods' features (extra: learn)", Learned,
+                       needs_model=True),
 }
 
 
@@ -66,3 +80,8 @@ def get_method(name: str) -> Method:
         return METHODS[name]
     except KeyError:
         raise KeyError(f"unknown detection method {name!r}; known: {', '.join(sorted(METHODS))}") from None
+
+
+def needs_model(factory: Callable[..., Any]) -> bool:
+    """Whether ``factory`` is a registered method's stream factory that must be handed a model."""
+    return any(m.needs_model and factory is m.stream for m in METHODS.values())

@@ -66,7 +66,7 @@ def paper_batch(
         parts.append({
             "t": reg.t[a:b][end], "r_coe": cols.r_coe, "r_dw": cols.r_dw, "valid": cols.valid,
             "f_sum": s, "xc": cof[end, 0], "yc": cof[end, 1], "flags": cols.flags,
-            "contact": (s >= settings.contact_threshold_n) & (s > 0),
+            "contact": cols.contact,
         })
     if not parts:
         return UpdateTable(**{c: np.zeros(0, np.int64 if c in ("state", "flags") else bool if c == "valid" else float) for c in COLUMNS})

@@ -12,6 +12,7 @@ import numpy as np
 import pywt
 
 from .settings import DetectorSettings
+from .state import ContactRule
 
 
 def reference_window_sums(
@@ -21,13 +22,17 @@ def reference_window_sums(
     geo = settings.geometry(rate_hz)
     k_total = forces.shape[0]
     ends, coe, dw = [], [], []
-    thr = settings.contact_threshold_n
-    # centre of force per frame, held at its last in-contact value (array centre before any)
+    rule = ContactRule.from_settings(settings)
+    # contact per frame (the rule remembers the frame before), and the centre of force,
+    # held at its last in-contact value (array centre before any)
+    contact = np.zeros(k_total, bool)
     cof = np.empty((k_total, 2))
     held = (float(np.mean(x_mm)), float(np.mean(y_mm)))
+    was = False
     for k in range(k_total):
         s = forces[k].sum()
-        if s >= thr and s > 0:
+        contact[k] = was = rule.touching(s, was)
+        if was:
             held = (float(forces[k] @ x_mm / s), float(forces[k] @ y_mm / s))
         cof[k] = held
     for end in range(geo.window - 1, k_total, geo.hop):
@@ -36,8 +41,7 @@ def reference_window_sums(
         for k in range(start, end + 1):
             if k < geo.lag:
                 continue
-            a, b = forces[k], forces[k - geo.lag]
-            c += _decorrelation(a, b, thr)
+            c += _decorrelation(forces[k], forces[k - geo.lag], contact[k], contact[k - geo.lag])
         xs, ys = cof[start:end + 1, 0], cof[start:end + 1, 1]
         e = 0.0
         if geo.window >= geo.filter_len:
@@ -63,9 +67,7 @@ def valid_detail(x: np.ndarray, wavelet: str) -> np.ndarray:
     return detail[first:last + 1]
 
 
-def _decorrelation(a: np.ndarray, b: np.ndarray, thr: float) -> float:
-    ca = a.sum() >= thr and a.sum() > 0
-    cb = b.sum() >= thr and b.sum() > 0
+def _decorrelation(a: np.ndarray, b: np.ndarray, ca: bool, cb: bool) -> float:
     if not (ca and cb):
         return 1.0 if (ca or cb) else 0.0
     fa, fb = a / a.sum(), b / b.sum()  # F_dis, as the paper writes it

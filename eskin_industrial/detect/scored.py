@@ -1,30 +1,35 @@
 """Detectors built from one per-frame score: the rivals a reviewer asks for, and the
-skeleton of our own method.  Each shares the frame hygiene, contact logic, hop
-cadence and :class:`Update` output of the paper detector, so the evaluation and the
-bridge run them all the same way.
+skeleton of our own method.  Each shares the frame hygiene, contact rule, decision
+and :class:`Update` output of the paper detector (:mod:`.state`), so the evaluation
+and the bridge run them all the same way.
 
-Per frame k the subclass returns ``(score_a, score_b, slip, varying)``; an update is
-emitted every hop with the hop's largest scores, ``slip`` if any frame of the hop
-voted slip (for ``confirm`` consecutive frames), ``varying`` likewise.  What the two
+Per frame k in contact the subclass returns ``(score_a, score_b, slip, varying)``;
+every hop the hop's votes go to the :class:`~.state.Decision`: slip evidence if any
+frame of the hop voted slip (for ``confirm`` consecutive frames), varying evidence
+if any voted varying.  The update carries the hop's largest scores; what the two
 score columns mean is each class's ``columns``; they are written where the paper
 detector writes R_coe and R_dw.
+
+The rivals' thresholds are profile settings (``[detector.force_rate]``,
+``[detector.cof_velocity]``, ``[detector.hf_energy]``); keyword arguments override
+single fields, for parameter sweeps.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from ..frames import FrameFlag
 from .hygiene import FrameHygiene, feed
 from .settings import DetectorSettings
-from .state import GraspState
+from .state import ContactRule, Decision
 from .updates import Update
 
 _WARMUP = int(FrameFlag.WARMUP)
 _FILLED = int(FrameFlag.FILLED)
-_NO, _STABLE, _VAR, _SLIP = (int(s) for s in GraspState)
 
 
 class ScoredDetector(FrameHygiene):
@@ -43,12 +48,15 @@ class ScoredDetector(FrameHygiene):
         self.hop = max(1, round((hop_s if hop_s is not None else settings.hop_s) * rate_hz))
         self.history = max(1, round(self.history_s * rate_hz))
         self.confirm = confirm
-        self.hold = settings.hold_s
         self._mat = np.column_stack([np.ones(self.n), x_mm, y_mm]).astype(np.float64)
-        self._thr = settings.contact_threshold_n
-        self.state = _NO
-        self._entered = -math.inf
+        self._touching = ContactRule.from_settings(settings).touching
+        # (confirmation is per frame, above: the decision reports a hop's slip vote at once)
+        self.decision = Decision(settings.hold_s, confirm=1)
         self._reset(0)
+
+    @property
+    def state(self) -> int:
+        return self.decision.state
 
     def _reset(self, flags: int) -> None:
         self._k = 0
@@ -71,9 +79,7 @@ class ScoredDetector(FrameHygiene):
     # -- the per-frame loop -----------------------------------------------------
     def _step(self, t: float, f: np.ndarray, flags: int, out: list[Update]) -> None:
         s, sx, sy = (f @ self._mat).tolist()
-        # contact with hysteresis: a total force hovering at the threshold (the first
-        # touch) must not toggle the PLC between no_contact and stable every frame
-        contact = s > 0.0 and (s >= self._thr or (self._contact_run > 0 and s >= 0.5 * self._thr))
+        contact = self._touching(s, self._contact_run > 0)
         if contact:
             self._cof = (sx / s, sy / s)
             self._contact_run += 1
@@ -104,18 +110,9 @@ class ScoredDetector(FrameHygiene):
 
     def _decide(self, t: float, s: float, contact: bool) -> Update:
         valid = not self._warm
-        if not contact:
-            candidate = _NO
-        elif not valid:
-            candidate = self.state if self.state != _NO else _STABLE
-        else:
-            candidate = _SLIP if self._hop_slip else _VAR if self._hop_var else _STABLE
-        cur = self.state
-        if candidate > cur or candidate == _NO or (candidate < cur and t - self._entered >= self.hold):
-            if candidate != cur:
-                self.state, self._entered = candidate, t
+        state = self.decision.decide(t, contact, valid, self._hop_slip, self._hop_var)
         flags = self._hop_flags | (0 if valid else _WARMUP)
-        upd = Update(t, self._hop_a, self._hop_b, self.state, valid, s, self._cof[0], self._cof[1], flags)
+        upd = Update(t, self._hop_a, self._hop_b, state, valid, s, self._cof[0], self._cof[1], flags)
         self._hop_a = self._hop_b = 0.0
         self._hop_slip = self._hop_var = False
         self._hop_flags = 0
@@ -146,15 +143,18 @@ class _Lagged:
 
 
 class ForceRate(ScoredDetector):
-    """Rival: slip when the total force changes fast: |dS/dt| / S above ``threshold`` (1/s)."""
+    """Rival: slip when the total force changes fast: |dS/dt| / S above ``threshold_per_s``
+    (``[detector.force_rate]``)."""
 
     name = "force-rate"
     columns = ("force_rate_per_s", "unused")
 
-    def __init__(self, *args, threshold_per_s: float = 1.0, lag_s: float = 0.1, **kw) -> None:
-        self.threshold = threshold_per_s
-        self.lag_s = lag_s
-        super().__init__(*args, **kw)
+    def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
+                 hop_s: float | None = None, confirm: int = 1, **overrides: float) -> None:
+        c = replace(settings.force_rate, **overrides) if overrides else settings.force_rate
+        self.threshold = c.threshold_per_s
+        self.lag_s = c.lag_s
+        super().__init__(settings, x_mm, y_mm, rate_hz, hop_s, confirm)
 
     def reset_scores(self) -> None:
         self._ring = _Lagged(max(1, round(self.lag_s * self.rate_hz)), None)
@@ -168,15 +168,18 @@ class ForceRate(ScoredDetector):
 
 
 class CofVelocity(ScoredDetector):
-    """Rival: slip when the centre of force moves faster than ``threshold_mm_s``."""
+    """Rival: slip when the centre of force moves faster than ``threshold_mm_s``
+    (``[detector.cof_velocity]``)."""
 
     name = "cof-velocity"
     columns = ("cof_speed_mm_s", "unused")
 
-    def __init__(self, *args, threshold_mm_s: float = 4.0, lag_s: float = 0.1, **kw) -> None:
-        self.threshold = threshold_mm_s
-        self.lag_s = lag_s
-        super().__init__(*args, **kw)
+    def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
+                 hop_s: float | None = None, confirm: int = 1, **overrides: float) -> None:
+        c = replace(settings.cof_velocity, **overrides) if overrides else settings.cof_velocity
+        self.threshold = c.threshold_mm_s
+        self.lag_s = c.lag_s
+        super().__init__(settings, x_mm, y_mm, rate_hz, hop_s, confirm)
 
     def reset_scores(self) -> None:
         self._ring = _Lagged(max(1, round(self.lag_s * self.rate_hz)), None)
@@ -193,19 +196,21 @@ class HfEnergy(ScoredDetector):
     """Rival (vibration-based slip detection): energy of the taxels' second difference,
     relative to its own running baseline; slip when above ``threshold`` times it.
     ``total=True`` takes the second difference of the total force instead, where a
-    vibration shared by the taxels adds up coherently and their noise does not."""
+    vibration shared by the taxels adds up coherently and their noise does not
+    (``[detector.hf_energy]``)."""
 
     name = "hf-energy"
     columns = ("hf_energy_ratio", "unused")
     history_s = 0.3
 
-    def __init__(self, *args, threshold: float = 6.0, smooth_s: float = 0.05, baseline_s: float = 2.0,
-                 total: bool = False, **kw) -> None:
-        self.threshold = threshold
-        self.total = total
-        self.smooth_s = smooth_s
-        self.baseline_s = baseline_s
-        super().__init__(*args, **kw)
+    def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
+                 hop_s: float | None = None, confirm: int = 1, **overrides: float | bool) -> None:
+        c = replace(settings.hf_energy, **overrides) if overrides else settings.hf_energy
+        self.threshold = c.threshold
+        self.total = c.total
+        self.smooth_s = c.smooth_s
+        self.baseline_s = c.baseline_s
+        super().__init__(settings, x_mm, y_mm, rate_hz, hop_s, confirm)
 
     def reset_scores(self) -> None:
         self._p1: np.ndarray | float | None = None  # the last two frames (or totals)

@@ -74,6 +74,53 @@ class CofTrackSettings:
 
 
 @dataclass(frozen=True)
+class ForceRateSettings:
+    """Rival ``force-rate``: slip when the total force changes fast."""
+
+    #: Slip when |S_k - S_{k-lag}| / lag_s / S_k exceeds this (1/s); varying force
+    #: above 0.3 of it.
+    threshold_per_s: float = field(default=1.0, metadata=positive())
+    #: Time over which the change is taken.
+    lag_s: float = field(default=0.1, metadata=positive())
+
+
+@dataclass(frozen=True)
+class CofVelocitySettings:
+    """Rival ``cof-velocity``: slip when the centre of force moves fast."""
+
+    #: Slip when the centre of force moved faster than this (mm/s) ...
+    threshold_mm_s: float = field(default=4.0, metadata=positive())
+    #: ... over this time.
+    lag_s: float = field(default=0.1, metadata=positive())
+
+
+@dataclass(frozen=True)
+class HfEnergySettings:
+    """Rival ``hf-energy`` (vibration-based slip detection): energy of the second
+    difference of the taxels (or of the total force) against its running baseline."""
+
+    #: Slip when the smoothed energy exceeds this multiple of its baseline.
+    threshold: float = field(default=6.0, metadata=positive())
+    #: Time constant of the smoothed energy.
+    smooth_s: float = field(default=0.05, metadata=positive())
+    #: Time constant of the baseline (learnt only from frames that do not vote slip).
+    baseline_s: float = field(default=2.0, metadata=positive())
+    #: Take the second difference of the total force instead of each taxel's: a
+    #: vibration the taxels share adds up coherently there, their noise does not.
+    total: bool = False
+
+
+@dataclass(frozen=True)
+class LearnedSettings:
+    """The ``learned`` ceiling's decision rule (its model is trained, not configured)."""
+
+    #: Slip when the model's slip probability exceeds this ...
+    slip_p: float = field(default=0.5, metadata=in_range(0.0, 1.0))
+    #: ... in this many consecutive hops.
+    confirm_hops: int = field(default=3, metadata=positive("an integer >= 1"))
+
+
+@dataclass(frozen=True)
 class DetectorSettings:
     #: Detection method by name (``eskin-bus detect --help`` lists them).
     method: MethodName = "cof-track"
@@ -106,13 +153,20 @@ class DetectorSettings:
     coe_floor: float = field(default=2e-3, metadata=non_negative())
     #: Noise floor added to each CoF detail-energy window sum, per coefficient (mm^2).
     dw_floor_mm2: float = field(default=2e-4, metadata=non_negative())
-    #: Total force below which the array is "not in contact" (F_dis, CoF undefined).
+    #: Total force at which the array comes into contact (F_dis and the CoF become
+    #: defined); contact then lasts while the total stays above half of it, for every
+    #: method (``detect/state.py``, ContactRule).
     contact_threshold_n: float = field(default=0.2, metadata=non_negative())
     #: A timestamp gap longer than this restarts the detector (shorter gaps are
     #: filled by holding the last frame, so that lags stay in time, not in samples).
     max_gap_s: float = field(default=0.4, metadata=positive())
     #: Settings of our own method (the paper's keys above do not apply to it).
     cof_track: CofTrackSettings = field(default_factory=CofTrackSettings)
+    #: Settings of the rivals and of the learned ceiling, one section each.
+    force_rate: ForceRateSettings = field(default_factory=ForceRateSettings)
+    cof_velocity: CofVelocitySettings = field(default_factory=CofVelocitySettings)
+    hf_energy: HfEnergySettings = field(default_factory=HfEnergySettings)
+    learned: LearnedSettings = field(default_factory=LearnedSettings)
 
     def __post_init__(self) -> None:
         hops = self.window_s / self.hop_s

@@ -22,6 +22,7 @@ from ..frames import FrameFlag
 from .hygiene import FrameHygiene
 from .indicators import _EPS, _ZERO_VAR, odd_offsets
 from .settings import DetectorSettings, Geometry
+from .state import ContactRule
 
 _WARMUP = int(FrameFlag.WARMUP)
 _SHORT = int(FrameFlag.SHORT_WINDOW)
@@ -47,12 +48,13 @@ class IndicatorStream(FrameHygiene):
         self._c_floor = settings.coe_floor * self.geo.window
         self._e_floor = settings.dw_floor_mm2 * odd_offsets(self.geo.window, len(self._h))
         self._symmetric = settings.ratio_mode == "symmetric"
-        self._thr = settings.contact_threshold_n
+        self._touching = ContactRule.from_settings(settings).touching
         self._reset(0)
 
     def _reset(self, flags: int) -> None:
         geo = self.geo
         self._k = 0
+        self._contact = False  # the previous frame's, for the contact rule's hysteresis
         self._ring_f = np.zeros((geo.lag, self.n))
         self._ring_s = [0.0] * geo.lag
         self._ring_ss = [0.0] * geo.lag
@@ -74,7 +76,7 @@ class IndicatorStream(FrameHygiene):
         k = self._k
         s, sx, sy = (f @ self._mat).tolist()
         ss = float(f @ f)
-        contact = s >= self._thr and s > 0.0
+        contact = self._contact = self._touching(s, self._contact)
         if contact:
             self._cof = (sx / s, sy / s)
         xc, yc = self._cof

@@ -1,11 +1,5 @@
 """Run methods over scenes and seeds and score them: the numbers every accuracy claim
-in the docs rests on.
-
-Seeds: ``TUNING_SEEDS`` are the only ones any threshold or default was chosen on;
-``EVALUATION_SEEDS`` are held out and are what the docs report.  False alarms per
-hour need hours of holding, more than the suite holds (0.7 h): the still holds alone
-are scored over many more seeds, ``HOLD_TUNING_SEEDS`` (11.3 h) to choose, and
-``HOLD_EVALUATION_SEEDS`` (3.8 h) held out to report.
+in the docs rests on.  Which scenes and seeds (tuning, held out) is ``corpus.py``.
 """
 
 from __future__ import annotations
@@ -19,32 +13,24 @@ import numpy as np
 from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
 from ..detect.updates import UpdateTable
-from ..profile import LayoutSection
 from ..scenes import Rendered, SceneSpec, load_scene, render
+from .corpus import (
+    EVALUATION_SEEDS,
+    HOLD_EVALUATION_SEEDS,
+    HOLD_SCENES,
+    HOLD_TUNING_SEEDS,
+    SUITE,
+    TUNING_SEEDS,
+    coordinates,
+)
 from .metrics import SceneScore, score_scene
-
-TUNING_SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4, 7)  # 7: the demo's seed, where a false alarm was found
-EVALUATION_SEEDS: tuple[int, ...] = tuple(range(1000, 1010))
-
-#: The long-hold check: the still holds only, over many seeds.
-HOLD_SCENES: tuple[str, ...] = ("hold", "hand-hold")
-#: (100-159 at first; 160-399 added when a false alarm every hour and a half on the
-#: light hand grip hid in the 2.3 h of the first sixty: docs/evaluation.md)
-HOLD_TUNING_SEEDS: tuple[int, ...] = tuple(range(100, 400))
-HOLD_EVALUATION_SEEDS: tuple[int, ...] = tuple(range(2000, 2100))
-
-#: The built-in suite: the paper's cases, the hand, and the scenes made to break methods.
-SUITE: tuple[str, ...] = ("case1", "case2", "case3", "case4", "case5", "case6", "hand",
-                          "hold", "hand-hold", "creep", "partial", "vibration")
+from .train import hand_model
 
 #: Detector settings per layout, from the shipped profiles' [detector] sections.
 DEFAULT_SETTINGS = DetectorSettings()
 
-
-def coordinates(rendered: Rendered) -> tuple[np.ndarray, np.ndarray]:
-    """Taxel coordinates of the scene's array, as a profile's layout computes them."""
-    a = rendered.spec.array
-    return LayoutSection(a.rows, a.cols, a.pitch_mm, a.row_pitch_mm).coordinates_mm()
+__all__ = ["DEFAULT_SETTINGS", "EVALUATION_SEEDS", "HOLD_EVALUATION_SEEDS", "HOLD_SCENES", "HOLD_TUNING_SEEDS",
+           "SUITE", "TUNING_SEEDS", "Factory", "Result", "by_name", "coordinates", "evaluate", "run_one"]
 
 
 @dataclass
@@ -64,8 +50,11 @@ Factory = Callable[[DetectorSettings, np.ndarray, np.ndarray, float], Any]
 
 
 def run_one(factory: Factory, settings: DetectorSettings, rendered: Rendered) -> tuple[UpdateTable, float]:
+    """One detector over one rendered scene; its updates and the seconds it took.
+    (A method that needs a model is handed the default one: trained, on first use,
+    on the tuning seeds.)"""
     x, y = coordinates(rendered)
-    det = factory(settings, x, y, rendered.rate_hz)
+    det = hand_model(factory)(settings, x, y, rendered.rate_hz)
     t, f = rendered.t, rendered.forces
     push = det.push
     start = time.perf_counter()
