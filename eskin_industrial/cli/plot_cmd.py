@@ -57,10 +57,16 @@ def plot(profile_path: str, input_path: str | None, can_log: str | None, output:
         if rec.unit == "raw":
             values, _ = cal.to_newtons(values)
         rate = rec.rate_hz(prof.sensor.rate_hz)
-    chosen = get_method(method or prof.detector.method)
+    base = get_method(method or prof.detector.method)
+    if base.needs_model:  # the learned method is handed its model by the layer above
+        from ..evaluation.train import ready
+
+        chosen = ready(base)
+    else:
+        chosen = base
     x, y = prof.coordinates_mm
     table = chosen.batch(prof.detector, x, y, rate, t, values, None)
-    col_a, col_b = getattr(chosen.stream, "columns", ("R_coe", "R_dw"))
+    col_a, col_b = getattr(base.stream, "columns", ("R_coe", "R_dw"))
 
     fig, (ax_f, ax_r) = plt.subplots(2, 1, figsize=(11, 6), sharex=True, gridspec_kw={"height_ratios": [1, 2]})
     ax_f.plot(t, np.nansum(values, axis=1), color="k", lw=0.8)
