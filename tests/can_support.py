@@ -17,7 +17,7 @@ class Receiver:
         self.source = CanSource(group, group.queues[0], ScanAssembler(layout, rate))
         self.updates: list = []
         self.loop = NodeLoop(profile, self.source, [], rate_hz=rate, on_update=self.updates.append)
-        self.pipeline, self.assembler = self.loop.pipeline, self.source.assembler
+        self.pipeline, self.assembler, self.reader = self.loop.pipeline, self.source.assembler, reader
 
     def run(self, **until) -> None:
         """As the command: until a stop condition, then the reader stops and what it

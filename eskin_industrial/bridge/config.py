@@ -328,3 +328,38 @@ def _check_together(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
 
 def output_classes(config: BridgeConfig, default_output: bool = True) -> list[tuple[type[Sink], Any]]:
     return [(sink_class(kind), options) for kind, options in config.output_kinds(default_output).items()]
+
+
+def explain(config: BridgeConfig, node: ResolvedNode) -> list[tuple[str, Any, str]]:
+    """The node's settings as resolved, each with where it came from (``--explain``):
+    the command line or the bridge configuration, the profile, or the default."""
+    given = "command line" if config.source == COMMAND_LINE else config.source
+    prof = f"profile {node.profile.source}"
+    out: list[tuple[str, Any, str]] = []
+
+    def from_profile(key: str) -> Any:
+        value: Any = node.profile
+        for part in key.split("."):
+            value = getattr(value, part)
+        return value
+
+    def add(prefix: str, options: Any, profile_keys: dict[str, str], origin: str) -> None:
+        for f in dataclasses.fields(options):
+            value = getattr(options, f.name)
+            default = None if f.default is dataclasses.MISSING else f.default
+            name = f"{prefix}{f.name}"
+            if value is not None and (f.default is dataclasses.MISSING or value != default):
+                out.append((name, value, origin))
+            elif f.name in profile_keys:
+                out.append((name, from_profile(profile_keys[f.name]), prof))
+            elif value is not None:
+                out.append((name, value, "default"))
+
+    c = node.config
+    out.append(("rate_hz", node.rate_hz, given if c.rate_hz is not None else prof))
+    out.append(("base_address", node.profile.modbus.plc.base_address, given if c.base_address is not None else prof))
+    out.append(("source", c.source, given))
+    add("", c.options, node.kind.profile_keys, given)
+    for kind, options in config.output_kinds().items():
+        add(f"{kind}.", options, sink_class(kind).profile_keys, given if kind in config.outputs else "default output")
+    return out

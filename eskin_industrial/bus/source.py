@@ -126,6 +126,8 @@ class Source(abc.ABC):
     spec: ClassVar[str] = ""
     #: The kind's own ``[[node]]`` keys (a frozen dataclass).
     Options: ClassVar[type] = type(None)
+    #: Option -> the profile key (dotted) it falls back to when unset, for ``--explain``.
+    profile_keys: ClassVar[dict[str, str]] = {}
 
     #: Set when this source is fed by a transport shared with other nodes' sources.
     feeder: "Feeder | None" = None

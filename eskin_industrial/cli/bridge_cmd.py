@@ -64,8 +64,10 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_
 @click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,
               help="Stop after this many seconds (default: until SIGTERM/SIGINT).")
 @click.option("--check", is_flag=True, help="Validate the configuration and profiles, print the plan, exit.")
+@click.option("--explain", is_flag=True,
+              help="With --check: also every node's resolved settings and where each came from.")
 def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, base_address, rate_hz,
-           name, log_format, log_level, status_every, duration_s, check, **output_values) -> None:
+           name, log_format, log_level, status_every, duration_s, check, explain, **output_values) -> None:
     """Run the bridge: decode each node's scans, detect, and keep the outputs (by
     default the PLC's register blocks) up to date, until SIGTERM or SIGINT (then every
     block reads BRIDGE_OFFLINE).  With no output given, the PLC as the profile
@@ -73,6 +75,7 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     from dataclasses import replace
 
     from ..bridge.config import BridgeConfig, check_sources, load_bridge_config, output_classes, resolve
+    from ..bridge.config import explain as explain_node
     from ..bridge.logs import EventLog
     from ..bridge.runtime import Bridge
     from ..bus.modbus.io import quiet_pymodbus
@@ -103,7 +106,12 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
             where = ", ".join(cls.describe(options, n) for cls, options in outputs)
             click.echo(f"{n.name}: {n.profile.name} ({n.profile.source}), {n.rate_hz:g} Hz, "
                        f"{n.kind.describe(n)} -> {where}")
+            if explain:
+                for key, value, origin in explain_node(cfg, n):
+                    click.echo(f"  {key} = {value!r}  ({origin})")
         return
+    if explain:
+        raise click.UsageError("--explain goes with --check")
     quiet_pymodbus()
     log = EventLog(sys.stderr, logs.format, logs.level)
     br = Bridge(cfg, nodes, log)

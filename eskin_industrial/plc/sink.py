@@ -85,6 +85,7 @@ class PlcSink(Sink):
 
     kind = "plc"
     Options = PlcOptions
+    profile_keys = {"mode": "modbus.plc.mode", "host": "modbus.plc.host", "port": "modbus.plc.port"}
     cli_options = (
         CliOption("--plc", "plc", "tcp:HOST:PORT (write into the PLC), rtu:PORT (PLC as RTU slave), serve:HOST:PORT "
                   "(serve, the PLC reads), serve-rtu:PORT; default: the profile's [modbus.plc].", metavar="SPEC"),

@@ -114,6 +114,8 @@ class Sink(abc.ABC):
     Options: ClassVar[type] = type(None)
     #: The kind's command-line options.
     cli_options: ClassVar[tuple[CliOption, ...]] = ()
+    #: Option -> the (first node's) profile key it falls back to when unset.
+    profile_keys: ClassVar[dict[str, str]] = {}
 
     def __init__(self) -> None:
         self._closed = False

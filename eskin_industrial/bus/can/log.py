@@ -139,6 +139,7 @@ class CanLogSource(CanSource):
     kind = "can-log"
     spec = "log:FILE"
     Options = CanLogOptions
+    profile_keys = {"fd": "can.fd", "base_id": "can.base_id", "node_id": "can.node_id"}
 
     @classmethod
     def options_from_spec(cls, where: str, bus: dict[str, Any]) -> dict[str, Any]:

@@ -50,6 +50,8 @@ class CanSource(Source):
     kind = "can"
     spec = "can"
     Options = CanOptions
+    profile_keys = {"bitrate_bps": "can.bitrate_bps", "fd": "can.fd", "data_bitrate_bps": "can.data_bitrate_bps",
+                    "base_id": "can.base_id", "node_id": "can.node_id"}
 
     def __init__(self, feeder: CanGroup, queue: collections.deque[can.Message], assembler: ScanAssembler,
                  idle_wait_s: float = 0.0005) -> None:

@@ -62,6 +62,7 @@ class RtuSource(Source):
     kind = "modbus-rtu"
     spec = "rtu:PORT[@BAUD]"
     Options = RtuOptions
+    profile_keys = {"unit_id": "modbus.node.unit_id", "baudrate": "modbus.node.baudrate"}
 
     def __init__(self, profile: Profile, port: str, *, baudrate: int | None = None,
                  poll_hz: float | None = None) -> None:
