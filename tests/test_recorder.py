@@ -45,7 +45,7 @@ def test_a_bridge_writes_the_plc_block_and_the_record(paper_profile, tmp_path, f
         wait_for(lambda: run.counters("grip")["scans"] == 200, what="every scan decoded")
         wait_for(lambda: run.block(0)["STATUS"] & Status.DATA_VALID, what="a verdict in the PLC block")
         block = run.block(0)
-        counters = run.counters("grip")
+    counters = run.bridge.counters()["grip"]  # stopped: every update recorded and counted
     written = tmp_path / f"updates-grip.{fmt}"
     text = written.read_text()
     if fmt == "csv":

@@ -241,12 +241,24 @@ class Bridge:
         stop = self._stop
         loops = [r.loop for r in runs]
         sources = [lp.source for lp in loops]
-        while not stop.is_set():
-            feeder.route(min(lp.wait_budget() for lp in loops))  # the round's one wait
+
+        def serve() -> None:  # route what came, step every node: one round, under the lock
+            feeder.route(0.0)
             for lp, src in zip(loops, sources):
                 lp.step(0.0)
                 while src.pending:  # every scan routed in this round
                     lp.step(0.0)
+
+        serve_arrivals = getattr(feeder, "serve_arrivals", None)
+        if serve_arrivals is not None:
+            serve_arrivals(serve)  # an idle bus's frame is served by its reader at once
+        lock = getattr(feeder, "lock", None) or threading.Lock()
+        while not stop.is_set():
+            feeder.wait(min(lp.wait_budget() for lp in loops))  # the round's one wait
+            with lock:
+                serve()
+            if getattr(feeder, "serve_error", None) is not None:
+                raise feeder.serve_error
             if feeder.done:
                 self.log.event("source_ended", node=",".join(r.name for r in runs),
                                error=sources[0].last_error or "-")

@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import collections
 import struct
-from collections.abc import Sequence
+import threading
+from collections.abc import Callable, Sequence
 
 import can
 
@@ -40,6 +41,33 @@ class CanGroup:
         self.unrouted_frames = 0
         self.log_write_errors = 0
         self._started = False
+        #: Held by whoever steps the nodes of this bus: the loop thread, or the reader
+        #: thread serving an arrival while the loop thread waits.
+        self.lock = threading.Lock()
+        self._serve: Callable[[], None] | None = None
+        self.serve_error: BaseException | None = None
+
+    def serve_arrivals(self, serve: Callable[[], None]) -> None:
+        """Let the reader thread run ``serve`` (route, then step every node) itself when
+        frames arrive while the nodes' loop thread is idle: the scan is decided and
+        published with no thread hand-off.  Under load (frames already queued, or the
+        loop thread busy) the reader only queues them, as before, and keeps reading."""
+        self._serve = serve
+        if hasattr(self.reader, "on_queued"):
+            self.reader.on_queued = self._on_queued
+
+    def _on_queued(self) -> bool:
+        serve = self._serve
+        if serve is None or not self.lock.acquire(blocking=False):
+            return False
+        try:
+            serve()
+        except BaseException as exc:  # noqa: BLE001 - handed to the loop thread, which fails the bridge
+            self.serve_error, self._serve = exc, None
+            return False
+        finally:
+            self.lock.release()
+        return True
 
     def start(self) -> "CanGroup":
         """Start the reader (once: several sources share it)."""
@@ -48,15 +76,21 @@ class CanGroup:
             self.reader.start()
         return self
 
-    def route(self, timeout_s: float) -> int:
-        """Wait up to ``timeout_s`` for frames, then hand every queued frame to its
-        node; returns how many."""
+    def wait(self, timeout_s: float) -> None:
+        """Wait up to ``timeout_s`` for frames to be queued."""
         q, arrived = self.reader.queue, self.reader.arrived
         if not q:
             # Cleared before the second look, so a frame queued in between is seen.
             arrived.clear()
             if not q:
                 arrived.wait(timeout_s)
+
+    def route(self, timeout_s: float) -> int:
+        """Wait up to ``timeout_s`` for frames, then hand every queued frame to its
+        node; returns how many."""
+        if timeout_s > 0.0:
+            self.wait(timeout_s)
+        q = self.reader.queue
         n = 0
         log, single, route = self.log, self._single, self._route
         while q:

@@ -94,7 +94,12 @@ class FrameThread:
     ``arrived`` (set after frames were queued: a consumer waits on it instead of
     polling), ``counters`` (``rx_queue_drops``: frames dropped because the consumer
     fell behind; ``bus_errors``; ``bus_reopens``), ``last_error`` and ``done`` (the
-    source has ended: never, for a live bus).  Subclasses write ``_run``."""
+    source has ended: never, for a live bus).  Subclasses write ``_run``.
+
+    ``on_queued``, when set, is called on this thread when frames arrive in an empty
+    queue; returning True means it has consumed them itself (an idle consumer served
+    on the spot, with no thread hand-off), False that the consumer must be woken.
+    """
 
     done = False
     thread_name = "can-frames"
@@ -104,6 +109,7 @@ class FrameThread:
         self.max_frames = queue_frames
         self.counters = {"rx_queue_drops": 0, "bus_errors": 0, "bus_reopens": 0, **counters}
         self.arrived = threading.Event()
+        self.on_queued: Callable[[], bool] | None = None
         self.last_error = ""
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=self.thread_name, daemon=True)
@@ -151,6 +157,7 @@ class BusReader(FrameThread):
             except (can.CanError, OSError, ValueError) as exc:
                 self._fail(exc)
                 continue
+            was_empty = not q
             for msg in batch:
                 if msg is None:
                     continue
@@ -159,7 +166,9 @@ class BusReader(FrameThread):
                 else:
                     q.append(msg)
             if q:
-                self.arrived.set()
+                hook = self.on_queued
+                if not (was_empty and hook is not None and hook()):
+                    self.arrived.set()
 
     def _fail(self, exc: Exception) -> None:
         self.counters["bus_errors"] += 1
