@@ -11,6 +11,8 @@ from eskin_industrial.cli import main
 from eskin_industrial.detect.updates import Update
 from eskin_industrial.errors import Refused
 from eskin_industrial.plc.image import (
+    COIL,
+    COILS,
     IMAGE_COUNT,
     REG,
     REGISTERS,
@@ -119,9 +121,9 @@ def test_writes_outside_the_command_registers_are_refused(paper_profile):
     assert info.value.code == 3
     with pytest.raises(Refused):
         parse_register_write(REG["COMMAND"].offset - 1, [0, 1])  # straddles into read-only
-    assert parse_coil_write(0, [True, False, False]) == [Command("ack"), Command("disable")]
+    assert parse_coil_write(COIL["ACK_SLIP"].offset, [True, False, False]) == [Command("ack"), Command("disable")]
     with pytest.raises(Refused):
-        parse_coil_write(3, [True])
+        parse_coil_write(len(COILS), [True])
 
 
 def test_non_finite_values_do_not_break_the_image(paper_profile):

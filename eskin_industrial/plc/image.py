@@ -4,17 +4,28 @@ Pure code, no I/O and no clock: :class:`PlcImage` takes detector updates, health
 (age of the newest frame, bus fault, counters) and the PLC's commands, and renders
 the holding registers and the status bits.  Transports (``plc_client``,
 ``plc_server``) only move the rendered values.  The table in ``docs/plc.md`` is
-generated from :data:`REGISTERS` and :data:`BITS` (``eskin-bus plc map``).
+generated from :data:`REGISTERS`, :data:`COILS` and :data:`BITS` (``eskin-bus plc map``).
+
+:data:`REGISTERS` is the one description of the image: a publication is a dict of
+named values (:meth:`PlcImage.values`), laid out into words by the table
+(:func:`encode_registers`) and read back by :func:`decode_registers`, its inverse.
 """
 
 from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-from ..bus.modbus.codec import ILLEGAL_ADDRESS, ILLEGAL_VALUE
+from ..bus.modbus.codec import (
+    ILLEGAL_ADDRESS,
+    ILLEGAL_VALUE,
+    WordOrder,
+    join32,
+    split32,
+)
 from ..detect.state import GraspState
 from ..detect.updates import Update
 from ..errors import Refused
@@ -90,20 +101,35 @@ REGISTERS: tuple[Register, ...] = (
              "RW"),
 )
 REG = {r.name: r for r in REGISTERS}
+#: The registers the bridge publishes: the read-only ones (the PLC writes the rest).
+PUBLISHED: tuple[Register, ...] = tuple(r for r in REGISTERS if r.access == "R")
 #: Registers the bridge publishes (client mode writes these in one request).
-STATUS_COUNT = REG["COMMAND"].offset
+STATUS_COUNT = max(r.offset + r.words for r in PUBLISHED)
 #: All registers, including the command registers.
-IMAGE_COUNT = REG["ENABLE"].offset + 1
+IMAGE_COUNT = max(r.offset + r.words for r in REGISTERS)
 
 CMD_ACK = 1 << 0
 CMD_TARE = 1 << 1
 
-#: Coils (offsets from the base address): write 1 to act.
-COILS: tuple[tuple[str, str], ...] = (
-    ("ACK_SLIP", "write 1: acknowledge the slip latch (reads 0)"),
-    ("TARE", "write 1: tare with the sensor unloaded (reads 0)"),
-    ("ENABLE", "1 enabled, 0 disabled (reads the current value)"),
+@dataclass(frozen=True)
+class Coil:
+    name: str
+    offset: int  #: from the base address
+    on: Literal["ack", "tare", "enable"]  #: the command a write of 1 gives
+    off: Literal["disable"] | None  #: the command a write of 0 gives (None: nothing)
+    doc: str
+
+
+#: Coils: ACK_SLIP and TARE act on a write of 1 and read 0; ENABLE reads its state.
+COILS: tuple[Coil, ...] = (
+    Coil("ACK_SLIP", 0, "ack", None, "write 1: acknowledge the slip latch (reads 0)"),
+    Coil("TARE", 1, "tare", None, "write 1: tare with the sensor unloaded (reads 0)"),
+    Coil("ENABLE", 2, "enable", "disable", "1 enabled, 0 disabled (reads the current value)"),
 )
+COIL = {c.name: c for c in COILS}
+_COIL_AT = {c.offset: c for c in COILS}
+#: Coils from the base address (no gaps: the server sizes the table with ``len(COILS)``).
+COIL_COUNT = max(c.offset for c in COILS) + 1
 #: Discrete inputs: bit i = Status bit i.
 BITS: tuple[Status, ...] = tuple(Status)
 
@@ -124,29 +150,79 @@ class Command:
     name: Literal["ack", "tare", "enable", "disable"]
 
 
-def _u16(v: float) -> int:
+# -- the kinds: a named value (what the PLC reads) <-> its words -------------------
+#
+# A named value is an int in its kind's range: "bits" and "u16" 0..65535, "i16"
+# -32768..32767, "u32" 0..2**32-1.  The saturating conversions bring a physical value
+# into that range; encode_registers / decode_registers turn named values into words
+# and back, exactly.
+
+#: The range of a named value of each kind.
+KIND_RANGE: dict[Kind, tuple[int, int]] = {
+    "bits": (0, 0xFFFF), "u16": (0, 0xFFFF), "i16": (-0x8000, 0x7FFF), "u32": (0, 0xFFFFFFFF)}
+
+
+def saturate_u16(v: float) -> int:
+    """Rounded and saturated; not finite reads 65535, the "saturated / none" value
+    (a NaN indicator must not read as a quiet 0)."""
     if not math.isfinite(v):
         return 0xFFFF
     return int(min(max(round(v), 0), 0xFFFF))
 
 
-def _i16(v: float) -> int:
-    v = int(min(max(round(v), -0x8000), 0x7FFF)) if math.isfinite(v) else 0
-    return v & 0xFFFF
+def saturate_i16(v: float) -> int:
+    """Rounded and clipped to -32768..32767; not finite reads 0."""
+    return int(min(max(round(v), -0x8000), 0x7FFF)) if math.isfinite(v) else 0
 
 
-def split32(value: int, word_order: str) -> list[int]:
-    value &= 0xFFFFFFFF
-    hi, lo = value >> 16, value & 0xFFFF
-    return [hi, lo] if word_order == "big" else [lo, hi]
+def saturate_u32(v: float) -> int:
+    """Clipped, then rounded (``round(inf)`` raises: an overflow saturates instead); NaN reads 0."""
+    return 0 if math.isnan(v) else round(min(max(v, 0.0), 0xFFFFFFFF))
 
 
-def join32(words: list[int], word_order: str) -> int:
-    hi, lo = (words[0], words[1]) if word_order == "big" else (words[1], words[0])
-    return (hi << 16) | lo
+def _signed16(word: int) -> int:
+    return word - 0x10000 if word >= 0x8000 else word
 
 
-def decode_registers(registers, word_order: str) -> dict[str, int]:
+@dataclass(frozen=True)
+class Layout:
+    """Where each named value of a register table goes, for one word order, worked
+    out once: :meth:`PlcImage.render` runs at every publication (up to 1 kHz)."""
+
+    size: int  #: registers from the base address
+    one_word: tuple[tuple[str, int], ...]  #: (name, offset) of the u16, i16 and bits values
+    two_words: tuple[tuple[str, int], ...]  #: (name, offset) of the u32 values
+    word_order: WordOrder
+
+    @classmethod
+    def of(cls, registers: Sequence[Register], word_order: WordOrder) -> Layout:
+        return cls(size=max(r.offset + r.words for r in registers),
+                   one_word=tuple((r.name, r.offset) for r in registers if r.words == 1),
+                   two_words=tuple((r.name, r.offset) for r in registers if r.words == 2),
+                   word_order=word_order)
+
+    def encode(self, values: Mapping[str, int]) -> list[int]:
+        """The words for named values (each in its kind's range; a missing name raises)."""
+        regs = [0] * self.size  # a gap in the table reads 0
+        for name, at in self.one_word:
+            # u16 and bits as they are, i16 as two's complement: one mask serves all three
+            regs[at] = values[name] & 0xFFFF
+        wo = self.word_order
+        for name, at in self.two_words:
+            regs[at: at + 2] = split32(values[name], wo)
+        return regs
+
+
+_LAYOUTS: dict[WordOrder, Layout] = {wo: Layout.of(PUBLISHED, wo) for wo in ("big", "little")}
+
+
+def encode_registers(values: Mapping[str, int], word_order: WordOrder) -> list[int]:
+    """The ``STATUS_COUNT`` published registers for named values (the inverse of
+    :func:`decode_registers`)."""
+    return _LAYOUTS[word_order].encode(values)
+
+
+def decode_registers(registers: Sequence[int], word_order: WordOrder) -> dict[str, int]:
     """Named values of registers read from the base address (the inverse of
     :meth:`PlcImage.render`): 32-bit values joined in ``word_order``, i16 values
     signed; registers past the end of ``registers`` are left out."""
@@ -158,7 +234,7 @@ def decode_registers(registers, word_order: str) -> dict[str, int]:
         if r.kind == "u32":
             out[r.name] = join32(words, word_order)
         elif r.kind == "i16":
-            out[r.name] = words[0] - 0x10000 if words[0] >= 0x8000 else words[0]
+            out[r.name] = _signed16(words[0])
         else:
             out[r.name] = words[0]
     return out
@@ -235,49 +311,68 @@ class PlcImage:
                 bits |= Status.DATA_VALID
         return int(bits)
 
-    def render(self, health: Health) -> list[int]:
-        """The STATUS..FLAGS registers (``STATUS_COUNT`` values); one publication:
-        the heartbeat advances."""
-        self.heartbeat = (self.heartbeat + 1) & 0xFFFF
+    def values(self, health: Health) -> dict[str, int]:
+        """The named values of the published registers, as the PLC reads them
+        (:func:`decode_registers` of :meth:`render`), for the heartbeat as it stands."""
         cfg = self.settings
-        wo = cfg.word_order
         status = self.status(health)
         u = self.update
         # Disabled or stale: no state is claimed (0, with DATA_VALID clear).
         shown = u is not None and self.enabled and not status & Status.SENSOR_STALE
-        state = u.state if shown else 0
-        r_coe = _u16(u.r_coe * cfg.r_scale) if shown else 0
-        r_dw = _u16(u.r_dw * cfg.r_scale) if shown else 0
-        # Clip before rounding: a finite f_sum above ~1.8e305 N is infinite in mN, and
-        # round(inf) raises (the register saturates instead).
-        f_sum = int(round(min(max(u.f_sum * 1000.0, 0.0), 0xFFFFFFFF))) if u is not None and math.isfinite(u.f_sum) else 0
-        xc = _i16(u.xc * 100.0) if u is not None else 0
-        yc = _i16(u.yc * 100.0) if u is not None else 0
-        age = 0xFFFF if health.frame_age_s is None else _u16(health.frame_age_s * 1000.0)
-        flags = (u.flags & 0xFFFF) if u is not None else 0
-        return [
-            status, state, r_coe, r_dw, *split32(f_sum, wo), xc, yc, self.heartbeat, age,
-            *split32(self.slip_events, wo), *split32(self.state_changes, wo),
-            *split32(health.lost_scans, wo), *split32(health.bus_errors, wo), flags, 0,
-        ]
+        age = health.frame_age_s
+        return {
+            "STATUS": status,
+            "STATE": u.state if shown else 0,
+            "R_COE": saturate_u16(u.r_coe * cfg.r_scale) if shown else 0,
+            "R_DW": saturate_u16(u.r_dw * cfg.r_scale) if shown else 0,
+            # a non-finite total reads 0; a finite one that overflows once in mN saturates
+            "F_SUM": saturate_u32(u.f_sum * 1000.0) if u is not None and math.isfinite(u.f_sum) else 0,
+            "XC": saturate_i16(u.xc * 100.0) if u is not None else 0,
+            "YC": saturate_i16(u.yc * 100.0) if u is not None else 0,
+            "HEARTBEAT": self.heartbeat,
+            "FRAME_AGE": 0xFFFF if age is None else saturate_u16(age * 1000.0),
+            # counters wrap, like the heartbeat: a PLC takes differences
+            "SLIP_EVENTS": self.slip_events & 0xFFFFFFFF,
+            "STATE_CHANGES": self.state_changes & 0xFFFFFFFF,
+            "LOST_SCANS": health.lost_scans & 0xFFFFFFFF,
+            "BUS_ERRORS": health.bus_errors & 0xFFFFFFFF,
+            "FLAGS": u.flags & 0xFFFF if u is not None else 0,
+            "RESERVED": 0,
+        }
+
+    def offline_values(self, health: Health) -> dict[str, int]:
+        """:meth:`values` of a bridge that stops: BRIDGE_OFFLINE and nothing else in
+        STATUS (no state bit, DATA_VALID clear), no state, force or flags, FRAME_AGE
+        65535 (no frame); the heartbeat, counters and centre of force are kept."""
+        return {**self.values(health), **_OFFLINE}
+
+    def render(self, health: Health) -> list[int]:
+        """The STATUS..RESERVED registers (``STATUS_COUNT`` values); one publication:
+        the heartbeat advances."""
+        self.heartbeat = (self.heartbeat + 1) & 0xFFFF
+        return _LAYOUTS[self.settings.word_order].encode(self.values(health))
 
     def render_offline(self, health: Health) -> list[int]:
-        """The last image of a bridge that stops: BRIDGE_OFFLINE and nothing else in
-        STATUS (no state bit, DATA_VALID clear), STATE 0, FRAME_AGE 65535, counters kept.
-        A client-mode PLC keeps what was written last, so this is what it must read,
-        never the last "stable"."""
-        regs = self.render(health)
-        wo = self.settings.word_order
-        regs[REG["STATUS"].offset] = int(Status.BRIDGE_OFFLINE)
-        for name in ("STATE", "R_COE", "R_DW", "FLAGS"):
-            regs[REG[name].offset] = 0
-        regs[REG["FRAME_AGE"].offset] = 0xFFFF
-        at = REG["F_SUM"].offset
-        regs[at: at + 2] = split32(0, wo)
-        return regs
+        """The last image of a bridge that stops (:meth:`offline_values`); a
+        publication too: the heartbeat advances.  A client-mode PLC keeps what was
+        written last, so this is what it must read, never the last "stable"."""
+        self.heartbeat = (self.heartbeat + 1) & 0xFFFF
+        return _LAYOUTS[self.settings.word_order].encode(self.offline_values(health))
 
     def coils(self) -> list[bool]:
-        return [False, False, self.enabled]
+        """What the coils read, from the base address."""
+        return coil_values(self.enabled)
+
+
+_OFFLINE: dict[str, int] = {"STATUS": int(Status.BRIDGE_OFFLINE), "STATE": 0, "R_COE": 0, "R_DW": 0,
+                            "F_SUM": 0, "FLAGS": 0, "FRAME_AGE": 0xFFFF}
+
+
+def coil_values(enabled: bool) -> list[bool]:
+    """What the coils read: ENABLE its state, the act-on-1 coils 0."""
+    values = [False] * COIL_COUNT
+    values[COIL["ENABLE"].offset] = enabled
+    return values
 
 
 # -- PLC writes: pure checks, shared by server mode (writes) and client mode (reads) ---
@@ -306,17 +401,16 @@ def parse_register_write(offset: int, values: list[int]) -> list[Command]:
 
 
 def parse_coil_write(offset: int, values: list[bool]) -> list[Command]:
+    """Commands for a write of coils starting at ``offset`` (from the base);
+    :class:`Refused` for a coil that does not exist."""
     out: list[Command] = []
     for i, v in enumerate(values):
-        at = offset + i
-        if at == 0:
-            out += [Command("ack")] if v else []
-        elif at == 1:
-            out += [Command("tare")] if v else []
-        elif at == 2:
-            out.append(Command("enable" if v else "disable"))
-        else:
-            raise Refused(ILLEGAL_ADDRESS, f"coil offset {at} does not exist")
+        coil = _COIL_AT.get(offset + i)
+        if coil is None:
+            raise Refused(ILLEGAL_ADDRESS, f"coil offset {offset + i} does not exist")
+        name = coil.on if v else coil.off
+        if name is not None:
+            out.append(Command(name))
     return out
 
 
@@ -340,10 +434,10 @@ def map_rows(settings: ModbusPlcSection) -> list[dict[str, str]]:
         unit = r.unit.replace("x r_scale", f"x {settings.r_scale:g}")
         rows.append({"table": "holding register", "name": r.name, "address": span, "ref": ref, "type": kind,
                      "unit": unit, "access": r.access, "description": doc})
-    for i, (name, doc) in enumerate(COILS):
-        addr = base + i
-        rows.append({"table": "coil", "name": name, "address": str(addr), "ref": _ref(0, addr),
-                     "type": "bit", "unit": "-", "access": "RW", "description": doc})
+    for c in COILS:
+        addr = base + c.offset
+        rows.append({"table": "coil", "name": c.name, "address": str(addr), "ref": _ref(0, addr),
+                     "type": "bit", "unit": "-", "access": "RW", "description": c.doc})
     for i, bit in enumerate(BITS):
         addr = base + i
         rows.append({"table": "discrete input", "name": bit.name, "address": str(addr), "ref": _ref(1, addr),

@@ -28,6 +28,7 @@ from .image import (
     Command,
     PlcImage,
     bits_of,
+    coil_values,
     parse_coil_write,
     parse_register_write,
 )
@@ -66,7 +67,7 @@ class PlcRegisterHandler:
             size = IMAGE_COUNT
             values: list = self._holding()
         elif table == "coils":
-            size, values = len(COILS), [False, False, self.enabled]
+            size, values = len(COILS), coil_values(self.enabled)
         elif table == "discrete":
             size, values = len(BITS), bits_of(self.registers[REG["STATUS"].offset])
         else:
