@@ -15,6 +15,7 @@ from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_reco
 
 from eskin_industrial.bridge.loop import NodeLoop
 from eskin_industrial.bus.modbus.rtu import RtuSource
+from eskin_industrial.detect.state import GraspState
 from eskin_industrial.plc.client import PlcWriter
 from eskin_industrial.plc.image import Status
 from eskin_industrial.recording import write_recording
@@ -42,16 +43,18 @@ def test_rtu_node_to_bridge_to_plc_sets_the_slip_bit_in_time(paper_profile, tmp_
         node_cfg = dataclasses.replace(paper_profile.modbus.node, timeout_s=1.0)
         poller = RtuSource(dataclasses.replace(paper_profile, modbus=dataclasses.replace(
             paper_profile.modbus, node=node_cfg)), b).open()
-        bridge = NodeLoop(paper_profile, poller, [writer])
-        stop = threading.Event()
         decided: list[float] = []
+
+        def on_update(u) -> None:  # the decision, timed before its publication
+            if u.state == GraspState.SLIP and not decided:
+                decided.append(time.perf_counter())
+
+        bridge = NodeLoop(paper_profile, poller, [writer], on_update=on_update)
+        stop = threading.Event()
 
         def run():
             while not stop.is_set():
-                before = bridge.image.slip_events
                 bridge.step()
-                if bridge.image.slip_events > before and not decided:
-                    decided.append(time.perf_counter())
 
         node = NodeSimulator(paper_profile, a, f, 100.0, loop=False).start()
         th = threading.Thread(target=run, daemon=True)

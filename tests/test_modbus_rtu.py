@@ -48,10 +48,6 @@ class RecordingSink(Sink):
     def _publish(self, publication):
         self.published.append(list(publication.registers))
 
-    @classmethod
-    def open_nodes(cls, options, nodes, context):
-        return [cls() for _ in nodes]
-
 
 @pytest.mark.parametrize("value_type", ["uint16", "int16", "uint32", "int32"])
 @pytest.mark.parametrize("word_order", ["big", "little"])

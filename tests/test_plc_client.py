@@ -35,7 +35,7 @@ def test_writer_refreshes_and_writes_changes_at_once(paper_profile):
     try:
         writer.offer([1] + [0] * (STATUS_COUNT - 1))
         wait_for(lambda: plc.memory.writes >= 3)  # refresh without any change (every refresh_s)
-        assert writer.master._client.socket.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY)
+        assert writer.master.sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY)
         # An urgent image does not wait for the refresh period.
         time.sleep(0.01)
         t0 = time.perf_counter()

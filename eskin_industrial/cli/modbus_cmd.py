@@ -8,7 +8,6 @@ import time
 
 import click
 
-from ..calibration import Calibrator
 from .common import host_port, open_profile, profile_option, scene_or_recording
 
 

@@ -16,9 +16,8 @@ import time
 from ..bus.modbus.codec import ILLEGAL_ADDRESS
 from ..bus.modbus.io import RegisterServer, SerialSettings
 from ..errors import Refused
-from ..sinks.base import Publication
-from .sink import PlcSink
 from ..profile import ModbusPlcSection
+from ..sinks.base import Publication, Sink
 from .image import (
     BITS,
     COILS,
@@ -183,7 +182,9 @@ class PlcServer:
         self.server.stop()
 
 
-class PlcBlockSink(PlcSink):
+class PlcBlockSink(Sink):
+    kind = "plc"  # opened by the output kind, plc.sink.PlcSink
+
     """One node's block of a shared :class:`PlcServer`, as that node's sink."""
 
     def __init__(self, server: PlcServer, handler: PlcRegisterHandler) -> None:

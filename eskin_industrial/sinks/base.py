@@ -185,9 +185,11 @@ class Sink(abc.ABC):
         """Problems across nodes found before anything opens; ValueError ``key: what``."""
 
     @classmethod
-    @abc.abstractmethod
     def open_nodes(cls, options: Any, nodes: Sequence[NodeLike], context: OpenContext) -> list["Sink"]:
-        """One sink per node (in order); what must be closed goes to ``context.closers``."""
+        """One sink per node (in order); what must be closed goes to ``context.closers``.
+        Written by the class a registry entry names (a sink made by another kind, or
+        in-process only, has none)."""
+        raise NotImplementedError(f"output kind {cls.kind!r} opens no nodes")
 
 
 def sink_class(kind: str) -> type[Sink]:

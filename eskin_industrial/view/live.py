@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import collections
 import time
-from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, TextIO
+from collections.abc import Callable, Mapping
+from typing import TextIO
 
 import numpy as np
 
@@ -25,9 +25,6 @@ from ..sinks.base import Publication, Sink
 from .screen import render
 from .snapshot import Snapshot, indicator_scale, status_names
 from .terminal import DEFAULT_FPS, LiveScreen
-
-if TYPE_CHECKING:
-    from ..bus.source import NodeLike, OpenContext
 
 #: Counters the view shows, in this order, under these names.
 COUNTER_LABELS: tuple[tuple[str, str], ...] = (
@@ -63,10 +60,6 @@ class KeptImage(Sink):
     def _publish(self, publication: Publication) -> None:
         self.registers = list(publication.registers)
         self.publications += 1
-
-    @classmethod
-    def open_nodes(cls, options: object, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
-        return [cls() for _ in nodes]
 
 
 class Watch:

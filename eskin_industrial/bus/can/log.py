@@ -17,9 +17,9 @@ from ...detect.updates import Update, UpdateTable
 from ...errors import EskinError, InputFormatError
 from ...frames import RawScan
 from ...pipeline import Pipeline
-from .layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
 from ...schema import in_range
 from ..source import NodeLike, OpenContext
+from .layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
 from .reader import FrameThread
 from .source import CanSource
 

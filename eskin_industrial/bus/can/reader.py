@@ -16,17 +16,12 @@ import collections
 import errno
 import select
 import socket
-import struct
 import threading
-import time
 from collections.abc import Callable
 
 import can
 
-from ...detect.updates import Update
 from ...errors import CanBusError, EskinError
-from ...pipeline import Pipeline
-from .layout import ScanAssembler
 
 #: Socket receive buffer asked for on SocketCAN (the kernel default holds a few
 #: hundred frames: a 1 Mbit/s bus fills it in tens of milliseconds).

@@ -11,7 +11,6 @@ thread, which waits once a round (``feeder.route``).
 from __future__ import annotations
 
 import collections
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any

@@ -1,0 +1,138 @@
+"""A Modbus TCP master that can send a write without waiting for its answer.
+
+The PLC client's writer thread owns the connection and reads every answer; the
+bridge's loop may send an urgent write itself (:meth:`PipelinedTcpMaster.send_write`)
+and go on: the PLC gets the new state without a hand-off to the writer thread, and
+the writer collects the answer (:meth:`PipelinedTcpMaster.await_response`).  Answers
+are matched by transaction id; a late answer to a request given up on is counted and
+dropped.  The framing is :mod:`.mbap` (pure).
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from collections.abc import Sequence
+
+from ...errors import DecodeError, ModbusFault
+from . import mbap
+
+
+class PipelinedTcpMaster:
+    def __init__(self, host: str, port: int, unit_id: int = 1, timeout_s: float = 1.0) -> None:
+        self.host, self.port, self.unit_id, self.timeout_s = host, port, unit_id, timeout_s
+        self.sock: socket.socket | None = None
+        self.stale_answers = 0
+        self._tid = 0
+        self._rx = bytearray()
+        self._send_lock = threading.Lock()
+
+    @property
+    def where(self) -> str:
+        return f"{self.host}:{self.port}"
+
+    def connect(self) -> None:
+        self.close()
+        try:
+            sock = socket.create_connection((self.host, self.port), timeout=self.timeout_s)
+        except OSError as exc:
+            raise ModbusFault("connection", f"cannot connect to {self.where}: {exc}") from None
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.sock = sock
+        self._rx.clear()
+
+    @property
+    def connected(self) -> bool:
+        return self.sock is not None
+
+    def close(self) -> None:
+        sock, self.sock = self.sock, None
+        if sock is not None:
+            try:
+                sock.close()
+            except OSError:
+                pass
+
+    # -- sending: any thread, never waits for the device ------------------------------
+    def send_write(self, address: int, values: Sequence[int]) -> int:
+        """Send an FC16 request; returns its transaction id."""
+        with self._send_lock:
+            self._tid = (self._tid + 1) & 0xFFFF
+            tid = self._tid
+            self._send(mbap.write_request(tid, self.unit_id, address, values))
+        return tid
+
+    def send_read(self, address: int, count: int) -> int:
+        with self._send_lock:
+            self._tid = (self._tid + 1) & 0xFFFF
+            tid = self._tid
+            self._send(mbap.read_request(tid, self.unit_id, address, count))
+        return tid
+
+    def _send(self, frame: bytes) -> None:
+        sock = self.sock
+        if sock is None:
+            raise ModbusFault("connection", f"write to {self.where}: not connected")
+        try:
+            sock.sendall(frame)  # a few dozen bytes into an empty socket buffer: at once
+        except OSError as exc:
+            raise ModbusFault("connection", f"write to {self.where}: {exc}") from None
+
+    # -- receiving: the owner thread only ----------------------------------------------
+    def await_response(self, tid: int, timeout_s: float | None = None) -> mbap.Response:
+        """The answer to transaction ``tid``; ModbusFault ``timeout``, ``connection``
+        or ``exception`` (with its code)."""
+        deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
+        while True:
+            resp = self._next_frame(deadline, tid)
+            if resp.tid != tid:
+                self.stale_answers += 1  # the answer to a request given up on
+                continue
+            if resp.exception:
+                raise ModbusFault("exception", f"{self.where} answered exception {resp.exception} to function "
+                                  f"{resp.function}", resp.exception)
+            return resp
+
+    def _next_frame(self, deadline: float, tid: int) -> mbap.Response:
+        rx = self._rx
+        while True:
+            if len(rx) >= mbap.HEADER_BYTES:
+                try:
+                    need = mbap.frame_length(bytes(rx[:mbap.HEADER_BYTES]))
+                except DecodeError as exc:
+                    raise ModbusFault("connection", f"{self.where}: {exc}") from None
+                if len(rx) >= need:
+                    frame = bytes(rx[:need])
+                    del rx[:need]
+                    try:
+                        return mbap.decode_response(frame)
+                    except DecodeError as exc:
+                        raise ModbusFault("connection", f"{self.where}: {exc}") from None
+            sock = self.sock
+            if sock is None:
+                raise ModbusFault("connection", f"{self.where}: not connected")
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise ModbusFault("timeout", f"{self.where}: no answer to transaction {tid} within "
+                                  f"{self.timeout_s:g} s")
+            try:
+                sock.settimeout(left)
+                chunk = sock.recv(4096)
+            except TimeoutError:
+                continue
+            except OSError as exc:
+                raise ModbusFault("connection", f"{self.where}: {exc}") from None
+            if not chunk:
+                raise ModbusFault("connection", f"{self.where}: connection closed by the device")
+            rx += chunk
+
+    # -- the blocking calls of a plain master --------------------------------------------
+    def write_registers(self, address: int, values: Sequence[int]) -> None:
+        self.await_response(self.send_write(address, values))
+
+    def read_holding(self, address: int, count: int) -> list[int]:
+        resp = self.await_response(self.send_read(address, count))
+        if len(resp.registers) != count:
+            raise ModbusFault("connection", f"{self.where}: read {len(resp.registers)} registers, asked {count}")
+        return list(resp.registers)
