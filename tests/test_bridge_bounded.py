@@ -9,7 +9,7 @@ import os
 import threading
 import time
 
-from bridge_support import can_node, channel, hold_raw, running_bridge, server_config, wait_for
+from tests.helpers.bridge import can_node, channel, hold_raw, running_bridge, server_config, wait_for
 
 from eskin_industrial.bridge.logs import QUEUE_RECORDS, EventLog
 from eskin_industrial.bus.can.layout import CanLayout

@@ -13,8 +13,8 @@ import threading
 import time
 
 import pytest
-from bridge_support import PAPER, TimedPlc, wait_for
-from modbus_support import free_port
+from tests.helpers.bridge import PAPER, TimedPlc, wait_for
+from tests.helpers.modbus import free_port
 
 from eskin_industrial.bus.modbus.io import TcpMaster
 from eskin_industrial.errors import ModbusFault

@@ -9,7 +9,7 @@ import threading
 import time
 
 import numpy as np
-from bridge_support import (
+from tests.helpers.bridge import (
     CLAIMS,
     TimedPlc,
     can_node,
@@ -21,7 +21,7 @@ from bridge_support import (
     server_config,
     wait_for,
 )
-from modbus_support import free_port
+from tests.helpers.modbus import free_port
 
 from eskin_industrial.errors import CanBusError
 from eskin_industrial.plc.image import Status

@@ -11,7 +11,7 @@ import time
 from collections import Counter
 
 import can
-from bridge_support import (
+from tests.helpers.bridge import (
     CLAIMS,
     PAPER,
     TimedPlc,
@@ -23,10 +23,10 @@ from bridge_support import (
     running_bridge,
     wait_for,
 )
-from fuzz_support import fuzz
+from tests.helpers.fuzz import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
-from modbus_support import free_port
+from tests.helpers.modbus import free_port
 
 from eskin_industrial import load_profile
 from eskin_industrial.bus.can.layout import HEADER_BYTES, ID_RANGE, SEQ_BITS, STATUS_LENGTH, CanLayout

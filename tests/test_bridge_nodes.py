@@ -6,7 +6,7 @@ from __future__ import annotations
 import threading
 
 import can
-from bridge_support import (
+from tests.helpers.bridge import (
     can_node,
     channel,
     hold_raw,

@@ -8,8 +8,8 @@ from __future__ import annotations
 import socket
 import time
 
-from bridge_support import TimedPlc, can_node, channel, client_config, hold_raw, node_thread, running_bridge, wait_for
-from modbus_support import free_port
+from tests.helpers.bridge import TimedPlc, can_node, channel, client_config, hold_raw, node_thread, running_bridge, wait_for
+from tests.helpers.modbus import free_port
 
 from eskin_industrial.plc.image import Status
 

@@ -9,8 +9,8 @@ import subprocess
 import sys
 import time
 
-from conftest import PROFILES
-from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
+from tests.helpers.paths import PROFILES
+from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
 
 from eskin_industrial.plc.image import REG, Status, join32
 from eskin_industrial.recording import write_recording

@@ -8,8 +8,8 @@ import uuid
 from pathlib import Path
 
 import numpy as np
-from bridge_support import wait_for
-from modbus_support import free_port
+from tests.helpers.bridge import wait_for
+from tests.helpers.modbus import free_port
 
 from eskin_industrial import load_profile
 from eskin_industrial.bridge.config import load_bridge_config, resolve

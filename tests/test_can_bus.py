@@ -12,7 +12,8 @@ import uuid
 import can
 import numpy as np
 import pytest
-from conftest import PROFILES, grasp
+from tests.helpers.paths import PROFILES
+from tests.helpers.scenes import grasp
 
 from eskin_industrial.bus.can.layout import CanLayout, ScanAssembler
 from eskin_industrial.bus.can.reader import BusReader, CanSource, open_bus

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import PROFILES, grasp
+from tests.helpers.paths import PROFILES
+from tests.helpers.scenes import grasp
 
 from eskin_industrial.recording import read_updates, write_recording
 

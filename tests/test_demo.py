@@ -5,7 +5,7 @@ import re
 import subprocess
 import sys
 
-from conftest import press_scene
+from tests.helpers.scenes import press_scene
 
 SCENE = press_scene("short-slide", 5.0, press_t=0.5, press_s=0.4, force_n=8.0, slide_t=3.0)
 

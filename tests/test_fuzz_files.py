@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import PROFILES
-from fuzz_support import fuzz
+from tests.helpers.paths import PROFILES
+from tests.helpers.fuzz import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
 

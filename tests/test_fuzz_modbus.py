@@ -12,8 +12,8 @@ import dataclasses
 import math
 
 import numpy as np
-from conftest import PROFILES
-from fuzz_support import fuzz
+from tests.helpers.paths import PROFILES
+from tests.helpers.fuzz import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
 from pymodbus.framer.rtu import FramerRTU

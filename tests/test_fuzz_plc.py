@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from conftest import PROFILES
-from fuzz_support import fuzz
+from tests.helpers.paths import PROFILES
+from tests.helpers.fuzz import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
 

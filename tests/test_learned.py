@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("sklearn")
 
-from conftest import grasp  # noqa: E402
+from tests.helpers.scenes import grasp  # noqa: E402
 
 from eskin_industrial.detect import GraspState, get_method  # noqa: E402
 from eskin_industrial.detect.learned import CLASSES, FEATURES, Learned  # noqa: E402

@@ -10,8 +10,8 @@ import sys
 import threading
 import time
 
-from conftest import PROFILES
-from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
+from tests.helpers.paths import PROFILES
+from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
 
 from eskin_industrial.bridge.loop import ModbusBridge
 from eskin_industrial.bus.modbus.rtu import RtuPoller

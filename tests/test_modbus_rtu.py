@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 import serial
-from modbus_support import mbpoll, mbpoll_values, pty_pair, slip_recording
+from tests.helpers.modbus import mbpoll, mbpoll_values, pty_pair, slip_recording
 
 from eskin_industrial.bridge.loop import ModbusBridge
 from eskin_industrial.bus.modbus.codec import decode_scans, encode_scan

@@ -12,7 +12,8 @@ import can.interfaces.virtual
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import PROFILES, press_scene
+from tests.helpers.paths import PROFILES
+from tests.helpers.scenes import press_scene
 
 from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.bus.can.reader import open_bus

@@ -1,7 +1,7 @@
 from __future__ import annotations
 
 import numpy as np
-from conftest import grasp
+from tests.helpers.scenes import grasp
 
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect import GraspState, paper_batch

@@ -6,7 +6,7 @@ from __future__ import annotations
 import socket
 import time
 
-from modbus_support import free_port, slip_recording
+from tests.helpers.modbus import free_port, slip_recording
 
 from eskin_industrial.bridge.loop import ModbusBridge
 from eskin_industrial.bus.replay import ReplaySource
@@ -100,7 +100,7 @@ def test_plc_drops_and_comes_back_while_detection_runs(paper_profile):
 
 
 def test_client_mode_over_rtu(paper_profile, tmp_path):
-    from modbus_support import pty_pair
+    from tests.helpers.modbus import pty_pair
 
     from eskin_industrial.bus.modbus.io import SerialSettings
 

@@ -5,7 +5,7 @@ import math
 
 import pytest
 from click.testing import CliRunner
-from conftest import PROFILES
+from tests.helpers.paths import PROFILES
 
 from eskin_industrial.cli import main
 from eskin_industrial.detect.updates import Update

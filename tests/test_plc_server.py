@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 import pytest
-from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
+from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
 
 from eskin_industrial.bridge.loop import ModbusBridge
 from eskin_industrial.bus.modbus.io import SerialSettings

@@ -3,7 +3,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from conftest import PROFILES, ROOT
+from tests.helpers.paths import PROFILES, ROOT
 
 
 def test_plot_writes_a_png_of_a_recording(tmp_path):

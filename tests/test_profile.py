@@ -6,7 +6,7 @@ import sys
 import tomllib
 
 import pytest
-from conftest import PROFILES
+from tests.helpers.paths import PROFILES
 
 from eskin_industrial import ProfileError, load_profile, parse_profile
 from eskin_industrial.cli.toml_out import dumps

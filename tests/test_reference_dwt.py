@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import pywt
-from conftest import grasp
+from tests.helpers.scenes import grasp
 
 from eskin_industrial.detect.indicators import segment_indicators
 from eskin_industrial.detect.reference import reference_window_sums, valid_detail

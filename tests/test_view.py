@@ -198,7 +198,7 @@ def test_numbers_fit_their_cells():
 
 
 def test_a_watch_snapshots_the_newest_values_of_a_running_pipeline(hand_profile):
-    from conftest import grasp
+    from tests.helpers.scenes import grasp
 
     from eskin_industrial.calibration import Calibrator
     from eskin_industrial.frames import RawScan

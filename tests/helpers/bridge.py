@@ -15,8 +15,6 @@ from dataclasses import dataclass, field, replace
 
 import can
 import numpy as np
-from conftest import PROFILES, grasp
-from modbus_support import free_port, slip_recording
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, PlcOutput, resolve
 from eskin_industrial.bridge.logs import EventLog
@@ -30,6 +28,9 @@ from eskin_industrial.plc.image import decode_registers as decode
 from eskin_industrial.profile import Profile
 from eskin_industrial.sim.can_node import CanNode, Faults
 from eskin_industrial.sim.plc import PlcMemory
+from tests.helpers.modbus import free_port, slip_recording
+from tests.helpers.paths import PROFILES
+from tests.helpers.scenes import grasp
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 #: Bits that claim a verdict: none may be set without fresh, valid data.
