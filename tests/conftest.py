@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from eskin_industrial import load_profile
+from tests.helpers.leaks import no_leaks  # noqa: F401  (autouse: fails a test that leaks)
 from tests.helpers.paths import PROFILES
 
 
