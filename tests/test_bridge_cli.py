@@ -48,6 +48,7 @@ def json_events(stderr: str) -> list[dict]:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+@pytest.mark.slow
 def test_a_signal_in_client_mode_leaves_the_plc_reading_offline(sig):
     port = free_port()
     plc = TimedPlc(port).start()

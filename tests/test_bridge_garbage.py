@@ -11,6 +11,7 @@ import time
 from collections import Counter
 
 import can
+import pytest
 from tests.helpers.bridge import (
     CLAIMS,
     PAPER,
@@ -111,6 +112,7 @@ GARBAGE = st.lists(st.one_of(wrong_length(), wrong_segment(), unused_id(), remot
                    min_size=20, max_size=200)
 
 
+@pytest.mark.slow
 @fuzz(max_examples=4)
 @given(garbage=GARBAGE)
 def test_garbage_on_the_bus_of_a_running_bridge(garbage):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import threading
 
 import can
+import pytest
 from tests.helpers.bridge import (
     can_node,
     channel,
@@ -25,6 +26,7 @@ from eskin_industrial.plc.image import decode_registers as decode
 RIGHT_BASE = 100
 
 
+@pytest.mark.slow
 def test_two_nodes_on_one_bus_each_in_its_own_block(paper_profile):
     ch = channel()
     cfg = server_config(can_node("left", ch), can_node("right", ch, base_id=0x210, node_id=2,

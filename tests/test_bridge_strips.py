@@ -8,6 +8,7 @@ import uuid
 from pathlib import Path
 
 import numpy as np
+import pytest
 from tests.helpers.bridge import wait_for
 from tests.helpers.modbus import free_port
 
@@ -40,6 +41,7 @@ def offline_slips(profile, raw: np.ndarray, rate: float) -> int:
     return entries
 
 
+@pytest.mark.slow
 def test_four_strips_on_one_bus_each_to_its_own_block(tmp_path):
     # The shipped example, moved onto a virtual bus and a free loopback port.
     ch, port = f"strips-{uuid.uuid4().hex[:8]}", free_port()

@@ -81,6 +81,7 @@ def recordings(draw) -> bytes:
 
 @fuzz(300)
 @given(content=recordings())
+@pytest.mark.slow
 def test_a_recording_reads_or_fails_with_one_line_naming_file_and_line(content):
     path = _write("rec.csv", content)
     try:

@@ -3,6 +3,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
 from tests.helpers.paths import PROFILES, ROOT
 
 
@@ -24,6 +25,7 @@ def test_plot_refuses_a_bad_recording_in_one_line(tmp_path):
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "1 taxel columns" in res.stderr
 
 
+@pytest.mark.slow
 def test_plot_draws_a_can_log_through_the_receivers_decoding(tmp_path):
     import numpy as np
 
