@@ -16,7 +16,10 @@ After the test (after every other fixture of the test has been torn down) it wai
 to :data:`GRACE_S` (2 s) for what the test started to wind down, then fails the test's
 teardown naming what is still there: thread names, socket addresses, channel names.
 Only what appeared during the test counts; what was open before (a module's server,
-an earlier test's leak) does not.
+an earlier test's leak) does not. pytest and hypothesis start no threads of their own
+here; asyncio's executor threads end when ``asyncio.run`` closes its loop, so one left
+running means a loop left running. Child processes and other descriptors (files,
+pipes, ptys) are not checked.
 
 A test that leaves something on purpose says so: ``@pytest.mark.allow_leaks("why")``.
 """
@@ -140,7 +143,7 @@ class Snapshot:
         if inodes:
             described = _describe_sockets(inodes)
             for inode in sorted(inodes):
-                what = described.get(inode, f"inode {inode} (not TCP, UDP or unix)")
+                what = described.get(inode, f"inode {inode} (not TCP, UDP or unix: CAN, netlink, ...)")
                 out.append(f"socket fd {self.sockets[inode]}: {what}")
         channels: dict[str, int] = {}
         for key, (channel, _q) in self.buses.items():
