@@ -13,12 +13,12 @@ import threading
 import time
 
 import pytest
-from bridge_support import PAPER, TimedPlc, wait_for
-from modbus_support import free_port
 
 from eskin_industrial.bus.modbus.io import TcpMaster
 from eskin_industrial.errors import ModbusFault
 from eskin_industrial.plc.image import IMAGE_COUNT, Status
+from tests.helpers.bridge import PAPER, TimedPlc, wait_for
+from tests.helpers.modbus import free_port
 
 
 def start_bridge(*args: str) -> subprocess.Popen:
@@ -48,6 +48,7 @@ def json_events(stderr: str) -> list[dict]:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+@pytest.mark.slow
 def test_a_signal_in_client_mode_leaves_the_plc_reading_offline(sig):
     port = free_port()
     plc = TimedPlc(port).start()

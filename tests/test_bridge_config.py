@@ -11,11 +11,11 @@ import sys
 from pathlib import Path
 
 import pytest
-from bridge_support import PAPER
-from modbus_support import free_port
 
 from eskin_industrial.bridge.config import load_bridge_config, resolve
 from eskin_industrial.errors import ProfileError
+from tests.helpers.bridge import PAPER
+from tests.helpers.modbus import free_port
 
 TWO_NODES = """
 [log]

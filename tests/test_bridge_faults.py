@@ -9,7 +9,12 @@ import threading
 import time
 
 import numpy as np
-from bridge_support import (
+import pytest
+
+from eskin_industrial.errors import CanBusError
+from eskin_industrial.plc.image import Status
+from eskin_industrial.sim.can_node import Faults
+from tests.helpers.bridge import (
     CLAIMS,
     TimedPlc,
     can_node,
@@ -21,11 +26,7 @@ from bridge_support import (
     server_config,
     wait_for,
 )
-from modbus_support import free_port
-
-from eskin_industrial.errors import CanBusError
-from eskin_industrial.plc.image import Status
-from eskin_industrial.sim.can_node import Faults
+from tests.helpers.modbus import free_port
 
 RATE_HZ = 100.0
 PERIOD_S = 1.0 / RATE_HZ
@@ -44,6 +45,7 @@ def gap(sent: list[float], at_least_s: float) -> tuple[float, float]:
     return sent[i], sent[i + 1]
 
 
+@pytest.mark.slow
 def test_a_silent_sensor_is_stale_within_three_periods_and_comes_back(paper_profile):
     ch, port = channel(), free_port()
     plc = TimedPlc(port).start()
@@ -88,6 +90,7 @@ def test_a_silent_sensor_is_stale_within_three_periods_and_comes_back(paper_prof
     assert stale_event["level"] == "warning" and stale_event["frame_age_ms"] >= 25
 
 
+@pytest.mark.slow
 def test_a_node_slower_than_its_profile_is_not_stale_between_scans(paper_profile):
     """rate_hz = 20 on a 100 Hz profile: the stale limit follows the node (125 ms),
     not the profile (25 ms), so a healthy node never reads stale."""
@@ -124,6 +127,7 @@ class FlakyOpener:
         return self.inner()
 
 
+@pytest.mark.slow
 def test_a_failing_bus_reads_bus_fault_and_recovers(paper_profile, monkeypatch):
     ch = channel()
     seen: list[int] = []

@@ -11,7 +11,16 @@ import time
 from collections import Counter
 
 import can
-from bridge_support import (
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from eskin_industrial import load_profile
+from eskin_industrial.bus.can.layout import HEADER_BYTES, ID_RANGE, SEQ_BITS, STATUS_LENGTH, CanLayout
+from eskin_industrial.bus.can.reader import open_bus
+from eskin_industrial.plc.image import Status
+from eskin_industrial.sim.can_node import Faults
+from tests.helpers.bridge import (
     CLAIMS,
     PAPER,
     TimedPlc,
@@ -23,16 +32,8 @@ from bridge_support import (
     running_bridge,
     wait_for,
 )
-from fuzz_support import fuzz
-from hypothesis import given
-from hypothesis import strategies as st
-from modbus_support import free_port
-
-from eskin_industrial import load_profile
-from eskin_industrial.bus.can.layout import HEADER_BYTES, ID_RANGE, SEQ_BITS, STATUS_LENGTH, CanLayout
-from eskin_industrial.bus.can.reader import open_bus
-from eskin_industrial.plc.image import Status
-from eskin_industrial.sim.can_node import Faults
+from tests.helpers.fuzz import fuzz
+from tests.helpers.modbus import free_port
 
 PROFILE = load_profile(PAPER)
 LAYOUT = CanLayout.from_profile(PROFILE)
@@ -111,6 +112,7 @@ GARBAGE = st.lists(st.one_of(wrong_length(), wrong_segment(), unused_id(), remot
                    min_size=20, max_size=200)
 
 
+@pytest.mark.slow
 @fuzz(max_examples=4)
 @given(garbage=GARBAGE)
 def test_garbage_on_the_bus_of_a_running_bridge(garbage):

@@ -6,7 +6,13 @@ from __future__ import annotations
 import threading
 
 import can
-from bridge_support import (
+import pytest
+
+from eskin_industrial.bus.can.reader import open_bus
+from eskin_industrial.bus.modbus.io import TcpMaster
+from eskin_industrial.plc.image import IMAGE_COUNT, Status
+from eskin_industrial.plc.image import decode_registers as decode
+from tests.helpers.bridge import (
     can_node,
     channel,
     hold_raw,
@@ -17,14 +23,10 @@ from bridge_support import (
     wait_for,
 )
 
-from eskin_industrial.bus.can.reader import open_bus
-from eskin_industrial.bus.modbus.io import TcpMaster
-from eskin_industrial.plc.image import IMAGE_COUNT, Status
-from eskin_industrial.plc.image import decode_registers as decode
-
 RIGHT_BASE = 100
 
 
+@pytest.mark.slow
 def test_two_nodes_on_one_bus_each_in_its_own_block(paper_profile):
     ch = channel()
     cfg = server_config(can_node("left", ch), can_node("right", ch, base_id=0x210, node_id=2,

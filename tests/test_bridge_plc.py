@@ -8,10 +8,20 @@ from __future__ import annotations
 import socket
 import time
 
-from bridge_support import TimedPlc, can_node, channel, client_config, hold_raw, node_thread, running_bridge, wait_for
-from modbus_support import free_port
+import pytest
 
 from eskin_industrial.plc.image import Status
+from tests.helpers.bridge import (
+    TimedPlc,
+    can_node,
+    channel,
+    client_config,
+    hold_raw,
+    node_thread,
+    running_bridge,
+    wait_for,
+)
+from tests.helpers.modbus import free_port
 
 RATE_HZ = 100.0
 #: Scans in flight between the node's counter and the bridge's (routing, one loop
@@ -29,6 +39,7 @@ def valid_images(plc: TimedPlc) -> list[dict[str, int]]:
     return [v for _, v in plc.images() if v["STATUS"] & Status.DATA_VALID and v["STATUS"] & Status.STABLE]
 
 
+@pytest.mark.slow
 def test_plc_down_at_start_then_up_then_away_and_back(paper_profile):
     ch, port = channel(), free_port()
     plcs: list[TimedPlc] = []
@@ -74,6 +85,7 @@ def test_plc_down_at_start_then_up_then_away_and_back(paper_profile):
     assert not run.bridge.failure
 
 
+@pytest.mark.slow
 def test_a_plc_that_accepts_and_never_answers_does_not_stall_detection(paper_profile):
     """A hung PLC: the connection is accepted (by the kernel's backlog) but no request
     is ever answered, so every write waits for the writer's timeout."""

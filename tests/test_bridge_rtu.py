@@ -9,11 +9,12 @@ import subprocess
 import sys
 import time
 
-from conftest import PROFILES
-from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
+import pytest
 
 from eskin_industrial.plc.image import REG, Status, join32
 from eskin_industrial.recording import write_recording
+from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
+from tests.helpers.paths import PROFILES
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 
@@ -25,6 +26,7 @@ def registers(port: int) -> list[int]:
     return [values[i + 1] for i in range(REG["FLAGS"].offset)]
 
 
+@pytest.mark.slow
 def test_bridge_polls_an_rtu_node_and_serves_what_mbpoll_reads(tmp_path):
     t, f, _onset = slip_recording(still_s=2.0, slip_s=0.3, after_s=1.5)
     rec = tmp_path / "slip.csv"

@@ -8,8 +8,7 @@ import uuid
 from pathlib import Path
 
 import numpy as np
-from bridge_support import wait_for
-from modbus_support import free_port
+import pytest
 
 from eskin_industrial import load_profile
 from eskin_industrial.bridge.config import load_bridge_config, resolve
@@ -25,6 +24,8 @@ from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.plc.image import REG, join32
 from eskin_industrial.scenes import render
 from eskin_industrial.sim.can_node import CanNode, Faults
+from tests.helpers.bridge import wait_for
+from tests.helpers.modbus import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "deploy" / "hand-strips.toml"
@@ -40,6 +41,7 @@ def offline_slips(profile, raw: np.ndarray, rate: float) -> int:
     return entries
 
 
+@pytest.mark.slow
 def test_four_strips_on_one_bus_each_to_its_own_block(tmp_path):
     # The shipped example, moved onto a virtual bus and a free loopback port.
     ch, port = f"strips-{uuid.uuid4().hex[:8]}", free_port()

@@ -12,8 +12,6 @@ import uuid
 import can
 import numpy as np
 import pytest
-from can_support import Receiver
-from conftest import PROFILES, grasp
 
 from eskin_industrial.bus.can.layout import CanLayout, ScanAssembler
 from eskin_industrial.bus.can.reader import BusReader, open_bus
@@ -23,6 +21,9 @@ from eskin_industrial.detect.updates import UpdateTable
 from eskin_industrial.errors import CanBusError
 from eskin_industrial.recording import write_recording, write_updates
 from eskin_industrial.sim.can_node import CanNode, Faults
+from tests.helpers.can import Receiver
+from tests.helpers.paths import PROFILES
+from tests.helpers.scenes import grasp
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 
@@ -95,6 +96,7 @@ def test_faults_are_counted_and_scans_never_mixed(hand_profile):
 
 
 @pytest.mark.parametrize("suffix", [".log", ".blf", ".asc"])
+@pytest.mark.slow
 def test_recorded_traffic_replays_to_the_live_output(paper_profile, tmp_path, suffix):
     raw = scene_raw(paper_profile)
     log_path = tmp_path / f"traffic{suffix}"
@@ -189,6 +191,7 @@ def test_paced_node_keeps_absolute_deadlines(hand_profile):
     assert 0.49 < stats.elapsed_s < 0.8
 
 
+@pytest.mark.slow
 def test_bus_options_and_python_can_environment(tmp_path):
     rec = tmp_path / "rec.csv"
     write_recording(rec, np.arange(20) / 100.0, grasp(20))

@@ -8,13 +8,13 @@ import sys
 import cantools
 import numpy as np
 import pytest
-from conftest import PROFILES
-from test_can_layout import scans_to_messages
 
 from eskin_industrial import load_profile
 from eskin_industrial.bus.can.dbc import dbc_text
 from eskin_industrial.bus.can.layout import CanLayout, NodeState, NodeStatus, decode_messages
 from eskin_industrial.calibration import Calibrator
+from tests.helpers.can_frames import scans_to_messages
+from tests.helpers.paths import PROFILES
 
 
 def variants(profile):

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import dataclasses
 
-import can
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -11,18 +10,7 @@ from hypothesis import strategies as st
 
 from eskin_industrial.bus.can.layout import SEQ_MODULO, CanLayout, NodeState, NodeStatus, ScanAssembler, decode_messages
 from eskin_industrial.errors import ProfileError
-
-
-def msg(can_id, data, t=0.0, **kw):
-    return can.Message(arbitration_id=can_id, data=data, timestamp=t, is_extended_id=kw.pop("ext", False), **kw)
-
-
-def scans_to_messages(layout, seqs, raw, rate=100.0):
-    out = []
-    for seq, frames in zip(seqs, layout.encode(seqs, raw)):
-        for can_id, data in frames:
-            out.append(msg(can_id, data, t=seq / rate, is_fd=layout.fd, ext=layout.extended_id))
-    return out
+from tests.helpers.can_frames import msg, scans_to_messages
 
 
 def random_raw(layout, k, seed=0):

@@ -7,9 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import PROFILES, grasp
 
 from eskin_industrial.recording import read_updates, write_recording
+from tests.helpers.paths import PROFILES
+from tests.helpers.scenes import grasp
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 

@@ -5,11 +5,14 @@ import re
 import subprocess
 import sys
 
-from conftest import press_scene
+import pytest
+
+from tests.helpers.scenes import press_scene
 
 SCENE = press_scene("short-slide", 5.0, press_t=0.5, press_s=0.4, force_n=8.0, slide_t=3.0)
 
 
+@pytest.mark.slow
 def test_demo_runs_the_whole_chain_and_the_plc_sees_the_slip(tmp_path):
     scene = tmp_path / "short.toml"
     scene.write_text(SCENE)
@@ -72,6 +75,7 @@ def run_in_terminal(args: list[str], cols: int = 80, rows: int = 24, timeout_s: 
     return code, out.decode(errors="replace").replace("\r\n", "\n"), err, time.monotonic() - start
 
 
+@pytest.mark.slow
 def test_demo_in_a_terminal_shows_the_live_view_then_the_summary(tmp_path):
     scene = tmp_path / "quick.toml"
     scene.write_text(QUICK)
@@ -93,6 +97,7 @@ def test_demo_in_a_terminal_shows_the_live_view_then_the_summary(tmp_path):
     assert "\x1b[" not in after.replace("\x1b[?1049l", "", 1)  # plain lines once the view has gone
 
 
+@pytest.mark.slow
 def test_demo_plain_in_a_terminal_has_no_live_view(tmp_path):
     scene = tmp_path / "quick.toml"
     scene.write_text(QUICK)

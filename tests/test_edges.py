@@ -5,13 +5,13 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from conftest import grasp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from eskin_industrial import FrameFlag
 from eskin_industrial.detect import GraspState, PaperDetector, paper_batch
+from tests.helpers.scenes import grasp
 
 RATE = 100.0
 

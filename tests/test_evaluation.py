@@ -66,6 +66,7 @@ def test_tuning_and_evaluation_seeds_are_disjoint():
     assert not tuning & (set(EVALUATION_SEEDS) | set(HOLD_EVALUATION_SEEDS))
 
 
+@pytest.mark.slow
 def test_our_method_meets_its_targets_on_held_out_seeds():
     """The default method on held-out seeds of the whole built-in suite (3 of the 10
     evaluation seeds, to keep the test short; docs/evaluation.md reports all 10)."""
@@ -79,6 +80,7 @@ def test_our_method_meets_its_targets_on_held_out_seeds():
     assert ours.per_scene["case1"].false_alarms == 0  # varying force alone never reads slip
 
 
+@pytest.mark.slow
 def test_false_alarms_per_hour_of_held_out_holding_within_the_target():
     """False alarms per hour need hours: the still holds over the 100 held-out
     long-hold seeds (3.8 h).  The target is at most one per hour (the default before

@@ -13,14 +13,14 @@ import math
 import can
 import numpy as np
 import pytest
-from conftest import PROFILES
-from fuzz_support import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
 
 from eskin_industrial import load_profile
 from eskin_industrial.bus.can.layout import ID_RANGE, SEQ_MASK, SEQ_MODULO, STATUS_LENGTH, CanLayout, ScanAssembler
 from eskin_industrial.errors import DecodeError
+from tests.helpers.fuzz import fuzz
+from tests.helpers.paths import PROFILES
 
 RATE_HZ = 100.0
 

@@ -14,8 +14,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import PROFILES
-from fuzz_support import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -24,6 +22,8 @@ from eskin_industrial.bus.can.log import read_can_log
 from eskin_industrial.errors import InputFormatError, ProfileError
 from eskin_industrial.profile import Profile, parse_profile
 from eskin_industrial.recording import read_recording
+from tests.helpers.fuzz import fuzz
+from tests.helpers.paths import PROFILES
 
 
 def _write(name: str, content: bytes) -> Path:
@@ -81,6 +81,7 @@ def recordings(draw) -> bytes:
 
 @fuzz(300)
 @given(content=recordings())
+@pytest.mark.slow
 def test_a_recording_reads_or_fails_with_one_line_naming_file_and_line(content):
     path = _write("rec.csv", content)
     try:

@@ -12,8 +12,6 @@ import dataclasses
 import math
 
 import numpy as np
-from conftest import PROFILES
-from fuzz_support import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
 from pymodbus.framer.rtu import FramerRTU
@@ -31,6 +29,8 @@ from eskin_industrial.bus.modbus.rtu import RtuSource
 from eskin_industrial.errors import ModbusFault
 from eskin_industrial.profile import ModbusNodeSection
 from eskin_industrial.sim.modbus_node import NodeRegisters
+from tests.helpers.fuzz import fuzz
+from tests.helpers.paths import PROFILES
 
 PAPER = load_profile(PROFILES / "paper-5x5.toml")
 HAND = load_profile(PROFILES / "hand-4x5.toml")

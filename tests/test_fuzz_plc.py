@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import dataclasses
 
-from conftest import PROFILES
-from fuzz_support import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -30,6 +28,8 @@ from eskin_industrial.plc.image import (
     parse_register_write,
 )
 from eskin_industrial.plc.server import PlcRegisterHandler
+from tests.helpers.fuzz import fuzz
+from tests.helpers.paths import PROFILES
 
 PLC = load_profile(PROFILES / "paper-5x5.toml").modbus.plc
 COMMAND_NAMES = {"ack", "tare", "enable", "disable"}

@@ -10,12 +10,12 @@ import pytest
 
 pytest.importorskip("sklearn")
 
-from conftest import PROFILES, grasp  # noqa: E402
-
 from eskin_industrial.detect import GraspState, get_method  # noqa: E402
 from eskin_industrial.detect.learned import CLASSES, FEATURES, Learned  # noqa: E402
 from eskin_industrial.evaluation.suite import EVALUATION_SEEDS, SUITE, TUNING_SEEDS, evaluate  # noqa: E402
 from eskin_industrial.evaluation.train import TrainConfig, default_model  # noqa: E402
+from tests.helpers.paths import PROFILES  # noqa: E402
+from tests.helpers.scenes import grasp  # noqa: E402
 
 RATE = 100.0
 
@@ -56,6 +56,7 @@ def test_tabulated_trees_equal_sklearn():
     assert np.allclose(np.array([m(v) for v in x[:500]]), clf.predict_proba(x[:500]), atol=1e-12)
 
 
+@pytest.mark.slow
 def test_held_out_accuracy(model):
     """Two held-out seeds of the whole suite.  Measured at 10 seeds: F1 1.0, no false
     alarm (docs/evaluation.md); the bar leaves margin for one seed's chance."""
@@ -68,6 +69,7 @@ def test_held_out_accuracy(model):
     assert res.per_scene["case1"].false_alarms == 0  # varying force alone never reads slip
 
 
+@pytest.mark.slow
 def test_edges_give_defined_output(paper_profile, model):
     assert run(paper_profile, model, np.zeros((0, 25))) == []
     ups = run(paper_profile, model, np.zeros((300, 25)))
@@ -82,6 +84,7 @@ def test_edges_give_defined_output(paper_profile, model):
     assert all(u.state == GraspState.NO_CONTACT for u in run(paper_profile, model, np.full((200, 25), np.nan)))
 
 
+@pytest.mark.slow
 def test_still_grasp_and_warmup(paper_profile, model):
     ups = run(paper_profile, model, grasp(2000, seed=4))
     assert not ups[0].valid  # warm-up: "I don't know", never slip

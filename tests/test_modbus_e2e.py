@@ -10,8 +10,7 @@ import sys
 import threading
 import time
 
-from conftest import PROFILES
-from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
+import pytest
 
 from eskin_industrial.bridge.loop import NodeLoop
 from eskin_industrial.bus.modbus.rtu import RtuSource
@@ -21,6 +20,8 @@ from eskin_industrial.plc.image import Status
 from eskin_industrial.recording import write_recording
 from eskin_industrial.sim.modbus_node import NodeSimulator
 from eskin_industrial.sim.plc import PlcSimulator
+from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
+from tests.helpers.paths import PROFILES
 
 #: Detection delay allowed after the slip starts.  The detector decides on the
 #: first hop after the slip enters its window (~0.1 s), or, when polling at the
@@ -32,6 +33,7 @@ DETECTION_BUDGET_S = 0.9
 WRITE_BUDGET_S = 0.05
 
 
+@pytest.mark.slow
 def test_rtu_node_to_bridge_to_plc_sets_the_slip_bit_in_time(paper_profile, tmp_path):
     t, f, onset = slip_recording(still_s=1.5, slip_s=0.3, after_s=1.0)
     port = free_port()
@@ -86,6 +88,7 @@ def test_rtu_node_to_bridge_to_plc_sets_the_slip_bit_in_time(paper_profile, tmp_
         assert poller.stats.bus_errors == 0
 
 
+@pytest.mark.slow
 def test_the_cli_path_end_to_end(paper_profile, tmp_path):
     t, f, onset = slip_recording(still_s=1.5, slip_s=0.3, after_s=1.0)
     rec = tmp_path / "slip.csv"
@@ -137,6 +140,7 @@ def test_cli_errors_are_one_line(tmp_path):
     assert r.returncode != 0 and "Traceback" not in r.stderr and r.stderr.strip().count("\n") == 0
 
 
+@pytest.mark.slow
 def test_cli_bridge_in_server_mode_read_by_mbpoll(tmp_path):
     t, f, _ = slip_recording(still_s=3.0, slip_s=0.0, after_s=0.0)
     rec = tmp_path / "still.csv"

@@ -10,17 +10,17 @@ import time
 import numpy as np
 import pytest
 import serial
-from modbus_support import mbpoll, mbpoll_values, pty_pair, slip_recording
 
 from eskin_industrial.bridge.loop import NodeLoop
-from eskin_industrial.bus.source import Source
-from eskin_industrial.sinks.base import Sink
 from eskin_industrial.bus.modbus.codec import decode_scans, encode_scan
 from eskin_industrial.bus.modbus.rtu import RtuSource
+from eskin_industrial.bus.source import Source
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.plc.image import Status
 from eskin_industrial.profile import ModbusNodeSection
 from eskin_industrial.sim.modbus_node import NodeSimulator
+from eskin_industrial.sinks.base import Sink
+from tests.helpers.modbus import mbpoll, mbpoll_values, pty_pair, slip_recording
 
 
 def with_node(profile, **changes):

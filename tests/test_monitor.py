@@ -12,7 +12,6 @@ import can.interfaces.virtual
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import PROFILES, press_scene
 
 from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.bus.can.reader import open_bus
@@ -23,6 +22,8 @@ from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.scenes import render
 from eskin_industrial.sim.can_node import CanNode, Faults
 from eskin_industrial.view.live import change_line
+from tests.helpers.paths import PROFILES
+from tests.helpers.scenes import press_scene
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 

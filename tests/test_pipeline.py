@@ -6,13 +6,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import grasp
 
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect import GraspState, get_method, paper_batch
 from eskin_industrial.detect.settings import LearnedSettings
 from eskin_industrial.frames import RawScan
 from eskin_industrial.pipeline import Pipeline
+from tests.helpers.scenes import grasp
 
 
 def test_raw_scans_give_the_offline_answer(paper_profile):

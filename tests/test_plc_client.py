@@ -6,8 +6,6 @@ from __future__ import annotations
 import socket
 import time
 
-from modbus_support import free_port, slip_recording
-
 from eskin_industrial.bridge.loop import NodeLoop
 from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
@@ -16,6 +14,7 @@ from eskin_industrial.plc.client import PlcWriter
 from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
 from eskin_industrial.plc.image import decode_registers as decode
 from eskin_industrial.sim.plc import PlcSimulator
+from tests.helpers.modbus import free_port, slip_recording
 
 
 def wait_for(cond, timeout_s: float = 5.0, step=None) -> None:
@@ -100,9 +99,8 @@ def test_plc_drops_and_comes_back_while_detection_runs(paper_profile):
 
 
 def test_client_mode_over_rtu(paper_profile, tmp_path):
-    from modbus_support import pty_pair
-
     from eskin_industrial.bus.modbus.io import SerialSettings
+    from tests.helpers.modbus import pty_pair
 
     settings = paper_profile.modbus.plc
     with pty_pair(tmp_path) as (a, b):

@@ -5,7 +5,6 @@ import math
 
 import pytest
 from click.testing import CliRunner
-from conftest import PROFILES
 
 from eskin_industrial.cli import main
 from eskin_industrial.detect.updates import Update
@@ -27,6 +26,7 @@ from eskin_industrial.plc.image import (
     parse_register_write,
     split32,
 )
+from tests.helpers.paths import PROFILES
 
 FRESH = Health(frame_age_s=0.01)
 

@@ -6,7 +6,6 @@ import time
 
 import numpy as np
 import pytest
-from modbus_support import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
 
 from eskin_industrial.bridge.loop import NodeLoop
 from eskin_industrial.bus.modbus.io import SerialSettings
@@ -15,6 +14,7 @@ from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
 from eskin_industrial.plc.server import PlcServer
+from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
 
 
 def run_bridge(bridge: NodeLoop, until, timeout_s: float = 10.0) -> None:

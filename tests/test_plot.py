@@ -3,7 +3,9 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from conftest import PROFILES, ROOT
+import pytest
+
+from tests.helpers.paths import PROFILES, ROOT
 
 
 def test_plot_writes_a_png_of_a_recording(tmp_path):
@@ -24,6 +26,7 @@ def test_plot_refuses_a_bad_recording_in_one_line(tmp_path):
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "1 taxel columns" in res.stderr
 
 
+@pytest.mark.slow
 def test_plot_draws_a_can_log_through_the_receivers_decoding(tmp_path):
     import numpy as np
 

@@ -6,12 +6,12 @@ import sys
 import tomllib
 
 import pytest
-from conftest import PROFILES
 
 from eskin_industrial import ProfileError, load_profile, parse_profile
 from eskin_industrial.cli.toml_out import dumps
 from eskin_industrial.profile import Profile
 from eskin_industrial.schema import build
+from tests.helpers.paths import PROFILES
 
 BASE = """
 [sensor]

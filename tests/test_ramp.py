@@ -53,6 +53,7 @@ def test_weights_are_the_least_squares_ramp_against_the_base() -> None:
 
 
 @pytest.mark.parametrize("sigma_x, sigma_y", [(0.2, 0.2), (0.05, 0.4)])
+@pytest.mark.slow
 def test_white_noise_crosses_the_threshold_as_rarely_as_its_rayleigh_tail(sigma_x, sigma_y) -> None:
     """Under white noise the whitened statistic exceeds z with probability
     exp(-z^2 / 2) per horizon, however unequal the axes' noise (rows 20 mm apart make
@@ -95,6 +96,7 @@ def test_a_ramp_is_found_sooner_than_by_a_two_window_difference() -> None:
     assert min(delays_ramp) > 0
 
 
+@pytest.mark.slow
 def test_the_noise_is_the_windows_not_the_current_frames() -> None:
     """A centre's noise scales as 1 / S; when S swings within the window (a machine's
     vibration), white noise of that changing size must still cross the threshold as

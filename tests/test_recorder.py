@@ -14,7 +14,6 @@ import sys
 
 import numpy as np
 import pytest
-from bridge_support import PAPER, channel, hold_raw, node_thread, running_bridge, server_config, wait_for
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, load_bridge_config, resolve
 from eskin_industrial.detect.state import LABELS
@@ -23,6 +22,7 @@ from eskin_industrial.errors import ProfileError
 from eskin_industrial.plc.image import Status
 from eskin_industrial.sinks.base import SINKS, sink_class
 from eskin_industrial.sinks.recorder import Recorder, RecorderOptions
+from tests.helpers.bridge import PAPER, channel, hold_raw, node_thread, running_bridge, server_config, wait_for
 
 
 def test_the_recorder_is_one_registry_entry():
@@ -67,8 +67,8 @@ def test_recorder_rows_equal_detect_output(paper_profile, tmp_path):
     """The CSV the recorder streams is byte for byte what ``eskin-bus detect`` writes
     for the same updates (one format, two writers)."""
     from eskin_industrial.detect.updates import UpdateTable
-    from eskin_industrial.pipeline import Pipeline
     from eskin_industrial.frames import RawScan
+    from eskin_industrial.pipeline import Pipeline
     from eskin_industrial.recording import write_updates
 
     pipe = Pipeline(paper_profile)
@@ -89,8 +89,8 @@ def test_recorder_rows_equal_detect_output(paper_profile, tmp_path):
 
 def test_a_full_disk_is_counted_and_the_bridge_goes_on(paper_profile):
     """/dev/full fails every write: each is counted, nothing raises."""
-    from eskin_industrial.pipeline import Pipeline
     from eskin_industrial.frames import RawScan
+    from eskin_industrial.pipeline import Pipeline
 
     stream = open("/dev/full", "w", buffering=1)
     rec = Recorder(stream, "jsonl", "n", where="/dev/full", owned=True, flush_every_s=0.0)
@@ -125,6 +125,7 @@ def test_recorder_section_in_a_file_and_its_errors(tmp_path):
         load_bridge_config(cfg)
 
 
+@pytest.mark.slow
 def test_bridge_command_records_a_scene_with_no_plc(tmp_path):
     """``--record`` alone: the one output (no PLC is contacted), and ``--check`` says so."""
     out = tmp_path / "case2.csv"

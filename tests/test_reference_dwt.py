@@ -6,10 +6,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import pywt
-from conftest import grasp
 
 from eskin_industrial.detect.indicators import segment_indicators
 from eskin_industrial.detect.reference import reference_window_sums, valid_detail
+from tests.helpers.scenes import grasp
 
 
 def test_valid_detail_is_the_unpadded_part_of_every_pywt_mode():

@@ -6,11 +6,8 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
-from conftest import PROFILES
-from fuzz_support import fuzz
 from hypothesis import given
 from hypothesis import strategies as st
-from test_fuzz_plc import commands, healths, updates
 
 from eskin_industrial import load_profile
 from eskin_industrial.plc.image import (
@@ -31,6 +28,9 @@ from eskin_industrial.plc.image import (
     parse_coil_write,
 )
 from eskin_industrial.plc.server import PlcRegisterHandler
+from tests.helpers.fuzz import fuzz
+from tests.helpers.paths import PROFILES
+from tests.test_fuzz_plc import commands, healths, updates
 
 PLC = load_profile(PROFILES / "paper-5x5.toml").modbus.plc
 ORDERS = ["big", "little"]

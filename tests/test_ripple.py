@@ -49,6 +49,7 @@ def test_a_held_copy_counts_the_value_given_not_a_change() -> None:
 
 
 @pytest.mark.parametrize("lag, window", [(1, 5), (1, 6), (10, 50), (5, 3)])
+@pytest.mark.slow
 def test_independent_samples_match_white_noise(lag: int, window: int) -> None:
     """The energy's mean over its calm level, under white noise, varies as a chi-square
     mean over ripple_dof samples: variance 2 / dof.  Counting ``window`` would
@@ -148,6 +149,7 @@ def test_a_shaking_force_with_a_creeping_centre_is_found_sooner() -> None:
     assert np.median(gains) >= 0.02 - 1e-9
 
 
+@pytest.mark.slow
 def test_a_shaking_force_alone_is_rarely_slip() -> None:
     """A still block whose normal force starts to ripple (a 4 % square wave, or a
     machine's 37 Hz vibration starting): strong evidence, no displacement.  The ramp

@@ -7,7 +7,6 @@ from functools import partial
 
 import numpy as np
 import pytest
-from conftest import PROFILES
 
 from eskin_industrial import parse_profile
 from eskin_industrial.detect import GraspState, get_method
@@ -15,6 +14,7 @@ from eskin_industrial.detect.scored import ForceRate, HfEnergy
 from eskin_industrial.detect.settings import DetectorSettings
 from eskin_industrial.evaluation.suite import run_one
 from eskin_industrial.scenes import render
+from tests.helpers.paths import PROFILES
 
 X = np.tile(np.arange(5) * 5.0, 5)
 Y = np.repeat(np.arange(5) * 5.0, 5)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from conftest import PROFILES
+from tests.helpers.paths import PROFILES
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 

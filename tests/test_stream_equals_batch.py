@@ -5,11 +5,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import grasp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from eskin_industrial.detect import COLUMNS, PaperDetector, UpdateTable, paper_batch
+from tests.helpers.scenes import grasp
 
 
 def faulty_recording(seed: int, k: int = 1500, n: int = 25, rate: float = 100.0):

@@ -198,12 +198,11 @@ def test_numbers_fit_their_cells():
 
 
 def test_a_watch_snapshots_the_newest_values_of_a_running_pipeline(hand_profile):
-    from conftest import grasp
-
     from eskin_industrial.calibration import Calibrator
     from eskin_industrial.frames import RawScan
     from eskin_industrial.pipeline import Pipeline
     from eskin_industrial.view.live import Watch
+    from tests.helpers.scenes import grasp
 
     pipe = Pipeline(hand_profile, rate_hz=100.0)
     image = PlcImage(hand_profile.modbus.plc)

@@ -117,3 +117,4 @@ def pytest_collection_modifyitems(items):
     for item in items:
         if Path(str(item.fspath)).parent == Path(__file__).parent:
             item.add_marker(pytest.mark.vcan)
+            item.add_marker(pytest.mark.slow)  # a machine boots for them, or they pace real traffic

@@ -13,14 +13,13 @@ import can
 import numpy as np
 import pytest
 
-from can_support import Receiver
-
 from eskin_industrial import Calibrator, load_profile
 from eskin_industrial.bus.can.layout import CanLayout, NodeState, NodeStatus, ScanAssembler, decode_messages
 from eskin_industrial.bus.can.log import read_can_log
 from eskin_industrial.bus.can.reader import BusReader, open_bus
 from eskin_industrial.detect import get_method
 from eskin_industrial.recording import write_recording
+from tests.helpers.can import Receiver
 
 PROFILES = Path(__file__).resolve().parents[2] / "profiles"
 PAPER, HAND = str(PROFILES / "paper-5x5.toml"), str(PROFILES / "hand-4x5.toml")

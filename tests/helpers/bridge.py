@@ -15,8 +15,6 @@ from dataclasses import dataclass, field, replace
 
 import can
 import numpy as np
-from conftest import PROFILES, grasp
-from modbus_support import free_port, slip_recording
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
 from eskin_industrial.bridge.logs import EventLog
@@ -26,11 +24,14 @@ from eskin_industrial.bus.can.reader import open_bus
 from eskin_industrial.bus.modbus.io import RegisterServer
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
-from eskin_industrial.plc.sink import PlcOptions
 from eskin_industrial.plc.image import decode_registers as decode
+from eskin_industrial.plc.sink import PlcOptions
 from eskin_industrial.profile import Profile
 from eskin_industrial.sim.can_node import CanNode, Faults
 from eskin_industrial.sim.plc import PlcMemory
+from tests.helpers.modbus import free_port, slip_recording
+from tests.helpers.paths import PROFILES
+from tests.helpers.scenes import grasp
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 #: Bits that claim a verdict: none may be set without fresh, valid data.
