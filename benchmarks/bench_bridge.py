@@ -106,7 +106,7 @@ def capture_main(port: int, out: str) -> None:
 
 class PlcCapture:
     def __init__(self) -> None:
-        from modbus_support import free_port
+        from tests.helpers.modbus import free_port
 
         self.port = free_port()
         self.out = tempfile.mktemp(suffix=".json")
@@ -183,7 +183,7 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
     rtu_proc = pty = None
     try:
         if path.startswith("rtu"):
-            from modbus_support import pty_pair
+            from tests.helpers.modbus import pty_pair
 
             pty = pty_pair(Path(tempfile.mkdtemp()))
             a, b = pty.__enter__()

@@ -38,7 +38,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from machine import describe  # noqa: E402  (benchmarks/machine.py)
-from modbus_support import free_port, slip_recording  # noqa: E402
+from tests.helpers.modbus import free_port, slip_recording  # noqa: E402
 
 from eskin_industrial import load_profile  # noqa: E402
 from eskin_industrial.bus.modbus.io import TcpMaster, quiet_pymodbus, rtu_transaction_s  # noqa: E402

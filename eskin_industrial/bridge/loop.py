@@ -49,6 +49,7 @@ class NodeLoop:
         self.publications = 0
         self._last_pub = float("-inf")
         self._last_status = -1
+        self._quiet_until = float("-inf")  #: see :meth:`publish_if_due`
         self._refresh_s = profile.modbus.plc.refresh_s
         self._stop = threading.Event()
         self.on_update = on_update
@@ -75,19 +76,26 @@ class NodeLoop:
         scan = self.source.poll(self.wait_budget() if timeout_s is None else timeout_s)
         t_event = time.perf_counter()  # after the wait: the event is now
         urgent = False
+        updates: list[Update] = []
         if scan is not None:
             self.recent_raw.append(scan.raw)
-            hook = self.on_update
             observe = self.image.observe
-            for u in self.pipeline.push(scan):
+            updates = self.pipeline.push(scan)
+            for u in updates:
                 urgent |= observe(u)
-                for on_update in self._update_sinks:
-                    on_update(u)
-                if hook is not None:
-                    hook(u)
         if self._command_sinks and self._apply_commands():
             urgent = True
-        return self.publish_if_due(urgent, t_event)
+        if scan is None and not urgent and time.monotonic() < self._quiet_until and not self.source.bus_fault:
+            return False  # no scan, no command, nothing due: a frame of a scan under way costs little
+        published = self.publish_if_due(urgent, t_event)
+        # The PLC first, then whatever else wants each update (a recorder, the logs).
+        hook = self.on_update
+        for u in updates:
+            for on_update in self._update_sinks:
+                on_update(u)
+            if hook is not None:
+                hook(u)
+        return published
 
     def _apply_commands(self) -> bool:
         acted = False
@@ -124,6 +132,12 @@ class NodeLoop:
         self._last_status = status
         self._last_pub = now
         self.publications += 1
+        # Until then, with no new update, no command and no bus fault, no publication
+        # can fall due: the next refresh, or the newest frame turning stale.
+        quiet = now + self._refresh_s
+        if health.frame_age_s is not None and health.frame_age_s <= self.image.stale_limit_s:
+            quiet = min(quiet, now + self.image.stale_limit_s - health.frame_age_s)
+        self._quiet_until = quiet if not health.bus_fault else now
         return True
 
     def wait_budget(self, now: float | None = None) -> float:

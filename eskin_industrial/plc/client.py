@@ -96,14 +96,18 @@ class PlcWriter(Sink):
     def offer(self, registers: list[int], urgent: bool = False, t_event: float | None = None) -> None:
         """Hand over the newest image; ``t_event`` (perf_counter) dates an urgent one."""
         with self._cond:
+            pending = self._pending
             if (urgent and self._inline and self.connected and not self._busy and self._outstanding is None
-                    and self._pending is None and not self._stop):
+                    and (pending is None or not pending[1]) and not self._stop):
                 t0 = t_event if t_event is not None else time.perf_counter()
                 try:
                     tid = self.master.send_write(self.settings.base_address, registers)  # type: ignore[union-attr]
                 except ModbusFault:
                     pass  # the writer finds the connection broken and writes it after reconnecting
                 else:
+                    if pending is not None:  # a refresh not yet written: this newer image replaces it
+                        self._pending = None
+                        self.stats.superseded += 1
                     self._outstanding = (tid, list(registers), t0)
                     self.stats.sent_inline += 1
                     self._cond.notify()  # the writer collects the answer

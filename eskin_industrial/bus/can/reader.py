@@ -148,7 +148,7 @@ class BusReader(FrameThread):
                     self._stop.wait(self.retry_s)
                 continue
             try:
-                batch = _drain_socketcan(bus) if _is_socketcan(bus) else [bus.recv(0.1)]
+                batch = _drain_socketcan(bus) if _is_socketcan(bus) else _drain(bus)
             except (can.CanError, OSError, ValueError) as exc:
                 self._fail(exc)
                 continue
@@ -193,6 +193,21 @@ class BusReader(FrameThread):
         bus, self.bus = self.bus, None
         if bus is not None:
             bus.shutdown()
+
+
+def _drain(bus: can.BusABC, wait_s: float = 0.1, most: int = 256) -> list[can.Message | None]:
+    """A frame (waiting up to ``wait_s``), then every frame already waiting behind it:
+    a burst (the segments of one scan) is handed on in one go, not frame by frame."""
+    first = bus.recv(wait_s)
+    if first is None:
+        return []
+    out: list[can.Message | None] = [first]
+    while len(out) < most:
+        msg = bus.recv(0.0)
+        if msg is None:
+            break
+        out.append(msg)
+    return out
 
 
 def _is_socketcan(bus: can.BusABC) -> bool:
