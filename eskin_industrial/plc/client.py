@@ -23,9 +23,8 @@ from dataclasses import dataclass, field
 from ..bus.modbus.io import RtuMaster, SerialSettings, TcpMaster
 from ..errors import ModbusFault, Refused
 from ..profile import ModbusPlcSection
-from ..sinks.base import Publication, SinkHealth
+from ..sinks.base import Publication, Sink, SinkHealth
 from .image import REG, Command, PlcImage, parse_register_write
-from .sink import PlcSink
 
 
 @dataclass
@@ -41,7 +40,11 @@ class WriterStats:
     latencies_s: collections.deque[float] = field(default_factory=lambda: collections.deque(maxlen=100_000))
 
 
-class PlcWriter(PlcSink):
+class PlcWriter(Sink):
+    # A sink of the "plc" output kind, opened by plc.sink.PlcSink: not a subclass of
+    # it, so that the two modules do not import each other.
+    kind = "plc"
+
     def __init__(self, settings: ModbusPlcSection, host: str | None = None, port: int | None = None,
                  *, timeout_s: float = 0.5, poll_commands: bool = True, serial: SerialSettings | None = None,
                  on_written: Callable[[float, float], None] | None = None) -> None:

@@ -16,8 +16,7 @@ import time
 from ..bus.modbus.codec import ILLEGAL_ADDRESS
 from ..bus.modbus.io import RegisterServer, SerialSettings
 from ..errors import Refused
-from ..sinks.base import Publication
-from .sink import PlcSink
+from ..sinks.base import Publication, Sink
 from ..profile import ModbusPlcSection
 from .image import (
     BITS,
@@ -183,8 +182,12 @@ class PlcServer:
         self.server.stop()
 
 
-class PlcBlockSink(PlcSink):
+class PlcBlockSink(Sink):
     """One node's block of a shared :class:`PlcServer`, as that node's sink."""
+
+    # A sink of the "plc" output kind, opened by plc.sink.PlcSink: not a subclass of
+    # it, so that the two modules do not import each other.
+    kind = "plc"
 
     def __init__(self, server: PlcServer, handler: PlcRegisterHandler) -> None:
         super().__init__()
