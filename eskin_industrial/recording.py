@@ -148,7 +148,7 @@ def read_updates(source: str | Path) -> dict[str, np.ndarray]:
 def _opened(dest: str | Path | IO[str]) -> Iterator[IO[str]]:
     """A stream to write to: an open stream as is, ``-`` for stdout, else a new file."""
     if hasattr(dest, "write"):
-        yield dest  # type: ignore[misc]
+        yield dest  # type: ignore[misc]  # hasattr does not narrow: anything with write() is the stream
     elif str(dest) == "-":
         yield sys.stdout
     else:

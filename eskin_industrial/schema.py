@@ -135,7 +135,7 @@ def _convert(tp: Any, value: Any, key: str) -> Any:
             raise SchemaError(key, f"expected a table, got {_show(value)}")
         _k_tp, v_tp = get_args(tp)
         return {k: _convert(v_tp, v, f"{key}.{k}") for k, v in value.items()}
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise SchemaError(key, f"expected a table, got {_show(value)}")
         return build(tp, value, key)

@@ -314,9 +314,9 @@ def _check_together(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
     by_kind: dict[type[Source], list[ResolvedNode]] = {}
     for n in nodes:
         by_kind.setdefault(n.kind, []).append(n)
-    for kind, members in by_kind.items():
+    for source_kind, members in by_kind.items():
         try:
-            kind.check_together(members)
+            source_kind.check_together(members)
         except ValueError as exc:  # the kind's message starts with "[node ...]"
             raise ProfileError(f"{src}: {exc}") from None
     for kind, options in config.output_kinds().items():

@@ -47,7 +47,7 @@ class JsonFormatter(logging.Formatter):
     """One JSON object per line: ``ts``, ``level``, ``event``, then the event's fields."""
 
     def format(self, record: logging.LogRecord) -> str:
-        out = {"ts": _utc(record), "level": record.levelname.lower(), "event": record.getMessage()}
+        out: dict[str, Any] = {"ts": _utc(record), "level": record.levelname.lower(), "event": record.getMessage()}
         for k, v in getattr(record, "fields", {}).items():
             # NaN and infinity are not JSON: null, so that every line parses.
             out[k] = None if isinstance(v, float) and not math.isfinite(v) else v
@@ -72,6 +72,12 @@ class _DroppingQueueHandler(logging.handlers.QueueHandler):
 
 
 class _Listener(logging.handlers.QueueListener):
+    # The standard listener accepts any object with get/put_nowait; EventLog always
+    # hands it a queue.Queue, whose blocking put stop_within needs.  Its end marker is
+    # an undeclared class attribute of the standard listener.
+    queue: queue.Queue[Any]
+    _sentinel: None
+
     def stop_within(self, timeout_s: float) -> None:
         """``stop()``, bounded: the standard one puts its end marker with
         ``put_nowait`` (``queue.Full`` when a blocked stream has let the queue fill)

@@ -73,6 +73,7 @@ def open_nodes(config: BridgeConfig, nodes: list[ResolvedNode], closers: list[Ca
     by_kind: dict[type[Source], list[int]] = {}
     for i, n in enumerate(nodes):
         by_kind.setdefault(n.kind, []).append(i)
+    src: Source | None  # (opened below, then read back from sources)
     for kind, members in by_kind.items():
         for i, src in zip(members, kind.open_nodes([nodes[i] for i in members], context)):
             sources[i] = src
@@ -296,6 +297,7 @@ class Bridge:
                 "stale": (bool(status & Status.SENSOR_STALE), None),
                 "bus_fault": (bool(status & Status.BUS_FAULT), None),
             }
+            sink: Sink | None  # (each output, then the one a change is about)
             for sink in run.sinks:
                 health = sink.health()
                 if health.connected is not None:
@@ -335,7 +337,7 @@ class Bridge:
 
     def log_counters(self, event: str) -> None:
         for name, c in self.counters().items():
-            self.log.event(event, node=name, **c)
+            self.log.event(event, "info", node=name, **c)  # level given: no counter can be taken for it
         if self.log.drops:
             self.log.event("log_drops", level="warning", dropped=self.log.drops)
 

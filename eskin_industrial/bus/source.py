@@ -98,12 +98,20 @@ class SourceHealth:
 
 class NodeLike(Protocol):
     """What a kind is handed to open a node: a resolved ``[[node]]`` (see
-    :class:`eskin_industrial.bridge.config.ResolvedNode`)."""
+    :class:`eskin_industrial.bridge.config.ResolvedNode`).  Read-only: a resolved
+    node is frozen."""
 
-    name: str
-    profile: Profile
-    rate_hz: float
-    options: Any
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def profile(self) -> Profile: ...
+
+    @property
+    def rate_hz(self) -> float: ...
+
+    @property
+    def options(self) -> Any: ...
 
 
 @dataclass

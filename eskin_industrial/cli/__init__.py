@@ -26,7 +26,7 @@ from .simulate_cmd import simulate
 class _Group(click.Group):
     """Turn expected errors into one line on stderr and an exit code, never a traceback."""
 
-    def invoke(self, ctx: click.Context):  # type: ignore[override]
+    def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
         except EskinError as exc:

@@ -69,6 +69,7 @@ def scene_or_recording(prof: Profile, scene: str | None, recording: str | None, 
             raise InputFormatError(f"--scene {scene}: {rendered.forces.shape[1]} taxels ({rendered.profile_name}), "
                                    f"but profile {prof.name} has {prof.taxels}")
         return NodeScans(rendered.t, rendered.forces, rate)
+    assert recording is not None  # exactly one of the two, checked above
     rec = read_recording(recording, prof.taxels)
     rate = rate_hz or rec.rate_hz(prof.sensor.rate_hz)
     if rec.unit == "raw":

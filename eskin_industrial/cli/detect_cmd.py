@@ -44,6 +44,7 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
 
         table = detect_log(prof, can_log, rate_hz, method, quiet)
     else:
+        assert input_path is not None  # exactly one of the two, checked above
         rec = read_recording(input_path, prof.taxels)
         flags = None
         values = rec.values

@@ -52,6 +52,7 @@ def plot(profile_path: str, input_path: str | None, can_log: str | None, output:
         values, _ = cal.to_newtons(np.stack([sc.raw for sc in scans]))
         name = can_log
     else:
+        assert input_path is not None  # exactly one of the two, checked above
         rec = read_recording(input_path, prof.taxels)
         t, values, name = rec.t, rec.values, rec.name
         if rec.unit == "raw":

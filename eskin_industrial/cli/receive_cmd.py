@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import json
+from typing import TYPE_CHECKING, cast
 
 import click
 
 from .can_common import bus_options
 from .common import profile_option
+
+if TYPE_CHECKING:
+    from ..bus.can.source import CanSource
 
 
 @click.command()
@@ -40,7 +44,7 @@ def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output,
     cfg = BridgeConfig(node=(node,), outputs=outputs, queue_frames=queue_frames)
     (resolved,) = resolve(cfg)
     single = SingleNode(cfg, resolved, default_output=False, all_frames=True)  # a bus that cannot be opened: one line, exit 3
-    loop, source = single.loop, single.loop.source
+    loop, source = single.loop, cast("CanSource", single.loop.source)  # the node's source is "can"
     if not quiet:
         layout = source.assembler.layout
         click.echo(f"eskin-bus: receiving {resolved.profile.name} on {source.describe_where()} "

@@ -86,7 +86,7 @@ class CofTrack(ScoredDetector):
         # one ring of the smoothed (x, y, S), read at the fast, half-slow and slow lags
         self._hist: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * self.ls
         self._hn = 0
-        self._prev = None
+        self._prev: tuple[float, float, float] | None = None
         self._seen = 0
         self._vib = [0.0] * self.vib_n  # the last vib_n CoF step energies
         self._vib_count = 0
@@ -168,7 +168,7 @@ class CofTrack(ScoredDetector):
         else:
             a = 0.0
         b = 0.0
-        if slow is not None:
+        if slow is not None and half is not None:  # (a slow lag implies the half one)
             # only while the motion goes on: the newer half of the horizon moved on in
             # the same direction (noise alone points anywhere)
             ux, uy = mx - slow[0], my - slow[1]

@@ -21,7 +21,7 @@ hand the default model over (``eskin_industrial.evaluation.train.ready``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -69,6 +69,11 @@ class TreeEnsemble:
     threshold: np.ndarray  #: float, (T, 7): the split goes right when x > threshold (padding: +inf)
     table: np.ndarray  #: float, (T, 128): leaf value by code (learning rate included)
     init: np.ndarray  #: (classes,) raw score before any tree
+    # Derived in __post_init__ from the four above, for __call__.
+    _rows: np.ndarray = field(init=False, repr=False, compare=False)
+    _flat: np.ndarray = field(init=False, repr=False, compare=False)
+    _pow2: np.ndarray = field(init=False, repr=False, compare=False)
+    _by_class: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_rows", np.arange(len(self.table)) * self.table.shape[1])
@@ -98,7 +103,7 @@ class Learned(CofTrack):
     columns = ("p_slip", "p_variable_force")
 
     def __init__(self, settings: DetectorSettings, x_mm, y_mm, rate_hz: float, *, model: Model,
-                 **overrides: float) -> None:
+                 **overrides: Any) -> None:
         c = replace(settings.learned, **overrides) if overrides else settings.learned
         self.model = model
         self.slip_p = c.slip_p

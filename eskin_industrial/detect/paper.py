@@ -60,13 +60,13 @@ def paper_batch(
     mat = np.column_stack([np.ones(len(x_mm)), x_mm, y_mm]).astype(np.float64)
     parts: list[dict[str, np.ndarray]] = []
     for a, b in reg.segments:
-        cols, sums, cof = segment_indicators(reg.forces[a:b], reg.flags[a:b], mat, settings, geo)
-        end = cols.end
+        ind, sums, cof = segment_indicators(reg.forces[a:b], reg.flags[a:b], mat, settings, geo)
+        end = ind.end
         s = sums[end, 0]
         parts.append({
-            "t": reg.t[a:b][end], "r_coe": cols.r_coe, "r_dw": cols.r_dw, "valid": cols.valid,
-            "f_sum": s, "xc": cof[end, 0], "yc": cof[end, 1], "flags": cols.flags,
-            "contact": cols.contact,
+            "t": reg.t[a:b][end], "r_coe": ind.r_coe, "r_dw": ind.r_dw, "valid": ind.valid,
+            "f_sum": s, "xc": cof[end, 0], "yc": cof[end, 1], "flags": ind.flags,
+            "contact": ind.contact,
         })
     if not parts:
         return UpdateTable(**{c: np.zeros(0, np.int64 if c in ("state", "flags") else bool if c == "valid" else float) for c in COLUMNS})

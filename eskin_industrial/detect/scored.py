@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -127,12 +128,13 @@ class _Lagged:
 
     __slots__ = ("buf", "i", "full")
 
-    def __init__(self, lag: int, fill: object = 0.0) -> None:
+    # Any: each detector keeps its own kind of value (floats, (x, y) pairs).
+    def __init__(self, lag: int, fill: Any = 0.0) -> None:
         self.buf = [fill] * lag
         self.i = 0
         self.full = False
 
-    def swap(self, value: object) -> object:
+    def swap(self, value: Any) -> Any:
         old = self.buf[self.i]
         self.buf[self.i] = value
         self.i += 1
@@ -204,7 +206,7 @@ class HfEnergy(ScoredDetector):
     history_s = 0.3
 
     def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
-                 hop_s: float | None = None, confirm: int = 1, **overrides: float | bool) -> None:
+                 hop_s: float | None = None, confirm: int = 1, **overrides: Any) -> None:
         c = replace(settings.hf_energy, **overrides) if overrides else settings.hf_energy
         self.threshold = c.threshold
         self.total = c.total
@@ -225,7 +227,7 @@ class HfEnergy(ScoredDetector):
         p1, p2 = self._p1, self._p2
         cur = s if self.total else f
         self._p2, self._p1 = p1, cur
-        if p2 is None:
+        if p1 is None or p2 is None:  # p2 set implies p1 set
             return 0.0, 0.0, False, False
         d = cur - 2.0 * p1 + p2
         e = float(d * d if self.total else d @ d) / (s * s)

@@ -43,7 +43,7 @@ def pareto(points: list[tuple[float, float]]) -> list[int]:
 
 
 def accuracy_charts(out: Path, seeds: tuple[int, ...], log: Any) -> list[dict[str, Any]]:
-    rows = []
+    rows: list[dict[str, Any]] = []
     for family, label, factory in sweep():
         res = evaluate({label: factory}, seeds=seeds)[label]
         s = res.score

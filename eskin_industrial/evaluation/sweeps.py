@@ -5,7 +5,7 @@ from __future__ import annotations
 import importlib.util
 from dataclasses import replace
 from functools import partial
-from typing import Any, Callable
+from typing import Any, Callable, Literal
 
 from ..detect.cof_track import CofTrack
 from ..detect.learned import Learned
@@ -16,7 +16,7 @@ from ..detect.settings import DetectorSettings
 from .train import default_model
 
 
-def _paper(rule: str, **changes: Any) -> Callable[..., Any]:
+def _paper(rule: Literal["both", "coe", "dw"], **changes: Any) -> Callable[..., Any]:
     def make(settings: DetectorSettings, x, y, rate):
         return PaperDetector(replace(settings, slip_rule=rule, **changes), x, y, rate)
     return make

@@ -54,7 +54,12 @@ class _Recorder(Learned):
         self.rows: list[np.ndarray] = []
         self.times: list[float] = []
         uniform = np.full(len(CLASSES), 1.0 / len(CLASSES))
-        super().__init__(*args, model=lambda x: self.rows.append(x.copy()) or uniform)
+
+        def model(x: np.ndarray) -> np.ndarray:
+            self.rows.append(x.copy())
+            return uniform
+
+        super().__init__(*args, model=model)
 
     def score(self, t, f, s, xc, yc):
         n = len(self.rows)

@@ -49,7 +49,9 @@ class WriterStats:
 
 
 class PlcWriter(Sink):
-    kind = "plc"  # opened by the output kind, plc.sink.PlcSink
+    # A sink of the "plc" output kind, opened by plc.sink.PlcSink: not a subclass of
+    # it, so that the two modules do not import each other.
+    kind = "plc"
 
     def __init__(self, settings: ModbusPlcSection, host: str | None = None, port: int | None = None,
                  *, timeout_s: float = 0.5, poll_commands: bool = True, serial: SerialSettings | None = None,

@@ -322,9 +322,9 @@ class PlcImage:
         age = health.frame_age_s
         return {
             "STATUS": status,
-            "STATE": u.state if shown else 0,
-            "R_COE": saturate_u16(u.r_coe * cfg.r_scale) if shown else 0,
-            "R_DW": saturate_u16(u.r_dw * cfg.r_scale) if shown else 0,
+            "STATE": u.state if u is not None and shown else 0,  # (shown implies an update)
+            "R_COE": saturate_u16(u.r_coe * cfg.r_scale) if u is not None and shown else 0,
+            "R_DW": saturate_u16(u.r_dw * cfg.r_scale) if u is not None and shown else 0,
             # a non-finite total reads 0; a finite one that overflows once in mN saturates
             "F_SUM": saturate_u32(u.f_sum * 1000.0) if u is not None and math.isfinite(u.f_sum) else 0,
             "XC": saturate_i16(u.xc * 100.0) if u is not None else 0,
@@ -440,7 +440,8 @@ def map_rows(settings: ModbusPlcSection) -> list[dict[str, str]]:
                      "type": "bit", "unit": "-", "access": "RW", "description": c.doc})
     for i, bit in enumerate(BITS):
         addr = base + i
-        rows.append({"table": "discrete input", "name": bit.name, "address": str(addr), "ref": _ref(1, addr),
+        # A single-bit flag member always has a name; the stubs allow None for combinations.
+        rows.append({"table": "discrete input", "name": bit.name, "address": str(addr), "ref": _ref(1, addr),  # type: ignore[dict-item]
                      "type": "bit", "unit": "-", "access": "R",
                      "description": f"STATUS bit {i}: {BIT_DOC[bit]}"})
     return rows

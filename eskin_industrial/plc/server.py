@@ -183,9 +183,11 @@ class PlcServer:
 
 
 class PlcBlockSink(Sink):
-    kind = "plc"  # opened by the output kind, plc.sink.PlcSink
-
     """One node's block of a shared :class:`PlcServer`, as that node's sink."""
+
+    # A sink of the "plc" output kind, opened by plc.sink.PlcSink: not a subclass of
+    # it, so that the two modules do not import each other.
+    kind = "plc"
 
     def __init__(self, server: PlcServer, handler: PlcRegisterHandler) -> None:
         super().__init__()

@@ -114,7 +114,10 @@ class PlcSink(Sink):
         from .server import PlcServer
 
         first = nodes[0].profile.modbus.plc
-        serial = SerialSettings(options.serial_port, options.baudrate) if options.transport == "rtu" else None
+        serial = None
+        if options.transport == "rtu":
+            assert options.serial_port is not None  # PlcOptions requires it over RTU
+            serial = SerialSettings(options.serial_port, options.baudrate)
         if plc_mode(options, nodes) == "server":
             tcp = None if serial else (options.host or first.bind, options.port or first.port)
             server = PlcServer(first, tcp=tcp, serial=serial, blocks=[n.profile.modbus.plc for n in nodes],

@@ -70,7 +70,7 @@ def stick_slip(t: np.ndarray, events: tuple[Event, ...], rng: np.random.Generato
         freq = e.stick_slip_hz * (1.0 + 0.2 * rng.standard_normal(n)).clip(0.3)
         phase = np.cumsum(freq * np.gradient(t[active])) if n > 1 else np.zeros(n)
         saw = 2.0 * (phase - np.floor(phase)) - 1.0
-        direction = np.asarray(e.distance_mm) / max(np.hypot(*e.distance_mm), 1e-9)
+        direction = np.asarray(e.distance_mm) / max(np.hypot(e.distance_mm[0], e.distance_mm[1]), 1e-9)
         wobble = e.stick_slip_mm * (saw + 0.3 * rng.standard_normal(n))
         jitter[active] += wobble[:, None] * direction[None, :]
         factor[active] *= 1.0 + e.stick_slip_force * (saw + 0.3 * rng.standard_normal(n))

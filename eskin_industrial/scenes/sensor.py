@@ -8,7 +8,7 @@ from .spec import SensorEffects
 
 
 def gain_mismatch(forces: np.ndarray, spread: float, rng: np.random.Generator) -> np.ndarray:
-    return forces * (1.0 + spread * rng.standard_normal(forces.shape[1]))[None, :]
+    return forces * (1.0 + spread * rng.standard_normal(int(forces.shape[1])))[None, :]
 
 
 def machine_vibration(forces: np.ndarray, t: np.ndarray, amplitude_n: float, freq_hz: float,

@@ -14,7 +14,7 @@ import threading
 import time
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import TYPE_CHECKING, Callable, cast
 
 import numpy as np
 
@@ -32,6 +32,9 @@ from ..scenes import Rendered
 from ..view.live import change_line
 from .can_node import CanNode, Faults
 from .plc import PlcSimulator
+
+if TYPE_CHECKING:
+    from ..plc.client import PlcWriter
 
 
 @dataclass
@@ -79,7 +82,7 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
 
     def observed(u: Update) -> None:
         if not result.updates or u.state != result.updates[-1].state:
-            truth = rec.labels[min(np.searchsorted(rec.t, u.t), len(rec.t) - 1)]
+            truth = rec.labels[min(int(np.searchsorted(rec.t, u.t)), len(rec.t) - 1)]
             say(f"{change_line(u)}   (truth: {truth})")
         result.updates.append(u)
 
@@ -93,7 +96,7 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
         plc.stop()
         raise
     loop = single.loop
-    writer = loop.sinks[0]
+    writer = cast("PlcWriter", loop.sinks[0])  # the one output: the PLC in client mode
     tx = open_bus("virtual", channel)
     sim = CanNode(layout, tx, raw, rec.rate_hz, profile.can.heartbeat_s, Faults(), False, 1, None)
     node_thread = threading.Thread(target=sim.run, name="demo-node", daemon=True)
@@ -112,7 +115,7 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
         single.close()
         plc.stop()
     result.counters = loop.counters()
-    result.latencies_s = list(writer.stats.latencies_s)  # type: ignore[attr-defined]
+    result.latencies_s = list(writer.stats.latencies_s)
     result.plc_status_changes = len(plc.status_changes)
     result.grip_raises = plc.gripper.raises
     if result.updates:

@@ -187,9 +187,11 @@ class Sink(abc.ABC):
     @classmethod
     def open_nodes(cls, options: Any, nodes: Sequence[NodeLike], context: OpenContext) -> list["Sink"]:
         """One sink per node (in order); what must be closed goes to ``context.closers``.
-        Written by the class a registry entry names (a sink made by another kind, or
-        in-process only, has none)."""
-        raise NotImplementedError(f"output kind {cls.kind!r} opens no nodes")
+
+        Every registered kind overrides it.  Not abstract: the sinks a kind opens may
+        be classes of their own that open nothing (the PLC's writer and server block),
+        as a source kind's :meth:`~eskin_industrial.bus.source.Source.open_node`."""
+        raise NotImplementedError(f"{cls.__name__} is opened by its output kind {cls.kind!r}")
 
 
 def sink_class(kind: str) -> type[Sink]:

@@ -21,6 +21,7 @@ import enum
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Literal
 
 import numpy as np
 
@@ -73,7 +74,7 @@ def fd_length(n: int) -> int:
 class CanLayout:
     taxels: int
     bits: int  #: 12 or 16 bits per taxel
-    byte_order: str  #: "little" or "big", for the header and the taxels
+    byte_order: Literal["little", "big"]  #: for the header and the taxels
     base_id: int
     extended_id: bool = False
     fd: bool = False
@@ -197,11 +198,11 @@ class CanLayout:
         :class:`ScanAssembler`: a few microseconds, no array of arrays)."""
         if self.bits == 16:
             return np.frombuffer(payload, ">u2" if self.byte_order == "big" else "<u2").astype(np.float64)
-        v = int.from_bytes(payload, self.byte_order)  # type: ignore[arg-type]
+        v = int.from_bytes(payload, self.byte_order)
         return np.array([(v >> s) & 0xFFF for s in self._shifts], dtype=np.float64)
 
     def header(self, seq: int, segment: int) -> bytes:
-        return ((seq & SEQ_MASK) | segment << SEQ_BITS).to_bytes(2, self.byte_order)  # type: ignore[arg-type]
+        return ((seq & SEQ_MASK) | segment << SEQ_BITS).to_bytes(2, self.byte_order)
 
     def encode(self, seqs: np.ndarray, raw: np.ndarray) -> list[list[tuple[int, bytes]]]:
         """Scans -> frames: for each scan, its ``(arbitration_id, data)`` in segment order.
@@ -229,7 +230,7 @@ class CanLayout:
         o = self.byte_order
         return bytes([status.node_id & 0xFF, status.state & 0xFF, min(status.tx_errors, 255),
                       min(status.rx_errors, 255)]) + int(status.rate_hz & 0xFFFF).to_bytes(2, o) + \
-            int(status.seq & SEQ_MASK).to_bytes(2, o)  # type: ignore[arg-type]
+            int(status.seq & SEQ_MASK).to_bytes(2, o)
 
     def decode_status(self, data: bytes, t: float = math.nan) -> NodeStatus:
         # A short payload would raise IndexError from the byte indexing below; say what
@@ -237,8 +238,8 @@ class CanLayout:
         if len(data) != STATUS_LENGTH:
             raise DecodeError(f"heartbeat: expected {STATUS_LENGTH} bytes, got {len(data)}")
         o = self.byte_order
-        return NodeStatus(data[0], data[1], data[2], data[3], int.from_bytes(data[4:6], o),  # type: ignore[arg-type]
-                          int.from_bytes(data[6:8], o) & SEQ_MASK, t)  # type: ignore[arg-type]
+        return NodeStatus(data[0], data[1], data[2], data[3], int.from_bytes(data[4:6], o),
+                          int.from_bytes(data[6:8], o) & SEQ_MASK, t)
 
 
 #: Counters a :class:`ScanAssembler` keeps (all start at 0; names are stable, they
@@ -326,7 +327,7 @@ class ScanAssembler:
         if expect is None or len(data) != expect[1]:
             c["malformed_frames"] += 1
             return None
-        header = int.from_bytes(data[:2], self._order)  # type: ignore[arg-type]
+        header = int.from_bytes(data[:2], self._order)
         segment, seq = header >> SEQ_BITS, header & SEQ_MASK
         if segment != expect[0]:
             c["malformed_frames"] += 1

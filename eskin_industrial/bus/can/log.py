@@ -42,7 +42,8 @@ class LogPlayer(FrameThread):
         self.speed = speed
 
     def _run(self) -> None:
-        first_log = first_wall = None
+        first_log: float | None = None
+        first_wall = 0.0  # set with first_log
         try:
             for msg in self._messages:
                 if self._stop.is_set():

@@ -222,6 +222,7 @@ def _drain_socketcan(bus: can.BusABC, wait_s: float = 0.1, most: int = 4096) -> 
     """
     from can.interfaces.socketcan.socketcan import capture_message
 
+    # Called only when _is_socketcan(bus): a SocketcanBus, whose socket BusABC does not declare.
     sock = bus.socket  # type: ignore[attr-defined]
     try:
         ready, _, _ = select.select([sock], [], [], wait_s)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import collections
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import can
 
@@ -48,7 +48,8 @@ class CanOptions:
 class CanSource(Source):
     kind = "can"
     spec = "can"
-    Options = CanOptions
+    Options: ClassVar[type] = CanOptions  # (the log kind has options of its own)
+    feeder: CanGroup  # always set: a CAN source is fed by its bus's group
     profile_keys = {"bitrate_bps": "can.bitrate_bps", "fd": "can.fd", "data_bitrate_bps": "can.data_bitrate_bps",
                     "base_id": "can.base_id", "node_id": "can.node_id"}
 

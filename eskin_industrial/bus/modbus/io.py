@@ -114,7 +114,7 @@ class RegisterServer:
         self.serial = serial
         self.unit_ids = unit_ids
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._server = None
+        self._server: ModbusTcpServer | ModbusSerialServer | None = None
         self._thread: threading.Thread | None = None
         self._ready = threading.Event()
         self._error: BaseException | None = None
@@ -206,8 +206,8 @@ class TcpMaster:
     def connect(self) -> None:
         try:
             ok = self._client.connect()
-            if ok:
-                self._client.socket.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            if ok:  # connected: pymodbus has set the socket (AttributeError is caught all the same)
+                self._client.socket.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # type: ignore[union-attr]
         except (ModbusException, OSError, AttributeError) as exc:
             self.close()
             raise ModbusFault("connection", f"cannot connect to {self.host}:{self.port}: {exc}") from None
