@@ -1,3 +1,4 @@
-"""The bridge as a long-running process: configuration (``config``), the threads
-that run each node (``runtime``, ``can_group``) and its structured logs (``logs``).
-The per-node loop itself is :class:`~eskin_industrial.bus.modbus_bridge.ModbusBridge`."""
+"""The bridge: the per-node loop (``loop``: source -> pipeline -> register image ->
+sinks), the process that runs every node's loop and supervises it (``runtime``), its
+configuration (``config``: ``bridge.toml`` and the single-node command lines) and its
+structured logs (``logs``)."""

@@ -51,15 +51,13 @@ Example, a source of a constant scan (a test stand-in)::
 from __future__ import annotations
 
 import abc
-import difflib
-import importlib
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
-from ..errors import ProfileError
 from ..frames import RawScan
+from ..registry import load_kind
 
 if TYPE_CHECKING:
     from ..profile import Profile
@@ -277,12 +275,5 @@ class Feeder(Protocol):
 
 def source_class(kind: str) -> type[Source]:
     """The class of a kind by name or alias; an unknown one is one line with the valid names."""
-    target = SOURCES.get(ALIASES.get(kind, kind))
-    if target is None:
-        near = difflib.get_close_matches(kind, [*SOURCES, *ALIASES], n=1)
-        hint = f" (did you mean {near[0]!r}?)" if near else ""
-        raise ProfileError(f"unknown source kind {kind!r}{hint}; valid kinds: {', '.join(sorted(SOURCES))}")
-    module, _, name = target.partition(":")
-    cls = getattr(importlib.import_module(module), name)
-    assert issubclass(cls, Source), target
+    cls: type[Source] = load_kind(SOURCES, ALIASES.get(kind, kind), "source kind", Source)
     return cls

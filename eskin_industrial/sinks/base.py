@@ -48,13 +48,11 @@ Example, a sink that prints slips (one module and one registry entry)::
 from __future__ import annotations
 
 import abc
-import difflib
-import importlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
-from ..errors import ProfileError
+from ..registry import load_kind
 
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
@@ -195,12 +193,6 @@ class Sink(abc.ABC):
 
 
 def sink_class(kind: str) -> type[Sink]:
-    target = SINKS.get(kind)
-    if target is None:
-        near = difflib.get_close_matches(kind, list(SINKS), n=1)
-        hint = f" (did you mean {near[0]!r}?)" if near else ""
-        raise ProfileError(f"unknown output kind {kind!r}{hint}; valid kinds: {', '.join(SINKS)}")
-    module, _, name = target.partition(":")
-    cls = getattr(importlib.import_module(module), name)
-    assert issubclass(cls, Sink), target
+    """The class of an output kind by name; an unknown one is one line with the valid names."""
+    cls: type[Sink] = load_kind(SINKS, kind, "output kind", Sink)
     return cls
