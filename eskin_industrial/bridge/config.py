@@ -51,7 +51,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from ..bus.source import SOURCES, Source, source_class
+from ..bus.source import DEFAULT_QUEUE_FRAMES, SOURCES, Source, source_class
 from ..errors import ProfileError
 from ..profile import Profile, derived_stale_s, load_profile
 from ..schema import SchemaError, build, in_range, positive, read_toml_file
@@ -106,7 +106,7 @@ class _Top:
 
     log: LogSettings = field(default_factory=LogSettings)
     #: Received CAN frames held per bus before the oldest are dropped (counted).
-    queue_frames: int = field(default=200_000, metadata=positive("an integer >= 1"))
+    queue_frames: int = field(default=DEFAULT_QUEUE_FRAMES, metadata=positive("an integer >= 1"))
 
 
 @dataclass(frozen=True)
@@ -115,7 +115,7 @@ class BridgeConfig:
     #: Output kind -> its options, in :data:`SINKS` order; empty: the default output.
     outputs: dict[str, Any] = field(default_factory=dict)
     log: LogSettings = field(default_factory=LogSettings)
-    queue_frames: int = 200_000
+    queue_frames: int = DEFAULT_QUEUE_FRAMES
     #: The file it came from, for messages.
     source: str = COMMAND_LINE
 

@@ -71,6 +71,10 @@ SOURCES: dict[str, str] = {
     "scene": "eskin_industrial.bus.replay:SceneSource",
     "recording": "eskin_industrial.bus.replay:RecordingSource",
 }
+#: Frames a reader may hold for its consumer before it drops (and counts) the newest:
+#: about 25 s of a saturated 1 Mbit/s classic bus.
+DEFAULT_QUEUE_FRAMES = 200_000
+
 #: Shorter spellings accepted on ``--source`` (``log:FILE``, ``rtu:PORT``).
 ALIASES: dict[str, str] = {"log": "can-log", "rtu": "modbus-rtu"}
 
@@ -116,7 +120,7 @@ class NodeLike(Protocol):
 class OpenContext:
     """Bridge-wide settings and the place to register what must be closed at the end."""
 
-    queue_frames: int = 200_000
+    queue_frames: int = DEFAULT_QUEUE_FRAMES
     #: A receiver watching one node: it also gets the other frames of its bus (counted
     #: as foreign), where a bridge routes each frame to its node only.
     all_frames: bool = False

@@ -18,7 +18,7 @@ from ...errors import EskinError, InputFormatError
 from ...frames import RawScan
 from ...pipeline import Pipeline
 from ...schema import in_range
-from ..source import NodeLike, OpenContext
+from ..source import DEFAULT_QUEUE_FRAMES, NodeLike, OpenContext
 from .layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
 from .reader import FrameThread
 from .source import CanSource
@@ -34,7 +34,7 @@ class LogPlayer(FrameThread):
 
     thread_name = "can-log-player"
 
-    def __init__(self, path: str | Path, messages: Iterator[can.Message], queue_frames: int = 200_000,
+    def __init__(self, path: str | Path, messages: Iterator[can.Message], queue_frames: int = DEFAULT_QUEUE_FRAMES,
                  speed: float = 1.0) -> None:
         super().__init__(queue_frames, log_frames=0)
         self.path = str(path)

@@ -22,11 +22,11 @@ from collections.abc import Callable
 import can
 
 from ...errors import CanBusError, EskinError
+from ..source import DEFAULT_QUEUE_FRAMES
 
 #: Socket receive buffer asked for on SocketCAN (the kernel default holds a few
 #: hundred frames: a 1 Mbit/s bus fills it in tens of milliseconds).
 DEFAULT_RCVBUF_BYTES = 8 * 1024 * 1024
-DEFAULT_QUEUE_FRAMES = 200_000
 
 
 def open_bus(interface: str | None = None, channel: str | None = None, bitrate: int | None = None,
