@@ -221,7 +221,8 @@ def _node(raw: Any, index: int, source: str) -> NodeConfig:
         if exc.message.startswith("unknown key"):
             valid = _COMMON + [f.name for f in dataclasses.fields(kind.Options) if f.init]
             near = difflib.get_close_matches(exc.key, valid, n=1, cutoff=0.6)
-            hint = f"did you mean {near[0]!r}?" if near else f"valid keys for source = {kind_name!r}: {', '.join(valid)}"
+            hint = (f"did you mean {near[0]!r}?" if near
+                    else f"valid keys for source = {kind_name!r}: {', '.join(valid)}")
             raise ProfileError(f"{source}: {label} {exc.key}: unknown key; {hint}") from None
         if exc.message.startswith("missing key"):
             raise ProfileError(f"{source}: {label} {exc.key}: missing key (source = {kind_name!r} needs it)") from None
