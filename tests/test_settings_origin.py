@@ -48,3 +48,29 @@ def test_with_no_output_given_the_plc_is_the_default_output():
     got = explain("-p", PAPER, "--source", "scene:case2")
     assert got["plc.mode"] == ("'server'", f"profile {PAPER}")
     assert not any(k.startswith("recorder.") for k in got)
+
+
+def test_profile_show_marks_what_the_file_leaves_to_the_default(tmp_path):
+    """``profile show``: every key as resolved, the defaults marked, and still TOML
+    that loads back to the same profile."""
+    import tomllib
+
+    from eskin_industrial import load_profile
+
+    src = (PROFILES / "paper-5x5.toml").read_text()
+    path = tmp_path / "p.toml"
+    path.write_text(src.replace("[detector]\n", "[detector]\nslip_confirm_updates = 2\n", 1))
+    res = subprocess.run([sys.executable, "-m", "eskin_industrial", "profile", "show", str(path)],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    assert "slip_confirm_updates = 2" in lines  # given by the file: no mark
+    assert "z = 6.0  # default" in lines  # [detector.cof_track] z is not in the file
+    assert "rate_hz = 100.0" in lines and not any(ln.startswith("window_samples") and "default" in ln
+                                                   for ln in lines)  # derived values are not defaults
+    table = tomllib.loads(res.stdout)
+    del table["derived"]
+    again = tmp_path / "again.toml"
+    again.write_text(res.stdout.split("\n[derived]")[0] + "\n")
+    assert table["detector"]["slip_confirm_updates"] == 2
+    assert load_profile(again) == load_profile(path)

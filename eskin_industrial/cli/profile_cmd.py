@@ -62,8 +62,13 @@ def show(file: str, fmt: str) -> None:
     if fmt == "json":
         click.echo(json.dumps(table, indent=2))
     else:
+        import tomllib
+
+        given = tomllib.loads(open(file, encoding="utf-8").read())  # loaded once already: valid TOML
+        given["derived"] = table["derived"]  # computed, not defaults
         click.echo(f"# {file}: {_brief(p)}")
-        click.echo(dumps(table), nl=False)
+        click.echo("# every key, as resolved: '# default' marks what the file leaves to the default")
+        click.echo(dumps(table, given=given), nl=False)
 
 
 @profile.command()

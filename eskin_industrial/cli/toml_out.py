@@ -25,15 +25,20 @@ def _key(k: str) -> str:
     return k if k.replace("_", "").replace("-", "").isalnum() and not k.isdigit() else json.dumps(k)
 
 
-def dumps(table: dict[str, Any], prefix: str = "") -> str:
+def dumps(table: dict[str, Any], prefix: str = "", given: dict[str, Any] | None = None) -> str:
+    """TOML text of ``table``.  With ``given`` (the table as the file wrote it), a key
+    the file left out is marked ``# default``: where each value came from."""
     lines: list[str] = []
     scalars = {k: v for k, v in table.items() if not isinstance(v, dict) or not v}
     subtables = {k: v for k, v in table.items() if k not in scalars}
     if prefix and (scalars or not subtables):
         lines.append(f"\n[{prefix}]")
-    lines += [f"{_key(k)} = {_value(v)}" for k, v in scalars.items()]
+    for k, v in scalars.items():
+        note = "  # default" if given is not None and k not in given else ""
+        lines.append(f"{_key(k)} = {_value(v)}{note}")
     out = "\n".join(lines) + ("\n" if lines else "")
     for k, v in subtables.items():
-        out += dumps(v, f"{prefix}.{_key(k)}" if prefix else _key(k))
+        sub = None if given is None else (given.get(k) if isinstance(given.get(k), dict) else {})
+        out += dumps(v, f"{prefix}.{_key(k)}" if prefix else _key(k), sub)
     return out
 
