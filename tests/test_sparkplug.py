@@ -247,3 +247,11 @@ def test_check_describes_the_output(tmp_path):
                                             "--check"], capture_output=True, text=True, timeout=60,
                          env={**os.environ, "PYTHONPATH": os.getcwd()})
     assert bad.returncode != 0 and "expected mqtt://HOST:PORT" in bad.stderr
+
+
+def test_the_metric_table_in_the_docs_is_the_code():
+    from eskin_industrial.plant.sparkplug import metric_table
+    from tests.helpers.paths import ROOT
+
+    text = (ROOT / "docs" / "plant.md").read_text()
+    assert "\n".join(metric_table()) in text

@@ -392,3 +392,17 @@ class SparkplugDevice(Sink):
             sinks.append(dev)
         edge.start()
         return sinks
+
+
+_TYPE_NAMES = {pb.INT8: "Int8", pb.INT16: "Int16", pb.INT32: "Int32", pb.INT64: "Int64", pb.UINT8: "UInt8",
+               pb.UINT16: "UInt16", pb.UINT32: "UInt32", pb.UINT64: "UInt64", pb.FLOAT: "Float",
+               pb.DOUBLE: "Double", pb.BOOLEAN: "Boolean", pb.STRING: "String"}
+
+
+def metric_table() -> list[str]:
+    """The device metric table of ``docs/plant.md`` (Markdown lines), from :data:`DEVICE_METRICS`."""
+    rows = ["| alias | metric | datatype | unit | sent | meaning |", "|---|---|---|---|---|---|"]
+    for i, m in enumerate(DEVICE_METRICS):
+        sent = "deadband, min interval" if m.analog else "at once"
+        rows.append(f"| base+{i} | `{m.name}` | {_TYPE_NAMES[m.datatype]} | {m.unit or '-'} | {sent} | {m.doc} |")
+    return rows
