@@ -255,3 +255,35 @@ def test_the_metric_table_in_the_docs_is_the_code():
 
     text = (ROOT / "docs" / "plant.md").read_text()
     assert "\n".join(metric_table()) in text
+
+
+@pytest.mark.slow
+def test_a_broker_restart_is_a_new_session_with_the_next_bdseq(tmp_path):
+    """The broker dies and comes back on its port: the node reconnects by itself and
+    births again with bdSeq + 1 (its will for the new session)."""
+    first = spb.Broker(tmp_path)
+    second = None
+    try:
+        node = NodeConfig.of("grip", PAPER, "scene", scene="hold")
+        config = BridgeConfig((node,), {"sparkplug": SparkplugOptions(f"mqtt://127.0.0.1:{first.port}", "g", "e")},
+                              LogSettings(format="json", status_every_s=0))
+        with running_bridge(config) as run:
+            counters = lambda: run.bridge.counters()["grip"]  # noqa: E731
+            wait_for(lambda: counters()["sparkplug_connects"] == 1, what="connected")
+            first.kill()
+            wait_for(lambda: counters()["sparkplug_failures"] == 1, what="the loss seen")
+            second = spb.Broker(tmp_path, first.port)
+            cap = spb.Capture(second.port, tmp_path / "sub.txt")
+            try:
+                wait_for(lambda: counters()["sparkplug_connects"] == 2, timeout_s=15, what="reconnected")
+                # the births of the reconnect may precede the subscription: ask again
+                spb.send_rebirth(second.port, "g", "e", tmp_path)
+                msgs = cap.wait(lambda m: any("/DBIRTH/" in t for t, _ in m))
+            finally:
+                cap.close()
+    finally:
+        first.kill()
+        if second is not None:
+            second.kill()
+    nbirths = [spb.parse(p) for t, p in msgs if "/NBIRTH/" in t]
+    assert all(p.seq == 0 and spb.metric_value(p, "bdSeq") == 1 for p in nbirths) and nbirths

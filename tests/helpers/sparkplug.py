@@ -72,20 +72,35 @@ def metric_value(p: Any, name: str) -> Any:
     return value(m)
 
 
+class Broker:
+    """A mosquitto of the test's own on a loopback port; killed by its pid."""
+
+    def __init__(self, tmp: Path, port: int | None = None) -> None:
+        self.port = port or free_port()
+        conf = tmp / f"mosquitto-{self.port}.conf"
+        conf.write_text(f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n")
+        self.proc = subprocess.Popen([need("mosquitto"), "-c", str(conf)], stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.DEVNULL)
+        try:
+            _wait_port(self.port, self.proc)
+        except BaseException:
+            self.kill()
+            raise
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            os.kill(self.proc.pid, signal.SIGKILL)
+        self.proc.wait(5)
+
+
 @contextlib.contextmanager
 def broker(tmp: Path) -> Iterator[int]:
-    """A mosquitto of the test's own on a free loopback port; killed by its pid."""
-    exe = need("mosquitto")
-    port = free_port()
-    conf = tmp / "mosquitto.conf"
-    conf.write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n")
-    proc = subprocess.Popen([exe, "-c", str(conf)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    """A broker for the length of the block; yields its port."""
+    b = Broker(tmp)
     try:
-        _wait_port(port, proc)
-        yield port
+        yield b.port
     finally:
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(5)
+        b.kill()
 
 
 def _wait_port(port: int, proc: subprocess.Popen) -> None:
@@ -131,3 +146,13 @@ class Capture:
         os.kill(self.proc.pid, signal.SIGKILL)
         self.proc.wait(5)
         self._file.close()
+
+
+def send_rebirth(port: int, group: str, edge: str, tmp: Path) -> None:
+    """An NCMD ``Node Control/Rebirth`` = true, encoded by protobuf, sent by ``mosquitto_pub``."""
+    cmd = Payload(timestamp=int(time.time() * 1000))
+    cmd.metrics.add(name="Node Control/Rebirth", datatype=11, boolean_value=True)
+    f = tmp / "rebirth.bin"
+    f.write_bytes(cmd.SerializeToString())
+    subprocess.run([need("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(port), "-q", "1",
+                    "-t", f"spBv1.0/{group}/NCMD/{edge}", "-f", str(f)], check=True, timeout=10)
