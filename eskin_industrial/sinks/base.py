@@ -64,6 +64,7 @@ if TYPE_CHECKING:
 SINKS: dict[str, str] = {
     "plc": "eskin_industrial.plc.sink:PlcSink",
     "recorder": "eskin_industrial.sinks.recorder:Recorder",
+    "sparkplug": "eskin_industrial.plant.sparkplug:SparkplugDevice",
 }
 #: With no output configured at all, the bridge publishes to this one (the PLC as
 #: each node's profile describes it).

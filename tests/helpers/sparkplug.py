@@ -1,0 +1,158 @@
+"""The tests' own Sparkplug B decoder and encoder: the ``protobuf`` package with
+message classes built at test time from ``sparkplug_b.proto`` (no protoc: the few
+lines of the schema are read into a ``FileDescriptorProto`` here), and a mosquitto
+broker and ``mosquitto_sub`` capture on a loopback port of the test's own."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+from tests.helpers.modbus import free_port, need
+
+PROTO = Path(__file__).with_name("sparkplug_b.proto")
+_TYPES = {"uint64": "TYPE_UINT64", "uint32": "TYPE_UINT32", "string": "TYPE_STRING", "bytes": "TYPE_BYTES",
+          "bool": "TYPE_BOOL", "float": "TYPE_FLOAT", "double": "TYPE_DOUBLE"}
+
+
+def _classes() -> dict[str, Any]:
+    text = PROTO.read_text()
+    fd = descriptor_pb2.FileDescriptorProto(name="sparkplug_b_test.proto", package="spb", syntax="proto2")
+    F = descriptor_pb2.FieldDescriptorProto
+    for name, body in re.findall(r"message (\w+) \{(.*?)\}", text, re.S):
+        msg = fd.message_type.add(name=name)
+        for label, typ, fname, num in re.findall(r"(optional|repeated) (\w+) (\w+) = (\d+);", body):
+            f = msg.field.add(name=fname, number=int(num),
+                              label=F.LABEL_REPEATED if label == "repeated" else F.LABEL_OPTIONAL)
+            if typ in _TYPES:
+                f.type = getattr(F, _TYPES[typ])
+            else:
+                f.type, f.type_name = F.TYPE_MESSAGE, f".spb.{typ}"
+    pool = descriptor_pool.DescriptorPool()
+    pool.Add(fd)
+    return {n: message_factory.GetMessageClass(pool.FindMessageTypeByName(f"spb.{n}"))
+            for n in ("Payload", "Metric", "PropertySet", "PropertyValue")}
+
+
+MESSAGES = _classes()
+Payload = MESSAGES["Payload"]
+
+
+def parse(data: bytes) -> Any:
+    p = Payload()
+    p.ParseFromString(data)
+    return p
+
+
+def value(m: Any) -> Any:
+    """The metric's value as the specification's datatype says (None when absent)."""
+    for f in ("int_value", "long_value", "float_value", "double_value", "boolean_value", "string_value",
+              "bytes_value"):
+        if m.HasField(f):
+            v = getattr(m, f)
+            if f == "int_value" and m.datatype in (1, 2, 3) and v >= 1 << 31:
+                v -= 1 << 32
+            if f == "long_value" and m.datatype == 4 and v >= 1 << 63:
+                v -= 1 << 64
+            return v
+    return None
+
+
+def metric_value(p: Any, name: str) -> Any:
+    (m,) = [m for m in p.metrics if m.name == name]
+    return value(m)
+
+
+class Broker:
+    """A mosquitto of the test's own on a loopback port; killed by its pid."""
+
+    def __init__(self, tmp: Path, port: int | None = None) -> None:
+        self.port = port or free_port()
+        conf = tmp / f"mosquitto-{self.port}.conf"
+        conf.write_text(f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n")
+        self.proc = subprocess.Popen([need("mosquitto"), "-c", str(conf)], stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.DEVNULL)
+        try:
+            _wait_port(self.port, self.proc)
+        except BaseException:
+            self.kill()
+            raise
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            os.kill(self.proc.pid, signal.SIGKILL)
+        self.proc.wait(5)
+
+
+@contextlib.contextmanager
+def broker(tmp: Path) -> Iterator[int]:
+    """A broker for the length of the block; yields its port."""
+    b = Broker(tmp)
+    try:
+        yield b.port
+    finally:
+        b.kill()
+
+
+def _wait_port(port: int, proc: subprocess.Popen) -> None:
+    import socket
+
+    deadline = time.monotonic() + 5
+    while True:
+        assert proc.poll() is None, "mosquitto exited"
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        assert time.monotonic() < deadline, "mosquitto does not listen"
+        time.sleep(0.02)
+
+
+class Capture:
+    """``mosquitto_sub`` (the third-party peer): every message as (topic, payload bytes)."""
+
+    def __init__(self, port: int, out: Path) -> None:
+        self.out = out
+        self._file = open(out, "w")
+        self.proc = subprocess.Popen([need("mosquitto_sub"), "-h", "127.0.0.1", "-p", str(port), "-t", "spBv1.0/#",
+                                      "-v", "-F", "%t %x"], stdout=self._file, stderr=subprocess.DEVNULL)
+        time.sleep(0.3)  # subscribed before the node connects (no retained messages in Sparkplug)
+
+    def messages(self) -> list[tuple[str, bytes]]:
+        out = []
+        for line in self.out.read_text().splitlines():
+            topic, _, hexed = line.partition(" ")
+            out.append((topic, bytes.fromhex(hexed)))
+        return out
+
+    def wait(self, cond: Any, timeout_s: float = 10.0) -> list[tuple[str, bytes]]:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            msgs = self.messages()
+            if cond(msgs):
+                return msgs
+            assert time.monotonic() < deadline, f"not seen within {timeout_s} s: {[t for t, _ in msgs]}"
+            time.sleep(0.05)
+
+    def close(self) -> None:
+        os.kill(self.proc.pid, signal.SIGKILL)
+        self.proc.wait(5)
+        self._file.close()
+
+
+def send_rebirth(port: int, group: str, edge: str, tmp: Path) -> None:
+    """An NCMD ``Node Control/Rebirth`` = true, encoded by protobuf, sent by ``mosquitto_pub``."""
+    cmd = Payload(timestamp=int(time.time() * 1000))
+    cmd.metrics.add(name="Node Control/Rebirth", datatype=11, boolean_value=True)
+    f = tmp / "rebirth.bin"
+    f.write_bytes(cmd.SerializeToString())
+    subprocess.run([need("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(port), "-q", "1",
+                    "-t", f"spBv1.0/{group}/NCMD/{edge}", "-f", str(f)], check=True, timeout=10)

@@ -1,0 +1,289 @@
+"""The Sparkplug B output kind on a real broker: mosquitto on a loopback port of the
+test's own, ``mosquitto_sub`` capturing what is published, and every payload decoded
+by the ``protobuf`` package from the tests' own schema (not by the package's codec)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
+from eskin_industrial.errors import ProfileError
+from eskin_industrial.plant import payload as pb
+from eskin_industrial.plant.sparkplug import DEVICE_METRICS, SparkplugDevice, SparkplugOptions
+from eskin_industrial.sinks.base import SINKS, sink_class
+from tests.helpers import sparkplug as spb
+from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, server_config, slip_raw, wait_for
+from tests.helpers.paths import PROFILES
+
+# -- the codec against protobuf ------------------------------------------------------
+_VALUES = {
+    pb.INT8: st.integers(-128, 127), pb.INT32: st.integers(-2**31, 2**31 - 1), pb.UINT32: st.integers(0, 2**32 - 1),
+    pb.INT64: st.integers(-2**63, 2**63 - 1), pb.UINT64: st.integers(0, 2**64 - 1),
+    pb.FLOAT: st.floats(width=32, allow_nan=False), pb.DOUBLE: st.floats(allow_nan=False),
+    pb.BOOLEAN: st.booleans(), pb.STRING: st.text(max_size=20), pb.BYTES: st.binary(max_size=20),
+}
+_metric = st.sampled_from(sorted(_VALUES)).flatmap(lambda dt: st.builds(
+    pb.Metric, name=st.none() | st.text(max_size=10), alias=st.none() | st.integers(0, 2**64 - 1),
+    timestamp=st.none() | st.integers(0, 2**64 - 1), datatype=st.just(dt), value=_VALUES[dt],
+    properties=st.lists(st.tuples(st.text(max_size=5), st.tuples(st.just(pb.STRING), st.text(max_size=5))),
+                        max_size=2).map(tuple)))
+_payload = st.builds(pb.Payload, timestamp=st.none() | st.integers(0, 2**64 - 1),
+                     metrics=st.lists(_metric, max_size=4).map(tuple), seq=st.none() | st.integers(0, 255))
+
+
+def _same(ours: pb.Payload, theirs) -> None:
+    assert theirs.HasField("timestamp") == (ours.timestamp is not None)
+    assert (theirs.timestamp if theirs.HasField("timestamp") else None) == ours.timestamp
+    assert (theirs.seq if theirs.HasField("seq") else None) == ours.seq
+    assert len(theirs.metrics) == len(ours.metrics)
+    for a, b in zip(ours.metrics, theirs.metrics):
+        assert (b.name if b.HasField("name") else None) == a.name
+        assert (b.alias if b.HasField("alias") else None) == a.alias
+        assert b.datatype == a.datatype and spb.value(b) == a.value
+        assert [(k, (v.type, v.string_value)) for k, v in zip(b.properties.keys, b.properties.values)] == \
+            list(a.properties)
+
+
+@settings(max_examples=200, deadline=None)
+@given(_payload)
+def test_our_encoding_reads_back_with_protobuf_and_theirs_with_ours(p):
+    _same(p, spb.parse(pb.encode(p)))
+    # protobuf's encoding of the same message, read by our decoder
+    assert pb.decode(spb.parse(pb.encode(p)).SerializeToString()) == p
+
+
+@given(st.binary(max_size=40))
+def test_garbage_is_one_error_or_a_payload(data):
+    try:
+        pb.decode(data)
+    except pb.PayloadError:
+        pass
+
+
+# -- options ------------------------------------------------------------------------
+def test_the_kind_is_one_registry_entry_and_checks_its_options():
+    assert sink_class("sparkplug") is SparkplugDevice and "sparkplug" in SINKS
+    with pytest.raises(ValueError, match="expected mqtt://HOST:PORT"):
+        SparkplugOptions("tcp://x:1", "g", "e")
+    with pytest.raises(ValueError, match="expected mqtt://HOST:PORT"):
+        SparkplugOptions("mqtt://x:99999", "g", "e")
+    with pytest.raises(ValueError, match="group_id: 'a/b' is not a Sparkplug id"):
+        SparkplugOptions("mqtt://x:1", "a/b", "e")
+    with pytest.raises(ValueError, match="edge_node_id: '#' is not"):
+        SparkplugOptions("mqtt://x:1", "g", "#")
+    assert SparkplugDevice.options_from_cli({}) is None
+    with pytest.raises(ValueError, match="give --group-id and --edge-node-id"):
+        SparkplugDevice.options_from_cli({"sparkplug": "mqtt://h:1", "group_id": "g"})
+
+
+def test_sparkplug_section_in_a_file(tmp_path):
+    from eskin_industrial.bridge.config import load_bridge_config, resolve
+
+    cfg = tmp_path / "b.toml"
+    body = (f'[sparkplug]\nbroker = "mqtt://127.0.0.1:1883"\ngroup_id = "plant1"\nedge_node_id = "cell7"\n'
+            f'deadband = 0.05\n\n[[node]]\nname = "grip"\nprofile = "{PAPER}"\nsource = "scene"\nscene = "case2"\n')
+    cfg.write_text(body)
+    config = load_bridge_config(cfg)
+    assert list(config.output_kinds()) == ["sparkplug"] and config.outputs["sparkplug"].deadband == 0.05
+    resolve(config)
+    cfg.write_text(body.replace('name = "grip"', 'name = "a+b"'))
+    with pytest.raises(ProfileError, match=r"\[sparkplug\].*'a\+b' is not a Sparkplug id"):
+        resolve(load_bridge_config(cfg))
+    cfg.write_text(body.replace("mqtt://", "http://"))
+    with pytest.raises(ProfileError, match="expected mqtt://HOST:PORT"):
+        load_bridge_config(cfg)
+
+
+# -- on a real broker ------------------------------------------------------------------
+def _decoded(msgs):
+    """Every message the node published (the commands sent to it left out)."""
+    return [(t.split("/")[2], t, spb.parse(p)) for t, p in msgs if "/NCMD/" not in t]
+
+
+def _check_sequence(decoded, device="grip"):
+    """NBIRTH first with seq 0; seq +1 mod 256 over everything but NDEATH; aliases."""
+    kinds = [k for k, _, _ in decoded]
+    assert kinds[0] == "NBIRTH" and decoded[0][2].seq == 0
+    bd_seq = spb.metric_value(decoded[0][2], "bdSeq")
+    seqs = [p.seq for k, _, p in decoded if k not in ("NDEATH", "NCMD")]
+    for a, b in zip(seqs, seqs[1:]):
+        assert b == (a + 1) % 256 or b == 0, seqs  # 0: a rebirth's NBIRTH
+    assert [k for k in kinds if k not in ("NCMD",)][-2:] == ["DDEATH", "NDEATH"]
+    assert spb.metric_value(decoded[-1][2], "bdSeq") == bd_seq
+    births = [p for k, _, p in decoded if k == "DBIRTH"]
+    assert births
+    declared = {m.alias: (m.name, m.datatype) for m in births[0].metrics}
+    assert [n for n, _ in declared.values()] == [m.name for m in DEVICE_METRICS]
+    assert all(dt == m.datatype for (_, dt), m in zip(declared.values(), DEVICE_METRICS))
+    units = {m.name: dict(zip(m.properties.keys, [v.string_value for v in m.properties.values]))
+             for m in births[0].metrics}
+    assert units["Total Force"] == {"engUnit": "N"}
+    states = []
+    for k, t, p in decoded:
+        if k == "DDATA":
+            assert t.endswith(f"/{device}")
+            for m in p.metrics:
+                assert not m.HasField("name") and m.alias in declared
+                if declared[m.alias][0] == "State":
+                    states.append(spb.value(m))
+    return states, bd_seq
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("with_plc", [False, True])
+def test_a_bridge_publishes_births_the_slip_and_deaths(paper_profile, tmp_path, with_plc):
+    ch = channel()
+    with spb.broker(tmp_path) as port:
+        cap = spb.Capture(port, tmp_path / "sub.txt")
+        try:
+            node = NodeConfig.of("grip", PAPER, "can", interface="virtual", channel=ch)
+            outputs = {"sparkplug": SparkplugOptions(f"mqtt://127.0.0.1:{port}", "plant1", "cell7")}
+            if with_plc:
+                outputs = {**server_config(node).outputs, **outputs}
+            config = BridgeConfig((node,), outputs, LogSettings(format="json", status_every_s=0))
+            raw, _ = slip_raw(paper_profile)
+            with running_bridge(config) as run:
+                wait_for(lambda: run.bridge.counters()["grip"]["sparkplug_connects"] == 1, what="connected")
+                cap.wait(lambda m: any("/DBIRTH/" in t for t, _ in m))
+                with node_thread(paper_profile, ch, raw) as nt:
+                    nt.start()
+                    nt.join(15)
+                cap.wait(lambda m: any(b"slip" in p for t, p in m if "/DDATA/" in t))
+            msgs = cap.wait(lambda m: any("/NDEATH/" in t for t, _ in m))
+        finally:
+            cap.close()
+    decoded = _decoded(msgs)
+    states, _ = _check_sequence(decoded)
+    assert "slip" in states and states[states.index("slip") - 1] != "slip"
+    topics = {t for _, t, _ in decoded}
+    assert topics == {f"spBv1.0/plant1/{k}/cell7" for k in ("NBIRTH", "NDEATH")} | \
+        {f"spBv1.0/plant1/{k}/cell7/grip" for k in ("DBIRTH", "DDATA", "DDEATH")}
+
+
+@pytest.mark.slow
+def test_ncmd_rebirth_and_malformed_commands(tmp_path):
+    import paho.mqtt.client as mqtt
+
+    with spb.broker(tmp_path) as port:
+        cap = spb.Capture(port, tmp_path / "sub.txt")
+        try:
+            node = NodeConfig.of("grip", PAPER, "scene", scene="hold")
+            config = BridgeConfig((node,), {"sparkplug": SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e")},
+                                  LogSettings(format="json", status_every_s=0))
+            with running_bridge(config) as run:
+                cap.wait(lambda m: any("/DBIRTH/" in t for t, _ in m))
+                cmd = spb.Payload(timestamp=1)
+                m = cmd.metrics.add(name="Node Control/Rebirth", datatype=11, boolean_value=True)
+                assert m.boolean_value
+                pub = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2)
+                pub.connect("127.0.0.1", port)
+                pub.loop_start()
+                try:
+                    pub.publish("spBv1.0/g/NCMD/e", b"\xff\xff\xff", qos=1).wait_for_publish(5)
+                    pub.publish("spBv1.0/g/NCMD/e", cmd.SerializeToString(), qos=1).wait_for_publish(5)
+                    wait_for(lambda: run.bridge.counters()["grip"]["sparkplug_rebirths"] == 1, what="rebirth")
+                    assert run.bridge.counters()["grip"]["sparkplug_bad_commands"] == 1
+                    cap.wait(lambda m: sum("/NBIRTH/" in t for t, _ in m) == 2
+                             and sum("/DBIRTH/" in t for t, _ in m) == 2)
+                finally:
+                    pub.disconnect()
+                    pub.loop_stop()
+            msgs = cap.wait(lambda m: any("/NDEATH/" in t for t, _ in m))
+        finally:
+            cap.close()
+    decoded = _decoded(msgs)
+    _check_sequence(decoded)
+    nbirths = [p for k, _, p in decoded if k == "NBIRTH"]
+    assert [p.seq for p in nbirths] == [0, 0]
+    assert spb.metric_value(nbirths[0], "bdSeq") == spb.metric_value(nbirths[1], "bdSeq")
+
+
+def _cli(port: int, *extra: str) -> list[str]:
+    return [sys.executable, "-m", "eskin_industrial", "bridge", "-p", str(PROFILES / "paper-5x5.toml"),
+            "--source", "scene:case2", "--sparkplug", f"mqtt://127.0.0.1:{port}", "--group-id", "plant1",
+            "--edge-node-id", "cell7", *extra]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_the_command_line_bridge_dies_with_ndeath(tmp_path, sig):
+    """SIGKILL: the broker delivers the will; SIGTERM: the bridge sends DDEATH and NDEATH."""
+    with spb.broker(tmp_path) as port:
+        cap = spb.Capture(port, tmp_path / "sub.txt")
+        proc = subprocess.Popen(_cli(port), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                env={**os.environ, "PYTHONPATH": os.getcwd()})
+        try:
+            cap.wait(lambda m: any("/DDATA/" in t for t, _ in m), timeout_s=20)
+            os.kill(proc.pid, sig)
+            proc.wait(10)
+            msgs = cap.wait(lambda m: any("/NDEATH/" in t for t, _ in m), timeout_s=10)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(5)
+            proc.stderr.close()
+            cap.close()
+    decoded = _decoded(msgs)
+    kinds = [k for k, _, _ in decoded]
+    assert kinds[0] == "NBIRTH" and kinds[-1] == "NDEATH"
+    assert spb.metric_value(decoded[-1][2], "bdSeq") == spb.metric_value(decoded[0][2], "bdSeq")
+    assert ("DDEATH" in kinds) == (sig == signal.SIGTERM)
+
+
+def test_check_describes_the_output(tmp_path):
+    out = subprocess.run(_cli(1883, "--check"), capture_output=True, text=True, timeout=60,
+                         env={**os.environ, "PYTHONPATH": os.getcwd()})
+    assert out.returncode == 0, out.stderr
+    assert "Sparkplug B spBv1.0/plant1/DDATA/cell7/" in out.stdout + out.stderr
+    bad = subprocess.run(_cli(1883)[:-6] + ["--sparkplug", "mqtt:/nohost", "--group-id", "g", "--edge-node-id", "e",
+                                            "--check"], capture_output=True, text=True, timeout=60,
+                         env={**os.environ, "PYTHONPATH": os.getcwd()})
+    assert bad.returncode != 0 and "expected mqtt://HOST:PORT" in bad.stderr
+
+
+def test_the_metric_table_in_the_docs_is_the_code():
+    from eskin_industrial.plant.sparkplug import metric_table
+    from tests.helpers.paths import ROOT
+
+    text = (ROOT / "docs" / "plant.md").read_text()
+    assert "\n".join(metric_table()) in text
+
+
+@pytest.mark.slow
+def test_a_broker_restart_is_a_new_session_with_the_next_bdseq(tmp_path):
+    """The broker dies and comes back on its port: the node reconnects by itself and
+    births again with bdSeq + 1 (its will for the new session)."""
+    first = spb.Broker(tmp_path)
+    second = None
+    try:
+        node = NodeConfig.of("grip", PAPER, "scene", scene="hold")
+        config = BridgeConfig((node,), {"sparkplug": SparkplugOptions(f"mqtt://127.0.0.1:{first.port}", "g", "e")},
+                              LogSettings(format="json", status_every_s=0))
+        with running_bridge(config) as run:
+            counters = lambda: run.bridge.counters()["grip"]  # noqa: E731
+            wait_for(lambda: counters()["sparkplug_connects"] == 1, what="connected")
+            first.kill()
+            wait_for(lambda: counters()["sparkplug_failures"] == 1, what="the loss seen")
+            second = spb.Broker(tmp_path, first.port)
+            cap = spb.Capture(second.port, tmp_path / "sub.txt")
+            try:
+                wait_for(lambda: counters()["sparkplug_connects"] == 2, timeout_s=15, what="reconnected")
+                # the births of the reconnect may precede the subscription: ask again
+                spb.send_rebirth(second.port, "g", "e", tmp_path)
+                msgs = cap.wait(lambda m: any("/DBIRTH/" in t for t, _ in m))
+            finally:
+                cap.close()
+    finally:
+        first.kill()
+        if second is not None:
+            second.kill()
+    nbirths = [spb.parse(p) for t, p in msgs if "/NBIRTH/" in t]
+    assert all(p.seq == 0 and spb.metric_value(p, "bdSeq") == 1 for p in nbirths) and nbirths
