@@ -4,6 +4,7 @@ or SocketCAN vcan) and Modbus RTU; and the CPU the bridge takes.
 
     .venv/bin/python benchmarks/bench_bridge.py                 # every path, 60 s each (~5 min)
     .venv/bin/python benchmarks/bench_bridge.py --paths can-1k --duration 30
+    .venv/bin/python benchmarks/bench_bridge.py --paths can-100 --duration 30 --breakdown   # where the time goes
     python tests/vcan/vm.py -- .venv/bin/python benchmarks/bench_bridge.py --paths vcan-100,vcan-1k
 
 What runs: the product's own :class:`~eskin_industrial.bridge.runtime.Bridge` (reader
@@ -43,7 +44,6 @@ import sys
 import tempfile
 import threading
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -171,7 +171,8 @@ def latencies(decisions: list[tuple[int, int]], arrival: dict[int, float], write
 
 # -- our bridge -------------------------------------------------------------------------
 
-def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, channel: str):
+def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, channel: str,
+             breakdown: bool = False):
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
     from eskin_industrial.plc.sink import PlcOptions
     from eskin_industrial.bridge.logs import EventLog
@@ -221,6 +222,24 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
             return scan
 
         source.poll = timed_poll  # type: ignore[method-assign]
+        pushed: dict[int, tuple[float, float]] = {}  # scan -> wall time at the start and end of detection
+        sends: list[tuple[float, int]] = []  # (wall time, STATE) of each write the bridge sends
+        if breakdown:
+            loop, writer = br.runs[0].loop, br.runs[0].sinks[0]
+            push, send_write = loop.pipeline.push, writer.master.send_write
+
+            def timed_push(scan):
+                t1 = time.time()
+                out = push(scan)
+                pushed[int(round(scan.t * rate))] = (t1, time.time())
+                return out
+
+            def timed_send(address, values):
+                sends.append((time.time(), int(values[1])))
+                return send_write(address, values)
+
+            loop.pipeline.push = timed_push  # type: ignore[method-assign]
+            writer.master.send_write = timed_send  # type: ignore[method-assign]
         node_thread = None
         if not path.startswith("rtu"):
             node_thread = start_can_node(nodes[0].profile, scene_file, rate, fd, interface, channel)
@@ -245,7 +264,26 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
     bridge_cpu = sum(v for k, v in ours.items() if k not in ("bench-node", "MainThread"))
     lat_all, lat_slip, skipped = latencies(decisions, arrival, writes)
     return dict(rate=rate, decisions=decisions, lat_all=lat_all, lat_slip=lat_slip, skipped=skipped, arrival=arrival, writes=writes,
-                cpu=bridge_cpu / wall, counters=counters)
+                cpu=bridge_cpu / wall, counters=counters,
+                breakdown=stages(decisions, arrival, pushed, sends) if breakdown else None)
+
+
+def stages(decisions: list[tuple[int, int]], arrival: dict[int, float], pushed: dict[int, tuple[float, float]],
+           sends: list[tuple[float, int]]) -> list[tuple[float, float, float]]:
+    """For each decision scan: arrival -> start of detection, detection (calibration
+    and detector), end of detection -> the bridge's send of the new STATE (seconds)."""
+    out = []
+    times = np.array([t for t, _ in sends])
+    for k, state in decisions:
+        if k not in arrival or k not in pushed:
+            continue
+        t1, t2 = pushed[k]
+        j = int(np.searchsorted(times, t2))
+        while j < len(sends) and sends[j][1] != state:
+            j += 1
+        if j < len(sends):
+            out.append((t1 - arrival[k], t2 - t1, sends[j][0] - t2))
+    return out
 
 
 def start_can_node(profile, scene_file: Path, rate: float, fd: bool, interface: str, channel: str,
@@ -332,6 +370,9 @@ def main() -> None:
     ap.add_argument("--paths", default=",".join(PATHS),
                     help=f"comma-separated: {', '.join(PATHS)}, vcan-100, vcan-1k (SocketCAN vcan0)")
     ap.add_argument("--duration", type=float, default=60.0, help="seconds per path (default 60)")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="also where our time goes, per decision scan (medians): arrival -> detection, "
+                         "detection, detection -> the write's send")
     ap.add_argument("--capture", nargs=2, metavar=("PORT", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.capture:
@@ -342,12 +383,14 @@ def main() -> None:
     from eskin_industrial.bus.modbus.io import quiet_pymodbus
 
     quiet_pymodbus()
-    cmd = f".venv/bin/python benchmarks/bench_bridge.py --paths {args.paths} --duration {args.duration:g}"
+    cmd = (f".venv/bin/python benchmarks/bench_bridge.py --paths {args.paths} --duration {args.duration:g}"
+           + (" --breakdown" if args.breakdown else ""))
     print(f"# {cmd}")
     print(f"# {time.strftime('%Y-%m-%d', time.gmtime())} on {describe()}")
     print("| path | rate | decisions timed (slips) | ours p50 / p99 ms | slips p50 / p99 ms | reference p50 / p99 ms "
           "| ratio p50 / p99 | bridge CPU | drops |")
     print("|---|---|---|---|---|---|---|---|---|")
+    breakdowns: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
         scene = Path(tmp) / "slip-train.toml"
         scene.write_text(slip_train_toml(args.duration))
@@ -356,7 +399,7 @@ def main() -> None:
                 interface, channel = "socketcan", "vcan0"
             else:
                 interface, channel = "virtual", f"bench-bridge-{os.getpid()}-{path}"
-            r = run_ours(path, args.duration, scene, interface, channel)
+            r = run_ours(path, args.duration, scene, interface, channel, args.breakdown)
             ref = None
             if not path.startswith("rtu"):
                 ref = run_reference(path, r["decisions"], scene, interface, channel + "-ref"
@@ -374,6 +417,12 @@ def main() -> None:
             print(f"| {path} | {r['rate']:g} Hz | {len(r['lat_all'])} ({n_slip}), {r['skipped']} superseded | {ms(r['lat_all'], 50)} / "
                   f"{ms(r['lat_all'], 99)} | {ms(r['lat_slip'], 50)} / {ms(r['lat_slip'], 99)} | {refcol} | {ratio} | "
                   f"{r['cpu'] * 100:.1f} % | {drops} (of {c.get('scans', 0)} scans) |", flush=True)
+            if r["breakdown"]:
+                a, d, s = np.median(np.asarray(r["breakdown"]) * 1000, axis=0)
+                breakdowns.append(f"# {path}: arrival -> detection {a:.2f} ms, detection {d:.2f} ms, "
+                                  f"detection -> send {s:.2f} ms (medians of {len(r['breakdown'])} decision scans)")
+    for line in breakdowns:
+        print(line)
 
 
 if __name__ == "__main__":

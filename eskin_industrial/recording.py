@@ -19,7 +19,7 @@ from typing import IO, Literal
 
 import numpy as np
 
-from .detect.state import GraspState
+from .detect.state import LABELS
 from .detect.updates import COLUMNS, Update, UpdateTable
 from .errors import InputFormatError
 
@@ -112,20 +112,17 @@ def write_recording(dest: str | Path | IO[str], t: np.ndarray, values: np.ndarra
 
 
 def write_updates(dest: str | Path | IO[str], table: UpdateTable) -> None:
-    """One row per update; ``state`` as its label, floats with 9 significant digits."""
-    labels = np.array([s.label for s in GraspState], dtype=object)
+    """One row per update (:func:`update_row`); ``state`` as its label, floats with 9
+    significant digits."""
     with _opened(dest) as out:
         out.write(",".join(COLUMNS) + "\n")
-        t, rc, rd, st, va = table.t, table.r_coe, table.r_dw, labels[table.state], table.valid.astype(int)
-        for i in range(len(table)):
-            out.write(
-                f"{t[i]:.6f},{rc[i]:.9g},{rd[i]:.9g},{st[i]},{va[i]},{table.f_sum[i]:.9g},"
-                f"{table.xc[i]:.9g},{table.yc[i]:.9g},{table.flags[i]}\n"
-            )
+        for row in zip(*(getattr(table, c).tolist() for c in COLUMNS)):
+            u = Update(*row)
+            out.write(update_row(u, LABELS[u.state]))
 
 
 def update_row(u: Update, label: str) -> str:
-    """One update as :func:`write_updates` writes it (streaming writers: the recorder)."""
+    """One update as a row of the updates CSV (``detect``'s output, the recorder's)."""
     return (f"{u.t:.6f},{u.r_coe:.9g},{u.r_dw:.9g},{label},{int(u.valid)},{u.f_sum:.9g},"
             f"{u.xc:.9g},{u.yc:.9g},{u.flags}\n")
 

@@ -41,6 +41,8 @@ def test_writer_refreshes_and_writes_changes_at_once(paper_profile):
         writer.offer([int(Status.SLIP)] + [0] * (STATUS_COUNT - 1), urgent=True, t_event=t0)
         wait_for(lambda: plc.first(Status.SLIP) is not None, timeout_s=1.0)
         assert plc.first(Status.SLIP) - t0 < 0.02  # far below refresh_s = 0.05 + the write
+        # the PLC has the image; the writer counts it once the PLC's answer is back
+        wait_for(lambda: writer.stats.writes and writer.flushed, timeout_s=1.0)
         assert writer.stats.urgent_writes == 1 and writer.stats.latencies_s[0] < 0.02
     finally:
         writer.stop()

@@ -1,11 +1,12 @@
-"""The two seams as docs/architecture.md shows them: a new source kind and a new
-output kind are each one module plus one registry entry, and the bridge
-configuration, ``--check`` and the runtime take them with no other change."""
+"""The two seams as docs/architecture.md shows them: its example source kind and its
+example output kind, taken from the page itself, are each one module plus one
+registry entry, and the bridge configuration and the runtime take them with no other
+change."""
 
 from __future__ import annotations
 
+import re
 import sys
-import textwrap
 
 import pytest
 
@@ -16,117 +17,72 @@ from eskin_industrial.bus.source import SOURCES
 from eskin_industrial.errors import ProfileError
 from eskin_industrial.sinks.base import SINKS
 from tests.helpers.bridge import LogCapture, wait_for
-from tests.helpers.paths import PROFILES
+from tests.helpers.paths import PROFILES, ROOT
 
-MODULE = '''
+#: What the page's examples take as given.
+PRELUDE = '''
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from eskin_industrial.bus.source import Source
+from eskin_industrial.detect.state import GraspState
 from eskin_industrial.frames import RawScan
 from eskin_industrial.sinks.base import CliOption, Sink
-
-
-@dataclass(frozen=True)
-class ConstOptions:
-    value: float = 0.0
-
-
-class ConstSource(Source):
-    kind = "const"
-    spec = "const"
-    Options = ConstOptions
-
-    def __init__(self, taxels, value):
-        super().__init__()
-        self.raw, self.seq = np.full(taxels, value), -1
-
-    def _poll(self, timeout_s):
-        time.sleep(0.01)
-        self.seq += 1
-        return RawScan(self.seq, self.seq * 0.01, self.raw, 0, time.monotonic())
-
-    @classmethod
-    def open_node(cls, node, context):
-        return cls(node.profile.taxels, node.options.value)
-
-
-@dataclass(frozen=True)
-class SeenOptions:
-    prefix: str = "seen"
-
-
-class SeenSink(Sink):
-    kind = "seen"
-    Options = SeenOptions
-    cli_options = (CliOption("--seen", "prefix", "Keep every update.", metavar="PREFIX"),)
-    opened = []
-
-    def __init__(self, node_name, prefix):
-        super().__init__()
-        self.where = f"{prefix}:{node_name}"
-        self.updates = []
-        self.publications = []
-
-    def on_update(self, update):
-        self.updates.append(update)
-
-    def _publish(self, publication):
-        self.publications.append(publication)
-
-    @classmethod
-    def describe(cls, options, node):
-        return f"seen {options.prefix}"
-
-    @classmethod
-    def open_nodes(cls, options, nodes, context):
-        sinks = [cls(n.name, options.prefix) for n in nodes]
-        cls.opened.extend(sinks)
-        return sinks
 '''
+
+
+def page_examples() -> str:
+    """The Python blocks of docs/architecture.md, less their registry lines (the test
+    makes those entries itself)."""
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    assert len(blocks) == 2, "the page shows one source and one output"
+    return PRELUDE + "\n".join(re.sub(r"^(SOURCES|SINKS)\[.*$", "", b, flags=re.M) for b in blocks)
 
 
 @pytest.fixture
 def kinds(tmp_path, monkeypatch):
-    (tmp_path / "mykinds.py").write_text(textwrap.dedent(MODULE))
+    (tmp_path / "pagekinds.py").write_text(page_examples())
     monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setitem(SOURCES, "const", "mykinds:ConstSource")  # the one registry entry each
-    monkeypatch.setitem(SINKS, "seen", "mykinds:SeenSink")
+    monkeypatch.setitem(SOURCES, "const", "pagekinds:ConstSource")  # the one registry entry each
+    monkeypatch.setitem(SINKS, "state-log", "pagekinds:StateLog")
     yield
-    sys.modules.pop("mykinds", None)
+    sys.modules.pop("pagekinds", None)
 
 
-def config(tmp_path, extra: str = "") -> str:
-    return (f'[log]\nformat = "json"\nstatus_every_s = 0\n\n[seen]\nprefix = "cell7"\n{extra}\n'
-            f'[[node]]\nname = "g"\nprofile = "{PROFILES / "paper-5x5.toml"}"\nsource = "const"\nvalue = 1500.0\n')
+def config(log_path) -> str:
+    # 600 ohm on every taxel: about 4.4 N each, a firm still grasp
+    return (f'[log]\nformat = "json"\nstatus_every_s = 0\n\n[state-log]\npath = "{log_path}"\n\n'
+            f'[[node]]\nname = "g"\nprofile = "{PROFILES / "paper-5x5.toml"}"\nsource = "const"\nvalue = 600.0\n')
 
 
-def test_a_new_source_and_a_new_output_run_in_the_bridge(kinds, tmp_path):
-    cfg = parse_bridge_config(config(tmp_path), str(tmp_path / "b.toml"))
+def test_the_page_examples_run_in_the_bridge(kinds, tmp_path):
+    log_path = tmp_path / "states.log"
+    cfg = parse_bridge_config(config(log_path), str(tmp_path / "b.toml"))
     (node,) = resolve(cfg)
-    assert node.options.value == 1500.0 and [c.kind for c, _ in output_classes(cfg)] == ["seen"]
+    assert node.options.value == 600.0 and [c.kind for c, _ in output_classes(cfg)] == ["state-log"]
     capture = LogCapture()
     log = EventLog(capture, "json", "debug")
     bridge = Bridge(cfg, [node], log).open()
     try:
         bridge.start()
-        sink = bridge.runs[0].sinks[0]
-        wait_for(lambda: len(sink.updates) >= 20, what="updates from the new source in the new sink")
+        wait_for(lambda: bridge.counters()["g"]["updates"] >= 20, what="updates from the example source")
     finally:
         bridge.stop()
         log.close()
-    assert sink.where == "cell7:g" and sink.publications[-1].offline  # BRIDGE_OFFLINE went to it too
-    assert [u.t for u in sink.updates] == sorted(u.t for u in sink.updates)
+    lines = log_path.read_text().splitlines()
+    assert lines and lines[-1].startswith("g ") and lines[-1].endswith(" stable"), lines
     start = capture.events("start")[0]
-    assert start["sources"] == "const" and start["outputs"] == "cell7:g"
+    assert start["sources"] == "const" and start["outputs"] == str(log_path)
 
 
 def test_the_new_kinds_keys_are_checked_like_every_section(kinds, tmp_path):
+    text = config(tmp_path / "x.log")
     with pytest.raises(ProfileError, match=r"\[node\[0\]\] valeu: unknown key; did you mean 'value'"):
-        parse_bridge_config(config(tmp_path).replace("value =", "valeu ="), "b.toml")
-    with pytest.raises(ProfileError, match=r"\[seen\] prefx: unknown key; did you mean 'prefix'"):
-        parse_bridge_config(config(tmp_path).replace("prefix =", "prefx ="), "b.toml")
+        parse_bridge_config(text.replace("value =", "valeu ="), "b.toml")
+    with pytest.raises(ProfileError, match=r"\[state-log\] paht: unknown key; did you mean 'path'"):
+        parse_bridge_config(text.replace("path =", "paht =", 1), "b.toml")
     with pytest.raises(ProfileError, match=r"\[node\[0\]\] value: expected a number"):
-        parse_bridge_config(config(tmp_path).replace("1500.0", '"1500"'), "b.toml")
+        parse_bridge_config(text.replace("600.0", '"600"'), "b.toml")

@@ -51,7 +51,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from ..bus.source import DEFAULT_QUEUE_FRAMES, SOURCES, Source, source_class
+from ..bus.source import DEFAULT_QUEUE_FRAMES, Source, source_class
 from ..errors import ProfileError
 from ..profile import Profile, derived_stale_s, load_profile
 from ..schema import SchemaError, build, in_range, positive, read_toml_file
@@ -105,7 +105,7 @@ class _Top:
     """The top-level keys that are not an output kind's section."""
 
     log: LogSettings = field(default_factory=LogSettings)
-    #: Received CAN frames held per bus before the oldest are dropped (counted).
+    #: Received CAN frames held per bus; past it, new frames are dropped (counted).
     queue_frames: int = field(default=DEFAULT_QUEUE_FRAMES, metadata=positive("an integer >= 1"))
 
 
@@ -207,12 +207,10 @@ def _node(raw: Any, index: int, source: str) -> NodeConfig:
     if not isinstance(raw, dict):
         raise ProfileError(f"{source}: {label}: expected a table")
     kind_name = raw.get("source", "can")
-    if not isinstance(kind_name, str) or kind_name not in SOURCES:
-        near = difflib.get_close_matches(str(kind_name), list(SOURCES), n=1)
-        hint = f" (did you mean {near[0]!r}?)" if near else ""
-        raise ProfileError(f"{source}: {label} source: expected one of {', '.join(repr(k) for k in SOURCES)}, "
-                           f"got {kind_name!r}{hint}")
-    kind = source_class(kind_name)
+    try:
+        kind = source_class(kind_name if isinstance(kind_name, str) else repr(kind_name))
+    except ProfileError as exc:  # unknown: the nearest and the valid names
+        raise ProfileError(f"{source}: {label} source: {exc}") from None
     common = {k: v for k, v in raw.items() if k in _COMMON}
     own = {k: v for k, v in raw.items() if k not in _COMMON}
     try:
@@ -227,26 +225,10 @@ def _node(raw: Any, index: int, source: str) -> NodeConfig:
         if exc.message.startswith("missing key"):
             raise ProfileError(f"{source}: {label} {exc.key}: missing key (source = {kind_name!r} needs it)") from None
         raise ProfileError(f"{source}: {label} {exc}") from None
-    try:
-        return _common(common, options)
+    try:  # the keys every node has, checked by NodeConfig's own fields
+        return replace(build(NodeConfig, common), options=options)
     except SchemaError as exc:
         raise ProfileError(f"{source}: {label} {exc}") from None
-
-
-@dataclass(frozen=True)
-class _NodeKeys:
-    """The keys of :class:`NodeConfig` as they appear in a ``[[node]]`` table."""
-
-    name: str
-    profile: str
-    source: str = "can"
-    rate_hz: float | None = field(default=None, metadata=positive())
-    base_address: int | None = field(default=None, metadata=in_range(0, 65000))
-
-
-def _common(common: dict[str, Any], options: Any) -> NodeConfig:
-    keys = build(_NodeKeys, common)
-    return NodeConfig(keys.name, keys.profile, keys.source, options, keys.rate_hz, keys.base_address)
 
 
 def resolve(config: BridgeConfig) -> list[ResolvedNode]:

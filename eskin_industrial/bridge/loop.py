@@ -27,6 +27,8 @@ from ..profile import Profile
 from ..sinks.base import Publication, Sink
 
 _QUIET = ~int(Status.BRIDGE_ALIVE)  # the life bit changes at every publication
+_BUS_FAULT = int(Status.BUS_FAULT)
+_STALE = int(Status.SENSOR_STALE)
 
 
 class NodeLoop:
@@ -41,7 +43,6 @@ class NodeLoop:
                  on_command: Callable[[str], None] | None = None) -> None:
         self.profile = profile
         self.source = source
-        self.sinks = list(sinks)
         self.pipeline = Pipeline(profile, rate_hz=rate_hz, method=method)
         self.image = PlcImage(profile.modbus.plc)
         self.recent_raw: collections.deque[np.ndarray] = collections.deque(maxlen=self.TARE_SCANS)
@@ -49,20 +50,25 @@ class NodeLoop:
         self.publications = 0
         self._last_pub = float("-inf")
         self._last_status = -1
-        self._quiet_until = float("-inf")  #: see :meth:`publish_if_due`
         self._refresh_s = profile.modbus.plc.refresh_s
         self._stop = threading.Event()
         self.on_update = on_update
         self.on_command = on_command
         self.offline = False
-        self.refresh_sinks()
+        # Only the sinks that override them are called per update and for commands:
+        # the per-scan path stays a few attribute reads.
+        self._update_sinks: list[Callable[[Update], None]] = []
+        self._command_sinks: list[Sink] = []
+        self.sinks: list[Sink] = []
+        for sink in sinks:
+            self.add_sink(sink)
 
-    def refresh_sinks(self) -> None:
-        """(Re)read which sinks take updates and commands (after ``sinks`` changed):
-        only the sinks that override them are called, so the per-scan path stays a few
-        attribute reads."""
-        self._update_sinks = [s.on_update for s in self.sinks if type(s).on_update is not Sink.on_update]
-        self._command_sinks = [s for s in self.sinks if type(s).take_commands is not Sink.take_commands]
+    def add_sink(self, sink: Sink) -> None:
+        self.sinks.append(sink)
+        if type(sink).on_update is not Sink.on_update:
+            self._update_sinks.append(sink.on_update)
+        if type(sink).take_commands is not Sink.take_commands:
+            self._command_sinks.append(sink)
 
     def health(self, now: float | None = None) -> Health:
         src = self.source
@@ -85,7 +91,8 @@ class NodeLoop:
                 urgent |= observe(u)
         if self._command_sinks and self._apply_commands():
             urgent = True
-        if scan is None and not urgent and time.monotonic() < self._quiet_until and not self.source.bus_fault:
+        if (scan is None and not urgent and not self._last_status & _BUS_FAULT and not self.source.bus_fault
+                and self._due_in(time.monotonic()) > 0):
             return False  # no scan, no command, nothing due: a frame of a scan under way costs little
         published = self.publish_if_due(urgent, t_event)
         # The PLC first, then whatever else wants each update (a recorder, the logs).
@@ -132,24 +139,20 @@ class NodeLoop:
         self._last_status = status
         self._last_pub = now
         self.publications += 1
-        # Until then, with no new update, no command and no bus fault, no publication
-        # can fall due: the next refresh, or the newest frame turning stale.
-        quiet = now + self._refresh_s
-        if health.frame_age_s is not None and health.frame_age_s <= self.image.stale_limit_s:
-            quiet = min(quiet, now + self.image.stale_limit_s - health.frame_age_s)
-        self._quiet_until = quiet if not health.bus_fault else now
         return True
 
-    def wait_budget(self, now: float | None = None) -> float:
-        """How long the loop may wait for traffic before a publication falls due:
-        the next refresh, or the moment the newest frame turns stale."""
-        now = time.monotonic() if now is None else now
-        budget = min(self.MAX_WAIT_S, self._last_pub + self._refresh_s - now)
+    def _due_in(self, now: float) -> float:
+        """Seconds until a publication falls due with no new scan or command: the next
+        refresh, or the moment the newest frame turns stale."""
+        due = self._last_pub + self._refresh_s - now
         age = self.source.frame_age(now)
-        stale_s = self.image.stale_limit_s
-        if age is not None and age <= stale_s:
-            budget = min(budget, stale_s - age + 1e-4)
-        return max(budget, 0.0)
+        if age is not None and not self._last_status & _STALE:  # published fresh: due when it turns stale
+            due = min(due, self.image.stale_limit_s - age + 1e-4)
+        return due
+
+    def wait_budget(self, now: float | None = None) -> float:
+        """How long the loop may wait for traffic before a publication falls due."""
+        return max(min(self.MAX_WAIT_S, self._due_in(time.monotonic() if now is None else now)), 0.0)
 
     def shutdown(self) -> None:
         """Publish the last image, BRIDGE_OFFLINE with no state claimed (a client-mode

@@ -26,7 +26,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..bus.source import OpenContext, Source
+from ..bus.source import Feeder, OpenContext, Source
 from ..detect.state import GraspState
 from ..detect.updates import Update
 from ..plc.image import Status
@@ -97,8 +97,8 @@ class SingleNode:
         except BaseException:
             self.close()
             raise
-        self.loop.sinks.extend(extra_sinks)
-        self.loop.refresh_sinks()
+        for sink in extra_sinks:
+            self.loop.add_sink(sink)
         self.source = self.loop.source
 
     def __enter__(self) -> "SingleNode":
@@ -130,7 +130,7 @@ class Bridge:
         self.on_update = on_update
         self.runs: list[NodeRun] = []
         #: Nodes stepped together: (feeder, indices of their runs).
-        self.groups: list[tuple[Any, list[int]]] = []
+        self.groups: list[tuple[Feeder, list[int]]] = []
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._closers: list[Callable[[], None]] = []
@@ -153,7 +153,7 @@ class Bridge:
             loop.on_update = self._update_hook(run)
             loop.on_command = self._command_hook(run)
             self.runs.append(run)
-        feeders: dict[int, tuple[Any, list[int]]] = {}
+        feeders: dict[int, tuple[Feeder, list[int]]] = {}
         for i, run in enumerate(self.runs):
             feeder = run.loop.source.feeder
             if feeder is not None:
@@ -238,7 +238,7 @@ class Bridge:
                 self.log.event("source_ended", node=run.name, error=source.last_error or "-")
                 break
 
-    def _group_loop(self, feeder: Any, runs: list[NodeRun]) -> None:
+    def _group_loop(self, feeder: Feeder, runs: list[NodeRun]) -> None:
         stop = self._stop
         loops = [r.loop for r in runs]
         sources = [lp.source for lp in loops]
@@ -250,15 +250,12 @@ class Bridge:
                 while src.pending:  # every scan routed in this round
                     lp.step(0.0)
 
-        serve_arrivals = getattr(feeder, "serve_arrivals", None)
-        if serve_arrivals is not None:
-            serve_arrivals(serve)  # an idle bus's frame is served by its reader at once
-        lock = getattr(feeder, "lock", None) or threading.Lock()
+        feeder.serve_arrivals(serve)  # an idle bus's frame is served by its reader at once
         while not stop.is_set():
             feeder.wait(min(lp.wait_budget() for lp in loops))  # the round's one wait
-            with lock:
+            with feeder.lock:
                 serve()
-            if getattr(feeder, "serve_error", None) is not None:
+            if feeder.serve_error is not None:
                 raise feeder.serve_error
             if feeder.done:
                 self.log.event("source_ended", node=",".join(r.name for r in runs),

@@ -22,35 +22,13 @@ the command line and ``--check`` need, so that none of them branches on the kind
 - :meth:`Source.open_nodes`: open the sources of every node of this kind (a CAN bus
   shared by several nodes is opened once).
 
-Example, a source of a constant scan (a test stand-in)::
-
-    @dataclass(frozen=True)
-    class ConstOptions:
-        value: float = 0.0
-
-    class ConstSource(Source):
-        kind = "const"
-        Options = ConstOptions
-
-        def __init__(self, taxels: int, value: float) -> None:
-            super().__init__()
-            self.raw, self.seq = np.full(taxels, value), -1
-
-        def _poll(self, timeout_s):
-            time.sleep(0.01)
-            self.seq += 1
-            return RawScan(self.seq, self.seq * 0.01, self.raw, 0, time.monotonic())
-
-        @classmethod
-        def open_node(cls, node, context):
-            return cls(node.profile.taxels, node.options.value)
-
-    SOURCES["const"] = "mymodule:ConstSource"
+An example of a new kind, run by ``tests/test_seams.py``: ``docs/architecture.md``.
 """
 
 from __future__ import annotations
 
 import abc
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -267,9 +245,18 @@ class Source(abc.ABC):
 
 class Feeder(Protocol):
     """Several nodes' sources fed by one transport read (a CAN bus shared by ID): the
-    loop waits on the feeder once a round, then polls each node's source."""
+    loop waits on the feeder once a round, then steps each node's loop under ``lock``;
+    ``serve_arrivals`` lets the reading thread run that round itself when the loop
+    thread is idle (its failure is kept in ``serve_error`` for the loop to raise)."""
+
+    lock: threading.Lock
+    serve_error: BaseException | None
+
+    def wait(self, timeout_s: float) -> None: ...
 
     def route(self, timeout_s: float) -> int: ...
+
+    def serve_arrivals(self, serve: Callable[[], None]) -> None: ...
 
     @property
     def done(self) -> bool: ...

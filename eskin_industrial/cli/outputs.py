@@ -13,10 +13,6 @@ from ..sinks.base import SINKS, sink_class
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-def output_option_dests() -> list[str]:
-    return [o.dest for kind in SINKS for o in sink_class(kind).cli_options]
-
-
 def output_options(func: F) -> F:
     """Every output kind's options, in registry order."""
     opts = []

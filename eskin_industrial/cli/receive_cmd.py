@@ -55,11 +55,7 @@ def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output,
             loop.run(duration_s=duration_s, idle_timeout_s=idle_s, max_scans=max_scans)
         except KeyboardInterrupt:
             pass
-        # The reader stops; what it had queued is still recorded and decoded.
-        source.reader.stop()
-        while source.pending or source.reader.queue:
-            loop.step(0.0)
-        source.assembler.flush()
+        source.end_reception(loop.step)  # what the reader had queued is still recorded and decoded
     if not quiet:
         c = loop.pipeline.counters
         summary = {k: v for k, v in vars(c).items() if k != "extra"} | source.counters()

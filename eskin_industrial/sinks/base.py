@@ -19,30 +19,7 @@ configuration (its own ``[SECTION]`` of ``bridge.toml``), the command line
 (:meth:`Sink.open_nodes`; a kind may share one connection between its nodes, as the
 PLC server serves every node's block).
 
-Example, a sink that prints slips (one module and one registry entry)::
-
-    @dataclass(frozen=True)
-    class SlipPrinterOptions:
-        prefix: str = "slip"
-
-    class SlipPrinter(Sink):
-        kind = "slip-printer"
-        Options = SlipPrinterOptions
-        cli_options = (CliOption("--print-slips", "prefix", "Print each slip.", metavar="PREFIX"),)
-
-        def __init__(self, node_name: str, prefix: str) -> None:
-            super().__init__()
-            self.where, self.prefix, self.node_name = "stdout", prefix, node_name
-
-        def on_update(self, update):
-            if update.state == GraspState.SLIP:
-                print(self.prefix, self.node_name, update.t)
-
-        @classmethod
-        def open_nodes(cls, options, nodes, context):
-            return [cls(n.name, options.prefix) for n in nodes]
-
-    SINKS["slip-printer"] = "mymodule:SlipPrinter"
+An example of a new kind, run by ``tests/test_seams.py``: ``docs/architecture.md``.
 """
 
 from __future__ import annotations

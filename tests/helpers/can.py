@@ -26,10 +26,7 @@ class Receiver:
         try:
             self.loop.run(**until)
         finally:
-            self.source.reader.stop()
-            while self.source.pending or self.source.reader.queue:
-                self.loop.step(0.0)
-            self.assembler.flush()
+            self.source.end_reception(self.loop.step)
             self.source.close()
 
     def poll(self) -> None:

@@ -53,8 +53,7 @@ class CanGroup:
         published with no thread hand-off.  Under load (frames already queued, or the
         loop thread busy) the reader only queues them, as before, and keeps reading."""
         self._serve = serve
-        if hasattr(self.reader, "on_queued"):
-            self.reader.on_queued = self._on_queued
+        self.reader.on_queued = self._on_queued  # a log player replays at its pace: it never calls it
 
     def _on_queued(self) -> bool:
         serve = self._serve

@@ -130,7 +130,6 @@ class CanLogOptions:
     fd: bool | None = None
     base_id: int | None = field(default=None, metadata=in_range(0, 0x1FFFFFFF))
     node_id: int | None = field(default=None, metadata=in_range(0, 255))
-    log: None = None  # a replay is not recorded again
 
 
 class CanLogSource(CanSource):

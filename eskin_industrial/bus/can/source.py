@@ -11,7 +11,7 @@ thread, which waits once a round (``feeder.route``).
 from __future__ import annotations
 
 import collections
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
@@ -99,6 +99,15 @@ class CanSource(Source):
     def counters(self) -> dict[str, int]:
         return {**self.assembler.counters, **self.feeder.counters()}
 
+    def end_reception(self, step: Callable[[float], object]) -> None:
+        """The end of a reception (``receive``): the reader stops, what it had queued is
+        still decoded through ``step`` (the node loop's), and a scan the end cut short
+        is counted torn."""
+        self.reader.stop()
+        while self.pending or self.reader.queue:
+            step(0.0)
+        self.assembler.flush()
+
     def start(self) -> "CanSource":
         self.feeder.start()
         return self
@@ -158,6 +167,7 @@ class CanSource(Source):
         for members in groups.values():
             first = nodes[members[0]]
             reader = cls._reader(first, context)
+            # (a replayed log's options have no ``log``: a replay is not recorded again)
             logs = [nodes[i].options.log for i in members if getattr(nodes[i].options, "log", None)]
             log = can.Logger(logs[0]) if logs else None
             if log is not None:
