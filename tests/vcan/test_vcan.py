@@ -141,7 +141,9 @@ def test_candump_capture_of_the_node_decodes_to_the_scene(vcan, tmp_path):
     decoded, _ = cal.to_newtons(np.array([s.raw for s in scans]))
     np.testing.assert_allclose(decoded, f, atol=0.5 / 250 + 1e-9)  # half a count of 250 per newton
     stamps = np.array([m.timestamp for m in read_can_log(cap) if m.arbitration_id == 0x280])
-    assert 0.49 < stamps[-1] - stamps[0] < 2.0  # paced at 200 Hz (99 periods), not a burst
+    # paced at 200 Hz (99 periods, 0.495 s), not a burst (a few ms): the node keeps an
+    # absolute schedule, so a first frame sent late (the emulated machine) shortens the span
+    assert 0.4 < stamps[-1] - stamps[0] < 2.0
 
 
 def test_receiver_recovers_when_the_interface_comes_back(vcan):
