@@ -46,12 +46,16 @@ def test_rtu_node_to_bridge_to_plc_sets_the_slip_bit_in_time(paper_profile, tmp_
         poller = RtuSource(dataclasses.replace(paper_profile, modbus=dataclasses.replace(
             paper_profile.modbus, node=node_cfg)), b).open()
         decided: list[float] = []
+        bridge = NodeLoop(paper_profile, poller, [writer])
+        push = bridge.pipeline.push
 
-        def on_update(u) -> None:  # the decision, timed before its publication
-            if u.state == GraspState.SLIP and not decided:
+        def timed_push(scan):  # the decision, timed as the detector returns it (before its publication)
+            updates = push(scan)
+            if not decided and any(u.state == GraspState.SLIP for u in updates):
                 decided.append(time.perf_counter())
+            return updates
 
-        bridge = NodeLoop(paper_profile, poller, [writer], on_update=on_update)
+        bridge.pipeline.push = timed_push  # type: ignore[method-assign]
         stop = threading.Event()
 
         def run():
