@@ -268,6 +268,20 @@ class PlcImage:
                 changed = True
         return changed
 
+    def refusal(self, command: Command) -> str | None:
+        """Why ``command`` must not be applied now (None: it may be).  One rule for
+        every way a command arrives (a PLC register or coil, a Sparkplug DCMD): a tare
+        while something is held would take the held force for the new zero, and the
+        PLC would then read ``no_contact`` with valid data until the next tare."""
+        if command.name != "tare":
+            return None
+        u = self.update
+        if u is None or not u.valid:
+            return "contact_unknown"  # no valid scan yet: nothing says the gripper is open
+        if u.state != GraspState.NO_CONTACT:
+            return "in_contact"
+        return None
+
     def apply(self, command: Command) -> None:
         if command.name == "ack":
             # The latch stays set while the slip lasts: an acknowledge cannot hide it.
