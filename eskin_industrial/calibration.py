@@ -19,7 +19,8 @@ import numpy as np
 from .frames import FrameFlag
 from .profile import CalibrationSection
 
-_NO_FLAGS = np.int64(0)  # the flags of a clean scan
+_NO_FLAGS = np.zeros((), dtype=np.int64)  # the flags of a clean scan (shared: read-only)
+_NO_FLAGS.flags.writeable = False
 
 
 @dataclass(frozen=True)
