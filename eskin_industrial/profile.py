@@ -17,10 +17,23 @@ from typing import Literal
 import numpy as np
 
 from .detect.settings import DetectorSettings
-from .schema import SchemaError, in_range, non_negative, parse_toml, positive, read_toml_file, to_table
+from .netaddr import check_host
+from .schema import (SchemaError, in_range, non_negative, parse_toml, positive, positive_at_most, read_toml_file,
+                     to_table)
 
 #: A sensor silent for this many scan periods is stale (the PLC must see it within three).
 STALE_PERIODS = 2.5
+
+# Bounds of the settings, each in docs/profiles.md: past them a value is a typo or a
+# unit mistake, and is refused before the run rather than met in it.
+#: Scan and poll rates: a fast tactile ADC scans at a few kHz.
+MAX_RATE_HZ = 100_000.0
+#: Taxels per node (64 x 64): a node's per-taxel arrays are sized from it at load.
+MAX_TAXELS = 4096
+#: RTU retries within one scan period.
+MAX_RETRIES = 10
+#: R x r_scale is sent as an integer up to 65535: beyond 10000 every slip saturates.
+MAX_R_SCALE = 10_000.0
 
 
 def derived_stale_s(rate_hz: float, poll_hz: float | None) -> float:
@@ -34,7 +47,7 @@ class SensorSection:
     name: str
     description: str = ""
     #: Nominal scan rate; offline input takes its rate from the timestamps instead.
-    rate_hz: float = field(default=100.0, metadata=positive())
+    rate_hz: float = field(default=100.0, metadata=positive_at_most(MAX_RATE_HZ))
 
 
 @dataclass(frozen=True)
@@ -53,6 +66,8 @@ class LayoutSection:
 
     def __post_init__(self) -> None:
         n = self.rows * self.cols
+        if n > MAX_TAXELS:  # before anything is sized from it (coordinates, calibration)
+            raise ValueError(f"rows: expected rows x cols at most {MAX_TAXELS} taxels, got {self.rows} x {self.cols}")
         for key in ("x_mm", "y_mm"):
             value = getattr(self, key)
             if value is not None and len(value) != n:
@@ -174,9 +189,9 @@ class ModbusNodeSection:
     #: How long to wait for an answer before the poll counts as a timeout.
     timeout_s: float = field(default=0.05, metadata=positive())
     #: Further attempts after a failed poll, within the same scan period.
-    retries: int = field(default=1, metadata=non_negative())
+    retries: int = field(default=1, metadata=in_range(0, MAX_RETRIES))
     #: Poll rate; default: the sensor's ``rate_hz``.
-    poll_hz: float | None = field(default=None, metadata=positive())
+    poll_hz: float | None = field(default=None, metadata=positive_at_most(MAX_RATE_HZ))
     #: Consecutive failed polls after which the bus-fault bit is set.
     fault_after_failures: int = field(default=3, metadata=positive("an integer >= 1"))
     #: The node keeps its scan counter (uint16, wrapping) in the register before the
@@ -213,7 +228,7 @@ class ModbusPlcSection:
     #: Server mode: the address to listen on (loopback unless told otherwise).
     bind: str = "127.0.0.1"
     #: R_coe and R_dw are sent as round(R x r_scale), saturated at 65535.
-    r_scale: float = field(default=100.0, metadata=positive())
+    r_scale: float = field(default=100.0, metadata=positive_at_most(MAX_R_SCALE))
     #: The newest frame older than this sets the sensor-stale bit (and clears data-valid).
     #: Default: 2.5 scan periods (of the slower of ``[sensor] rate_hz`` and
     #: ``[modbus.node] poll_hz``), so a silent sensor shows within three periods.
@@ -222,6 +237,8 @@ class ModbusPlcSection:
     def __post_init__(self) -> None:
         if self.backoff_max_s < self.backoff_s:
             raise ValueError("backoff_max_s: expected at least backoff_s")
+        check_host(self.host, "host")
+        check_host(self.bind, "bind")
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
+from ..netaddr import check_host, parse_endpoint
 from ..schema import in_range, positive
 from ..sinks.base import CliOption, Sink
 
@@ -42,6 +43,8 @@ class PlcOptions:
     def __post_init__(self) -> None:
         if self.transport == "rtu" and self.serial_port is None:
             raise ValueError("serial_port: missing key (transport = 'rtu' needs it)")
+        if self.host is not None:
+            check_host(self.host)
 
 
 def plc_mode(options: PlcOptions, nodes: Sequence[NodeLike]) -> Literal["client", "server"]:
@@ -50,8 +53,9 @@ def plc_mode(options: PlcOptions, nodes: Sequence[NodeLike]) -> Literal["client"
 
 
 def parse_plc_spec(spec: str, baud: int) -> PlcOptions:
-    """``tcp:HOST:PORT``, ``rtu:PORT``, ``serve:HOST:PORT``, ``serve-rtu:PORT``
-    (``KIND://...`` reads the same); ValueError names what is wrong."""
+    """``tcp:HOST[:PORT]``, ``rtu:PORT``, ``serve:PORT``, ``serve::PORT``,
+    ``serve:HOST:PORT``, ``serve-rtu:PORT`` (``KIND://...`` reads the same; an IPv6
+    host with a port in brackets, ``serve:[::1]:1502``); ValueError names what is wrong."""
     kind, sep, where = spec.partition(":")
     where = where[2:] if where.startswith("//") else where
     if not sep:
@@ -69,14 +73,10 @@ def parse_plc_spec(spec: str, baud: int) -> PlcOptions:
 
 
 def parse_host_port(text: str, require_port: bool = False) -> tuple[str | None, int | None]:
-    """``HOST:PORT`` (``HOST``, ``:PORT`` or nothing when the port is not required):
-    None for what is left out, for the caller's default; ValueError when malformed."""
-    host, sep, port = text.rpartition(":")
-    if not sep:
-        host, port = text, ""
-    if (sep or require_port) and not (port.isdigit() and 0 < int(port) < 65536):
-        raise ValueError(f"expected HOST:PORT, got {text!r}")
-    return host or None, int(port) if port else None
+    """``HOST:PORT``, ``HOST``, ``:PORT`` or ``PORT`` (digits alone are a port), or
+    nothing when the port is not required: None for what is left out, for the
+    caller's default; ValueError when malformed (:func:`eskin_industrial.netaddr.parse_endpoint`)."""
+    return parse_endpoint(text, require_port)
 
 
 class PlcSink(Sink):
