@@ -34,6 +34,9 @@ MAX_TAXELS = 4096
 MAX_RETRIES = 10
 #: R x r_scale is sent as an integer up to 65535: beyond 10000 every slip saturates.
 MAX_R_SCALE = 10_000.0
+#: Samples in the detector's window and lag (10 s at 100 kHz): its buffers are sized
+#: from them when it starts.
+MAX_WINDOW_SAMPLES = 1_000_000
 
 
 def derived_stale_s(rate_hz: float, poll_hz: float | None) -> float:
@@ -284,6 +287,10 @@ class Profile:
                 "sensor.rate_hz", f"expected a rate at which the detector's times are countable samples, "
                 f"got {self.sensor.rate_hz:g} Hz (window_s = {self.detector.window_s:g}, hop_s = "
                 f"{self.detector.hop_s:g}, max_gap_s = {self.detector.max_gap_s:g})") from None
+        for key, samples in (("window_s", geo.window), ("lag_s", geo.lag)):
+            if samples > MAX_WINDOW_SAMPLES:
+                raise SchemaError(f"detector.{key}", f"expected at most {MAX_WINDOW_SAMPLES} samples at "
+                                  f"{self.sensor.rate_hz:g} Hz, got {getattr(self.detector, key):g} s ({samples} samples)")
         if geo.window < geo.filter_len:
             raise SchemaError(
                 "detector.window_s",

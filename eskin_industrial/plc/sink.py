@@ -14,7 +14,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
-from ..netaddr import check_host, parse_endpoint
+from ..netaddr import check_host, listen_problem, parse_endpoint
+from ..preflight import check_serial
 from ..schema import in_range, positive
 from ..sinks.base import CliOption, Sink
 
@@ -50,6 +51,13 @@ class PlcOptions:
 def plc_mode(options: PlcOptions, nodes: Sequence[NodeLike]) -> Literal["client", "server"]:
     mode = options.mode or nodes[0].profile.modbus.plc.mode
     return "client" if mode == "client" else "server"
+
+
+def serve_address(options: PlcOptions, nodes: Sequence[NodeLike]) -> tuple[str, int]:
+    """Server mode over TCP: where to listen (``[plc]`` / ``--plc``, else the first
+    node's ``[modbus.plc] bind`` and ``port``)."""
+    first = nodes[0].profile.modbus.plc
+    return options.host or first.bind, options.port or first.port
 
 
 def parse_plc_spec(spec: str, baud: int) -> PlcOptions:
@@ -108,6 +116,21 @@ class PlcSink(Sink):
                              "(use server mode, or TCP)")
 
     @classmethod
+    def probe(cls, options: PlcOptions, nodes: Sequence[NodeLike]) -> None:
+        """Server mode: the port can be listened on, the serial device is there.  (A
+        client's PLC may be down at ``--check``; the writer waits for it.)"""
+        if plc_mode(options, nodes) != "server":
+            return
+        if options.transport == "rtu":
+            assert options.serial_port is not None  # PlcOptions requires it over RTU
+            check_serial(options.serial_port, "serial_port")
+            return
+        host, port = serve_address(options, nodes)
+        problem = listen_problem(host, port)
+        if problem:
+            raise ValueError(f"port: {problem}")
+
+    @classmethod
     def open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
         from ..bus.modbus.io import SerialSettings
         from .client import PlcWriter
@@ -119,7 +142,7 @@ class PlcSink(Sink):
             assert options.serial_port is not None  # PlcOptions requires it over RTU
             serial = SerialSettings(options.serial_port, options.baudrate)
         if plc_mode(options, nodes) == "server":
-            tcp = None if serial else (options.host or first.bind, options.port or first.port)
+            tcp = None if serial else serve_address(options, nodes)
             server = PlcServer(first, tcp=tcp, serial=serial, blocks=[n.profile.modbus.plc for n in nodes],
                                linger_s=options.offline_linger_s).start()
             context.closers.append(server.stop)

@@ -17,7 +17,9 @@ from typing import Any, ClassVar
 
 import can
 
+from ...errors import ProfileError
 from ...frames import RawScan
+from ...preflight import check_writable_dir
 from ...profile import Profile
 from ...schema import in_range, positive
 from ..source import NodeLike, OpenContext, Source
@@ -139,6 +141,22 @@ class CanSource(Source):
     def describe(cls, node: NodeLike) -> str:
         o = node.options
         return f"can {o.interface or '(configured)'} {o.channel or ''} ids {node.profile.can.base_id:#x}+{ID_RANGE}"
+
+    @classmethod
+    def check(cls, node: NodeLike, base_dir: str) -> None:
+        cls.check_layout(node)
+        if node.options.log:
+            check_writable_dir(node.options.log, "log")
+
+    @classmethod
+    def check_layout(cls, node: NodeLike) -> None:
+        """The node's frames as the profile describes them can carry its raw values
+        (``taxel_bits``, a scan that fits a node's IDs): the refusal the run meets when it
+        opens the bus, found before."""
+        try:
+            CanLayout.from_profile(node.profile, fd=cls.fd(node))
+        except ProfileError as exc:
+            raise ValueError(f"profile: {exc}") from None
 
     @classmethod
     def check_together(cls, nodes: Sequence[NodeLike]) -> None:

@@ -19,6 +19,7 @@ from typing import Any
 
 from ...errors import ModbusFault
 from ...frames import RawScan
+from ...preflight import check_serial
 from ...profile import Profile
 from ...schema import in_range, positive
 from ..source import NodeLike, OpenContext, Source
@@ -184,6 +185,10 @@ class RtuSource(Source):
     @classmethod
     def describe(cls, node: NodeLike) -> str:
         return f"rtu {node.options.serial_port} unit {node.profile.modbus.node.unit_id}"
+
+    @classmethod
+    def check(cls, node: NodeLike, base_dir: str) -> None:
+        check_serial(node.options.serial_port, "serial_port")
 
     @classmethod
     def check_together(cls, nodes: Sequence[NodeLike]) -> None:
