@@ -52,7 +52,8 @@ def in_range(lo: float, hi: float) -> dict[str, Check]:
 def positive_at_most(hi: float, what: str = "a number") -> dict[str, Check]:
     """A number in (0, hi]: the bounds a setting can sanely take (``docs/profiles.md``
     lists each), so that an absurd value is refused before the run, not met in it."""
-    return {"check": (lambda v: 0 < v <= hi, f"{what} > 0 and at most {hi:g}")}
+    shown = f"{int(hi)}" if float(hi).is_integer() else f"{hi:g}"
+    return {"check": (lambda v: 0 < v <= hi, f"{what} > 0 and at most {shown}")}
 
 
 def _describe(tp: Any) -> str:
