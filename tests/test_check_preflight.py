@@ -208,3 +208,11 @@ def test_the_bounds_hold_on_the_command_line_and_in_the_bridge_configuration(tmp
                    f'scene = "case2"\n')
     refused(run("bridge", "--config", str(cfg), "--check"),
             f"{cfg}: [queue_frames]: expected an integer > 0 and at most 2000000")
+
+
+@pytest.mark.parametrize("command", [["modbus-bridge", "-p", PAPER, "--recording", "x.csv", "--plc-host"],
+                                     ["plc-sim", "-p", PAPER, "--host"]])
+def test_host_options_of_other_commands_use_the_same_parser(command):
+    """Before: modbus-bridge --plc-host 999.1.1.1 reached the writer, which retried it."""
+    res = run(*command, "999.1.1.1")
+    assert res.exit_code == 2 and "host: expected an IPv4 address (four numbers 0-255), got '999.1.1.1'" in res.output

@@ -96,7 +96,8 @@ class PlcSink(Sink):
     profile_keys = {"mode": "modbus.plc.mode", "host": "modbus.plc.host", "port": "modbus.plc.port"}
     cli_options = (
         CliOption("--plc", "plc", "tcp:HOST:PORT (write into the PLC), rtu:PORT (PLC as RTU slave), serve:HOST:PORT "
-                  "(serve, the PLC reads), serve-rtu:PORT; default: the profile's [modbus.plc].", metavar="SPEC"),
+                  "or serve:PORT (serve, the PLC reads; the host: the profile's bind), serve-rtu:PORT; IPv6 in "
+                  "brackets ([::1]:1502); default: the profile's [modbus.plc].", metavar="SPEC"),
         CliOption("--plc-baud", "plc_baud", "Baud rate for rtu: and serve-rtu:.", type=int, default=115200),
     )
 
