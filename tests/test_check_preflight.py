@@ -216,3 +216,21 @@ def test_host_options_of_other_commands_use_the_same_parser(command):
     """Before: modbus-bridge --plc-host 999.1.1.1 reached the writer, which retried it."""
     res = run(*command, "999.1.1.1")
     assert res.exit_code == 2 and "host: expected an IPv4 address (four numbers 0-255), got '999.1.1.1'" in res.output
+
+
+def test_explain_in_server_mode_shows_the_address_listened_on(tmp_path):
+    """A server listens on the profile's ``bind``, not on its PLC ``host``; before,
+    --explain showed the PLC's host."""
+    prof = paper_with(tmp_path, 'host = "127.0.0.1"', 'host = "192.168.0.10"')
+    text = Path(prof).read_text().replace('bind = "127.0.0.1"', 'bind = "127.0.0.2"', 1)
+    Path(prof).write_text(text)
+
+    def host(*plc: str) -> str:
+        res = run("bridge", "-p", prof, "--source", "scene:case2", *plc, "--check", "--explain")
+        if res.exit_code != 0 and "cannot listen" in res.output:
+            pytest.skip(f"this machine cannot listen there: {res.output.strip()}")
+        assert res.exit_code == 0, res.output
+        return next(line.strip() for line in res.output.splitlines() if line.startswith("  plc.host = "))
+
+    assert host() == f"plc.host = '127.0.0.2'  (profile {prof})"
+    assert host("--plc", "tcp:") == f"plc.host = '192.168.0.10'  (profile {prof})"

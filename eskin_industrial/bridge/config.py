@@ -358,5 +358,6 @@ def explain(config: BridgeConfig, node: ResolvedNode) -> list[tuple[str, Any, st
     out.append(("source", c.source, given))
     add("", c.options, node.kind.profile_keys, given)
     for kind, options in config.output_kinds().items():
-        add(f"{kind}.", options, sink_class(kind).profile_keys, given if kind in config.outputs else "default output")
+        add(f"{kind}.", options, sink_class(kind).explain_keys(options, [node]),
+            given if kind in config.outputs else "default output")
     return out

@@ -117,6 +117,12 @@ class PlcSink(Sink):
                              "(use server mode, or TCP)")
 
     @classmethod
+    def explain_keys(cls, options: PlcOptions, nodes: Sequence[NodeLike]) -> dict[str, str]:
+        if plc_mode(options, nodes) == "server":  # a server listens on the profile's bind, not its PLC host
+            return {**cls.profile_keys, "host": "modbus.plc.bind"}
+        return cls.profile_keys
+
+    @classmethod
     def probe(cls, options: PlcOptions, nodes: Sequence[NodeLike]) -> None:
         """Server mode: the port can be listened on, the serial device is there.  (A
         client's PLC may be down at ``--check``; the writer waits for it.)"""
