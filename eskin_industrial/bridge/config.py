@@ -51,15 +51,13 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from ..bus.source import DEFAULT_QUEUE_FRAMES, Source, source_class
+from ..bus.source import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES, Source, source_class
 from ..errors import ProfileError
 from ..profile import MAX_RATE_HZ, Profile, derived_stale_s, load_profile
 from ..schema import SchemaError, build, in_range, positive_at_most, read_toml_file
 from ..sinks.base import DEFAULT_OUTPUT, SINKS, Sink, sink_class
 
 COMMAND_LINE = "<command line>"
-#: ``queue_frames`` at most: ten times the default (a held frame costs a few hundred bytes).
-MAX_QUEUE_FRAMES = 10 * DEFAULT_QUEUE_FRAMES
 
 
 @dataclass(frozen=True)
