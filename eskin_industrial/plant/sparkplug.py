@@ -44,7 +44,7 @@ def parse_broker(url: str) -> tuple[str, int]:
         port = parts.port
     except ValueError:
         port = -1
-    if parts.scheme != "mqtt" or not parts.hostname or port == -1 or parts.path not in ("", "/"):
+    if parts.scheme != "mqtt" or not parts.hostname or port in (-1, 0) or parts.path not in ("", "/"):
         raise ValueError(f"expected mqtt://HOST:PORT, got {url!r}")
     check_host(parts.hostname, "broker host")  # the one host parser (999.1.1.1 is refused here, not retried)
     return parts.hostname, port or 1883
