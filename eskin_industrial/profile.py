@@ -154,11 +154,11 @@ class CanSection:
     byte_order: Literal["little", "big"] = "little"
     #: One CAN FD frame per scan (with bit-rate switching) instead of classic segments.
     fd: bool = False
-    bitrate_bps: int = field(default=1_000_000, metadata=positive())
+    bitrate_bps: int = field(default=1_000_000, metadata=positive_at_most(1_000_000, "an integer"))  # ISO 11898
     #: Data-phase bit rate of CAN FD frames.
-    data_bitrate_bps: int = field(default=5_000_000, metadata=positive())
+    data_bitrate_bps: int = field(default=5_000_000, metadata=positive_at_most(16_000_000, "an integer"))
     #: Period of the node's heartbeat (status) frame.
-    heartbeat_s: float = field(default=0.1, metadata=positive())
+    heartbeat_s: float = field(default=0.1, metadata=positive_at_most(60.0))
 
     def __post_init__(self) -> None:
         top = 0x1FFFFFFF if self.extended_id else 0x7FF
@@ -190,7 +190,7 @@ class ModbusNodeSection:
     parity: Literal["N", "E", "O"] = "N"
     stopbits: Literal[1, 2] = 1
     #: How long to wait for an answer before the poll counts as a timeout.
-    timeout_s: float = field(default=0.05, metadata=positive())
+    timeout_s: float = field(default=0.05, metadata=positive_at_most(10.0))
     #: Further attempts after a failed poll, within the same scan period.
     retries: int = field(default=1, metadata=in_range(0, MAX_RETRIES))
     #: Poll rate; default: the sensor's ``rate_hz``.
@@ -224,7 +224,7 @@ class ModbusPlcSection:
     #: nothing changes (a change is written at once).
     host: str = "127.0.0.1"
     port: int = field(default=502, metadata=in_range(1, 65535))
-    refresh_s: float = field(default=0.05, metadata=positive())
+    refresh_s: float = field(default=0.05, metadata=positive_at_most(60.0))
     #: Client mode: reconnection delay, doubled after each failure up to the maximum.
     backoff_s: float = field(default=0.1, metadata=positive())
     backoff_max_s: float = field(default=2.0, metadata=positive())
@@ -235,7 +235,7 @@ class ModbusPlcSection:
     #: The newest frame older than this sets the sensor-stale bit (and clears data-valid).
     #: Default: 2.5 scan periods (of the slower of ``[sensor] rate_hz`` and
     #: ``[modbus.node] poll_hz``), so a silent sensor shows within three periods.
-    stale_s: float | None = field(default=None, metadata=positive())
+    stale_s: float | None = field(default=None, metadata=positive_at_most(3600.0))
 
     def __post_init__(self) -> None:
         if self.backoff_max_s < self.backoff_s:
