@@ -34,6 +34,9 @@ MAX_TAXELS = 4096
 MAX_RETRIES = 10
 #: R x r_scale is sent as an integer up to 65535: beyond 10000 every slip saturates.
 MAX_R_SCALE = 10_000.0
+#: CAN bit rates: classic CAN ends at 1 Mbit/s (ISO 11898); an FD data phase at 8-16.
+MAX_BITRATE_BPS = 1_000_000
+MAX_DATA_BITRATE_BPS = 16_000_000
 #: Samples in the detector's window and lag (10 s at 100 kHz): its buffers are sized
 #: from them when it starts.
 MAX_WINDOW_SAMPLES = 1_000_000
@@ -154,9 +157,9 @@ class CanSection:
     byte_order: Literal["little", "big"] = "little"
     #: One CAN FD frame per scan (with bit-rate switching) instead of classic segments.
     fd: bool = False
-    bitrate_bps: int = field(default=1_000_000, metadata=positive_at_most(1_000_000, "an integer"))  # ISO 11898
+    bitrate_bps: int = field(default=1_000_000, metadata=positive_at_most(MAX_BITRATE_BPS, "an integer"))
     #: Data-phase bit rate of CAN FD frames.
-    data_bitrate_bps: int = field(default=5_000_000, metadata=positive_at_most(16_000_000, "an integer"))
+    data_bitrate_bps: int = field(default=5_000_000, metadata=positive_at_most(MAX_DATA_BITRATE_BPS, "an integer"))
     #: Period of the node's heartbeat (status) frame.
     heartbeat_s: float = field(default=0.1, metadata=positive_at_most(60.0))
 

@@ -209,6 +209,8 @@ def test_absurd_values_are_refused_naming_file_section_and_key(tmp_path, old, ne
 def test_the_bounds_hold_on_the_command_line_and_in_the_bridge_configuration(tmp_path):
     refused(run("bridge", "-p", PAPER, "--source", "scene:case2", "--rate", "1e12", "--check"),
             "<command line>: [node 'node'] rate_hz: expected a number > 0 and at most 100000")
+    refused(run("bridge", "-p", PAPER, "-i", "virtual", "-c", "x", "-b", "10000000", "--check"),
+            "<command line>: [node 'node'] bitrate_bps: expected an integer > 0 and at most 1000000")
     cfg = tmp_path / "b.toml"
     cfg.write_text(f'queue_frames = 1000000000\n[[node]]\nname = "a"\nprofile = "{PAPER}"\nsource = "scene"\n'
                    f'scene = "case2"\n')

@@ -20,8 +20,8 @@ import can
 from ...errors import ProfileError
 from ...frames import RawScan
 from ...preflight import check_writable_dir
-from ...profile import Profile
-from ...schema import in_range, positive
+from ...profile import MAX_BITRATE_BPS, MAX_DATA_BITRATE_BPS, Profile
+from ...schema import in_range, positive_at_most
 from ..source import NodeLike, OpenContext, Source
 from .group import CanGroup
 from .layout import ID_RANGE, CanLayout, ScanAssembler
@@ -36,9 +36,9 @@ class CanOptions:
 
     interface: str | None = None
     channel: str | None = None
-    bitrate_bps: int | None = field(default=None, metadata=positive())
+    bitrate_bps: int | None = field(default=None, metadata=positive_at_most(MAX_BITRATE_BPS, "an integer"))
     fd: bool | None = None
-    data_bitrate_bps: int | None = field(default=None, metadata=positive())
+    data_bitrate_bps: int | None = field(default=None, metadata=positive_at_most(MAX_DATA_BITRATE_BPS, "an integer"))
     #: Override the profile's ``[can] base_id`` / ``node_id`` (several nodes, one bus).
     base_id: int | None = field(default=None, metadata=in_range(0, 0x1FFFFFFF))
     node_id: int | None = field(default=None, metadata=in_range(0, 255))
