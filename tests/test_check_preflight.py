@@ -242,3 +242,8 @@ def test_explain_in_server_mode_shows_the_address_listened_on(tmp_path):
 
     assert host() == f"plc.host = '127.0.0.2'  (profile {prof})"
     assert host("--plc", "tcp:") == f"plc.host = '192.168.0.10'  (profile {prof})"
+
+
+def test_a_serial_server_needs_its_device(tmp_path):
+    refused(run("bridge", "-p", PAPER, "--source", "scene:case2", "--plc", f"serve-rtu:{tmp_path}/ttyS7", "--check"),
+            f"[plc] serial_port: {tmp_path}/ttyS7: no such device")
