@@ -17,10 +17,29 @@ from typing import Literal
 import numpy as np
 
 from .detect.settings import DetectorSettings
-from .schema import SchemaError, in_range, non_negative, parse_toml, positive, read_toml_file, to_table
+from .netaddr import check_host
+from .schema import (SchemaError, in_range, non_negative, parse_toml, positive, positive_at_most, read_toml_file,
+                     to_table)
 
 #: A sensor silent for this many scan periods is stale (the PLC must see it within three).
 STALE_PERIODS = 2.5
+
+# Bounds of the settings, each in docs/profiles.md: past them a value is a typo or a
+# unit mistake, and is refused before the run rather than met in it.
+#: Scan and poll rates: a fast tactile ADC scans at a few kHz.
+MAX_RATE_HZ = 100_000.0
+#: Taxels per node (64 x 64): a node's per-taxel arrays are sized from it at load.
+MAX_TAXELS = 4096
+#: RTU retries within one scan period.
+MAX_RETRIES = 10
+#: R x r_scale is sent as an integer up to 65535: beyond 10000 every slip saturates.
+MAX_R_SCALE = 10_000.0
+#: CAN bit rates: classic CAN ends at 1 Mbit/s (ISO 11898); an FD data phase at 8-16.
+MAX_BITRATE_BPS = 1_000_000
+MAX_DATA_BITRATE_BPS = 16_000_000
+#: Samples in the detector's window and lag (10 s at 100 kHz): its buffers are sized
+#: from them when it starts.
+MAX_WINDOW_SAMPLES = 1_000_000
 
 
 def derived_stale_s(rate_hz: float, poll_hz: float | None) -> float:
@@ -34,7 +53,7 @@ class SensorSection:
     name: str
     description: str = ""
     #: Nominal scan rate; offline input takes its rate from the timestamps instead.
-    rate_hz: float = field(default=100.0, metadata=positive())
+    rate_hz: float = field(default=100.0, metadata=positive_at_most(MAX_RATE_HZ))
 
 
 @dataclass(frozen=True)
@@ -53,6 +72,8 @@ class LayoutSection:
 
     def __post_init__(self) -> None:
         n = self.rows * self.cols
+        if n > MAX_TAXELS:  # before anything is sized from it (coordinates, calibration)
+            raise ValueError(f"rows: expected rows x cols at most {MAX_TAXELS} taxels, got {self.rows} x {self.cols}")
         for key in ("x_mm", "y_mm"):
             value = getattr(self, key)
             if value is not None and len(value) != n:
@@ -136,11 +157,11 @@ class CanSection:
     byte_order: Literal["little", "big"] = "little"
     #: One CAN FD frame per scan (with bit-rate switching) instead of classic segments.
     fd: bool = False
-    bitrate_bps: int = field(default=1_000_000, metadata=positive())
+    bitrate_bps: int = field(default=1_000_000, metadata=positive_at_most(MAX_BITRATE_BPS, "an integer"))
     #: Data-phase bit rate of CAN FD frames.
-    data_bitrate_bps: int = field(default=5_000_000, metadata=positive())
+    data_bitrate_bps: int = field(default=5_000_000, metadata=positive_at_most(MAX_DATA_BITRATE_BPS, "an integer"))
     #: Period of the node's heartbeat (status) frame.
-    heartbeat_s: float = field(default=0.1, metadata=positive())
+    heartbeat_s: float = field(default=0.1, metadata=positive_at_most(60.0))
 
     def __post_init__(self) -> None:
         top = 0x1FFFFFFF if self.extended_id else 0x7FF
@@ -172,11 +193,11 @@ class ModbusNodeSection:
     parity: Literal["N", "E", "O"] = "N"
     stopbits: Literal[1, 2] = 1
     #: How long to wait for an answer before the poll counts as a timeout.
-    timeout_s: float = field(default=0.05, metadata=positive())
+    timeout_s: float = field(default=0.05, metadata=positive_at_most(10.0))
     #: Further attempts after a failed poll, within the same scan period.
-    retries: int = field(default=1, metadata=non_negative())
+    retries: int = field(default=1, metadata=in_range(0, MAX_RETRIES))
     #: Poll rate; default: the sensor's ``rate_hz``.
-    poll_hz: float | None = field(default=None, metadata=positive())
+    poll_hz: float | None = field(default=None, metadata=positive_at_most(MAX_RATE_HZ))
     #: Consecutive failed polls after which the bus-fault bit is set.
     fault_after_failures: int = field(default=3, metadata=positive("an integer >= 1"))
     #: The node keeps its scan counter (uint16, wrapping) in the register before the
@@ -206,22 +227,24 @@ class ModbusPlcSection:
     #: nothing changes (a change is written at once).
     host: str = "127.0.0.1"
     port: int = field(default=502, metadata=in_range(1, 65535))
-    refresh_s: float = field(default=0.05, metadata=positive())
+    refresh_s: float = field(default=0.05, metadata=positive_at_most(60.0))
     #: Client mode: reconnection delay, doubled after each failure up to the maximum.
     backoff_s: float = field(default=0.1, metadata=positive())
     backoff_max_s: float = field(default=2.0, metadata=positive())
     #: Server mode: the address to listen on (loopback unless told otherwise).
     bind: str = "127.0.0.1"
     #: R_coe and R_dw are sent as round(R x r_scale), saturated at 65535.
-    r_scale: float = field(default=100.0, metadata=positive())
+    r_scale: float = field(default=100.0, metadata=positive_at_most(MAX_R_SCALE))
     #: The newest frame older than this sets the sensor-stale bit (and clears data-valid).
     #: Default: 2.5 scan periods (of the slower of ``[sensor] rate_hz`` and
     #: ``[modbus.node] poll_hz``), so a silent sensor shows within three periods.
-    stale_s: float | None = field(default=None, metadata=positive())
+    stale_s: float | None = field(default=None, metadata=positive_at_most(3600.0))
 
     def __post_init__(self) -> None:
         if self.backoff_max_s < self.backoff_s:
             raise ValueError("backoff_max_s: expected at least backoff_s")
+        check_host(self.host, "host")
+        check_host(self.bind, "bind")
 
 
 @dataclass(frozen=True)
@@ -267,6 +290,10 @@ class Profile:
                 "sensor.rate_hz", f"expected a rate at which the detector's times are countable samples, "
                 f"got {self.sensor.rate_hz:g} Hz (window_s = {self.detector.window_s:g}, hop_s = "
                 f"{self.detector.hop_s:g}, max_gap_s = {self.detector.max_gap_s:g})") from None
+        for key, samples in (("window_s", geo.window), ("lag_s", geo.lag)):
+            if samples > MAX_WINDOW_SAMPLES:
+                raise SchemaError(f"detector.{key}", f"expected at most {MAX_WINDOW_SAMPLES} samples at "
+                                  f"{self.sensor.rate_hz:g} Hz, got {getattr(self.detector, key):g} s ({samples} samples)")
         if geo.window < geo.filter_len:
             raise SchemaError(
                 "detector.window_s",

@@ -49,6 +49,13 @@ def in_range(lo: float, hi: float) -> dict[str, Check]:
     return {"check": (lambda v: lo <= v <= hi, f"a value in [{lo:g}, {hi:g}]")}
 
 
+def positive_at_most(hi: float, what: str = "a number") -> dict[str, Check]:
+    """A number in (0, hi]: the bounds a setting can sanely take (``docs/profiles.md``
+    lists each), so that an absurd value is refused before the run, not met in it."""
+    shown = f"{int(hi)}" if float(hi).is_integer() else f"{hi:g}"
+    return {"check": (lambda v: 0 < v <= hi, f"{what} > 0 and at most {shown}")}
+
+
 def _describe(tp: Any) -> str:
     origin = get_origin(tp)
     if tp is float:
@@ -223,6 +230,9 @@ def read_toml_file(path, what: str) -> str:
         return path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ProfileError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:  # TOML is UTF-8; say where it is not
+        raise ProfileError(f"{path}: cannot read {what}: not UTF-8 text (byte {exc.start}: "
+                           f"{exc.object[exc.start:exc.start + 1]!r})") from None
 
 
 def parse_toml(cls: type[T], text: str, source: str) -> T:

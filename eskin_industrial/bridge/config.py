@@ -51,10 +51,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from ..bus.source import DEFAULT_QUEUE_FRAMES, Source, source_class
+from ..bus.source import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES, Source, source_class
 from ..errors import ProfileError
-from ..profile import Profile, derived_stale_s, load_profile
-from ..schema import SchemaError, build, in_range, positive, read_toml_file
+from ..profile import MAX_RATE_HZ, Profile, derived_stale_s, load_profile
+from ..schema import SchemaError, build, in_range, positive_at_most, read_toml_file
 from ..sinks.base import DEFAULT_OUTPUT, SINKS, Sink, sink_class
 
 COMMAND_LINE = "<command line>"
@@ -73,7 +73,7 @@ class NodeConfig:
     #: The kind's keys (an instance of its ``Options``), validated.
     options: Any = None
     #: Scan rate; default: the profile's ``[sensor] rate_hz``.
-    rate_hz: float | None = field(default=None, metadata=positive())
+    rate_hz: float | None = field(default=None, metadata=positive_at_most(MAX_RATE_HZ))
     #: The node's register block in the PLC; default: the profile's ``[modbus.plc] base_address``.
     base_address: int | None = field(default=None, metadata=in_range(0, 65000))
 
@@ -82,11 +82,13 @@ class NodeConfig:
            base_address: int | None = None, **keys: Any) -> "NodeConfig":
         """A node from keyword keys, the kind's ones checked as in a file."""
         cls = source_class(source)
+        common = {k: v for k, v in (("rate_hz", rate_hz), ("base_address", base_address)) if v is not None}
         try:
             options = build(cls.Options, keys)
+            node = build(NodeConfig, {"name": name, "profile": profile, **common})  # the bounds, as in a file
         except SchemaError as exc:
             raise ProfileError(f"{COMMAND_LINE}: [node {name!r}] {exc}") from None
-        return NodeConfig(name, profile, cls.kind, options, rate_hz, base_address)
+        return replace(node, source=cls.kind, options=options)
 
 
 _COMMON = [f.name for f in dataclasses.fields(NodeConfig) if f.name not in ("options",)]
@@ -106,7 +108,7 @@ class _Top:
 
     log: LogSettings = field(default_factory=LogSettings)
     #: Received CAN frames held per bus; past it, new frames are dropped (counted).
-    queue_frames: int = field(default=DEFAULT_QUEUE_FRAMES, metadata=positive("an integer >= 1"))
+    queue_frames: int = field(default=DEFAULT_QUEUE_FRAMES, metadata=positive_at_most(MAX_QUEUE_FRAMES, "an integer"))
 
 
 @dataclass(frozen=True)
@@ -267,6 +269,16 @@ def check_sources(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
             raise ProfileError(f"{config.source}: [node {n.name!r}] {exc}") from None
 
 
+def probe_outputs(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
+    """``--check`` only: what each output kind finds by trying on this machine (a
+    server's port is free); the run meets the same when it opens the output."""
+    for kind, options in config.output_kinds().items():
+        try:
+            sink_class(kind).probe(options, nodes)
+        except ValueError as exc:
+            raise ProfileError(f"{config.source}: [{kind}] {exc}") from None
+
+
 def _apply_overrides(prof: Profile, nc: NodeConfig) -> Profile:
     prof = source_class(nc.source).adapt_profile(prof, nc.options)
     plc = prof.modbus.plc
@@ -344,5 +356,6 @@ def explain(config: BridgeConfig, node: ResolvedNode) -> list[tuple[str, Any, st
     out.append(("source", c.source, given))
     add("", c.options, node.kind.profile_keys, given)
     for kind, options in config.output_kinds().items():
-        add(f"{kind}.", options, sink_class(kind).profile_keys, given if kind in config.outputs else "default output")
+        add(f"{kind}.", options, sink_class(kind).explain_keys(options, [node]),
+            given if kind in config.outputs else "default output")
     return out

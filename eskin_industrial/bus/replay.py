@@ -80,9 +80,13 @@ class SceneSource(ReplaySource):
         from ..scenes import load_scene
 
         try:
-            load_scene(node.options.scene)
+            spec = load_scene(node.options.scene)
         except EskinError as exc:
             raise ValueError(f"scene: {exc}") from None
+        taxels = spec.array.rows * spec.array.cols  # what open_node renders, without rendering it
+        if taxels != node.profile.taxels:
+            raise ValueError(f"scene: {node.options.scene} has {taxels} taxels ({spec.array.rows}x{spec.array.cols}, "
+                             f"for profile {spec.scene.profile}), profile {node.profile.name} has {node.profile.taxels}")
 
     @classmethod
     def open_node(cls, node: NodeLike, context: OpenContext) -> "SceneSource":

@@ -52,6 +52,8 @@ SOURCES: dict[str, str] = {
 #: Frames a reader may hold for its consumer before it drops (and counts) the newest:
 #: about 25 s of a saturated 1 Mbit/s classic bus.
 DEFAULT_QUEUE_FRAMES = 200_000
+#: ``queue_frames`` at most (``bridge.toml``, ``receive --queue-frames``): ten times the default.
+MAX_QUEUE_FRAMES = 10 * DEFAULT_QUEUE_FRAMES
 
 #: Shorter spellings accepted on ``--source`` (``log:FILE``, ``rtu:PORT``).
 ALIASES: dict[str, str] = {"log": "can-log", "rtu": "modbus-rtu"}

@@ -74,7 +74,7 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     describes it; --plc keeps it beside another output."""
     from dataclasses import replace
 
-    from ..bridge.config import BridgeConfig, check_sources, load_bridge_config, output_classes, resolve
+    from ..bridge.config import BridgeConfig, check_sources, load_bridge_config, output_classes, probe_outputs, resolve
     from ..bridge.config import explain as explain_node
     from ..bridge.logs import EventLog
     from ..bridge.runtime import Bridge
@@ -101,6 +101,7 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     nodes = resolve(cfg)  # every profile loads and the nodes fit together, or one line and exit 2
     check_sources(cfg, nodes)  # files and scenes the sources need exist
     if check:
+        probe_outputs(cfg, nodes)  # a server's port is free (the run would fail to listen)
         outputs = output_classes(cfg)
         for n in nodes:
             where = ", ".join(cls.describe(options, n) for cls, options in outputs)

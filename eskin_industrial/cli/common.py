@@ -31,6 +31,18 @@ def host_port(text: str, what: str, require_port: bool = False) -> tuple[str | N
         raise click.BadParameter(str(exc), param_hint=what) from None
 
 
+def host_value(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """A click callback: ``value`` is a host (:func:`eskin_industrial.netaddr.check_host`)."""
+    from ..netaddr import check_host
+
+    if value is None:
+        return None
+    try:
+        return check_host(value)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc)) from None
+
+
 def open_profile(path: str) -> Profile:
     """Load and validate; a bad profile stops the command before anything starts."""
     return load_profile(path)

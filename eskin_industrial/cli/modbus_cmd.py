@@ -8,7 +8,7 @@ import time
 
 import click
 
-from .common import host_port, open_profile, profile_option, scene_or_recording
+from .common import host_port, host_value, open_profile, profile_option, scene_or_recording
 
 
 @click.command("modbus-node")
@@ -56,7 +56,7 @@ def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, du
 @click.option("--recording", type=click.Path(dir_okay=False), default=None,
               help="Replay a recording instead of polling a node.")
 @click.option("--baud", "baudrate", type=int, default=None, help="Node baud rate (default: the profile's).")
-@click.option("--plc-host", default=None, help="Client mode: the PLC's host (default: the profile's).")
+@click.option("--plc-host", default=None, callback=host_value, help="Client mode: the PLC's host (default: the profile's).")
 @click.option("--plc-port", type=int, default=None, help="Client mode: the PLC's port (default: the profile's).")
 @click.option("--plc-rtu", default=None, metavar="PORT", help="Client mode over Modbus RTU: the PLC's serial port.")
 @click.option("--plc-baud", type=int, default=115200, show_default=True, help="Baud rate for --plc-rtu.")

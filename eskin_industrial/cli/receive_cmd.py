@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, cast
 
 import click
 
-from ..bus.source import DEFAULT_QUEUE_FRAMES
+from ..bus.source import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES
 from .can_common import bus_options
 from .common import profile_option
 
@@ -27,7 +27,7 @@ if TYPE_CHECKING:
 @click.option("--idle-exit", "idle_s", type=float, default=None,
               help="Stop once no scan came for this many seconds (after the first).")
 @click.option("--scans", "max_scans", type=int, default=None, help="Stop after this many scans.")
-@click.option("--queue-frames", type=click.IntRange(min=1), default=DEFAULT_QUEUE_FRAMES, show_default=True,
+@click.option("--queue-frames", type=click.IntRange(min=1, max=MAX_QUEUE_FRAMES), default=DEFAULT_QUEUE_FRAMES, show_default=True,
               help="Frames the reader may queue ahead of the detector before dropping.")
 @click.option("-q", "--quiet", is_flag=True, help="Nothing on stderr (no start line, no counters).")
 def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output, log_path, rate_hz, duration_s,

@@ -24,6 +24,7 @@ from .. import __version__
 from ..detect.state import LABELS
 from ..errors import EskinError
 from ..plc.image import Status, decode_registers
+from ..netaddr import check_host
 from ..schema import in_range
 from ..sinks.base import CliOption, Publication, Sink, SinkHealth
 from . import payload as pb
@@ -43,8 +44,9 @@ def parse_broker(url: str) -> tuple[str, int]:
         port = parts.port
     except ValueError:
         port = -1
-    if parts.scheme != "mqtt" or not parts.hostname or port == -1 or parts.path not in ("", "/"):
+    if parts.scheme != "mqtt" or not parts.hostname or port in (-1, 0) or parts.path not in ("", "/"):
         raise ValueError(f"expected mqtt://HOST:PORT, got {url!r}")
+    check_host(parts.hostname, "broker host")  # the one host parser (999.1.1.1 is refused here, not retried)
     return parts.hostname, port or 1883
 
 

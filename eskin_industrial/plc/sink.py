@@ -14,6 +14,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
+from ..netaddr import check_host, listen_problem, parse_endpoint
+from ..preflight import check_serial
 from ..schema import in_range, positive
 from ..sinks.base import CliOption, Sink
 
@@ -42,6 +44,8 @@ class PlcOptions:
     def __post_init__(self) -> None:
         if self.transport == "rtu" and self.serial_port is None:
             raise ValueError("serial_port: missing key (transport = 'rtu' needs it)")
+        if self.host is not None:
+            check_host(self.host)
 
 
 def plc_mode(options: PlcOptions, nodes: Sequence[NodeLike]) -> Literal["client", "server"]:
@@ -49,9 +53,17 @@ def plc_mode(options: PlcOptions, nodes: Sequence[NodeLike]) -> Literal["client"
     return "client" if mode == "client" else "server"
 
 
+def serve_address(options: PlcOptions, nodes: Sequence[NodeLike]) -> tuple[str, int]:
+    """Server mode over TCP: where to listen (``[plc]`` / ``--plc``, else the first
+    node's ``[modbus.plc] bind`` and ``port``)."""
+    first = nodes[0].profile.modbus.plc
+    return options.host or first.bind, options.port or first.port
+
+
 def parse_plc_spec(spec: str, baud: int) -> PlcOptions:
-    """``tcp:HOST:PORT``, ``rtu:PORT``, ``serve:HOST:PORT``, ``serve-rtu:PORT``
-    (``KIND://...`` reads the same); ValueError names what is wrong."""
+    """``tcp:HOST[:PORT]``, ``rtu:PORT``, ``serve:PORT``, ``serve::PORT``,
+    ``serve:HOST:PORT``, ``serve-rtu:PORT`` (``KIND://...`` reads the same; an IPv6
+    host with a port in brackets, ``serve:[::1]:1502``); ValueError names what is wrong."""
     kind, sep, where = spec.partition(":")
     where = where[2:] if where.startswith("//") else where
     if not sep:
@@ -69,14 +81,10 @@ def parse_plc_spec(spec: str, baud: int) -> PlcOptions:
 
 
 def parse_host_port(text: str, require_port: bool = False) -> tuple[str | None, int | None]:
-    """``HOST:PORT`` (``HOST``, ``:PORT`` or nothing when the port is not required):
-    None for what is left out, for the caller's default; ValueError when malformed."""
-    host, sep, port = text.rpartition(":")
-    if not sep:
-        host, port = text, ""
-    if (sep or require_port) and not (port.isdigit() and 0 < int(port) < 65536):
-        raise ValueError(f"expected HOST:PORT, got {text!r}")
-    return host or None, int(port) if port else None
+    """``HOST:PORT``, ``HOST``, ``:PORT`` or ``PORT`` (digits alone are a port), or
+    nothing when the port is not required: None for what is left out, for the
+    caller's default; ValueError when malformed (:func:`eskin_industrial.netaddr.parse_endpoint`)."""
+    return parse_endpoint(text, require_port)
 
 
 class PlcSink(Sink):
@@ -88,7 +96,8 @@ class PlcSink(Sink):
     profile_keys = {"mode": "modbus.plc.mode", "host": "modbus.plc.host", "port": "modbus.plc.port"}
     cli_options = (
         CliOption("--plc", "plc", "tcp:HOST:PORT (write into the PLC), rtu:PORT (PLC as RTU slave), serve:HOST:PORT "
-                  "(serve, the PLC reads), serve-rtu:PORT; default: the profile's [modbus.plc].", metavar="SPEC"),
+                  "or serve:PORT (serve, the PLC reads; the host: the profile's bind), serve-rtu:PORT; IPv6 in "
+                  "brackets ([::1]:1502); default: the profile's [modbus.plc].", metavar="SPEC"),
         CliOption("--plc-baud", "plc_baud", "Baud rate for rtu: and serve-rtu:.", type=int, default=115200),
     )
 
@@ -108,6 +117,27 @@ class PlcSink(Sink):
                              "(use server mode, or TCP)")
 
     @classmethod
+    def explain_keys(cls, options: PlcOptions, nodes: Sequence[NodeLike]) -> dict[str, str]:
+        if plc_mode(options, nodes) == "server":  # a server listens on the profile's bind, not its PLC host
+            return {**cls.profile_keys, "host": "modbus.plc.bind"}
+        return cls.profile_keys
+
+    @classmethod
+    def probe(cls, options: PlcOptions, nodes: Sequence[NodeLike]) -> None:
+        """Server mode: the port can be listened on, the serial device is there.  (A
+        client's PLC may be down at ``--check``; the writer waits for it.)"""
+        if plc_mode(options, nodes) != "server":
+            return
+        if options.transport == "rtu":
+            assert options.serial_port is not None  # PlcOptions requires it over RTU
+            check_serial(options.serial_port, "serial_port")
+            return
+        host, port = serve_address(options, nodes)
+        problem = listen_problem(host, port)
+        if problem:
+            raise ValueError(f"port: {problem}")
+
+    @classmethod
     def open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
         from ..bus.modbus.io import SerialSettings
         from .client import PlcWriter
@@ -119,7 +149,7 @@ class PlcSink(Sink):
             assert options.serial_port is not None  # PlcOptions requires it over RTU
             serial = SerialSettings(options.serial_port, options.baudrate)
         if plc_mode(options, nodes) == "server":
-            tcp = None if serial else (options.host or first.bind, options.port or first.port)
+            tcp = None if serial else serve_address(options, nodes)
             server = PlcServer(first, tcp=tcp, serial=serial, blocks=[n.profile.modbus.plc for n in nodes],
                                linger_s=options.offline_linger_s).start()
             context.closers.append(server.stop)

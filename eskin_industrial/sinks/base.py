@@ -161,6 +161,17 @@ class Sink(abc.ABC):
         """Problems across nodes found before anything opens; ValueError ``key: what``."""
 
     @classmethod
+    def explain_keys(cls, options: Any, nodes: Sequence[NodeLike]) -> dict[str, str]:
+        """:attr:`profile_keys` as they apply to these options (``--explain``)."""
+        return cls.profile_keys
+
+    @classmethod
+    def probe(cls, options: Any, nodes: Sequence[NodeLike]) -> None:
+        """``--check`` only: what can be found by trying on this machine (a port to
+        listen on is free); the run meets the same at open, with the same message.
+        ValueError ``key: what``."""
+
+    @classmethod
     def open_nodes(cls, options: Any, nodes: Sequence[NodeLike], context: OpenContext) -> list["Sink"]:
         """One sink per node (in order); what must be closed goes to ``context.closers``.
 

@@ -20,6 +20,7 @@ from typing import IO, TYPE_CHECKING, Any, Literal
 
 from ..detect.state import LABELS
 from ..detect.updates import COLUMNS, Update
+from ..preflight import check_writable_dir
 from ..recording import update_row
 from ..schema import in_range
 from .base import CliOption, Sink, SinkHealth
@@ -140,8 +141,10 @@ class Recorder(Sink):
         if len(nodes) > 1 and len(set(paths)) < len(paths):
             raise ValueError("path: several nodes would write one file; put {node} in the path")
         for p in paths:
-            if p != "-" and not Path(p).parent.is_dir():
-                raise ValueError(f"path: {p}: no such directory")
+            if p != "-":
+                check_writable_dir(p, "path")
+                if Path(p).is_dir():
+                    raise ValueError(f"path: {p}: is a folder, not a file")
 
     @classmethod
     def open_nodes(cls, options: RecorderOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:

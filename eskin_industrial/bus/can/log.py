@@ -17,6 +17,7 @@ from ...detect.updates import Update, UpdateTable
 from ...errors import EskinError, InputFormatError
 from ...frames import RawScan
 from ...pipeline import Pipeline
+from ...preflight import check_readable
 from ...schema import in_range
 from ..source import DEFAULT_QUEUE_FRAMES, NodeLike, OpenContext
 from .layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
@@ -153,8 +154,8 @@ class CanLogSource(CanSource):
 
     @classmethod
     def check(cls, node: NodeLike, base_dir: str) -> None:
-        if not Path(node.options.path).is_file():
-            raise ValueError(f"path: {node.options.path}: no such file")
+        check_readable(node.options.path, "path")
+        cls.check_layout(node)
 
     @classmethod
     def share_key(cls, node: NodeLike) -> tuple:

@@ -17,9 +17,11 @@ from typing import Any, ClassVar
 
 import can
 
+from ...errors import ProfileError
 from ...frames import RawScan
-from ...profile import Profile
-from ...schema import in_range, positive
+from ...preflight import check_writable_dir
+from ...profile import MAX_BITRATE_BPS, MAX_DATA_BITRATE_BPS, Profile
+from ...schema import in_range, positive_at_most
 from ..source import NodeLike, OpenContext, Source
 from .group import CanGroup
 from .layout import ID_RANGE, CanLayout, ScanAssembler
@@ -34,9 +36,9 @@ class CanOptions:
 
     interface: str | None = None
     channel: str | None = None
-    bitrate_bps: int | None = field(default=None, metadata=positive())
+    bitrate_bps: int | None = field(default=None, metadata=positive_at_most(MAX_BITRATE_BPS, "an integer"))
     fd: bool | None = None
-    data_bitrate_bps: int | None = field(default=None, metadata=positive())
+    data_bitrate_bps: int | None = field(default=None, metadata=positive_at_most(MAX_DATA_BITRATE_BPS, "an integer"))
     #: Override the profile's ``[can] base_id`` / ``node_id`` (several nodes, one bus).
     base_id: int | None = field(default=None, metadata=in_range(0, 0x1FFFFFFF))
     node_id: int | None = field(default=None, metadata=in_range(0, 255))
@@ -139,6 +141,22 @@ class CanSource(Source):
     def describe(cls, node: NodeLike) -> str:
         o = node.options
         return f"can {o.interface or '(configured)'} {o.channel or ''} ids {node.profile.can.base_id:#x}+{ID_RANGE}"
+
+    @classmethod
+    def check(cls, node: NodeLike, base_dir: str) -> None:
+        cls.check_layout(node)
+        if node.options.log:
+            check_writable_dir(node.options.log, "log")
+
+    @classmethod
+    def check_layout(cls, node: NodeLike) -> None:
+        """The node's frames as the profile describes them can carry its raw values
+        (``taxel_bits``, a scan that fits a node's IDs): the refusal the run meets when it
+        opens the bus, found before."""
+        try:
+            CanLayout.from_profile(node.profile, fd=cls.fd(node))
+        except ProfileError as exc:
+            raise ValueError(f"profile: {exc}") from None
 
     @classmethod
     def check_together(cls, nodes: Sequence[NodeLike]) -> None:

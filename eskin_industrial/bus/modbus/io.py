@@ -29,6 +29,7 @@ from pymodbus.framer.rtu import FramerRTU
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
 from ...errors import EskinError, ModbusFault
+from ...netaddr import listen_problem
 
 Table = Literal["coils", "discrete", "holding", "input"]
 
@@ -132,6 +133,10 @@ class RegisterServer:
         if not self._ready.wait(timeout_s):
             raise EskinError(f"modbus server ({self.where}): did not start within {timeout_s:g} s")
         if self._error is not None:
+            # pymodbus says only "please check address": try the bind ourselves for why
+            problem = listen_problem(*self.tcp) if self.tcp is not None else None
+            if problem:
+                raise EskinError(f"modbus server: {problem}")
             raise EskinError(f"modbus server ({self.where}): cannot listen: {self._error}")
         return self
 

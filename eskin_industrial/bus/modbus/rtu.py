@@ -19,6 +19,7 @@ from typing import Any
 
 from ...errors import ModbusFault
 from ...frames import RawScan
+from ...preflight import check_serial
 from ...profile import Profile
 from ...schema import in_range, positive
 from ..source import NodeLike, OpenContext, Source
@@ -80,6 +81,9 @@ class RtuSource(Source):
         self._counter: int | None = None  #: the node's last scan counter
         self._last_node_seq = 0
         self._next = time.monotonic()
+        #: The newest failure, as the master reported it (the ``bus_fault`` event's
+        #: ``error``); kept after a good poll, as a CAN reader keeps its last error.
+        self._last_error = ""
 
     def open(self) -> "RtuSource":
         self.master.connect()
@@ -92,6 +96,10 @@ class RtuSource(Source):
     def bus_fault(self) -> bool:
         return self.consecutive_failures >= self.node.fault_after_failures
 
+    @property
+    def last_error(self) -> str:
+        return self._last_error
+
     def poll_once(self) -> RawScan | None:
         """One poll (with retries), now; None when it failed (counted)."""
         c = self.stats
@@ -103,6 +111,7 @@ class RtuSource(Source):
             try:
                 regs = self.master.read(self.node.function, self.node.start_address, self.count)
             except ModbusFault as exc:
+                self._last_error = str(exc)
                 if exc.kind == "exception":
                     c.exceptions += 1
                 elif exc.kind == "crc":
@@ -114,6 +123,7 @@ class RtuSource(Source):
             rx = time.monotonic()
             if len(regs) != self.count:
                 c.crc_errors += 1
+                self._last_error = f"{self.settings.port}: {len(regs)} registers in the answer, {self.count} asked"
                 continue
             self.consecutive_failures = 0
             self._last_rx = rx  # a good answer, even a repeated scan: the node is alive
@@ -184,6 +194,10 @@ class RtuSource(Source):
     @classmethod
     def describe(cls, node: NodeLike) -> str:
         return f"rtu {node.options.serial_port} unit {node.profile.modbus.node.unit_id}"
+
+    @classmethod
+    def check(cls, node: NodeLike, base_dir: str) -> None:
+        check_serial(node.options.serial_port, "serial_port")
 
     @classmethod
     def check_together(cls, nodes: Sequence[NodeLike]) -> None:
