@@ -12,6 +12,7 @@ from .bridge_cmd import bridge
 from .demo_cmd import demo
 from .detect_cmd import detect
 from .evaluate_cmd import evaluate_cmd
+from .examples_cmd import examples
 from .modbus_cmd import modbus_bridge, modbus_node
 from .monitor_cmd import monitor
 from .node_cmd import node
@@ -62,3 +63,4 @@ main.add_command(modbus_bridge)
 main.add_command(node)
 main.add_command(receive)
 main.add_command(monitor)
+main.add_command(examples)

@@ -16,7 +16,7 @@ from ..recording import read_recording
 def profile_option(required: bool = True):
     return click.option(
         "-p", "--profile", "profile_path", type=click.Path(dir_okay=False), required=required,
-        help="Sensor profile (TOML), e.g. profiles/paper-5x5.toml.",
+        help="Sensor profile: a TOML file, or a built-in name (eskin-bus profile list), e.g. paper-5x5.",
     )
 
 

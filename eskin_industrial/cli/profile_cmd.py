@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+import shutil
+from pathlib import Path
 
 import click
 
 from ..errors import ProfileError
-from ..profile import Profile, load_profile
+from ..profile import Profile, builtin_profiles, load_profile
 from .toml_out import dumps
 
 
@@ -64,7 +66,7 @@ def show(file: str, fmt: str) -> None:
     else:
         import tomllib
 
-        given = tomllib.loads(open(file, encoding="utf-8").read())  # loaded once already: valid TOML
+        given = tomllib.loads(Path(p.source).read_text(encoding="utf-8"))  # loaded once already: valid TOML
         given["derived"] = table["derived"]  # computed, not defaults
         click.echo(f"# {file}: {_brief(p)}")
         click.echo("# every key, as resolved: '# default' marks what the file leaves to the default")
@@ -81,6 +83,35 @@ def dbc(file: str, fd: bool | None) -> None:
 
     p = load_profile(file)
     click.echo(dbc_text(p, CanLayout.from_profile(p, fd=fd)), nl=False)
+
+
+@profile.command(name="list")
+def list_() -> None:
+    """The built-in profiles: their names work wherever a profile file does (-p NAME)."""
+    for name, path in builtin_profiles().items():
+        click.echo(f"{name:<12} {_brief(load_profile(path))}")
+
+
+@profile.command()
+@click.argument("name")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
+              help="Where to write it (default: NAME.toml in the working directory).")
+@click.option("--force", is_flag=True, help="Overwrite an existing file.")
+def init(name: str, output: str | None, force: bool) -> None:
+    """Copy a built-in profile out, to edit it for an installation."""
+    builtin = builtin_profiles().get(name.removesuffix(".toml"))
+    if builtin is None:
+        raise click.BadParameter(f"{name!r} is not a built-in profile (built-in: {', '.join(builtin_profiles())})",
+                                 param_hint="NAME")
+    target = Path(output or f"{builtin.stem}.toml")
+    if target.exists() and not force:
+        raise click.UsageError(f"{target}: exists; give --force to overwrite it")
+    try:
+        shutil.copyfile(builtin, target)
+    except OSError as exc:
+        raise click.UsageError(f"{target}: cannot write: {exc.strerror or exc}") from None
+    click.echo(f"{target}: written from the built-in profile {builtin.stem}; check it with "
+               f"`eskin-bus profile check {target}`")
 
 
 def _brief(p: Profile) -> str:
