@@ -66,7 +66,7 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_
 @click.option("--check", is_flag=True, help="Validate the configuration and profiles, print the plan, exit.")
 @click.option("--explain", is_flag=True,
               help="With --check: also every node's resolved settings and where each came from.")
-def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, base_address, rate_hz,
+def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, bus_extra, base_address, rate_hz,
            name, log_format, log_level, status_every, duration_s, check, explain, **output_values) -> None:
     """Run the bridge: decode each node's scans, detect, and keep the outputs (by
     default the PLC's register blocks) up to date, until SIGTERM or SIGINT (then every
@@ -82,7 +82,8 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
 
     if (config_path is None) == (profile_path is None):
         raise click.UsageError("give --config FILE, or --profile P for one node")
-    bus = dict(interface=interface, channel=channel, bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate)
+    bus = dict(interface=interface, channel=channel, bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate,
+               **bus_extra)
     if config_path is not None:
         given = [opt for opt, value in (("--source", source != "can"), ("-i", interface), ("-c", channel),
                                         ("-b", bitrate), ("--fd", fd is not None), ("--data-bitrate", data_bitrate),
