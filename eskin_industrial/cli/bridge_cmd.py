@@ -16,6 +16,7 @@ from typing import Any
 import click
 
 from .can_common import bus_options
+from .console import verbosity
 from .outputs import given_output_options, output_options, outputs_from_cli
 
 
@@ -96,6 +97,7 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     else:
         node = node_from_options(profile_path, source, bus, base_address, rate_hz, name)
         cfg = BridgeConfig(node=(node,), outputs=outputs_from_cli(output_values))
+    log_level = log_level or {-1: "warning", 1: "debug", 2: "debug"}.get(verbosity())  # -q / -v
     logs = replace(cfg.log, **{k: v for k, v in (("format", log_format), ("level", log_level),
                                                    ("status_every_s", status_every)) if v is not None})
     cfg = replace(cfg, log=logs)

@@ -5,11 +5,14 @@ from __future__ import annotations
 import json
 import shutil
 from pathlib import Path
+from typing import Any
 
 import click
 
 from ..errors import ProfileError
 from ..profile import Profile, builtin_profiles, load_profile
+from .common import complete_profile
+from .console import echo_json
 from .toml_out import dumps
 
 
@@ -19,30 +22,43 @@ def profile() -> None:
 
 
 @profile.command()
-@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
-def check(files: tuple[str, ...]) -> None:
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False), shell_complete=complete_profile)
+@click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text", show_default=True,
+              help="One line per profile, or one JSON document (a list: file, ok, error, warnings, summary).")
+def check(files: tuple[str, ...], fmt: str) -> None:
     """Validate profiles; one line each, exit 2 if any is refused."""
-    failed = False
-    for path in files:
-        try:
-            p = load_profile(path)
-        except ProfileError as exc:
-            click.echo(f"eskin-bus: error: {exc}", err=True)
-            failed = True
-            continue
-        click.echo(f"{path}: ok ({_brief(p)})")
-        try:  # the transports' own checks; only the commands that use them refuse
-            from ..bus.can.layout import CanLayout
-
-            CanLayout.from_profile(p)
-        except ProfileError as exc:
-            click.echo(f"eskin-bus: warning: {exc} (CAN commands will refuse this profile)", err=True)
-    if failed:
+    results = [_check_one(path) for path in files]
+    if fmt == "json":
+        echo_json(results)
+    else:
+        for r in results:
+            if r["ok"]:
+                click.echo(f"{r['file']}: ok ({r['summary']})")
+            else:
+                click.echo(f"eskin-bus: error: {r['error']}", err=True)
+            for w in r["warnings"]:
+                click.echo(f"eskin-bus: warning: {w}", err=True)
+    if not all(r["ok"] for r in results):
         raise SystemExit(2)
 
 
+def _check_one(path: str) -> dict[str, Any]:
+    try:
+        p = load_profile(path)
+    except ProfileError as exc:
+        return {"file": path, "ok": False, "error": str(exc), "warnings": [], "summary": None}
+    warnings = []
+    try:  # the transports' own checks; only the commands that use them refuse
+        from ..bus.can.layout import CanLayout
+
+        CanLayout.from_profile(p)
+    except ProfileError as exc:
+        warnings.append(f"{exc} (CAN commands will refuse this profile)")
+    return {"file": path, "ok": True, "error": None, "warnings": warnings, "summary": _brief(p)}
+
+
 @profile.command()
-@click.argument("file", type=click.Path(dir_okay=False))
+@click.argument("file", type=click.Path(dir_okay=False), shell_complete=complete_profile)
 @click.option("--format", "fmt", type=click.Choice(["toml", "json"]), default="toml", show_default=True)
 def show(file: str, fmt: str) -> None:
     """Print the profile as loaded: every key with its default filled in, plus the
@@ -74,7 +90,7 @@ def show(file: str, fmt: str) -> None:
 
 
 @profile.command()
-@click.argument("file", type=click.Path(dir_okay=False))
+@click.argument("file", type=click.Path(dir_okay=False), shell_complete=complete_profile)
 @click.option("--fd/--no-fd", "fd", default=None, help="Describe CAN FD frames (default: the profile's).")
 def dbc(file: str, fd: bool | None) -> None:
     """Write a DBC describing the profile's CAN frames (taxels scaled to newtons)."""
