@@ -33,7 +33,15 @@ class DecodeError(EskinError):
 
 
 class MissingExtra(EskinError):
-    """An optional dependency the chosen command or method needs is not installed."""
+    """An optional dependency the chosen command or method needs is not installed.
+    Every one reads the same and exits 4:
+    ``WHAT needs PACKAGE: pip install 'eskin-industrial[EXTRA]'`` (quoted for zsh)."""
+
+    exit_code = 4
+
+    @classmethod
+    def of(cls, what: str, package: str, extra: str) -> "MissingExtra":
+        return cls(f"{what} needs {package}: pip install 'eskin-industrial[{extra}]'")
 
 
 class TransportError(EskinError):

@@ -17,6 +17,7 @@ from typing import Literal
 import numpy as np
 
 from .detect.settings import DetectorSettings
+from .errors import ProfileError
 from .netaddr import check_host
 from .schema import (SchemaError, in_range, non_negative, parse_toml, positive, positive_at_most, read_toml_file,
                      to_table)
@@ -322,11 +323,36 @@ class Profile:
         return to_table(self)
 
 
-def load_profile(path: str | Path) -> Profile:
-    """Read and validate a profile; :class:`ProfileError` names the file and the key."""
-    path = Path(path)
-    text = read_toml_file(path, "profile")
-    return parse_profile(text, str(path))
+#: The profiles shipped inside the package (package data): ``-p paper-5x5`` names one.
+BUILTIN_DIR = Path(__file__).resolve().parent / "data" / "profiles"
+
+
+def builtin_profiles() -> dict[str, Path]:
+    """The shipped profiles by name (the file's stem), sorted."""
+    return {p.stem: p for p in sorted(BUILTIN_DIR.glob("*.toml"))}
+
+
+def find_profile(name_or_path: str | Path, base: Path | None = None) -> Path:
+    """A profile's file.  A bare name (no folder, no ``.toml``) that is no file names a
+    built-in profile (``paper-5x5``); anything else is a path, relative to ``base`` when
+    given, else to the working directory, and its read error names it."""
+    path = Path(name_or_path)
+    here = path if path.is_absolute() or base is None else base / path
+    if here.exists() or path.parent != Path(".") or path.suffix == ".toml":
+        return here
+    builtin = builtin_profiles().get(path.name)
+    if builtin is not None:
+        return builtin
+    known = ", ".join(builtin_profiles()) or "none"
+    raise ProfileError(f"{here}: no such profile file, and not a built-in profile (built-in: {known})")
+
+
+def load_profile(path: str | Path, base: Path | None = None) -> Profile:
+    """Read and validate a profile (a path, or a built-in name: :func:`find_profile`);
+    :class:`ProfileError` names the file and the key."""
+    found = find_profile(path, base)
+    text = read_toml_file(found, "profile")
+    return parse_profile(text, str(found))
 
 
 def parse_profile(text: str, source: str = "<profile>") -> Profile:

@@ -103,9 +103,9 @@ def test_without_scikit_learn_the_cli_names_the_extra(tmp_path):
     code = ("import sys; sys.path.insert(0, %r); from eskin_industrial.cli import main; "
             "main(['evaluate', '-m', 'learned', '-s', 'case2', '--seeds', '1000'])") % str(tmp_path)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert out.returncode != 0
+    assert out.returncode == 4  # every missing extra: one format, one exit code (tests/test_cli_conventions.py)
     assert out.stderr.strip().splitlines() == [
-        "eskin-bus: error: the learned method needs scikit-learn: pip install eskin-industrial[learn]"]
+        "eskin-bus: error: the learned method needs scikit-learn: pip install 'eskin-industrial[learn]'"]
 
 
 def test_nothing_imports_sklearn_at_import_time():

@@ -27,14 +27,14 @@ Example (two grippers on one CAN bus, written into the PLC over Modbus TCP)::
 
     [[node]]
     name = "left"
-    profile = "profiles/paper-5x5.toml"
+    profile = "paper-5x5"
     interface = "socketcan"
     channel = "can0"
     base_address = 0
 
     [[node]]
     name = "right"
-    profile = "profiles/paper-5x5.toml"
+    profile = "paper-5x5"
     interface = "socketcan"
     channel = "can0"
     base_id = 0x210
@@ -240,9 +240,8 @@ def resolve(config: BridgeConfig) -> list[ResolvedNode]:
     nodes: list[ResolvedNode] = []
     for nc in config.node:
         where = f"{config.source}: [node {nc.name!r}]"
-        path = Path(nc.profile)
-        try:
-            loaded = load_profile(path if path.is_absolute() else base / path)
+        try:  # a path relative to this file's folder, or a built-in name
+            loaded = load_profile(nc.profile, base)
         except ProfileError as exc:
             # The profile's own message names its file; prefix the configuration file
             # and the node, so that the line says which [[node]] table points at it.

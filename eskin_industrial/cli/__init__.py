@@ -9,9 +9,11 @@ import click
 
 from ..errors import EskinError
 from .bridge_cmd import bridge
+from .console import add_envvars, add_verbosity
 from .demo_cmd import demo
 from .detect_cmd import detect
 from .evaluate_cmd import evaluate_cmd
+from .examples_cmd import examples
 from .modbus_cmd import modbus_bridge, modbus_node
 from .monitor_cmd import monitor
 from .node_cmd import node
@@ -62,3 +64,8 @@ main.add_command(modbus_bridge)
 main.add_command(node)
 main.add_command(receive)
 main.add_command(monitor)
+main.add_command(examples)
+# After every command is added: -v/-q on each, and each option also from the
+# environment, ESKIN_<COMMAND>_<OPTION> (docs/cli.md).
+add_verbosity(main)
+add_envvars(main, "ESKIN")

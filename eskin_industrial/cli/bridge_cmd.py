@@ -16,6 +16,7 @@ from typing import Any
 import click
 
 from .can_common import bus_options
+from .console import verbosity
 from .outputs import given_output_options, output_options, outputs_from_cli
 
 
@@ -66,7 +67,7 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_
 @click.option("--check", is_flag=True, help="Validate the configuration and profiles, print the plan, exit.")
 @click.option("--explain", is_flag=True,
               help="With --check: also every node's resolved settings and where each came from.")
-def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, base_address, rate_hz,
+def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, bus_extra, base_address, rate_hz,
            name, log_format, log_level, status_every, duration_s, check, explain, **output_values) -> None:
     """Run the bridge: decode each node's scans, detect, and keep the outputs (by
     default the PLC's register blocks) up to date, until SIGTERM or SIGINT (then every
@@ -82,7 +83,8 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
 
     if (config_path is None) == (profile_path is None):
         raise click.UsageError("give --config FILE, or --profile P for one node")
-    bus = dict(interface=interface, channel=channel, bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate)
+    bus = dict(interface=interface, channel=channel, bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate,
+               **bus_extra)
     if config_path is not None:
         given = [opt for opt, value in (("--source", source != "can"), ("-i", interface), ("-c", channel),
                                         ("-b", bitrate), ("--fd", fd is not None), ("--data-bitrate", data_bitrate),
@@ -95,6 +97,7 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     else:
         node = node_from_options(profile_path, source, bus, base_address, rate_hz, name)
         cfg = BridgeConfig(node=(node,), outputs=outputs_from_cli(output_values))
+    log_level = log_level or {-1: "warning", 1: "debug", 2: "debug"}.get(verbosity())  # -q / -v
     logs = replace(cfg.log, **{k: v for k, v in (("format", log_format), ("level", log_level),
                                                    ("status_every_s", status_every)) if v is not None})
     cfg = replace(cfg, log=logs)

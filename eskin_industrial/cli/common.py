@@ -13,10 +13,21 @@ from ..profile import Profile, load_profile
 from ..recording import read_recording
 
 
+def complete_profile(ctx: click.Context, param: click.Parameter, incomplete: str) -> list:
+    """Shell completion of a profile: the built-in names, then files."""
+    from click.shell_completion import CompletionItem
+
+    from ..profile import builtin_profiles
+
+    names = [CompletionItem(n) for n in builtin_profiles() if n.startswith(incomplete)]
+    return names + [CompletionItem(incomplete, type="file")]
+
+
 def profile_option(required: bool = True):
     return click.option(
         "-p", "--profile", "profile_path", type=click.Path(dir_okay=False), required=required,
-        help="Sensor profile (TOML), e.g. profiles/paper-5x5.toml.",
+        shell_complete=complete_profile,
+        help="Sensor profile: a TOML file, or a built-in name (eskin-bus profile list), e.g. paper-5x5.",
     )
 
 

@@ -17,14 +17,11 @@ if TYPE_CHECKING:
     from ..sim.demo import DemoResult
     from ..view.terminal import LiveScreen
 
-#: the shipped profiles, next to the package in a checkout
-PROFILES = Path(__file__).resolve().parents[2] / "profiles"
-
 
 @click.command()
 @click.option("--scene", default="hand", show_default=True, help="Scene the node plays (see `simulate --list`).")
 @click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None,
-              help="Profile (default: the scene's, from profiles/).")
+              help="Profile: a file or a built-in name (default: the scene's built-in profile).")
 @click.option("--rate", "rate_hz", type=click.FloatRange(min=10.0, max=2000.0), default=100.0, show_default=True)
 @click.option("--seed", type=int, default=7, show_default=True)
 @click.option("--plain", is_flag=True,
@@ -40,7 +37,7 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
     from ..sim.demo import run_demo
 
     rec = render(scene, rate_hz, seed)
-    prof = open_profile(profile_path or str(PROFILES / f"{rec.profile_name}.toml"))
+    prof = open_profile(profile_path or rec.profile_name)
     say = click.echo
     say(f"demo: scene {rec.name} ({rec.spec.scene.description}), {len(rec.t)} scans at {rate_hz:g} Hz on a "
         f"virtual CAN bus -> bridge ({prof.detector.method}) -> Modbus TCP -> PLC stand-in; "

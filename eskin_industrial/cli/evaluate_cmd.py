@@ -22,6 +22,7 @@ from ..evaluation.suite import (
     evaluate,
 )
 from .common import open_profile
+from .console import Ticker, echo_json, quiet
 
 
 def _seeds(value: str) -> tuple[int, ...]:
@@ -63,14 +64,17 @@ def _seeds(value: str) -> tuple[int, ...]:
               help="Take the detector settings from this profile's [detector] (default: the built-in defaults).")
 @click.option("--within", "within_ms", multiple=True, type=click.IntRange(min=0),
               help="Also print the share of slip events found within this many ms of onset (repeatable).")
+@click.option("--format", "fmt", type=click.Choice(["md", "json"]), default="md", show_default=True,
+              help="A Markdown table, or one JSON document (every figure, per scene too).")
 def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, long_holds,
-                 profile_path, within_ms) -> None:
+                 profile_path, within_ms, fmt) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
     force read as slip, and cost per frame, for each method."""
     if charts_dir is not None:
         from ..evaluation.charts import all_charts
 
-        all_charts(Path(charts_dir), lambda line: click.echo(line, err=True), quick=quick)
+        all_charts(Path(charts_dir), (lambda line: None) if quiet() else (lambda line: click.echo(line, err=True)),
+                   quick=quick)
         return
     if long_holds:
         if scenes:
@@ -86,9 +90,20 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
     if "learned" in names:
         names = _prepare_learned(names, explicit=bool(methods))
     settings = open_profile(profile_path).detector if profile_path else DEFAULT_SETTINGS
-    res = evaluate(by_name(*names), scenes=tuple(scenes) or SUITE, seeds=seed_set, rate_hz=rate_hz,
-                   tolerance_s=tolerance_s, settings=settings)
+    scene_set = tuple(scenes) or SUITE
+    ticker = Ticker(len(scene_set) * len(seed_set), f"{len(names)} methods")
+    try:
+        res = evaluate(by_name(*names), scenes=scene_set, seeds=seed_set, rate_hz=rate_hz,
+                       tolerance_s=tolerance_s, settings=settings,
+                       progress=lambda scene: ticker.step(label=f"{len(names)} methods, {scene:<10}"))
+    finally:
+        ticker.close()
     held = sum(r.score.holding_s for r in res.values()) / max(1, len(res)) / 3600
+    if fmt == "json":
+        echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz, "scenes": list(scene_set),
+                   "holding_h": held, "seconds": time.perf_counter() - start,
+                   "methods": [_json_row(r, res, within_ms) for r in res.values()]})
+        return
     click.echo(f"# eskin-bus evaluate --seeds {seeds} --rate {rate_hz:g}  "
                f"({len(scenes) or len(SUITE)} scenes x {len(seed_set)} seeds, {held:.2f} h of holding, "
                f"{time.perf_counter() - start:.0f} s)")
@@ -107,6 +122,21 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
         if within_ms:
             shares = ", ".join(f"{_within(r.score, ms):.0f} % within {ms} ms" for ms in within_ms)
             click.echo(f"# {name}: of {r.score.events} slip events, {shares}")
+
+
+def _figures(s: Any) -> dict[str, Any]:
+    return {"events": s.events, "found": s.found, "f1": s.f1, "false_alarms": s.false_alarms,
+            "false_alarms_per_hour": s.false_alarms_per_hour, "holding_s": s.holding_s,
+            "varying_force_as_slip": s.vf_as_slip, "delay_p50_ms": s.delay_percentile(50) * 1000,
+            "delay_p90_ms": s.delay_percentile(90) * 1000}
+
+
+def _json_row(r: Any, res: dict[str, Any], within_ms: tuple[int, ...]) -> dict[str, Any]:
+    paper_us = res["paper"].us_per_frame if "paper" in res else float("nan")
+    return {"method": r.method, **_figures(r.score), "us_per_frame": r.us_per_frame,
+            "cost_vs_paper": r.us_per_frame / paper_us,
+            "within_ms": {str(ms): _within(r.score, ms) for ms in within_ms},
+            "per_scene": {scene: _figures(ss) for scene, ss in r.per_scene.items()}}
 
 
 def _num(value: float, unit: str = "", digits: int = 1) -> str:

@@ -24,7 +24,7 @@ from .common import profile_option
               help="Stop once no scan came for this many seconds (after the first).")
 @click.option("--plain", is_flag=True,
               help="One line per state change instead of the live view (the default when stdout is not a terminal).")
-def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, rate_hz, method, duration_s, idle_s,
+def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, bus_extra, rate_hz, method, duration_s, idle_s,
             plain) -> None:
     """Watch a sensor node on a CAN bus: its scans decoded and detected, shown live
     (taxel heat map, scores against their thresholds, state, the register image the
@@ -39,7 +39,7 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, rate_hz
     if rate_hz is not None and not rate_hz > 0:
         raise click.BadParameter(f"expected a positive rate, got {rate_hz}", param_hint="--rate")
     node = NodeConfig.of("node", profile_path, "can", rate_hz=rate_hz, interface=interface, channel=channel,
-                         bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate)
+                         bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate, **bus_extra)
     cfg = BridgeConfig(node=(node,))
     (resolved,) = resolve(cfg)
     prof = resolved.profile

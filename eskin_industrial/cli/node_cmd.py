@@ -33,7 +33,7 @@ from .common import open_profile, profile_option, scene_or_recording
               help="Be a Modbus RTU node on this serial port instead of a CAN node (the profile's [modbus.node] map).")
 @click.option("--baud", "baudrate", type=int, default=None, help="With --modbus-rtu: baud rate (default: the profile's).")
 @click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
-def node(profile_path, interface, channel, bitrate, fd, data_bitrate, scene, recording, rate_hz, burst, repeat,
+def node(profile_path, interface, channel, bitrate, fd, data_bitrate, bus_extra, scene, recording, rate_hz, burst, repeat,
          duration_s, seed, drop, duplicate, reorder, corrupt, silent_at_s, silent_for_s, modbus_rtu, baudrate,
          quiet) -> None:
     """Send scans as the profile's sensor node: one scan every 1/rate seconds (absolute
@@ -55,7 +55,8 @@ def node(profile_path, interface, channel, bitrate, fd, data_bitrate, scene, rec
             raise click.BadParameter(f"expected a probability in [0, 1], got {p}", param_hint=name)
     scans = scene_or_recording(prof, scene, recording, rate_hz, seed)
     rate, raw = scans.rate_hz, scans.raw_values(prof)
-    kw = bus_kwargs(prof, interface, channel, bitrate, fd, data_bitrate)
+    kw = bus_kwargs(prof, interface, channel, bitrate, fd, data_bitrate, timing=bus_extra.get("timing"),
+                    filters=bus_extra.get("filter", ()), extra=bus_extra.get("bus_kwargs"))
     layout = CanLayout.from_profile(prof, fd=kw["fd"])
     faults = Faults(drop, duplicate, reorder, corrupt, silent_at_s, silent_for_s, seed)
     bus = open_bus(**kw)

@@ -9,6 +9,7 @@ import click
 
 from ..plc.image import map_rows
 from .common import open_profile, profile_option
+from .console import echo_json
 
 _COLUMNS = ("table", "name", "address", "ref", "type", "unit", "access", "description")
 _HEAD = ("table", "name", "address (0-based)", "reference (1-based)", "type", "unit", "access", "description")
@@ -21,13 +22,17 @@ def plc() -> None:
 
 @plc.command("map")
 @profile_option()
-@click.option("--format", "fmt", type=click.Choice(["csv", "md"]), default="md", show_default=True)
+@click.option("--format", "fmt", type=click.Choice(["csv", "md", "json"]), default="md", show_default=True,
+              help="A table (CSV or Markdown), or JSON: a list of rows with the same keys.")
 def map_cmd(profile_path: str, fmt: str) -> None:
     """Print the register map (holding registers, coils, discrete inputs) with the
     profile's base address: 0-based protocol addresses and 1-based references
     (4xxxx holding, 0xxxx coils, 1xxxx discrete inputs)."""
     prof = open_profile(profile_path)
     rows = map_rows(prof.modbus.plc)
+    if fmt == "json":
+        echo_json([{c: r[c] for c in _COLUMNS} for r in rows])
+        return
     if fmt == "csv":
         w = csv.writer(sys.stdout, lineterminator="\n")
         w.writerow(_COLUMNS)

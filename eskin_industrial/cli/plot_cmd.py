@@ -35,7 +35,9 @@ def plot(profile_path: str, input_path: str | None, can_log: str | None, output:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        raise click.ClickException("plot needs matplotlib: pip install 'eskin-industrial[plot]'") from None
+        from ..errors import MissingExtra
+
+        raise MissingExtra.of("plot", "matplotlib", "plot") from None
     from ..calibration import Calibrator
 
     prof = open_profile(profile_path)

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 @click.option("--queue-frames", type=click.IntRange(min=1, max=MAX_QUEUE_FRAMES), default=DEFAULT_QUEUE_FRAMES, show_default=True,
               help="Frames the reader may queue ahead of the detector before dropping.")
 @click.option("-q", "--quiet", is_flag=True, help="Nothing on stderr (no start line, no counters).")
-def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output, log_path, rate_hz, duration_s,
+def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, bus_extra, output, log_path, rate_hz, duration_s,
             idle_s, max_scans, queue_frames, quiet) -> None:
     """Receive scans from a CAN bus until stopped (Ctrl-C, --duration, --idle-exit,
     --scans), run the detector, and report the transport counters as JSON on stderr.
@@ -40,7 +40,7 @@ def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, output,
     from ..sinks.recorder import RecorderOptions
 
     node = NodeConfig.of("node", profile_path, "can", rate_hz=rate_hz, interface=interface, channel=channel,
-                         bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate, log=log_path)
+                         bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate, log=log_path, **bus_extra)
     outputs = {"recorder": RecorderOptions(path=output)} if output is not None else {}
     cfg = BridgeConfig(node=(node,), outputs=outputs, queue_frames=queue_frames)
     (resolved,) = resolve(cfg)

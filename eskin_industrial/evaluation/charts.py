@@ -25,7 +25,12 @@ LABEL_COLOURS = {"slip": "tab:red", "variable_force": "tab:orange", "transition"
 
 
 def _plt():
-    import matplotlib
+    try:
+        import matplotlib
+    except ImportError:
+        from ..errors import MissingExtra
+
+        raise MissingExtra.of("the evaluation charts", "matplotlib", "plot") from None
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -66,9 +66,11 @@ def run_one(factory: Factory, settings: DetectorSettings, rendered: Rendered) ->
 
 def evaluate(methods: dict[str, Factory], scenes: tuple[str, ...] = SUITE, seeds: tuple[int, ...] = EVALUATION_SEEDS,
              rate_hz: float = 100.0, settings: DetectorSettings = DEFAULT_SETTINGS,
-             spec_hook: Callable[[SceneSpec], SceneSpec] | None = None, tolerance_s: float = 0.5) -> dict[str, Result]:
+             spec_hook: Callable[[SceneSpec], SceneSpec] | None = None, tolerance_s: float = 0.5,
+             progress: Callable[[str], None] | None = None) -> dict[str, Result]:
     """Score every method on every scene and seed (each scene rendered once per seed);
-    ``spec_hook`` changes a scene before it is rendered (the failure map's conditions)."""
+    ``spec_hook`` changes a scene before it is rendered (the failure map's conditions);
+    ``progress`` is called with the scene's name after each scene and seed."""
     results = {name: Result(name) for name in methods}
     for scene in scenes:
         spec = load_scene(scene)
@@ -85,6 +87,8 @@ def evaluate(methods: dict[str, Factory], scenes: tuple[str, ...] = SUITE, seeds
                 res.per_scene[scene] += s
                 res.frames += len(rendered.t)
                 res.seconds += seconds
+            if progress is not None:
+                progress(scene)
     return results
 
 

@@ -22,7 +22,8 @@ from ..errors import MissingExtra
 from ..scenes import load_scene, render
 from .corpus import EVALUATION_SEEDS, SUITE, TUNING_SEEDS, coordinates
 
-INSTALL_HINT = "the learned method needs scikit-learn: pip install eskin-industrial[learn]"
+MISSING = MissingExtra.of("the learned method", "scikit-learn", "learn")
+INSTALL_HINT = str(MISSING)
 
 
 @dataclass(frozen=True)
@@ -44,7 +45,7 @@ def require_sklearn() -> None:
     try:
         import sklearn  # noqa: F401
     except ImportError:
-        raise MissingExtra(INSTALL_HINT) from None
+        raise MISSING from None
 
 
 class _Recorder(Learned):

@@ -17,12 +17,14 @@ import errno
 import select
 import socket
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import can
 
 from ...errors import CanBusError, EskinError
 from ..source import DEFAULT_QUEUE_FRAMES
+from .busargs import NO_BITRATE, configured, make_timing, parse_filters
 
 #: Socket receive buffer asked for on SocketCAN (the kernel default holds a few
 #: hundred frames: a 1 Mbit/s bus fills it in tens of milliseconds).
@@ -31,10 +33,12 @@ DEFAULT_RCVBUF_BYTES = 8 * 1024 * 1024
 
 def open_bus(interface: str | None = None, channel: str | None = None, bitrate: int | None = None,
              fd: bool = False, data_bitrate: int | None = None,
-             rcvbuf_bytes: int = DEFAULT_RCVBUF_BYTES) -> can.BusABC:
+             rcvbuf_bytes: int = DEFAULT_RCVBUF_BYTES, **extra: Any) -> can.BusABC:
     """``can.Bus`` with python-can's own option names; ``None`` leaves the value to
-    python-can's configuration (file, ``CAN_INTERFACE``, ``CAN_CHANNEL``)."""
-    kwargs: dict = {}
+    python-can's configuration (file, ``CAN_INTERFACE``, ``CAN_CHANNEL``,
+    ``CAN_BITRATE``).  ``extra``: ``timing``, ``can_filters`` and the bus class's own
+    keyword arguments (``--bus-kwargs``), passed on as they are."""
+    kwargs: dict = dict(extra)
     if bitrate is not None:
         kwargs["bitrate"] = bitrate
     if fd:
@@ -43,7 +47,7 @@ def open_bus(interface: str | None = None, channel: str | None = None, bitrate: 
             kwargs["data_bitrate"] = data_bitrate
     try:
         bus = can.Bus(interface=interface, channel=channel, **kwargs)
-    except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
+    except (can.CanError, OSError, ValueError, TypeError, ImportError, NotImplementedError) as exc:
         where = f"interface {interface!r}" if interface else "the configured interface"
         if channel:
             where += f", channel {channel!r}"
@@ -56,15 +60,29 @@ def open_bus(interface: str | None = None, channel: str | None = None, bitrate: 
 
 
 def bus_kwargs(profile, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None,
-               data_bitrate: int | None) -> dict:
-    """Arguments for :func:`open_bus` from python-can's options, the profile filling in
-    what they leave open (the command line's ``-i/-c/-b/--fd``, or a bridge node's keys)."""
+               data_bitrate: int | None, timing: dict[str, int] | None = None,
+               filters: Sequence[str] = (), extra: dict[str, Any] | None = None) -> dict:
+    """Arguments for :func:`open_bus` from python-can's options (the command line's
+    ``-i/-c/-b/--fd/--timing/--filter/--bus-kwargs``, or a bridge node's keys).
+
+    Bit rates resolve as python-can's own tools resolve them: the command line, then
+    python-can's configuration (``CAN_BITRATE``, its config files), and only then the
+    profile's ``[can]`` rates, for an interface that takes one (not virtual or
+    socketcan) and is not given a ``timing``, whichever way the interface was named."""
     use_fd = profile.can.fd if fd is None else fd
-    # A bit rate is only passed on when given: virtual and socketcan buses ignore it,
-    # hardware adapters need it (the profile's when none is given).
-    rate = bitrate if bitrate is not None else (profile.can.bitrate_bps if interface not in (None, "virtual", "socketcan") else None)
-    data = data_bitrate if data_bitrate is not None else (profile.can.data_bitrate_bps if rate is not None else None)
-    return dict(interface=interface, channel=channel, bitrate=rate, fd=use_fd, data_bitrate=data)
+    conf = configured(interface, channel)
+    wants_rate = conf.get("interface") not in (None, *NO_BITRATE) and not timing and "timing" not in conf
+    rate, data = bitrate, data_bitrate
+    if rate is None and wants_rate and "bitrate" not in conf:
+        rate = profile.can.bitrate_bps
+    if data is None and wants_rate and use_fd and "data_bitrate" not in conf:
+        data = profile.can.data_bitrate_bps
+    kw: dict[str, Any] = dict(interface=interface, channel=channel, bitrate=rate, fd=use_fd, data_bitrate=data)
+    if timing:
+        kw["timing"] = make_timing(timing)
+    if filters:
+        kw["can_filters"] = parse_filters(filters)
+    return {**(extra or {}), **kw}
 
 
 def enlarge_rcvbuf(bus: can.BusABC, size: int) -> int | None:

@@ -25,6 +25,7 @@ from ...schema import in_range, positive_at_most
 from ..source import NodeLike, OpenContext, Source
 from .group import CanGroup
 from .layout import ID_RANGE, CanLayout, ScanAssembler
+from .busargs import make_timing, parse_filters
 from .reader import BusReader, FrameThread, bus_kwargs, open_bus
 
 
@@ -45,6 +46,24 @@ class CanOptions:
     #: Record the bus traffic to this file (python-can writer by suffix: .log candump,
     #: .blf, .asc, ...); replaying it gives the same scans.
     log: str | None = None
+    #: python-can's bit timing table (``--timing``): f_clock, brp, tseg1, ... or, for
+    #: CAN FD, f_clock, nom_brp, ..., data_brp, ...; it replaces the bit rates.
+    timing: dict[str, int] | None = None
+    #: python-can's filters, hexadecimal ``ID:MASK`` / ``ID~MASK`` (``--filter``).
+    filter: tuple[str, ...] = ()
+    #: The bus class's own keyword arguments (``--bus-kwargs``): app_name, serial, ...
+    bus_kwargs: dict[str, int | float | str | bool] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        try:
+            if self.timing:
+                make_timing(self.timing)
+        except ValueError as exc:
+            raise ValueError(f"timing: {exc}") from None
+        try:
+            parse_filters(self.filter)
+        except ValueError as exc:
+            raise ValueError(f"filter: {exc}") from None
 
 
 class CanSource(Source):
@@ -174,7 +193,8 @@ class CanSource(Source):
     @classmethod
     def share_key(cls, node: NodeLike) -> tuple:
         o = node.options
-        return ("can", o.interface, o.channel, o.bitrate_bps, cls.fd(node), o.data_bitrate_bps)
+        return ("can", o.interface, o.channel, o.bitrate_bps, cls.fd(node), o.data_bitrate_bps,
+                tuple(sorted((o.timing or {}).items())), o.filter, tuple(sorted(o.bus_kwargs.items())))
 
     @classmethod
     def open_nodes(cls, nodes: Sequence[NodeLike], context: OpenContext) -> list[Source]:
@@ -200,7 +220,8 @@ class CanSource(Source):
     @classmethod
     def _reader(cls, node: NodeLike, context: OpenContext) -> FrameThread:
         o = node.options
-        kw = bus_kwargs(node.profile, o.interface, o.channel, o.bitrate_bps, o.fd, o.data_bitrate_bps)
+        kw = bus_kwargs(node.profile, o.interface, o.channel, o.bitrate_bps, o.fd, o.data_bitrate_bps,
+                        timing=o.timing, filters=o.filter, extra=o.bus_kwargs)
         return BusReader(lambda: open_bus(**kw), context.queue_frames)
 
     def describe_where(self) -> str:

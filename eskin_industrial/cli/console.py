@@ -1,0 +1,148 @@
+"""What every command shares on the terminal: ``-v/-q``, progress on stderr, JSON.
+
+``-v``/``-q`` are added to every command by :func:`add_verbosity` (a command that has
+its own ``-q`` keeps it).  ``-v`` lets the package's and, with ``-vv``, python-can's and
+pymodbus' logs through to stderr; ``-q`` leaves only errors: no progress, no summary.
+Progress bars go to stderr, only when it is a terminal and ``-q`` is not given, so a
+pipe or a log file never sees them.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from typing import Any, TypeVar
+
+import click
+
+T = TypeVar("T")
+_KEY = "eskin.verbosity"  # in ctx.meta, which every context of one invocation shares
+
+
+def verbosity() -> int:
+    """-1 with ``-q``, 0 by default, 1 with ``-v``, 2 with ``-vv``."""
+    ctx = click.get_current_context(silent=True)
+    return ctx.meta.get(_KEY, 0) if ctx is not None else 0
+
+
+def quiet(own_flag: bool = False) -> bool:
+    return own_flag or verbosity() < 0
+
+
+def _set_verbose(ctx: click.Context, _param: click.Parameter, value: int) -> None:
+    if value:
+        ctx.meta[_KEY] = value
+        logging.basicConfig(stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s")
+        logging.getLogger("eskin_industrial").setLevel(logging.DEBUG if value > 1 else logging.INFO)
+        if value > 1:
+            for name in ("can", "pymodbus", "paho"):
+                logging.getLogger(name).setLevel(logging.DEBUG)
+
+
+def _set_quiet(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
+    if value:
+        ctx.meta[_KEY] = -1
+
+
+def _remember_quiet(ctx: click.Context, _param: click.Parameter, value: bool) -> bool:
+    """A command's own exposed ``-q``: still recorded, so that progress honours it."""
+    _set_quiet(ctx, _param, value)
+    return value
+
+
+def add_verbosity(cmd: click.Command) -> None:
+    """Give ``cmd`` (and every command under a group) ``-v/--verbose`` and
+    ``-q/--quiet``, unless it has them already."""
+    if isinstance(cmd, click.Group):
+        for sub in cmd.commands.values():
+            add_verbosity(sub)
+        return
+    taken = {opt for p in cmd.params for opt in getattr(p, "opts", [])}
+    for p in cmd.params:
+        if "-q" in getattr(p, "opts", []) and p.callback is None:
+            p.callback = _remember_quiet
+    if "-v" not in taken:
+        cmd.params.append(click.Option(["-v", "--verbose"], count=True, expose_value=False, callback=_set_verbose,
+                                       help="More on stderr: -v the package's logs, -vv python-can's and "
+                                            "pymodbus' too."))
+    if "-q" not in taken:
+        cmd.params.append(click.Option(["-q", "--quiet"], is_flag=True, expose_value=False, callback=_set_quiet,
+                                       help="Only errors on stderr: no progress, no summary."))
+
+
+def add_envvars(root: click.Group, prefix: str) -> None:
+    """Every option of every command also from an environment variable named after
+    the command path and the option's long name, the way click's
+    ``auto_envvar_prefix`` names them, but from the option's name rather than its
+    Python parameter: ``--plc`` of ``bridge`` is ``ESKIN_BRIDGE_PLC``, ``-p/--profile``
+    of ``plc map`` is ``ESKIN_PLC_MAP_PROFILE``.  The command line wins over the
+    environment, the environment over the defaults."""
+    for name, sub in root.commands.items():
+        _envvars(sub, f"{prefix}_{_upper(name)}")
+
+
+def _envvars(cmd: click.Command, prefix: str) -> None:
+    if isinstance(cmd, click.Group):
+        for name, sub in cmd.commands.items():
+            _envvars(sub, f"{prefix}_{_upper(name)}")
+        return
+    for p in cmd.params:
+        if isinstance(p, click.Option) and p.envvar is None and not p.hidden:
+            longs = [o for o in p.opts if o.startswith("--")]
+            if longs and longs[0] not in ("--help", "--version"):
+                p.envvar = f"{prefix}_{_upper(longs[0][2:])}"
+
+
+def _upper(name: str) -> str:
+    return name.upper().replace("-", "_")
+
+
+@contextmanager
+def progress(items: Iterable[T], label: str, length: int | None = None,
+             own_quiet: bool = False) -> Iterator[Iterable[T]]:
+    """``items``, with a progress bar on stderr when stderr is a terminal and not quiet."""
+    if quiet(own_quiet) or not sys.stderr.isatty():
+        yield items
+        return
+    with click.progressbar(items, length=length, label=label, file=sys.stderr,
+                           show_pos=True, show_eta=True) as bar:
+        yield bar
+
+
+class Ticker:
+    """Progress by steps of known count, for work that reports through a callback."""
+
+    def __init__(self, total: int, label: str, own_quiet: bool = False) -> None:
+        self._bar: Any = None
+        if total > 0 and not quiet(own_quiet) and sys.stderr.isatty():
+            self._bar = click.progressbar(length=total, label=label, file=sys.stderr, show_pos=True, show_eta=True)
+            self._bar.__enter__()
+
+    def step(self, n: int = 1, label: str | None = None) -> None:
+        if self._bar is not None:
+            if label is not None:
+                self._bar.label = label
+            self._bar.update(n)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.__exit__(None, None, None)
+            self._bar = None
+
+
+def echo_json(value: Any) -> None:
+    """One JSON document on stdout (numbers that are not finite become null)."""
+    click.echo(json.dumps(_finite(value), indent=2))
+
+
+def _finite(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if value == value and abs(value) != float("inf") else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value

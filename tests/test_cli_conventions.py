@@ -1,0 +1,149 @@
+"""What every command shares: -v/-q, options from ESKIN_* variables, JSON where a
+script reads the result, progress on a terminal only, one format for a missing extra."""
+
+from __future__ import annotations
+
+import json
+import os
+import pty
+import select
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import click
+import pytest
+from click.testing import CliRunner
+
+from eskin_industrial.cli import main
+
+
+def _leaves(group: click.Group, path: tuple[str, ...] = ()):
+    for name, cmd in group.commands.items():
+        if isinstance(cmd, click.Group):
+            yield from _leaves(cmd, (*path, name))
+        else:
+            yield (*path, name), cmd
+
+
+def test_every_command_has_verbose_and_quiet() -> None:
+    missing = [" ".join(p) for p, cmd in _leaves(main)
+               if not {"-v", "--verbose", "-q", "--quiet"} <= {o for prm in cmd.params for o in getattr(prm, "opts", [])}]
+    assert not missing, f"without -v/-q: {missing}"
+
+
+def test_every_long_option_has_an_eskin_variable() -> None:
+    for path, cmd in _leaves(main):
+        for prm in cmd.params:
+            longs = [o for o in getattr(prm, "opts", []) if o.startswith("--") and o != "--help"]
+            if isinstance(prm, click.Option) and longs:
+                want = "ESKIN_" + "_".join(p.upper().replace("-", "_") for p in path) + "_" + \
+                    longs[0][2:].upper().replace("-", "_")
+                assert prm.envvar == want, (path, longs[0], prm.envvar)
+
+
+def test_options_from_the_environment_and_the_command_line_wins() -> None:
+    runner = CliRunner()
+    env = {"ESKIN_PLC_MAP_PROFILE": "hand-4x5", "ESKIN_PLC_MAP_FORMAT": "json"}
+    from_env = runner.invoke(main, ["plc", "map"], env=env)
+    assert from_env.exit_code == 0, from_env.output
+    rows = json.loads(from_env.output)
+    assert rows[0]["name"] == "STATUS"
+    over = runner.invoke(main, ["plc", "map", "--format", "csv"], env=env)
+    assert over.output.startswith("table,name,address")
+
+
+def test_json_outputs_parse(tmp_path: Path) -> None:
+    runner = CliRunner()
+    checked = runner.invoke(main, ["profile", "check", "--format", "json", "paper-5x5", str(tmp_path / "none.toml")])
+    assert checked.exit_code == 2
+    ok, bad = json.loads(checked.stdout)
+    assert ok["ok"] and ok["summary"].startswith("paper-5x5") and not bad["ok"] and "cannot read" in bad["error"]
+    shown = runner.invoke(main, ["profile", "show", "--format", "json", "strip-1x5"])
+    assert json.loads(shown.output)["layout"]["cols"] == 5
+    ev = runner.invoke(main, ["evaluate", "-m", "cof-track", "-s", "case2", "--seeds", "1000", "--format", "json"])
+    assert ev.exit_code == 0, ev.output
+    doc = json.loads(ev.stdout)
+    (row,) = doc["methods"]
+    assert row["method"] == "cof-track" and row["events"] == 1 and row["found"] == 1
+    assert row["per_scene"]["case2"]["found"] == 1 and doc["seed_list"] == [1000]
+
+
+def _on_a_terminal(args: list[str], timeout: float = 60) -> tuple[int, str]:
+    """Run ``eskin-bus ARGS`` with stderr on a pseudo-terminal; (exit code, what it showed)."""
+    leader, follower = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "eskin_industrial", *args], stdout=subprocess.DEVNULL,
+                            stderr=follower, stdin=subprocess.DEVNULL, env={**os.environ, "COLUMNS": "120"})
+    os.close(follower)
+    shown = b""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([leader], [], [], 0.2)
+        if ready:
+            try:
+                chunk = os.read(leader, 65536)
+            except OSError:  # the other side closed
+                break
+            if not chunk:
+                break
+            shown += chunk
+        elif proc.poll() is not None:
+            break
+    os.close(leader)
+    return proc.wait(timeout=10), shown.decode(errors="replace")
+
+
+def test_progress_on_a_terminal_only_and_never_with_quiet() -> None:
+    args = ["evaluate", "-m", "paper", "-s", "case2", "-s", "case4", "--seeds", "1000..1002"]
+    code, shown = _on_a_terminal(args)
+    assert code == 0 and "6/6" in shown and "1 methods" in shown
+    code, shown = _on_a_terminal([*args, "-q"])
+    assert code == 0 and "6/6" not in shown
+    piped = subprocess.run([sys.executable, "-m", "eskin_industrial", *args], capture_output=True, text=True,
+                           timeout=60)
+    assert piped.returncode == 0 and "6/6" not in piped.stderr and piped.stderr == ""
+
+
+def test_every_missing_extra_reads_alike_and_exits_4(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib -> ImportError
+    monkeypatch.setitem(sys.modules, "sklearn", None)
+    runner = CliRunner()
+    csv = tmp_path / "r.csv"
+    csv.write_text("t," + ",".join(f"f{i}" for i in range(25)) + "\n" +
+                   "\n".join(f"{i / 100}," + ",".join(["0"] * 25) for i in range(10)) + "\n")
+    plot = runner.invoke(main, ["plot", "-p", "paper-5x5", str(csv), "-o", str(tmp_path / "x.png")])
+    learned = runner.invoke(main, ["detect", "-p", "paper-5x5", str(csv), "--method", "learned", "-q"])
+    lines = [r.output.strip() for r in (plot, learned)]
+    assert [r.exit_code for r in (plot, learned)] == [4, 4], lines
+    assert lines[0] == "eskin-bus: error: plot needs matplotlib: pip install 'eskin-industrial[plot]'"
+    assert lines[1] == "eskin-bus: error: the learned method needs scikit-learn: pip install 'eskin-industrial[learn]'"
+
+
+@pytest.mark.parametrize("shell", ["bash", "zsh", "fish"])
+def test_shell_completion_scripts_and_profile_names(shell: str) -> None:
+    exe = str(Path(sys.executable).parent / "eskin-bus")
+    script = subprocess.run([exe], env={**os.environ, "_ESKIN_BUS_COMPLETE": f"{shell}_source"},
+                            capture_output=True, text=True, timeout=30)
+    assert script.returncode == 0 and "_ESKIN_BUS_COMPLETE" in script.stdout
+    if shell == "bash":
+        done = subprocess.run([exe], env={**os.environ, "_ESKIN_BUS_COMPLETE": "bash_complete",
+                                          "COMP_WORDS": "eskin-bus detect -p pa", "COMP_CWORD": "3"},
+                              capture_output=True, text=True, timeout=30)
+        assert "plain,paper-5x5" in done.stdout.splitlines()
+
+
+def test_bridge_quiet_and_verbose_set_its_log_level() -> None:
+    from tests.helpers.modbus import free_port
+
+    def run(*extra: str) -> str:
+        done = subprocess.run([sys.executable, "-m", "eskin_industrial", "bridge", "-p", "paper-5x5", "--source",
+                               "scene:case2", "--plc", f"serve:127.0.0.1:{free_port()}", "--duration", "0.5", *extra],
+                              capture_output=True, text=True, timeout=60)
+        assert done.returncode == 0, done.stderr
+        return done.stderr
+
+    normal, quiet_ = run(), run("-q")
+    assert " info " in normal and " start " in normal
+    assert " info " not in quiet_ and " start " not in quiet_
+    assert run("-q", "--log-level", "info").count(" info ") == normal.count(" info ")  # an explicit level wins

@@ -1,0 +1,96 @@
+"""The package as an integrator installs it: a wheel built from the checkout, installed
+with the deployment constraints into a fresh virtualenv, run from an empty folder with
+no checkout in sight (the profiles, scenes and example files must travel with it)."""
+
+from __future__ import annotations
+
+import email
+import os
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from tests.helpers.paths import ROOT
+
+pytestmark = pytest.mark.slow
+
+
+def _run(cmd: list[str], cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    done = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+    assert done.returncode == 0, f"{' '.join(cmd)} exited {done.returncode}:\n{done.stdout}\n{done.stderr}"
+    return done
+
+
+def _pins(path: Path) -> dict[str, str]:
+    pins = {}
+    for line in path.read_text().splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            name, _, version = line.partition("==")
+            pins[name.lower().replace("_", "-")] = version
+    return pins
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """(the wheel, the fresh virtualenv's bin folder)."""
+    tmp = tmp_path_factory.mktemp("wheel")
+    _run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", str(ROOT), "-w", str(tmp / "dist")], tmp)
+    (wheel,) = (tmp / "dist").glob("eskin_industrial-*.whl")
+    _run([sys.executable, "-m", "venv", str(tmp / "venv")], tmp)
+    bin_dir = tmp / "venv" / "bin"
+    _run([str(bin_dir / "pip"), "install", "-q", "--disable-pip-version-check",
+          "-c", str(ROOT / "constraints.txt"), str(wheel)], tmp)
+    return wheel, bin_dir
+
+
+def test_wheel_carries_profiles_examples_license_and_metadata(installed: tuple[Path, Path]) -> None:
+    wheel, _ = installed
+    with zipfile.ZipFile(wheel) as zf:
+        names = set(zf.namelist())
+        meta = email.message_from_bytes(zf.read(next(n for n in names if n.endswith(".dist-info/METADATA"))))
+    for profile in (ROOT / "profiles").glob("*.toml"):
+        assert f"eskin_industrial/data/profiles/{profile.name}" in names
+    for example in ("bridge.toml", "hand-strips.toml", "eskin-bus-bridge.service"):
+        assert f"eskin_industrial/data/deploy/{example}" in names
+    assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
+    assert any(n.startswith("eskin_industrial/scenes/builtin/") for n in names)
+    assert meta["License-Expression"] == "MIT"
+    classifiers = meta.get_all("Classifier") or []
+    for version in ("3.11", "3.12", "3.13"):
+        assert f"Programming Language :: Python :: {version}" in classifiers
+
+
+def test_constraints_pin_every_installed_distribution(installed: tuple[Path, Path], tmp_path: Path) -> None:
+    _, bin_dir = installed
+    frozen = _run([str(bin_dir / "pip"), "freeze", "--exclude", "eskin-industrial"], tmp_path).stdout
+    pins = _pins(ROOT / "constraints.txt")
+    installed_now = {}
+    for line in frozen.splitlines():
+        name, _, version = line.partition("==")
+        installed_now[name.lower().replace("_", "-")] = version
+    assert installed_now == pins, "constraints.txt is out of date: regenerate it from the fresh virtualenv's pip freeze"
+
+
+def test_installed_demo_runs_from_an_empty_folder(installed: tuple[Path, Path], tmp_path: Path) -> None:
+    _, bin_dir = installed
+    eskin = str(bin_dir / "eskin-bus")
+    listed = _run([eskin, "profile", "list"], tmp_path).stdout
+    assert {"paper-5x5", "hand-4x5", "strip-1x5"} <= {line.split()[0] for line in listed.splitlines()}
+    demo = _run([eskin, "demo", "--plain", "--scene", "case2"], tmp_path, timeout=120).stdout
+    assert "slip events 1, found 1, false alarms 0" in demo
+
+
+def test_installed_profiles_and_examples_copy_out_and_check(installed: tuple[Path, Path], tmp_path: Path) -> None:
+    _, bin_dir = installed
+    eskin = str(bin_dir / "eskin-bus")
+    _run([eskin, "profile", "init", "paper-5x5", "-o", "left.toml"], tmp_path)
+    assert (tmp_path / "left.toml").read_text() == (ROOT / "profiles" / "paper-5x5.toml").read_text()
+    assert "ok" in _run([eskin, "profile", "check", "left.toml", "hand-4x5"], tmp_path).stdout
+    _run([eskin, "examples", "-o", "cell"], tmp_path)
+    plan = _run([eskin, "bridge", "--config", "cell/bridge.toml", "--check"], tmp_path).stdout
+    assert "gripper-left" in plan and "gripper-right" in plan
