@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import ipaddress
 import math
 import tomllib
 import types
@@ -47,6 +48,19 @@ def non_negative(what: str = "a number >= 0") -> dict[str, Check]:
 
 def in_range(lo: float, hi: float) -> dict[str, Check]:
     return {"check": (lambda v: lo <= v <= hi, f"a value in [{lo:g}, {hi:g}]")}
+
+
+def _is_network(v: Any) -> bool:
+    try:
+        ipaddress.ip_network(v, strict=False)
+    except ValueError:
+        return False
+    return True
+
+
+def ip_network() -> dict[str, Check]:
+    """An IP address or network, each entry of a list (an allow-list)."""
+    return {"check": (_is_network, "an IP address or network (10.0.0.5, 10.0.0.0/24)")}
 
 
 def _describe(tp: Any) -> str:

@@ -18,7 +18,7 @@ import socket
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Literal
 
 from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
@@ -29,8 +29,7 @@ from pymodbus.framer.rtu import FramerRTU
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
 from ...errors import EskinError, ModbusFault
-
-Table = Literal["coils", "discrete", "holding", "input"]
+from .pdu import RegisterHandler, Table
 
 
 _TABLE_OF_FC: dict[int, Table] = {1: "coils", 5: "coils", 15: "coils", 2: "discrete", 3: "holding", 6: "holding",
@@ -43,16 +42,6 @@ def quiet_pymodbus() -> None:
     at ERROR (through Python's last-resort handler when nothing is configured); the
     package counts those itself and reports them in one line."""
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-
-
-class RegisterHandler(Protocol):
-    """What a served device answers.  Both run on the server's thread: keep them short.
-
-    Return the values, or a Modbus exception code (an int) to refuse."""
-
-    def read(self, table: Table, address: int, count: int) -> list[int] | list[bool] | int: ...
-
-    def write(self, table: Table, address: int, values: list[int] | list[bool]) -> int | None: ...
 
 
 class _HandlerContext(ModbusServerContext):
