@@ -396,3 +396,81 @@ def test_mbpoll_reads_the_input_register_mirror(paper_profile):
         assert out.returncode != 0
     finally:
         server.stop()
+
+
+# -- configuration ---------------------------------------------------------------------
+
+def profile_with(tmp_path, plc_lines: str) -> str:
+    """paper-5x5 with lines added to its [modbus.plc] (keys it does not set)."""
+    from tests.helpers.paths import PROFILES
+
+    text = (PROFILES / "paper-5x5.toml").read_text()
+    text = text.replace('bind = "127.0.0.1"\n', "").replace("[modbus.plc]\n", f"[modbus.plc]\n{plc_lines}\n")
+    path = tmp_path / "profile.toml"
+    path.write_text(text)
+    return str(path)
+
+
+@pytest.mark.slow
+def test_modbus_bridge_serve_port_only_listens_on_the_profiles_bind(tmp_path):
+    import subprocess
+    import sys
+
+    from eskin_industrial.recording import write_recording
+
+    profile = profile_with(tmp_path, 'bind = "127.0.0.2"')
+    t, f, _ = slip_recording(still_s=3.0, slip_s=0.0, after_s=0.0)
+    write_recording(tmp_path / "still.csv", t, f)
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "eskin_industrial", "modbus-bridge", "-p", profile, "--recording",
+                             str(tmp_path / "still.csv"), "--serve", f":{port}", "--duration", "4"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 15
+        while True:
+            try:
+                with connect(port, host="127.0.0.2", timeout_s=0.5) as s:
+                    assert len(read_registers(s, 0, 2)) == 2
+                break
+            except OSError:
+                assert time.monotonic() < deadline and proc.poll() is None, "nothing listens on 127.0.0.2"
+                time.sleep(0.1)
+        with pytest.raises(ConnectionRefusedError):
+            connect(port, host="127.0.0.1", timeout_s=0.5)
+    finally:
+        _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    assert f"tcp 127.0.0.2:{port}" in err
+
+
+@pytest.mark.parametrize("key, line, bad", [
+    ("allow_read", 'allow_read = ["10.0.0.0/24", "10.0.0.300"]', "'10.0.0.300'"),
+    ("allow_write", 'allow_write = ["plc.local"]', "'plc.local'"),
+    ("unit_ids", "unit_ids = [1, 256]", "256"),
+    ("max_connections", "max_connections = 0", "0"),
+])
+def test_a_bad_server_setting_is_one_line_at_load(tmp_path, key, line, bad):
+    from eskin_industrial import load_profile
+    from eskin_industrial.errors import ProfileError
+
+    with pytest.raises(ProfileError) as err:
+        load_profile(profile_with(tmp_path, line))
+    msg = str(err.value)
+    assert "\n" not in msg and f"[modbus] plc.{key}:" in msg and bad in msg
+
+
+def test_a_bad_allow_list_in_bridge_toml_is_one_line_and_exit_2(tmp_path):
+    import subprocess
+    import sys
+
+    from tests.helpers.paths import PROFILES
+
+    cfg = tmp_path / "bridge.toml"
+    cfg.write_text(f'[plc]\nmode = "server"\nallow_write = ["192.168.10.20", "192.168.10.x"]\n\n'
+                   f'[[node]]\nname = "a"\nprofile = "{PROFILES / "paper-5x5.toml"}"\nsource = "scene"\n'
+                   f'scene = "hold"\n')
+    r = subprocess.run([sys.executable, "-m", "eskin_industrial", "bridge", "--config", str(cfg), "--check"],
+                       capture_output=True, text=True, timeout=30)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert r.stderr.strip().count("\n") == 0 and "[plc] allow_write:" in r.stderr and "192.168.10.x" in r.stderr
+    assert "Traceback" not in r.stderr
