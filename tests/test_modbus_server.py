@@ -175,7 +175,10 @@ def test_a_malformed_header_closes_only_that_connection(paper_profile):
 
 # -- connections --------------------------------------------------------------------
 
-def test_connection_cap_lets_a_polling_plc_in_by_replacing_an_idle_socket(paper_profile):
+def test_connection_cap_lets_a_polling_plc_in_by_replacing_an_idle_socket(paper_profile, monkeypatch):
+    import eskin_industrial.bus.modbus.server as mod
+
+    monkeypatch.setattr(mod, "EVICT_IDLE_S", 0.3)  # the rule as it stands, sooner (1 s in service)
     server = served(paper_profile, Policy(max_connections=3, idle_timeout_s=60))
     port = port_of(server)
     idle = [connect(port) for _ in range(3)]
@@ -184,14 +187,15 @@ def test_connection_cap_lets_a_polling_plc_in_by_replacing_an_idle_socket(paper_
         with connect(port) as extra:
             assert closed_by_peer(extra)
         assert server.counters()["modbus_over_cap"] == 1
-        time.sleep(1.2)  # now the three are idle: a reconnecting PLC takes one's place
+        time.sleep(0.4)  # now the three are idle: a reconnecting PLC takes one's place
         with connect(port) as plc:
             for _ in range(3):
                 assert len(read_registers(plc, 0, 4)) == 4
-            assert sum(closed_by_peer(s, 0.5) for s in idle) == 1
+            assert sum(closed_by_peer(s, 0.2) for s in idle) == 1
             # The PLC polls: it is never the one replaced.
-            time.sleep(1.2)
-            read_registers(plc, 0, 1)
+            for _ in range(4):
+                time.sleep(0.1)
+                read_registers(plc, 0, 1)
             with connect(port) as other:
                 read_registers(other, 0, 1)
             assert len(read_registers(plc, 0, 4)) == 4
@@ -204,11 +208,11 @@ def test_connection_cap_lets_a_polling_plc_in_by_replacing_an_idle_socket(paper_
 
 
 def test_idle_timeout_closes_a_quiet_connection_not_a_polling_one(paper_profile):
-    server = served(paper_profile, Policy(idle_timeout_s=0.6))
+    server = served(paper_profile, Policy(idle_timeout_s=0.4))
     try:
         with connect(port_of(server)) as quiet, connect(port_of(server)) as polling:
             t0 = time.monotonic()
-            while time.monotonic() - t0 < 1.5:
+            while time.monotonic() - t0 < 0.9:
                 read_registers(polling, 0, 1)
                 time.sleep(0.1)
             assert closed_by_peer(quiet, 0.1)
@@ -474,3 +478,37 @@ def test_a_bad_allow_list_in_bridge_toml_is_one_line_and_exit_2(tmp_path):
     assert r.returncode == 2, r.stdout + r.stderr
     assert r.stderr.strip().count("\n") == 0 and "[plc] allow_write:" in r.stderr and "192.168.10.x" in r.stderr
     assert "Traceback" not in r.stderr
+
+
+# -- the structured log ------------------------------------------------------------------
+
+@pytest.mark.slow
+def test_refusals_and_asyncio_reports_reach_the_bridge_log_rate_limited(capfd):
+    from tests.helpers.bridge import can_node, channel, hold_raw, node_thread, running_bridge, server_config, wait_for
+
+    from eskin_industrial import load_profile
+    from tests.helpers.paths import PROFILES
+
+    profile = load_profile(PROFILES / "paper-5x5.toml")
+    ch = channel()
+    cfg = server_config(can_node("left", ch))
+    port = cfg.outputs["plc"].port
+    with running_bridge(cfg) as run, node_thread(profile, ch, hold_raw(profile, 150)) as node:
+        node.start()
+        wait_for(lambda: run.block(0)["STATUS"] & Status.DATA_VALID and run.block(0)["STATE"] != 0, 10, "a grasp")
+        with connect(port) as s:
+            for _ in range(3):
+                assert ask(s, struct.pack(">BHH", 5, TARE, 0xFF00)) == bytes((0x85, 4))
+        server = run.bridge.server.server
+        for _ in range(50):  # what asyncio reports when accept() runs out of descriptors
+            server._loop.call_soon_threadsafe(server._loop.call_exception_handler, {
+                "message": "socket.accept() out of system resource", "exception": OSError(24, "Too many open files")})
+        wait_for(lambda: run.counters("left")["modbus_asyncio_errors"] == 50, 5, "the reports")
+        wait_for(lambda: run.log.events("modbus_server_error"), 5, "the log line")
+        counters = run.counters("left")
+        refused = run.log.events("plc_tare_refused")
+        errors = run.log.events("modbus_server_error")
+    assert counters["plc_tares_refused"] == 3 and counters["tares"] == 0
+    assert len(refused) == 1 and refused[0]["reason"] == "in_contact" and refused[0]["level"] == "warning"
+    assert len(errors) == 1 and "Too many open files" in errors[0]["error"]
+    assert "Traceback" not in capfd.readouterr().err
