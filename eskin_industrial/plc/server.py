@@ -8,9 +8,10 @@ with SERVER DEVICE FAILURE (04) while the image says something is held, or canno
 say (:meth:`PlcImage.refusal`).  Accepted commands are queued for the bridge loop,
 which applies them to the image (the server thread never changes it).
 
-Over TCP the server is our own (:mod:`..bus.modbus.server`: connection cap, idle
-timeout, allow-lists, read-only mode, unit ids, device identification); over RTU it
-is pymodbus' (:class:`..bus.modbus.io.RegisterServer`) with the same handler.
+The servers are our own, with one PDU handler (:mod:`..bus.modbus.pdu`): over TCP
+:mod:`..bus.modbus.server` (connection cap, idle timeout, allow-lists, read-only
+mode, unit ids), over RTU :mod:`..bus.modbus.rtu_server` (our unit id, read-only
+mode).
 """
 
 from __future__ import annotations
@@ -22,9 +23,10 @@ import threading
 import time
 from collections.abc import Sequence
 
-from ..bus.modbus.codec import DEVICE_FAILURE, ILLEGAL_ADDRESS, ILLEGAL_FUNCTION
-from ..bus.modbus.io import RegisterServer, SerialSettings
+from ..bus.modbus.codec import DEVICE_FAILURE, ILLEGAL_ADDRESS
+from ..bus.modbus.io import SerialSettings
 from ..bus.modbus.pdu import Identity
+from ..bus.modbus.rtu_server import RtuServer
 from ..bus.modbus.server import PEER, Policy, RateLimitedLog, TcpServer, networks
 from ..errors import Refused
 from ..profile import ModbusPlcSection
@@ -57,7 +59,6 @@ class PlcRegisterHandler:
         self.refused = 0
         self.tares_refused = 0
         self.reads = 0
-        self.read_only = False  #: over RTU (over TCP the server refuses writes before they get here)
         self.image: PlcImage | None = None  #: the image of the newest publication (for the tare rule)
         self.log = RateLimitedLog(logging.getLogger(__name__))
         self._lock = threading.Lock()
@@ -94,9 +95,6 @@ class PlcRegisterHandler:
         return values[off: off + count]
 
     def write(self, table, address, values):
-        if self.read_only:
-            self.refused += 1
-            return ILLEGAL_FUNCTION
         off = address - self.base
         try:
             if table == "holding":
@@ -174,14 +172,14 @@ class PlcServer:
         self.handlers = [PlcRegisterHandler(b) for b in (blocks or [settings])]
         self.handler = self.handlers[0]
         served = self.handler if len(self.handlers) == 1 else PlcBlocks(self.handlers)
-        self.server: TcpServer | RegisterServer
+        self.server: TcpServer | RtuServer
         if tcp is not None:
             self.server = TcpServer(served, tcp[0], tcp[1], identity or identity_of(settings),
                                     policy or policy_of(settings, blocks or [settings]), server_id=settings.unit_id)
         else:
-            for h in self.handlers:
-                h.read_only = policy.read_only if policy is not None else settings.read_only
-            self.server = RegisterServer(served, serial=serial, unit_ids=[settings.unit_id])
+            assert serial is not None
+            self.server = RtuServer(served, serial, settings.unit_id, identity or identity_of(settings),
+                                    read_only=policy.read_only if policy is not None else settings.read_only)
         self.linger_s = linger_s
         self._lingered = False
         self._blocks = [PlcBlockSink(self, h) for h in self.handlers]  # built once: used at every scan
@@ -216,8 +214,8 @@ class PlcServer:
         self._blocks[0].commands_done()
 
     def counters(self) -> dict[str, int]:
-        """The server's own counters (connections, refusals), TCP only."""
-        return self.server.counters.as_dict() if isinstance(self.server, TcpServer) else {}
+        """The server's own counters (requests, refusals; over TCP, connections)."""
+        return self.server.counters.as_dict()
 
     def stop(self) -> None:
         self.server.stop()
