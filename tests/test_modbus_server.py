@@ -89,6 +89,9 @@ def test_write_answers_are_the_specifications(paper_profile):
             req = struct.pack(">BHH", 5, COIL["ENABLE"].offset, 0x0000)
             assert ask(s, req) == req
             assert ask(s, struct.pack(">BHH", 5, COIL["ENABLE"].offset, 0x1234)) == bytes((0x85, 3))
+            # ACK_SLIP acts on 1 and reads 0: the answer is still the request, not what it reads.
+            req = struct.pack(">BHH", 5, COIL["ACK_SLIP"].offset, 0xFF00)
+            assert ask(s, req) == req
             # FC6: the echo too.
             req = struct.pack(">BHH", 6, enable, 1)
             assert ask(s, req) == req
@@ -104,7 +107,7 @@ def test_write_answers_are_the_specifications(paper_profile):
             assert ask(s, struct.pack(">BHH", 1, COIL["ENABLE"].offset, 1)) == bytes((1, 1, 1))
             assert ask(s, bytes((8, 0, 0, 0, 0))) == bytes((0x88, 1))  # diagnostics: not served
         names = [c.name for c in server.take_commands()]
-        assert names == ["enable", "disable", "enable", "enable", "enable"]
+        assert names == ["enable", "disable", "ack", "enable", "enable", "enable"]
     finally:
         server.stop()
 

@@ -4,6 +4,9 @@ minor releases; the tested range is pinned in ``pyproject.toml``).
 - :class:`RegisterServer` serves a :class:`RegisterHandler` over Modbus TCP or RTU
   from a background thread; the handler answers every read and write itself, so
   it decides which addresses exist and which exception a refused request gets.
+  The simulators (the sensor node, the PLC stand-in) use it: a server that someone
+  else wrote.  The bridge's server mode has its own (:mod:`.server`, :mod:`.rtu_server`),
+  for answers that follow the specification and an access policy.
 - :class:`TcpMaster` / :class:`RtuMaster`: synchronous clients that raise
   :class:`ModbusFault` instead of returning error objects.
 
