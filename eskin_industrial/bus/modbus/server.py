@@ -213,6 +213,10 @@ class TcpServer:
         self._error: BaseException | None = None
 
     @property
+    def tcp(self) -> tuple[str, int]:
+        return self.host, self.port
+
+    @property
     def where(self) -> str:
         return f"tcp {self.host}:{self.port}"
 
