@@ -515,3 +515,15 @@ def test_refusals_and_asyncio_reports_reach_the_bridge_log_rate_limited(capfd):
     assert len(refused) == 1 and refused[0]["reason"] == "in_contact" and refused[0]["level"] == "warning"
     assert len(errors) == 1 and "Too many open files" in errors[0]["error"]
     assert "Traceback" not in capfd.readouterr().err
+
+
+def test_requests_before_a_malformed_header_are_answered_then_the_connection_closes(paper_profile):
+    server = served(paper_profile)
+    try:
+        with connect(port_of(server)) as s:
+            s.sendall(adu(1, 1, struct.pack(">BHH", 3, 0, 1)) + adu(2, 1, struct.pack(">BHH", 3, 0, 1))
+                      + struct.pack(">HHHB", 3, 0, 900, 1))  # a length no frame has
+            assert [read_adu(s)[0] for _ in range(2)] == [1, 2]
+            assert closed_by_peer(s)
+    finally:
+        server.stop()

@@ -161,11 +161,12 @@ class _Connection(asyncio.Protocol):
         buf = self.buf
         buf += data
         out = []
+        bad = ""
         while len(buf) >= mbap.HEADER_BYTES:
             try:
                 need = mbap.frame_length(bytes(buf[:mbap.HEADER_BYTES]))
             except DecodeError as exc:
-                self.server.malformed(self, str(exc))
+                bad = str(exc)
                 break
             if len(buf) < need:
                 break
@@ -173,7 +174,9 @@ class _Connection(asyncio.Protocol):
             del buf[:need]
             out.append(self.server.answer(request, self))
         if out and self.transport is not None:
-            self.transport.write(b"".join(out))
+            self.transport.write(b"".join(out))  # every answer, in order, in one send
+        if bad:  # the requests before it are answered; the stream cannot be resynchronised
+            self.server.malformed(self, bad)
 
     def pause_writing(self) -> None:  # the client does not read its responses: stop reading it
         if self.transport is not None:
@@ -186,9 +189,14 @@ class _Connection(asyncio.Protocol):
     def connection_lost(self, exc: Exception | None) -> None:
         self.server.conns.discard(self)
 
-    def close(self) -> None:
+    def close(self, flush: bool = False) -> None:
+        """Abort (an idle or refused peer gets no goodbye), or with ``flush`` close
+        once the answers already written have gone out."""
         if self.transport is not None:
-            self.transport.abort()  # now: an idle or refused peer gets no goodbye
+            if flush:
+                self.transport.close()
+            else:
+                self.transport.abort()
         self.server.conns.discard(self)
 
 
@@ -276,7 +284,7 @@ class TcpServer:
         self.counters.malformed += 1
         self.log.event("modbus_client_malformed", peer=conn.peer, error=why)
         conn.buf.clear()
-        conn.close()
+        conn.close(flush=True)
 
     def _sweep(self) -> None:
         limit = self.policy.idle_timeout_s
