@@ -299,7 +299,7 @@ def test_allow_lists_by_client_address(paper_profile):
 def test_read_only_mode_refuses_every_write(paper_profile, caplog):
     server = served(paper_profile, Policy(read_only=True))
     try:
-        with connect(port_of(server)) as s, caplog.at_level(logging.WARNING):
+        with connect(port_of(server)) as s, caplog.at_level(logging.WARNING, logger="eskin_industrial"):
             for req in (struct.pack(">BHH", 5, TARE, 0xFF00), struct.pack(">BHH", 6, REG["COMMAND"].offset, 1),
                         struct.pack(">BHHBB", 15, 0, 1, 1, 1), struct.pack(">BHHBH", 16, REG["ENABLE"].offset, 1, 2, 0)):
                 assert ask(s, req) == bytes((req[0] | 0x80, 1))
@@ -340,7 +340,7 @@ def test_tare_during_contact_is_refused_with_exception_04_and_allowed_once_open(
         f_before = loop.pipeline.last_update.f_sum
         assert f_before > 4.0 and loop.pipeline.last_update.state != GraspState.NO_CONTACT
         zero = loop.pipeline.calibrator.zero.copy()
-        with connect(port_of(server)) as s, caplog.at_level(logging.WARNING):
+        with connect(port_of(server)) as s, caplog.at_level(logging.WARNING, logger="eskin_industrial"):
             # The TARE coil and COMMAND bit 1 (with an acknowledge: refused as a whole).
             assert ask(s, struct.pack(">BHH", 5, TARE, 0xFF00)) == bytes((0x85, 4))
             assert ask(s, struct.pack(">BHH", 6, REG["COMMAND"].offset, 3)) == bytes((0x86, 4))

@@ -110,6 +110,7 @@ class EventLog:
         self._handler = _DroppingQueueHandler(q, self)
         self.logger.addHandler(self._handler)
         package = logging.getLogger(PACKAGE_LOGGER)
+        self._package_level = package.level  # given back at close
         package.setLevel(level.upper())
         package.addHandler(self._handler)
         self._listener = _Listener(q, out)
@@ -123,5 +124,7 @@ class EventLog:
     def close(self, timeout_s: float = 5.0) -> None:
         """Write out what is queued (waiting at most ``timeout_s`` for a blocked stream)."""
         self.logger.removeHandler(self._handler)
-        logging.getLogger(PACKAGE_LOGGER).removeHandler(self._handler)
+        package = logging.getLogger(PACKAGE_LOGGER)
+        package.removeHandler(self._handler)
+        package.setLevel(self._package_level)
         self._listener.stop_within(timeout_s)
