@@ -527,3 +527,33 @@ def test_requests_before_a_malformed_header_are_answered_then_the_connection_clo
             assert closed_by_peer(s)
     finally:
         server.stop()
+
+
+def test_the_servers_events_are_lines_of_the_bridge_log_while_it_is_open():
+    import io
+    import json
+
+    from eskin_industrial.bridge.logs import EventLog
+    from eskin_industrial.bus.modbus.server import RateLimitedLog
+
+    stream = io.StringIO()
+    log = EventLog(stream, "json", "info")
+    events = RateLimitedLog(every_s=60)
+    for i in range(5):
+        events.event("modbus_write_denied", peer=f"10.0.0.{i}:502", reason="read_only")
+    events.event("modbus_client_idle", level=logging.DEBUG, peer="-")  # below the log's level
+    quick = RateLimitedLog(every_s=0.05)
+    quick.event("modbus_unit_refused", unit=7)
+    quick.event("modbus_unit_refused", unit=8)
+    time.sleep(0.06)
+    quick.event("modbus_unit_refused", unit=9)
+    log.close()
+    events.event("modbus_write_denied", peer="after close")
+    lines = [json.loads(line) for line in stream.getvalue().splitlines()]
+    for line in lines:
+        del line["ts"]
+    assert lines == [
+        {"level": "warning", "event": "modbus_write_denied", "peer": "10.0.0.0:502", "reason": "read_only"},
+        {"level": "warning", "event": "modbus_unit_refused", "unit": 7},
+        {"level": "warning", "event": "modbus_unit_refused", "unit": 9, "held_back": 1},
+    ]
