@@ -127,3 +127,21 @@ def test_rtu_tare_refused_before_anything_is_known(line):
     req = rtu(UNIT, struct.pack(">BHH", 5, COIL["TARE"].offset, 0xFF00))
     assert m.ask(req, 5) == rtu(UNIT, bytes((0x85, 4)))
     assert server.handler.tares_refused == 1
+
+
+def test_a_serial_line_that_goes_away_is_counted_and_logged_once(tmp_path, paper_profile, caplog):
+    import logging
+
+    from tests.helpers.bridge import wait_for
+
+    with caplog.at_level(logging.ERROR, logger="eskin_industrial"):
+        with pty_pair(tmp_path) as (a, _b):
+            server = PlcServer(paper_profile.modbus.plc, serial=SerialSettings(a, 115200)).start()
+        try:  # socat has gone: the port fails, and cannot be opened again
+            wait_for(lambda: server.counters()["modbus_serial_errors"] >= 2, 5, "the failures")
+        finally:
+            t0 = time.monotonic()
+            server.stop()
+            assert time.monotonic() - t0 < 2.0
+    errors = [r for r in caplog.records if r.getMessage() == "modbus_serial_error"]
+    assert len(errors) == 1 and a in errors[0].fields["port"]  # type: ignore[attr-defined]
