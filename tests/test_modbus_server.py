@@ -300,8 +300,9 @@ def test_read_only_mode_refuses_every_write(paper_profile, caplog):
     server = served(paper_profile, Policy(read_only=True))
     try:
         with connect(port_of(server)) as s, caplog.at_level(logging.WARNING, logger="eskin_industrial"):
-            for req in (struct.pack(">BHH", 5, TARE, 0xFF00), struct.pack(">BHH", 6, REG["COMMAND"].offset, 1),
-                        struct.pack(">BHHBB", 15, 0, 1, 1, 1), struct.pack(">BHHBH", 16, REG["ENABLE"].offset, 1, 2, 0)):
+            writes = (struct.pack(">BHH", 5, TARE, 0xFF00), struct.pack(">BHH", 6, REG["COMMAND"].offset, 1),
+                      struct.pack(">BHHBB", 15, 0, 1, 1, 1), struct.pack(">BHHBH", 16, REG["ENABLE"].offset, 1, 2, 0))
+            for req in writes:
                 assert ask(s, req) == bytes((req[0] | 0x80, 1))
             assert len(read_registers(s, 0, IMAGE_COUNT)) == IMAGE_COUNT
         assert server.counters()["modbus_denied_writes"] == 4 and not server.take_commands()
@@ -557,3 +558,12 @@ def test_the_servers_events_are_lines_of_the_bridge_log_while_it_is_open():
         {"level": "warning", "event": "modbus_unit_refused", "unit": 7},
         {"level": "warning", "event": "modbus_unit_refused", "unit": 9, "held_back": 1},
     ]
+
+
+def test_serving_on_every_interface_without_an_allow_list_is_logged(paper_profile, caplog):
+    with caplog.at_level(logging.WARNING, logger="eskin_industrial"):
+        listed = Policy(allow_write=networks(["127.0.0.1"]))
+        for host, policy in (("0.0.0.0", None), ("127.0.0.1", None), ("0.0.0.0", listed)):
+            PlcServer(paper_profile.modbus.plc, tcp=(host, free_port()), policy=policy).start().stop()
+    exposed = [r for r in caplog.records if r.getMessage() == "plc_server_exposed"]
+    assert len(exposed) == 1 and exposed[0].fields["bind"] == "0.0.0.0"  # type: ignore[attr-defined]

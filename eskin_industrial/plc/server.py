@@ -17,6 +17,7 @@ mode).
 from __future__ import annotations
 
 import importlib.metadata
+import ipaddress
 import logging
 import queue
 import threading
@@ -193,6 +194,13 @@ class PlcServer:
 
     def start(self) -> "PlcServer":
         self.server.start()
+        server = self.server
+        if isinstance(server, TcpServer) and _every_interface(server.host) and not (
+                server.policy.allow_read or server.policy.allow_write):
+            # Modbus has no authentication: say so once, where the operator looks.
+            logging.getLogger(__name__).warning("plc_server_exposed", extra={"fields": {
+                "bind": server.host, "port": server.port,
+                "advice": "bind to the cell interface, or set allow_read / allow_write"}})
         return self
 
     def linger(self) -> None:
@@ -219,6 +227,14 @@ class PlcServer:
 
     def stop(self) -> None:
         self.server.stop()
+
+
+def _every_interface(host: str) -> bool:
+    """``0.0.0.0``, ``::`` or an empty host: every interface of the machine."""
+    try:
+        return not host or ipaddress.ip_address(host).is_unspecified
+    except ValueError:
+        return False  # a host name: one interface
 
 
 def policy_of(settings: ModbusPlcSection, blocks: Sequence[ModbusPlcSection] = ()) -> Policy:

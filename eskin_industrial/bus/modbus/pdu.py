@@ -43,7 +43,8 @@ WRITES = frozenset({WRITE_COIL, WRITE_REGISTER, WRITE_COILS, WRITE_REGISTERS})
 #: unit id it does not serve.
 GATEWAY_TARGET_FAILED = 0x0B
 
-_TABLE: dict[int, Table] = {READ_COILS: "coils", READ_DISCRETE: "discrete", READ_HOLDING: "holding", READ_INPUT: "input"}
+_TABLE: dict[int, Table] = {READ_COILS: "coils", READ_DISCRETE: "discrete", READ_HOLDING: "holding",
+                            READ_INPUT: "input"}
 #: Quantity limits of the specification (section 6): bits, registers.
 _MAX_READ = {READ_COILS: 2000, READ_DISCRETE: 2000, READ_HOLDING: 125, READ_INPUT: 125}
 _MAX_WRITE_COILS = 1968
