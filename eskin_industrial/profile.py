@@ -19,8 +19,8 @@ import numpy as np
 from .detect.settings import DetectorSettings
 from .errors import ProfileError
 from .netaddr import check_host
-from .schema import (SchemaError, in_range, non_negative, parse_toml, positive, positive_at_most, read_toml_file,
-                     to_table)
+from .schema import (SchemaError, in_range, ip_network, non_negative, parse_toml, positive, positive_at_most,
+                     read_toml_file, to_table)
 
 #: A sensor silent for this many scan periods is stale (the PLC must see it within three).
 STALE_PERIODS = 2.5
@@ -212,6 +212,21 @@ class ModbusNodeSection:
 
 
 @dataclass(frozen=True)
+class DeviceIdentitySection:
+    """``[modbus.plc.identity]``: what server mode answers to a read of the device
+    identification (FC43/14) and, in part, to report server id (FC17)."""
+
+    vendor_name: str = "eskin-industrial"
+    product_code: str = "eskin-bus"
+    #: Empty: the package's version.
+    revision: str = ""
+    vendor_url: str = ""
+    product_name: str = "eskin-industrial bridge"
+    #: Empty: the profile's ``[sensor] name``.
+    model_name: str = ""
+
+
+@dataclass(frozen=True)
 class ModbusPlcSection:
     """The PLC register image, written to the PLC (client) or served (server)."""
 
@@ -234,6 +249,19 @@ class ModbusPlcSection:
     backoff_max_s: float = field(default=2.0, metadata=positive())
     #: Server mode: the address to listen on (loopback unless told otherwise).
     bind: str = "127.0.0.1"
+    #: Server mode over TCP: client connections at once (beyond: see docs/operations.md),
+    #: and how long one may stay quiet before it is closed.
+    max_connections: int = field(default=8, metadata=in_range(1, 1024))
+    idle_timeout_s: float = field(default=60.0, metadata=in_range(0.1, 86400))
+    #: Server mode over TCP: the client addresses or networks that may connect and
+    #: read, and those that may write (empty: any).
+    allow_read: tuple[str, ...] = field(default=(), metadata=ip_network())
+    allow_write: tuple[str, ...] = field(default=(), metadata=ip_network())
+    #: Server mode: every write refused (exception 01): no command from the PLC.
+    read_only: bool = False
+    #: Server mode over TCP: the unit ids answered (empty: ``unit_id``, 0 and 255).
+    unit_ids: tuple[int, ...] = field(default=(), metadata=in_range(0, 255))
+    identity: DeviceIdentitySection = field(default_factory=DeviceIdentitySection)
     #: R_coe and R_dw are sent as round(R x r_scale), saturated at 65535.
     r_scale: float = field(default=100.0, metadata=positive_at_most(MAX_R_SCALE))
     #: The newest frame older than this sets the sensor-stale bit (and clears data-valid).

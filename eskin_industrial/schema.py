@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import ipaddress
 import math
 import tomllib
 import types
@@ -54,6 +55,19 @@ def positive_at_most(hi: float, what: str = "a number") -> dict[str, Check]:
     lists each), so that an absurd value is refused before the run, not met in it."""
     shown = f"{int(hi)}" if float(hi).is_integer() else f"{hi:g}"
     return {"check": (lambda v: 0 < v <= hi, f"{what} > 0 and at most {shown}")}
+
+
+def _is_network(v: Any) -> bool:
+    try:
+        ipaddress.ip_network(v, strict=False)
+    except ValueError:
+        return False
+    return True
+
+
+def ip_network() -> dict[str, Check]:
+    """An IP address or network, each entry of a list (an allow-list)."""
+    return {"check": (_is_network, "an IP address or network (10.0.0.5, 10.0.0.0/24)")}
 
 
 def _describe(tp: Any) -> str:

@@ -46,7 +46,9 @@ def test_four_strips_on_one_bus_each_to_its_own_block(tmp_path):
     # The shipped example, moved onto a virtual bus and a free loopback port.
     ch, port = f"strips-{uuid.uuid4().hex[:8]}", free_port()
     text = EXAMPLE.read_text().replace('"socketcan"', '"virtual"').replace('"can0"', f'"{ch}"')
-    text = text.replace('host = "0.0.0.0"', 'host = "127.0.0.1"').replace("port = 1502", f"port = {port}")
+    text = text.replace('"192.168.10.5"', '"127.0.0.1"').replace("port = 1502", f"port = {port}")
+    text = text.replace('"192.168.10.0/24"', '"127.0.0.1"').replace('"192.168.10.20"', '"127.0.0.1"')
+    assert "192.168." not in text
     text = text.replace("../../profiles/", f"{ROOT / 'profiles'}/")
     (tmp_path / "strips.toml").write_text(text)
     cfg = load_bridge_config(tmp_path / "strips.toml")

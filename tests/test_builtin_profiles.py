@@ -67,7 +67,14 @@ def test_examples_list_and_copy(tmp_path: Path) -> None:
         line.split()[0] for line in listed.output.splitlines()}
     copied = runner.invoke(main, ["examples", "-o", str(tmp_path / "cell")])
     assert copied.exit_code == 0, copied.output
-    checked = runner.invoke(main, ["bridge", "--config", str(tmp_path / "cell" / "hand-strips.toml"), "--check"])
+    # The copy binds the example's cell interface, absent here: --check tries the listen
+    # address (it says so), so the copy is checked as an integrator on a test bench would
+    # check it, on loopback.
+    strips = tmp_path / "cell" / "hand-strips.toml"
+    refused = runner.invoke(main, ["bridge", "--config", str(strips), "--check"])
+    assert refused.exit_code == 2 and "192.168.10.5" in refused.output
+    strips.write_text(strips.read_text().replace('host = "192.168.10.5"', 'host = "127.0.0.1"'))
+    checked = runner.invoke(main, ["bridge", "--config", str(strips), "--check"])
     assert checked.exit_code == 0, checked.output
     again = runner.invoke(main, ["examples", "-o", str(tmp_path / "cell")])
     assert again.exit_code == 2 and "exists" in again.output

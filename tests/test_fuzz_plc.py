@@ -134,14 +134,16 @@ def test_the_register_handler_answers_values_or_an_exception_code(base, data):
                 assert out == 2
             else:
                 assert len(out) == count
-                assert all(isinstance(v, bool) for v in out) if table != "holding" else all(
+                # input registers: the holding block, read-only (function 4)
+                assert all(isinstance(v, bool) for v in out) if table in ("coils", "discrete") else all(
                     0 <= v <= 0xFFFF for v in out)
         else:
             values = data.draw(st.lists(st.integers(0, 0xFFFF) if table == "holding" else st.booleans(),
                                         max_size=8))
-            before = handler.refused
+            before, tares_before = handler.refused, handler.tares_refused
             result = handler.write(table, address, values)
-            assert result in (None, 2, 3)
-            assert handler.refused == before + (result is not None and table in ("holding", "coils"))
+            assert result in (None, 2, 3, 4)  # 4: a tare, with nothing known of the contact (no update yet)
+            assert handler.tares_refused == tares_before + (result == 4)
+            assert handler.refused == before + (result in (2, 3) and table in ("holding", "coils"))
             holding = handler.read("holding", base, IMAGE_COUNT)
             assert isinstance(holding, list) and holding[-1] == int(handler.enabled)

@@ -99,12 +99,14 @@ def test_commands_by_mbpoll_and_refused_writes(paper_profile):
         assert not bridge.image.latched and not Status(server.handler.registers[0]) & Status.SLIP_LATCHED
         out = mbpoll(*tcp, "-r", str(REG["COMMAND"].offset + 1), "-c", "1", "-1", "127.0.0.1")
         assert mbpoll_values(out.stdout)[REG["COMMAND"].offset + 1] == 0  # handshake: done
-        # Tare through COMMAND bit 1: zero moves to the recent (loaded, here) mean.
+        # Tare through COMMAND bit 1 while the grasp holds: refused (SERVER DEVICE
+        # FAILURE), the zero stays (a tare with the gripper open: tests/test_modbus_server.py).
         zero_before = bridge.pipeline.calibrator.zero.copy()
         out = mbpoll(*tcp, "-r", str(REG["COMMAND"].offset + 1), "-1", "127.0.0.1", "2")
-        assert out.returncode == 0, out.stderr
+        assert out.returncode != 0 and "Slave device or server failure" in out.stderr
         bridge.step()
-        assert bridge.tares == 1 and not np.allclose(bridge.pipeline.calibrator.zero, zero_before)
+        assert bridge.tares == 0 and np.array_equal(bridge.pipeline.calibrator.zero, zero_before)
+        assert server.handler.tares_refused == 1
         # Unknown command bits: ILLEGAL DATA VALUE.
         out = mbpoll(*tcp, "-r", str(REG["COMMAND"].offset + 1), "-1", "127.0.0.1", "8")
         assert out.returncode != 0 and "Illegal data value" in out.stderr

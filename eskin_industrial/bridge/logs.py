@@ -20,6 +20,10 @@ import queue
 from typing import IO, Any
 
 LOGGER = "eskin_industrial.bridge"
+#: The package's own loggers (a part with no access to the EventLog, as the Modbus
+#: server's thread, logs there: the record's message is the event's name, its
+#: ``fields`` extra the event's fields); an EventLog writes them out with its own.
+PACKAGE_LOGGER = "eskin_industrial"
 #: Records waiting for the writer thread; beyond it they are dropped and counted.
 QUEUE_RECORDS = 10_000
 
@@ -105,6 +109,10 @@ class EventLog:
         q: queue.Queue = queue.Queue(maxsize=QUEUE_RECORDS)
         self._handler = _DroppingQueueHandler(q, self)
         self.logger.addHandler(self._handler)
+        package = logging.getLogger(PACKAGE_LOGGER)
+        self._package_level = package.level  # given back at close
+        package.setLevel(level.upper())
+        package.addHandler(self._handler)
         self._listener = _Listener(q, out)
         self._listener.start()
 
@@ -116,4 +124,7 @@ class EventLog:
     def close(self, timeout_s: float = 5.0) -> None:
         """Write out what is queued (waiting at most ``timeout_s`` for a blocked stream)."""
         self.logger.removeHandler(self._handler)
+        package = logging.getLogger(PACKAGE_LOGGER)
+        package.removeHandler(self._handler)
+        package.setLevel(self._package_level)
         self._listener.stop_within(timeout_s)

@@ -47,6 +47,7 @@ class NodeLoop:
         self.image = PlcImage(profile.modbus.plc)
         self.recent_raw: collections.deque[np.ndarray] = collections.deque(maxlen=self.TARE_SCANS)
         self.tares = 0
+        self.tares_refused = 0
         self.publications = 0
         self._last_pub = float("-inf")
         self._last_status = -1
@@ -111,6 +112,13 @@ class NodeLoop:
             for cmd in commands:
                 before = (self.image.enabled, self.image.latched)
                 if cmd.name == "tare":
+                    if self.image.refusal(cmd) is not None:
+                        # Refused when applied too (the server refuses at write time; a
+                        # client-mode PLC's COMMAND or a contact since then lands here).
+                        self.tares_refused += 1
+                        if self.on_command is not None:
+                            self.on_command("tare_refused")
+                        continue
                     self._tare()
                 else:
                     self.image.apply(cmd)
@@ -199,7 +207,8 @@ class NodeLoop:
     def counters(self) -> dict[str, int]:
         c = self.pipeline.counters
         out = {"scans": c.scans, "updates": c.updates, "lost_scans": c.lost_scans,
-               "state_changes": c.state_changes, "publications": self.publications, "tares": self.tares}
+               "state_changes": c.state_changes, "publications": self.publications, "tares": self.tares,
+               "tares_refused": self.tares_refused}
         out.update(self.source.counters())
         for sink in self.sinks:
             out.update(sink.counters())

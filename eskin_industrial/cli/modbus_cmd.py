@@ -61,7 +61,7 @@ def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, du
 @click.option("--plc-rtu", default=None, metavar="PORT", help="Client mode over Modbus RTU: the PLC's serial port.")
 @click.option("--plc-baud", type=int, default=115200, show_default=True, help="Baud rate for --plc-rtu.")
 @click.option("--serve", "serve", default=None, metavar="HOST:PORT",
-              help="Server mode over TCP (default host: the profile's bind, 127.0.0.1).")
+              help="Server mode over TCP (default host: the profile's [modbus.plc] bind).")
 @click.option("--serve-rtu", default=None, metavar="PORT", help="Server mode over Modbus RTU on this serial port.")
 @click.option("--serve-baud", type=int, default=115200, show_default=True)
 @click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,
@@ -92,7 +92,7 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
         out = PlcOptions(mode="server", transport="rtu", serial_port=serve_rtu, baudrate=serve_baud)
     elif serve:
         host, port = host_port(serve, "--serve", require_port=True)
-        out = PlcOptions(mode="server", host=host or "127.0.0.1", port=port)
+        out = PlcOptions(mode="server", host=host, port=port)  # no host: the profile's bind
     elif plc_rtu:
         out = PlcOptions(mode="client", transport="rtu", serial_port=plc_rtu, baudrate=plc_baud)
     else:

@@ -1,20 +1,34 @@
 """Server mode: the bridge serves the PLC register image over Modbus TCP or RTU.
 
-Holding registers ``base .. base + IMAGE_COUNT - 1``, coils ``base .. base + 2`` and
-discrete inputs ``base .. base + 9`` (see ``docs/plc.md``).  A write anywhere but
-COMMAND, ENABLE and the coils is refused with ILLEGAL DATA ADDRESS; a read outside
-the image too.  Accepted commands are queued for the bridge loop, which applies them
-to the image (the server thread never touches it).
+Holding registers ``base .. base + IMAGE_COUNT - 1`` (and the same words, read-only,
+as input registers), coils ``base .. base + 2`` and discrete inputs ``base .. base + 9``
+(see ``docs/plc.md``).  A write anywhere but COMMAND, ENABLE and the coils is refused
+with ILLEGAL DATA ADDRESS; a read outside the image too.  A tare is refused at once
+with SERVER DEVICE FAILURE (04) while the image says something is held, or cannot
+say (:meth:`PlcImage.refusal`).  Accepted commands are queued for the bridge loop,
+which applies them to the image (the server thread never changes it).
+
+The servers are our own, with one PDU handler (:mod:`..bus.modbus.pdu`): over TCP
+:mod:`..bus.modbus.server` (connection cap, idle timeout, allow-lists, read-only
+mode, unit ids), over RTU :mod:`..bus.modbus.rtu_server` (our unit id, read-only
+mode).
 """
 
 from __future__ import annotations
 
+import importlib.metadata
+import ipaddress
+import logging
 import queue
 import threading
 import time
+from collections.abc import Sequence
 
-from ..bus.modbus.codec import ILLEGAL_ADDRESS
-from ..bus.modbus.io import RegisterServer, SerialSettings
+from ..bus.modbus.codec import DEVICE_FAILURE, ILLEGAL_ADDRESS
+from ..bus.modbus.io import SerialSettings
+from ..bus.modbus.pdu import Identity
+from ..bus.modbus.rtu_server import RtuServer
+from ..bus.modbus.server import PEER, Policy, RateLimitedLog, TcpServer, networks
 from ..errors import Refused
 from ..profile import ModbusPlcSection
 from ..sinks.base import Publication, Sink
@@ -44,12 +58,17 @@ class PlcRegisterHandler:
         self.command_pending = 0  #: COMMAND reads this until the bridge has acted
         self.commands: queue.SimpleQueue[Command] = queue.SimpleQueue()
         self.refused = 0
+        self.tares_refused = 0
         self.reads = 0
+        self.image: PlcImage | None = None  #: the image of the newest publication (for the tare rule)
+        self.log = RateLimitedLog(logging.getLogger(__name__))
         self._lock = threading.Lock()
 
-    def publish(self, registers: list[int], enabled: bool) -> None:
+    def publish(self, registers: list[int], enabled: bool, image: PlcImage | None = None) -> None:
         self.registers = list(registers)
         self.enabled = enabled
+        if image is not None:
+            self.image = image
 
     def done(self) -> None:
         """The bridge has applied the queued commands: COMMAND reads 0 again."""
@@ -62,7 +81,7 @@ class PlcRegisterHandler:
 
     def read(self, table, address, count):
         off = address - self.base
-        if table == "holding":
+        if table in ("holding", "input"):  # input registers: a read-only mirror (FC4)
             size = IMAGE_COUNT
             values: list = self._holding()
         elif table == "coils":
@@ -88,6 +107,17 @@ class PlcRegisterHandler:
         except Refused as exc:
             self.refused += 1
             return exc.code
+        for cmd in cmds:
+            if cmd.name != "tare":
+                continue
+            # The image of the newest publication: its update is replaced (never changed
+            # in place) by the loop's thread, so this thread reads one whole update.
+            why = "contact_unknown" if self.image is None else self.image.refusal(cmd)
+            if why is not None:
+                # Refused as a whole, at once: nothing of this write is applied.
+                self.tares_refused += 1
+                self.log.event("plc_tare_refused", peer=PEER.get(), base_address=self.base, reason=why)
+                return DEVICE_FAILURE
         with self._lock:
             for cmd in cmds:
                 if cmd.name in ("enable", "disable"):
@@ -102,7 +132,7 @@ class PlcBlocks:
     """Several register blocks on one server, one per sensor node, each at its own
     ``base_address``; a request must fall inside one block."""
 
-    SIZES = {"holding": IMAGE_COUNT, "coils": len(COILS), "discrete": len(BITS)}
+    SIZES = {"holding": IMAGE_COUNT, "input": IMAGE_COUNT, "coils": len(COILS), "discrete": len(BITS)}
 
     def __init__(self, handlers: list[PlcRegisterHandler]) -> None:
         bases = sorted(h.base for h in handlers)
@@ -139,12 +169,18 @@ class PlcServer:
 
     def __init__(self, settings: ModbusPlcSection, *, tcp: tuple[str, int] | None = None,
                  serial: SerialSettings | None = None, blocks: list[ModbusPlcSection] | None = None,
-                 linger_s: float = 0.0) -> None:
+                 linger_s: float = 0.0, policy: Policy | None = None, identity: Identity | None = None) -> None:
         self.handlers = [PlcRegisterHandler(b) for b in (blocks or [settings])]
         self.handler = self.handlers[0]
-        units = None if tcp is not None else [settings.unit_id]
         served = self.handler if len(self.handlers) == 1 else PlcBlocks(self.handlers)
-        self.server = RegisterServer(served, tcp=tcp, serial=serial, unit_ids=units)
+        self.server: TcpServer | RtuServer
+        if tcp is not None:
+            self.server = TcpServer(served, tcp[0], tcp[1], identity or identity_of(settings),
+                                    policy or policy_of(settings, blocks or [settings]), server_id=settings.unit_id)
+        else:
+            assert serial is not None
+            self.server = RtuServer(served, serial, settings.unit_id, identity or identity_of(settings),
+                                    read_only=policy.read_only if policy is not None else settings.read_only)
         self.linger_s = linger_s
         self._lingered = False
         self._blocks = [PlcBlockSink(self, h) for h in self.handlers]  # built once: used at every scan
@@ -158,6 +194,13 @@ class PlcServer:
 
     def start(self) -> "PlcServer":
         self.server.start()
+        server = self.server
+        if isinstance(server, TcpServer) and _every_interface(server.host) and not (
+                server.policy.allow_read or server.policy.allow_write):
+            # Modbus has no authentication: say so once, where the operator looks.
+            logging.getLogger(__name__).warning("plc_server_exposed", extra={"fields": {
+                "bind": server.host, "port": server.port,
+                "advice": "bind to the cell interface, or set allow_read / allow_write"}})
         return self
 
     def linger(self) -> None:
@@ -178,8 +221,44 @@ class PlcServer:
     def commands_done(self) -> None:
         self._blocks[0].commands_done()
 
+    def counters(self) -> dict[str, int]:
+        """The server's own counters (requests, refusals; over TCP, connections)."""
+        return self.server.counters.as_dict()
+
     def stop(self) -> None:
         self.server.stop()
+
+
+def _every_interface(host: str) -> bool:
+    """``0.0.0.0``, ``::`` or an empty host: every interface of the machine."""
+    try:
+        return not host or ipaddress.ip_address(host).is_unspecified
+    except ValueError:
+        return False  # a host name: one interface
+
+
+def policy_of(settings: ModbusPlcSection, blocks: Sequence[ModbusPlcSection] = ()) -> Policy:
+    """The TCP server's policy from ``[modbus.plc]`` (or ``[plc]`` merged into it);
+    no ``unit_ids``: each block's ``unit_id``, 0 and 255 (the ids a Modbus TCP client
+    uses for "the device at this address")."""
+    units = settings.unit_ids or (0, 255, *(b.unit_id for b in blocks or [settings]))
+    return Policy(max_connections=settings.max_connections, idle_timeout_s=settings.idle_timeout_s,
+                  allow_read=networks(settings.allow_read, "allow_read"),
+                  allow_write=networks(settings.allow_write, "allow_write"),
+                  read_only=settings.read_only, unit_ids=frozenset(units))
+
+
+def identity_of(settings: ModbusPlcSection, model_name: str = "") -> Identity:
+    """The device identification of ``[modbus.plc.identity]``, its blanks filled:
+    the revision with the package's version, the model with ``model_name``."""
+    ident = settings.identity
+    try:
+        version = importlib.metadata.version("eskin-industrial")
+    except importlib.metadata.PackageNotFoundError:
+        version = "unknown"
+    return Identity(vendor_name=ident.vendor_name, product_code=ident.product_code,
+                    revision=ident.revision or version, vendor_url=ident.vendor_url,
+                    product_name=ident.product_name, model_name=ident.model_name or model_name)
 
 
 class PlcBlockSink(Sink):
@@ -196,7 +275,7 @@ class PlcBlockSink(Sink):
         self.where = f"{server.where}, base address {handler.base}"
 
     def _publish(self, publication: Publication) -> None:
-        self.handler.publish(publication.registers, publication.image.enabled)
+        self.handler.publish(publication.registers, publication.image.enabled, publication.image)
 
     def take_commands(self) -> list[Command]:
         out = []
@@ -210,7 +289,11 @@ class PlcBlockSink(Sink):
         self.handler.done()
 
     def counters(self) -> dict[str, int]:
-        return {"plc_reads": self.handler.reads, "plc_refused_writes": self.handler.refused}
+        out = {"plc_reads": self.handler.reads, "plc_refused_writes": self.handler.refused,
+               "plc_tares_refused": self.handler.tares_refused}
+        if self.handler is self.server.handler:  # the server's own counters: once, with the first block
+            out.update(self.server.counters())
+        return out
 
     def flush(self, timeout_s: float = 1.0) -> bool:
         self.server.linger()

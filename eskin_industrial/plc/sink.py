@@ -11,16 +11,17 @@ Where a setting can come from, the first that gives it wins: the command line
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
 
 from ..netaddr import check_host, listen_problem, parse_endpoint
 from ..preflight import check_serial
-from ..schema import in_range, positive
+from ..schema import in_range, ip_network, positive
 from ..sinks.base import CliOption, Sink
 
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
+    from ..profile import ModbusPlcSection
 
 
 @dataclass(frozen=True)
@@ -40,12 +41,30 @@ class PlcOptions:
     #: Server mode, on shutdown: keep serving the "bridge offline" image this long,
     #: so that a polling PLC reads it before the connection goes.
     offline_linger_s: float = field(default=0.5, metadata=in_range(0, 60))
+    #: Server mode: access and connections, as ``[modbus.plc]`` says them (unset: the
+    #: first node's profile); see docs/operations.md, "Who may talk to the server".
+    max_connections: int | None = field(default=None, metadata=in_range(1, 1024))
+    idle_timeout_s: float | None = field(default=None, metadata=in_range(0.1, 86400))
+    allow_read: tuple[str, ...] | None = field(default=None, metadata=ip_network())
+    allow_write: tuple[str, ...] | None = field(default=None, metadata=ip_network())
+    read_only: bool | None = None
+    unit_ids: tuple[int, ...] | None = field(default=None, metadata=in_range(0, 255))
 
     def __post_init__(self) -> None:
         if self.transport == "rtu" and self.serial_port is None:
             raise ValueError("serial_port: missing key (transport = 'rtu' needs it)")
         if self.host is not None:
             check_host(self.host)
+
+
+#: The ``[plc]`` keys that override the first node's ``[modbus.plc]`` for the server.
+SERVER_KEYS = ("max_connections", "idle_timeout_s", "allow_read", "allow_write", "read_only", "unit_ids")
+
+
+def server_settings(options: PlcOptions, nodes: Sequence[NodeLike]) -> ModbusPlcSection:
+    """The first node's ``[modbus.plc]`` with what ``[plc]`` sets of :data:`SERVER_KEYS`."""
+    given = {k: getattr(options, k) for k in SERVER_KEYS if getattr(options, k) is not None}
+    return replace(nodes[0].profile.modbus.plc, **given)
 
 
 def plc_mode(options: PlcOptions, nodes: Sequence[NodeLike]) -> Literal["client", "server"]:
@@ -93,7 +112,8 @@ class PlcSink(Sink):
 
     kind = "plc"
     Options = PlcOptions
-    profile_keys = {"mode": "modbus.plc.mode", "host": "modbus.plc.host", "port": "modbus.plc.port"}
+    profile_keys = {"mode": "modbus.plc.mode", "host": "modbus.plc.host", "port": "modbus.plc.port",
+                    **{k: f"modbus.plc.{k}" for k in SERVER_KEYS}}
     cli_options = (
         CliOption("--plc", "plc", "tcp:HOST:PORT (write into the PLC), rtu:PORT (PLC as RTU slave), serve:HOST:PORT "
                   "or serve:PORT (serve, the PLC reads; the host: the profile's bind), serve-rtu:PORT; IPv6 in "
@@ -141,7 +161,7 @@ class PlcSink(Sink):
     def open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
         from ..bus.modbus.io import SerialSettings
         from .client import PlcWriter
-        from .server import PlcServer
+        from .server import PlcServer, identity_of, policy_of
 
         first = nodes[0].profile.modbus.plc
         serial = None
@@ -150,8 +170,11 @@ class PlcSink(Sink):
             serial = SerialSettings(options.serial_port, options.baudrate)
         if plc_mode(options, nodes) == "server":
             tcp = None if serial else serve_address(options, nodes)
-            server = PlcServer(first, tcp=tcp, serial=serial, blocks=[n.profile.modbus.plc for n in nodes],
-                               linger_s=options.offline_linger_s).start()
+            blocks = [n.profile.modbus.plc for n in nodes]
+            merged = server_settings(options, nodes)
+            server = PlcServer(first, tcp=tcp, serial=serial, blocks=blocks, linger_s=options.offline_linger_s,
+                               policy=policy_of(merged, blocks), identity=identity_of(first, nodes[0].profile.name)
+                               ).start()
             context.closers.append(server.stop)
             return [server.block(i) for i in range(len(nodes))]
         sinks: list[Sink] = []

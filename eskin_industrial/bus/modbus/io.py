@@ -4,6 +4,9 @@ minor releases; the tested range is pinned in ``pyproject.toml``).
 - :class:`RegisterServer` serves a :class:`RegisterHandler` over Modbus TCP or RTU
   from a background thread; the handler answers every read and write itself, so
   it decides which addresses exist and which exception a refused request gets.
+  The simulators (the sensor node, the PLC stand-in) use it: a server that someone
+  else wrote.  The bridge's server mode has its own (:mod:`.server`, :mod:`.rtu_server`),
+  for answers that follow the specification and an access policy.
 - :class:`TcpMaster` / :class:`RtuMaster`: synchronous clients that raise
   :class:`ModbusFault` instead of returning error objects.
 
@@ -18,7 +21,7 @@ import socket
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Literal
 
 from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
@@ -30,8 +33,7 @@ from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
 from ...errors import EskinError, ModbusFault
 from ...netaddr import listen_problem
-
-Table = Literal["coils", "discrete", "holding", "input"]
+from .pdu import RegisterHandler, Table
 
 
 _TABLE_OF_FC: dict[int, Table] = {1: "coils", 5: "coils", 15: "coils", 2: "discrete", 3: "holding", 6: "holding",
@@ -44,16 +46,6 @@ def quiet_pymodbus() -> None:
     at ERROR (through Python's last-resort handler when nothing is configured); the
     package counts those itself and reports them in one line."""
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-
-
-class RegisterHandler(Protocol):
-    """What a served device answers.  Both run on the server's thread: keep them short.
-
-    Return the values, or a Modbus exception code (an int) to refuse."""
-
-    def read(self, table: Table, address: int, count: int) -> list[int] | list[bool] | int: ...
-
-    def write(self, table: Table, address: int, values: list[int] | list[bool]) -> int | None: ...
 
 
 class _HandlerContext(ModbusServerContext):

@@ -1,8 +1,10 @@
 """Modbus TCP framing (MBAP), pure: requests to bytes, bytes to responses.
 
-Only what the PLC client sends: write multiple registers (FC16) and read holding
-registers (FC3), and their answers, including exception responses.  No socket here:
-:mod:`.tcp` moves the bytes.  Layout (Modbus Messaging on TCP/IP, section 3.1.3):
+The client side: what the PLC client sends, write multiple registers (FC16) and read
+holding registers (FC3), and their answers, including exception responses.  The
+server side (:mod:`.server`): a request frame split into its header and PDU
+(:func:`split_request`), and a response framed (:func:`frame`).  No socket here:
+:mod:`.tcp` and :mod:`.server` move the bytes.  Layout (Modbus Messaging on TCP/IP, section 3.1.3):
 transaction id (2 bytes), protocol id 0 (2), length of what follows (2), unit id
 (1), then the PDU; big-endian.
 """
@@ -80,3 +82,15 @@ def decode_response(frame: bytes) -> Response:
         n = pdu[1] // 2
         return Response(tid, unit, fc, 0, struct.unpack(f">{n}H", pdu[2:]))
     raise DecodeError(f"transaction {tid}: unexpected function code {fc}")
+
+
+def split_request(frame: bytes) -> tuple[int, int, bytes]:
+    """Transaction id, unit id and PDU of one whole request frame (its length from
+    :func:`frame_length`)."""
+    tid, _proto, _length, unit = HEADER.unpack(frame[:HEADER_BYTES])
+    return tid, unit, frame[HEADER_BYTES:]
+
+
+def frame(tid: int, unit: int, pdu: bytes) -> bytes:
+    """A frame carrying ``pdu`` (a response: the request's transaction and unit id)."""
+    return HEADER.pack(tid & 0xFFFF, 0, len(pdu) + 1, unit) + pdu

@@ -1,0 +1,357 @@
+"""A Modbus TCP server of our own, on a background thread: the PDUs are answered by
+:mod:`.pdu` (pure), the frames split and built by :mod:`.mbap` (pure); this module
+moves the bytes and applies the :class:`Policy`.
+
+- Every complete request in the receive buffer is answered, in order: requests sent
+  back to back in one TCP segment each get their response.
+- At most ``max_connections`` at once.  A connection beyond the cap replaces the one
+  idle the longest, if that one has been quiet for :data:`EVICT_IDLE_S` or more (an
+  idle socket left behind, never a PLC that polls); otherwise it is closed at once.
+- A connection quiet for ``idle_timeout_s`` is closed.
+- ``allow_read`` / ``allow_write``: the client addresses (or networks) that may
+  connect and read, and that may write; empty: any.  A client in neither list is
+  closed at once; a write from a client that may not write, or any write in
+  ``read_only`` mode, is answered with exception 01 (ILLEGAL FUNCTION).
+- ``unit_ids``: the unit ids served; a request to another is answered with exception
+  0x0B (gateway target device failed to respond).
+- A client that stops reading its responses is not read either (no buffer grows);
+  a frame header no Modbus TCP client sends closes its connection.
+
+Every refusal is counted (:attr:`TcpServer.counters`) and logged; the log lines (and
+whatever asyncio reports) go to the standard logger :data:`LOG` as structured events,
+at most one line per event name per :data:`LOG_EVERY_S`, the next line saying how
+many were held back.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextvars
+import ipaddress
+import logging
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from ...errors import DecodeError, EskinError
+from . import mbap, pdu
+from .codec import DEVICE_FAILURE, ILLEGAL_FUNCTION
+
+Network = ipaddress.IPv4Network | ipaddress.IPv6Network
+Address = ipaddress.IPv4Address | ipaddress.IPv6Address
+
+LOG = logging.getLogger(__name__)
+#: One log line per event name in this time at most; the rest are counted.
+LOG_EVERY_S = 10.0
+#: At the connection cap, a connection quiet this long may be replaced by a new one.
+EVICT_IDLE_S = 1.0
+#: The client whose request is being answered (for a handler's log line).
+PEER: contextvars.ContextVar[str] = contextvars.ContextVar("modbus_peer", default="-")
+
+
+def networks(entries: Sequence[str], key: str = "allow") -> tuple[Network, ...]:
+    """Addresses or networks (``10.0.0.5``, ``10.0.0.0/24``, ``::1``); ValueError
+    ``key: ...`` naming the first entry that is neither."""
+    out = []
+    for entry in entries:
+        try:
+            out.append(ipaddress.ip_network(entry, strict=False))
+        except ValueError:
+            raise ValueError(f"{key}: {entry!r} is not an IP address or network") from None
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Policy:
+    """Who may do what; see the module's docstring."""
+
+    max_connections: int = 8
+    idle_timeout_s: float = 60.0
+    allow_read: tuple[Network, ...] = ()
+    allow_write: tuple[Network, ...] = ()
+    read_only: bool = False
+    unit_ids: frozenset[int] | None = None  #: None: every unit id
+
+    def may_connect(self, ip: Address) -> bool:
+        if not self.allow_read:
+            return True
+        return _within(ip, self.allow_read) or (bool(self.allow_write) and _within(ip, self.allow_write))
+
+    def may_write(self, ip: Address) -> bool:
+        if self.read_only:
+            return False
+        return not self.allow_write or _within(ip, self.allow_write)
+
+
+def _within(ip: Address, nets: tuple[Network, ...]) -> bool:
+    return any(ip in n for n in nets)
+
+
+def _peer_ip(peer: Any) -> Address | None:
+    try:
+        ip = ipaddress.ip_address(peer[0])
+    except (TypeError, ValueError, IndexError):
+        return None
+    mapped = getattr(ip, "ipv4_mapped", None)  # a dual-stack socket's IPv4 client
+    return mapped if mapped is not None else ip
+
+
+class RateLimitedLog:
+    """Structured events on ``logger``, at most one per name per ``every_s``."""
+
+    def __init__(self, logger: logging.Logger = LOG, every_s: float = LOG_EVERY_S) -> None:
+        self.logger = logger
+        self.every_s = every_s
+        self._last: dict[str, float] = {}
+        self._held: dict[str, int] = {}
+        self._lock = threading.Lock()
+
+    def event(self, name: str, level: int = logging.WARNING, **fields: Any) -> None:
+        now = time.monotonic()
+        with self._lock:
+            last = self._last.get(name)
+            if last is not None and now - last < self.every_s:
+                self._held[name] = self._held.get(name, 0) + 1
+                return
+            self._last[name] = now
+            held = self._held.pop(name, 0)
+        if held:
+            fields["held_back"] = held
+        self.logger.log(level, name, extra={"fields": fields})
+
+
+@dataclass
+class Counters:
+    connections: int = 0  #: accepted
+    refused_connections: int = 0  #: not in the allow-lists
+    over_cap: int = 0  #: closed at once: the cap was reached and nobody idle to replace
+    evicted: int = 0  #: replaced by a new connection at the cap
+    idle_closed: int = 0
+    malformed: int = 0  #: connections closed for a frame header no client sends
+    requests: int = 0
+    denied_writes: int = 0  #: read-only mode, or a client not allowed to write
+    wrong_unit: int = 0
+    handler_errors: int = 0
+    asyncio_errors: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {f"modbus_{k}": v for k, v in vars(self).items()}
+
+
+class _Connection(asyncio.Protocol):
+    def __init__(self, server: TcpServer) -> None:
+        self.server = server
+        self.transport: asyncio.Transport | None = None
+        self.buf = bytearray()
+        self.last = time.monotonic()
+        self.peer = "-"
+        self.may_write = False
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        peer = transport.get_extra_info("peername")
+        self.peer = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
+        self.server.admit(self, _peer_ip(peer))
+
+    def data_received(self, data: bytes) -> None:
+        self.last = time.monotonic()
+        buf = self.buf
+        buf += data
+        out = []
+        bad = ""
+        while len(buf) >= mbap.HEADER_BYTES:
+            try:
+                need = mbap.frame_length(bytes(buf[:mbap.HEADER_BYTES]))
+            except DecodeError as exc:
+                bad = str(exc)
+                break
+            if len(buf) < need:
+                break
+            request = bytes(buf[:need])
+            del buf[:need]
+            out.append(self.server.answer(request, self))
+        if out and self.transport is not None:
+            self.transport.write(b"".join(out))  # every answer, in order, in one send
+        if bad:  # the requests before it are answered; the stream cannot be resynchronised
+            self.server.malformed(self, bad)
+
+    def pause_writing(self) -> None:  # the client does not read its responses: stop reading it
+        if self.transport is not None:
+            self.transport.pause_reading()
+
+    def resume_writing(self) -> None:
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.resume_reading()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.server.conns.discard(self)
+
+    def close(self, flush: bool = False) -> None:
+        """Abort (an idle or refused peer gets no goodbye), or with ``flush`` close
+        once the answers already written have gone out."""
+        if self.transport is not None:
+            if flush:
+                self.transport.close()
+            else:
+                self.transport.abort()
+        self.server.conns.discard(self)
+
+
+class TcpServer:
+    """Serves ``handler`` over Modbus TCP on ``host:port`` from its own thread;
+    ``start()`` returns once it listens."""
+
+    def __init__(self, handler: pdu.RegisterHandler, host: str, port: int, identity: pdu.Identity,
+                 policy: Policy | None = None, server_id: int = 1) -> None:
+        self.handler = handler
+        self.host, self.port = host, port
+        self.identity = identity
+        self.policy = policy or Policy()
+        self.server_id = server_id
+        self.counters = Counters()
+        self.log = RateLimitedLog()
+        self.conns: set[_Connection] = set()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stopping: asyncio.Event | None = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+
+    @property
+    def tcp(self) -> tuple[str, int]:
+        return self.host, self.port
+
+    @property
+    def where(self) -> str:
+        return f"tcp {self.host}:{self.port}"
+
+    # -- the policy, on the server's thread ------------------------------------------
+    def admit(self, conn: _Connection, ip: Address | None) -> None:
+        p, c = self.policy, self.counters
+        if ip is None or not p.may_connect(ip):
+            c.refused_connections += 1
+            self.log.event("modbus_client_refused", peer=conn.peer, reason="not in allow_read")
+            conn.close()
+            return
+        if len(self.conns) >= p.max_connections:
+            now = time.monotonic()
+            oldest = min(self.conns, key=lambda k: k.last)
+            if now - oldest.last < EVICT_IDLE_S:
+                c.over_cap += 1
+                self.log.event("modbus_client_refused", peer=conn.peer, reason="connection cap",
+                               max_connections=p.max_connections)
+                conn.close()
+                return
+            c.evicted += 1
+            self.log.event("modbus_client_evicted", level=logging.INFO, peer=oldest.peer,
+                           idle_s=round(now - oldest.last, 1), by=conn.peer)
+            oldest.close()
+        conn.may_write = p.may_write(ip)
+        self.conns.add(conn)
+        c.connections += 1
+
+    def answer(self, request: bytes, conn: _Connection) -> bytes:
+        tid, unit, req = mbap.split_request(request)
+        fc = req[0] if req else 0
+        c = self.counters
+        c.requests += 1
+        units = self.policy.unit_ids
+        if units is not None and unit not in units:
+            c.wrong_unit += 1
+            self.log.event("modbus_unit_refused", peer=conn.peer, unit=unit, served=",".join(map(str, sorted(units))))
+            return mbap.frame(tid, unit, pdu.exception(fc, pdu.GATEWAY_TARGET_FAILED))
+        if fc in pdu.WRITES and not conn.may_write:
+            c.denied_writes += 1
+            self.log.event("modbus_write_denied", peer=conn.peer, function=fc,
+                           reason="read_only" if self.policy.read_only else "not in allow_write")
+            return mbap.frame(tid, unit, pdu.exception(fc, ILLEGAL_FUNCTION))
+        token = PEER.set(conn.peer)
+        try:
+            resp = pdu.handle(req, self.handler, self.identity, self.server_id)
+        except Exception as exc:  # noqa: BLE001 - a handler's bug must not end the server
+            c.handler_errors += 1
+            self.log.event("modbus_handler_error", level=logging.ERROR, function=fc,
+                           error=f"{type(exc).__name__}: {exc}")
+            resp = pdu.exception(fc, DEVICE_FAILURE)
+        finally:
+            PEER.reset(token)
+        return mbap.frame(tid, unit, resp)
+
+    def malformed(self, conn: _Connection, why: str) -> None:
+        self.counters.malformed += 1
+        self.log.event("modbus_client_malformed", peer=conn.peer, error=why)
+        conn.buf.clear()
+        conn.close(flush=True)
+
+    def _sweep(self) -> None:
+        limit = self.policy.idle_timeout_s
+        now = time.monotonic()
+        for conn in [k for k in self.conns if now - k.last >= limit]:
+            self.counters.idle_closed += 1
+            self.log.event("modbus_client_idle", level=logging.INFO, peer=conn.peer, idle_timeout_s=limit)
+            conn.close()
+
+    def _asyncio_error(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
+        """asyncio's reports (an accept that fails for lack of descriptors, ...) as
+        structured events, rate-limited, never a traceback on stderr."""
+        self.counters.asyncio_errors += 1
+        exc = context.get("exception")
+        self.log.event("modbus_server_error", level=logging.ERROR, message=context.get("message", "-"),
+                       error=f"{type(exc).__name__}: {exc}" if exc is not None else "-")
+
+    # -- the thread ---------------------------------------------------------------------
+    def start(self, timeout_s: float = 5.0) -> TcpServer:
+        self._thread = threading.Thread(target=self._run, name="modbus-server", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(timeout_s):
+            raise EskinError(f"modbus server ({self.where}): did not start within {timeout_s:g} s")
+        if self._error is not None:
+            raise EskinError(f"modbus server ({self.where}): cannot listen: {self._error}")
+        return self
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except BaseException as exc:  # noqa: BLE001 - reported to start()
+            self._error = exc
+            self._ready.set()
+
+    async def _main(self) -> None:
+        loop = self._loop = asyncio.get_running_loop()
+        loop.set_exception_handler(self._asyncio_error)
+        self._stopping = asyncio.Event()
+        server = await loop.create_server(lambda: _Connection(self), self.host, self.port)
+        self._ready.set()
+        tick = min(1.0, self.policy.idle_timeout_s / 4)
+        try:
+            while not self._stopping.is_set():
+                try:
+                    await asyncio.wait_for(self._stopping.wait(), tick)
+                except TimeoutError:
+                    self._sweep()
+        finally:
+            server.close()
+            for conn in list(self.conns):
+                conn.close()
+            await server.wait_closed()
+
+    def stop(self) -> None:
+        """Stop serving and close every connection; safe to call twice."""
+        loop, stopping = self._loop, self._stopping
+        if loop is not None and stopping is not None and not loop.is_closed():
+            try:
+                loop.call_soon_threadsafe(stopping.set)
+            except RuntimeError:  # the loop has just closed
+                pass
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        self._loop = None
+
+    def __enter__(self) -> TcpServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
