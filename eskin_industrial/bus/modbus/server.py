@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ...errors import DecodeError, EskinError
+from ...netaddr import listen_error
 from . import mbap, pdu
 from .codec import DEVICE_FAILURE, ILLEGAL_FUNCTION
 
@@ -308,6 +309,8 @@ class TcpServer:
         self._thread.start()
         if not self._ready.wait(timeout_s):
             raise EskinError(f"modbus server ({self.where}): did not start within {timeout_s:g} s")
+        if isinstance(self._error, OSError):  # in use, not this machine's address, ...: say which
+            raise EskinError(f"modbus server: {listen_error(self.host, self.port, self._error)}")
         if self._error is not None:
             raise EskinError(f"modbus server ({self.where}): cannot listen: {self._error}")
         return self
