@@ -188,9 +188,9 @@ def slip_guard_st() -> str:
     return f"""\
 FUNCTION_BLOCK FB_SlipGuard
 VAR_INPUT
-    wStatus     : WORD;   (* %MW{st:<3} STATUS    *)
-    wHeartbeat  : WORD;   (* %MW{hb:<3} HEARTBEAT *)
-    wFrameAgeMs : WORD;   (* %MW{age:<3} FRAME_AGE *)
+    wStatus     : WORD;   (* %MW{st:<2} STATUS    *)
+    wHeartbeat  : WORD;   (* %MW{hb:<2} HEARTBEAT *)
+    wFrameAgeMs : WORD;   (* %MW{age:<2} FRAME_AGE *)
     rGripForceN : REAL;   (* current set-point *)
 END_VAR
 VAR_OUTPUT
