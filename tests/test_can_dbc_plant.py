@@ -136,3 +136,11 @@ def test_plant_dbc_refuses_two_nodes_on_the_same_ids(tmp_path):
     assert res.returncode == 2
     assert "gripper-left" in res.stderr or "gripper_left" in res.stderr
     assert "0x200" in res.stderr and res.stdout == ""
+
+
+def test_plant_dbc_refuses_a_configuration_without_can_nodes(tmp_path):
+    config = tmp_path / "bridge.toml"
+    config.write_text(f'[[node]]\nname = "a"\nprofile = "{PROFILES / "paper-5x5.toml"}"\nsource = "scene"\n'
+                      f'scene = "case2"\n')
+    res = eskin_bus("profile", "dbc", "--config", str(config))
+    assert res.returncode == 2 and "no CAN node" in res.stderr and res.stdout == ""

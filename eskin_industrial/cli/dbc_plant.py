@@ -13,11 +13,14 @@ def plant_dbc(config_path: str) -> str:
     """The DBC of the configuration's CAN nodes (live or from a log), each under its
     ``[[node]] name``, with the node's ``base_id``, ``node_id``, ``fd`` and rate."""
     config = load_bridge_config(config_path)
-    nodes = [n for n in resolve(config) if issubclass(n.kind, CanSource)]
-    if not nodes:
+    dbc_nodes = []
+    for n in resolve(config):
+        kind = n.kind
+        if issubclass(kind, CanSource):  # live or from a log: CAN frames either way
+            layout = CanLayout.from_profile(n.profile, fd=kind.fd(n))
+            dbc_nodes.append(DbcNode(dbc_name(n.name), n.profile, layout, n.rate_hz))
+    if not dbc_nodes:
         raise ProfileError(f"{config_path}: [node]: no CAN node (source = \"can\" or \"can-log\") to describe")
-    dbc_nodes = [DbcNode(dbc_name(n.name), n.profile, CanLayout.from_profile(n.profile, fd=n.kind.fd(n)), n.rate_hz)
-                 for n in nodes]
     try:
         return plant_dbc_text(dbc_nodes)
     except ValueError as exc:

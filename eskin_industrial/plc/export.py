@@ -175,6 +175,10 @@ def _bit(s: Status) -> int:
     return int(s).bit_length() - 1
 
 
+def _name(s: Status) -> str:
+    return s.name or f"BIT{_bit(s)}"  # a single-bit flag always has a name; the stubs allow None
+
+
 def slip_guard_st() -> str:
     """``FB_SlipGuard``: act on SLIP only when the data is trustworthy.  The register
     offsets and bit numbers come from the tables."""
@@ -300,10 +304,9 @@ def codesys_st(settings: ModbusPlcSection, profile_name: str, input_word: int = 
     if write:
         parts.append(_struct(out_type, f"what the PLC writes: holding registers {base + first_out}.."
                              f"{base + first_out + n_out - 1}", write))
-    status = {s.name: _bit(s) for s in BITS}
-    width = max(len(n) for n in status)
-    consts = "\n".join(f"    EB_{n:<{width}} : UINT := {i};   (* {_comment(BIT_DOC[Status[n]])} *)"
-                       for n, i in status.items())
+    width = max(len(_name(s)) for s in BITS)
+    consts = "\n".join(f"    EB_{_name(s):<{width}} : UINT := {_bit(s)};   (* {_comment(BIT_DOC[s])} *)"
+                       for s in BITS)
     glob = ["{attribute 'qualified_only'}", "VAR_GLOBAL",
             f"    stIn  AT %IW{input_word} : {in_type};   (* the read channel's first word *)"]
     if write:
@@ -351,7 +354,7 @@ def tia_rows(settings: ModbusPlcSection, profile_name: str, m_byte: int = 0) -> 
         i = _bit(s)
         # big-endian word: bits 8..15 in the first byte, bits 0..7 in the second
         byte = status + (0 if i >= 8 else 1)
-        rows.append([s.name or "", path, "Bool", f"%M{byte}.{i % 8}", f"STATUS bit {i}: {BIT_DOC[s]}",
+        rows.append([_name(s), path, "Bool", f"%M{byte}.{i % 8}", f"STATUS bit {i}: {BIT_DOC[s]}",
                      "True", "True", "False", "", ""])
     return rows
 

@@ -155,11 +155,11 @@ def plant_dbc_text(nodes: Sequence[DbcNode]) -> str:
             seen[key] = n.name
         lay = n.layout
         for can_id in [lay.data_id(s) for s in range(lay.segments)] + [lay.status_id]:
-            key = (can_id, lay.extended_id)
-            if key in ids:
-                raise ValueError(f"nodes {ids[key]!r} and {n.name!r} both send ID {can_id:#x}: one DBC describes one "
+            frame = (can_id, lay.extended_id)
+            if frame in ids:
+                raise ValueError(f"nodes {ids[frame]!r} and {n.name!r} both send ID {can_id:#x}: one DBC describes one "
                                  f"bus; give them different base_id")
-            ids[key] = n.name
+            ids[frame] = n.name
     parts = [_node_parts(n) for n in nodes]
     lines = ['VERSION ""', "", "NS_ :", "", "BS_:", "", "BU_: " + " ".join(n.name for n in nodes), ""]
     for p in parts:
