@@ -26,8 +26,8 @@ _FILES = {"codesys": "eskin_{}.st", "tia": "eskin_{}_tags.xlsx", "csv": "eskin_{
 @click.option("--output-word", type=click.IntRange(0, 65535), default=0, show_default=True,
               help="codesys: %QW address of the write channel.")
 @click.option("--m-byte", type=click.IntRange(0, 65534), default=0, show_default=True,
-              help="tia: first byte of the register block in the M area (%MB, even): the MB_CLIENT / MB_SERVER "
-                   "buffer.")
+              help="tia: the M byte (even) where the block's first register lands: MB_CLIENT's DATA_PTR, or "
+                   "MB_SERVER's MB_HOLD_REG start + 2 x base_address.")
 def export(profile_path: str, fmt: str, out_dir: str | None, input_word: int, output_word: int, m_byte: int) -> None:
     """Write PLC import files for the profile's register image: a Codesys source, a
     TIA Portal tag table or a flat CSV tag list (see docs/plc.md)."""
