@@ -250,3 +250,22 @@ def test_export_to_standard_output():
     res = CliRunner().invoke(main, ["plc", "export", "-p", str(PROFILES / "paper-5x5.toml"), "--format", "csv"])
     assert res.exit_code == 0
     assert res.output == flat_csv(PROFILE.modbus.plc)
+
+
+def test_a_register_added_to_the_table_appears_in_every_file(monkeypatch, tmp_path):
+    from eskin_industrial.plc import image
+
+    added = image.Register("GRIP_WIDTH", 22, "u32", "0.01 mm", "an added value")
+    table = (*image.REGISTERS, added)
+    monkeypatch.setattr(image, "REGISTERS", table)
+    monkeypatch.setattr(image, "REG", {r.name: r for r in table})
+    s = settings("little", base_address=10)
+    row = next(r for r in csv.DictReader(io.StringIO(flat_csv(s))) if r["name"] == "GRIP_WIDTH")
+    assert (row["address"], row["reference"], row["data_type"], row["word_order"], row["scale"], row["unit"]) == \
+        ("32", "40033", "UDINT", "little", "0.01", "mm")
+    types = structs(parsed(codesys_st(s, "paper-5x5")))
+    assert ("GRIP_WIDTH", "UDINT") in types["ST_Eskin_paper_5x5_In"]
+    path = tmp_path / "t.xlsx"
+    path.write_bytes(tia_xlsx(s, "paper-5x5"))
+    names = {r[0]: r[3] for r in openpyxl.load_workbook(path)["PLC Tags"].iter_rows(values_only=True)}
+    assert names["GRIP_WIDTH_LO"] == "%MW44" and names["GRIP_WIDTH_HI"] == "%MW46"  # low word first, S7 high first

@@ -3,7 +3,7 @@ TIA Portal PLC tag table.  Pure: the settings in, text (or a workbook's bytes) o
 
 Everything is derived from the tables of :mod:`~eskin_industrial.plc.image`
 (``REGISTERS``, ``COILS``, ``BITS`` and the numbering of :func:`map_rows`), so that a
-register added there appears in every file.
+register added there appears in every file (read through the module, at each call).
 
 Types are IEC 61131-3's: a 16-bit register is ``WORD`` (bit fields), ``UINT`` or
 ``INT``; a 32-bit pair ``UDINT`` with the profile's word order stated; a coil or
@@ -26,7 +26,8 @@ from typing import Literal
 from xml.sax.saxutils import escape
 
 from ..profile import ModbusPlcSection
-from .image import BIT_DOC, BITS, COILS, REG, REGISTERS, Register, Status, map_rows
+from . import image
+from .image import BIT_DOC, BITS, COILS, Register, Status, map_rows
 
 Table = Literal["holding register", "coil", "discrete input"]
 Order = Literal["big", "little"]
@@ -74,7 +75,7 @@ def _iec(r: Register) -> str:
 def tags(settings: ModbusPlcSection) -> list[Tag]:
     """Every register, coil and discrete input, in the order of :func:`map_rows`."""
     rows = map_rows(settings)
-    objects: list[Register | object] = [*REGISTERS, *COILS, *BITS]
+    objects: list[Register | object] = [*image.REGISTERS, *COILS, *BITS]
     out: list[Tag] = []
     for row, obj in zip(rows, objects, strict=True):
         address = int(row["address"].split("-")[0])
@@ -131,7 +132,7 @@ def members(registers: Sequence[Register], settings: ModbusPlcSection, native: O
     at = registers[0].offset if registers else 0
     for r in sorted(registers, key=lambda r: r.offset):
         for gap in range(at, r.offset):
-            out.append(Member(f"RESERVED_{gap}", gap, "WORD", "not in the register table"))
+            out.append(Member(f"RESERVED_{gap}", gap, "WORD", "not part of this block (a gap, or a register of the other direction)"))
         t = by_tag[r.name]
         unit = f" [{t.label}]" if t.label not in ("-", "") else ""
         where = f"{t.reference}" + (f"-{_next_ref(t.reference)}" if r.words == 2 else "")
@@ -182,7 +183,8 @@ def _name(s: Status) -> str:
 def slip_guard_st() -> str:
     """``FB_SlipGuard``: act on SLIP only when the data is trustworthy.  The register
     offsets and bit numbers come from the tables."""
-    st, hb, age = REG["STATUS"].offset, REG["HEARTBEAT"].offset, REG["FRAME_AGE"].offset
+    reg = image.REG
+    st, hb, age = reg["STATUS"].offset, reg["HEARTBEAT"].offset, reg["FRAME_AGE"].offset
     b = {s: _bit(s) for s in Status}
 
     def bit(var: str, s: Status, note: str) -> str:
@@ -269,7 +271,7 @@ def codesys_st(settings: ModbusPlcSection, profile_name: str, input_word: int = 
     runtime's own on x86 and ARM); in big word order two WORDs and ``F_EskinJoin32``."""
     node = ident(profile_name)
     base, wo = settings.base_address, settings.word_order
-    published, written = _published(REGISTERS), _written(REGISTERS)
+    published, written = _published(image.REGISTERS), _written(image.REGISTERS)
     read = members(published, settings, native="little")
     write = members(written, settings, native="little")
     in_type, out_type = f"ST_Eskin_{node}_In", f"ST_Eskin_{node}_Out"
@@ -347,14 +349,14 @@ def tia_rows(settings: ModbusPlcSection, profile_name: str, m_byte: int = 0) -> 
         raise ValueError(f"m_byte: expected an even byte address (a word's), got {m_byte}")
     path = f"eskin_{ident(profile_name)}"
     rows: list[list[str]] = []
-    regs = members(REGISTERS, settings, native="big")
+    regs = members(image.REGISTERS, settings, native="big")
     first = regs[0].offset
     for m in regs:
         byte = m_byte + 2 * (m.offset - first)
         addr = f"%MD{byte}" if m.iec_type == "UDINT" else f"%MW{byte}"
         rows.append([m.name, path, TIA_TYPE[m.iec_type], addr, m.comment, "True", "True",
                      "True" if m.access == "RW" else "False", "", ""])
-    status = m_byte + 2 * (REG["STATUS"].offset - first)
+    status = m_byte + 2 * (image.REG["STATUS"].offset - first)
     for s in BITS:
         i = _bit(s)
         # big-endian word: bits 8..15 in the first byte, bits 0..7 in the second
