@@ -89,9 +89,9 @@ def test_generated_c_encoder_sends_scans_our_decoder_reads(name, fd, order, tmp_
     lay = CanLayout.from_profile(prof, fd=fd)
     dbc = tmp_path / "eskin.dbc"
     if order == "little":  # the profiles' own byte order: the command, as a user runs it
-        res = subprocess.run([sys.executable, "-m", "eskin_industrial", "profile", "dbc", str(PROFILES / f"{name}.toml"),
-                              "--node-name", "node", "--fd" if fd else "--no-fd"], capture_output=True, text=True,
-                             timeout=60)
+        res = subprocess.run([sys.executable, "-m", "eskin_industrial", "profile", "dbc",
+                              str(PROFILES / f"{name}.toml"), "--node-name", "node", "--fd" if fd else "--no-fd"],
+                             capture_output=True, text=True, timeout=60)
         assert res.returncode == 0, res.stderr
         dbc.write_text(res.stdout)
     else:
@@ -105,22 +105,22 @@ def test_generated_c_encoder_sends_scans_our_decoder_reads(name, fd, order, tmp_
     raw[0, 0], raw[0, -1] = 0, lay.max_raw  # both ends of the range
     (tmp_path / "main.c").write_text(firmware_main(db, lay, raw))
     exe = tmp_path / "node"
-    cc = subprocess.run([need("gcc"), "-std=c99", "-Wall", "-Wextra", "-Werror", "-O1", "-I", str(tmp_path), "-o", str(exe),
-                         str(tmp_path / "main.c"), str(tmp_path / "eskin.c")], capture_output=True, text=True,
-                        timeout=120)
+    cc = subprocess.run([need("gcc"), "-std=c99", "-Wall", "-Wextra", "-Werror", "-O1", "-I", str(tmp_path),
+                         "-o", str(exe), str(tmp_path / "main.c"), str(tmp_path / "eskin.c")],
+                        capture_output=True, text=True, timeout=120)
     assert cc.returncode == 0, cc.stderr
     run = subprocess.run([str(exe)], capture_output=True, text=True, timeout=10)
     assert run.returncode == 0, run.stdout
     frames = []
     for i, line in enumerate(run.stdout.split()):
         can_id, data = line.split("#")
-        frames.append(can.Message(arbitration_id=int(can_id, 16), data=bytes.fromhex(data), is_fd=fd, is_extended_id=lay.extended_id,
-                                  timestamp=i * 1e-3))
+        frames.append(can.Message(arbitration_id=int(can_id, 16), data=bytes.fromhex(data), is_fd=fd,
+                                  is_extended_id=lay.extended_id, timestamp=i * 1e-3))
     assert len(frames) == len(SEQS) * lay.segments + 1
     scans, asm = decode_messages(lay, frames, prof.sensor.rate_hz)
     assert asm.counters["malformed_frames"] == 0 and asm.counters["torn_scans"] == 0
     assert [s.seq % 4096 for s in scans] == SEQS
     np.testing.assert_array_equal(np.array([s.raw for s in scans]), raw)  # to the count
     assert asm.status is not None
-    assert (asm.status.node_id, asm.status.state, asm.status.rate_hz, asm.status.seq) == (lay.node_id, NodeState.RUNNING, 1000,
-                                                                                          SEQS[-1])
+    hb = asm.status
+    assert (hb.node_id, hb.state, hb.rate_hz, hb.seq) == (lay.node_id, NodeState.RUNNING, 1000, SEQS[-1])

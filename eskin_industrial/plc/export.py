@@ -132,7 +132,8 @@ def members(registers: Sequence[Register], settings: ModbusPlcSection, native: O
     at = registers[0].offset if registers else 0
     for r in sorted(registers, key=lambda r: r.offset):
         for gap in range(at, r.offset):
-            out.append(Member(f"RESERVED_{gap}", gap, "WORD", "not part of this block (a gap, or a register of the other direction)"))
+            out.append(Member(f"RESERVED_{gap}", gap, "WORD",
+                              "not part of this block (a gap, or a register of the other direction)"))
         t = by_tag[r.name]
         unit = f" [{t.label}]" if t.label not in ("-", "") else ""
         where = f"{t.reference}" + (f"-{_next_ref(t.reference)}" if r.words == 2 else "")
