@@ -269,3 +269,51 @@ def test_a_register_added_to_the_table_appears_in_every_file(monkeypatch, tmp_pa
     path.write_bytes(tia_xlsx(s, "paper-5x5"))
     names = {r[0]: r[3] for r in openpyxl.load_workbook(path)["PLC Tags"].iter_rows(values_only=True)}
     assert names["GRIP_WIDTH_LO"] == "%MW44" and names["GRIP_WIDTH_HI"] == "%MW46"  # low word first, S7 high first
+
+
+def test_export_of_a_bridge_gives_each_node_its_block_and_names(tmp_path):
+    bridge = ROOT / "examples" / "deploy" / "bridge.toml"  # gripper-left at 0, gripper-right at 100
+    for fmt in ("codesys", "tia", "csv"):
+        res = subprocess.run([sys.executable, "-m", "eskin_industrial", "plc", "export", "--config", str(bridge),
+                              "--format", fmt, "-o", str(tmp_path), "--m-byte", "1000"], capture_output=True,
+                             timeout=60)
+        assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        f"eskin_gripper_{side}{suffix}" for side in ("left", "right") for suffix in (".st", "_tags.csv", "_tags.xlsx"))
+    tia = {side: [r for r in openpyxl.load_workbook(tmp_path / f"eskin_gripper_{side}_tags.xlsx")["PLC Tags"]
+                  .iter_rows(values_only=True)][1:] for side in ("left", "right")}
+    names = [r[0] for rows in tia.values() for r in rows]
+    assert len(names) == len(set(names))  # one PLC: tag names unique across both tables
+    assert all(r[0].startswith(f"gripper_{side}_") and r[1] == f"eskin_gripper_{side}"
+               for side, rows in tia.items() for r in rows)
+    # one MB_SERVER buffer from %MB1000: the right block 100 registers (200 bytes) further
+    left = {r[0].removeprefix("gripper_left_"): r[3] for r in tia["left"]}
+    right = {r[0].removeprefix("gripper_right_"): r[3] for r in tia["right"]}
+    assert left["STATUS"] == "%MW1000" and right["STATUS"] == "%MW1200" and right["F_SUM"] == "%MD1208"
+    assert right["DATA_VALID"] == "%M1201.5"
+    csv_right = list(csv.DictReader(io.StringIO((tmp_path / "eskin_gripper_right_tags.csv").read_text())))
+    assert (csv_right[0]["name"], csv_right[0]["address"], csv_right[0]["reference"]) == \
+        ("gripper_right_STATUS", "100", "40101")
+    st = (tmp_path / "eskin_gripper_right.st").read_text()
+    assert "offset 100, length 20" in st and "GVL_Eskin_gripper_right" in st
+    assert set(structs(parsed(st))) == {"ST_Eskin_gripper_right_In", "ST_Eskin_gripper_right_Out"}
+
+
+def test_export_of_one_profile_takes_a_node_name_and_base_address():
+    res = CliRunner().invoke(main, ["plc", "export", "-p", str(PROFILES / "paper-5x5.toml"), "--format", "csv",
+                                    "--node-name", "left", "--base-address", "300"])
+    assert res.exit_code == 0, res.output
+    first = next(csv.DictReader(io.StringIO(res.output)))
+    assert (first["name"], first["address"], first["reference"]) == ("left_STATUS", "300", "40301")
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--format", "csv"], "-p PROFILE"),  # neither -p nor --config
+    (["--format", "csv", "-p", "P", "--config", "C"], "-p PROFILE"),
+    (["--format", "csv", "--config", str(ROOT / "examples" / "deploy" / "bridge.toml")], "-o DIR"),
+    (["--format", "csv", "--config", str(ROOT / "examples" / "deploy" / "bridge.toml"), "-o", "x",
+      "--node-name", "a"], "--node-name"),
+])
+def test_export_refuses_unclear_requests(args, needle):
+    res = CliRunner().invoke(main, ["plc", "export", *args])
+    assert res.exit_code == 2 and needle in res.output, res.output
