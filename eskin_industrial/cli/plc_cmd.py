@@ -47,3 +47,8 @@ def markdown(rows: list[dict[str, str]]) -> str:
     for r in rows:
         lines.append("| " + " | ".join(r[c].replace("|", "\\|") for c in _COLUMNS) + " |")
     return "\n".join(lines)
+
+
+from .plc_export_cmd import export  # noqa: E402  (its own module: the import files)
+
+plc.add_command(export)

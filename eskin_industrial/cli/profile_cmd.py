@@ -90,15 +90,48 @@ def show(file: str, fmt: str) -> None:
 
 
 @profile.command()
-@click.argument("file", type=click.Path(dir_okay=False), shell_complete=complete_profile)
+@click.argument("file", type=click.Path(dir_okay=False), required=False, shell_complete=complete_profile)
+@click.option("--config", "config_path", type=click.Path(dir_okay=False),
+              help="A bridge configuration: one DBC for every CAN node in it (instead of FILE).")
 @click.option("--fd/--no-fd", "fd", default=None, help="Describe CAN FD frames (default: the profile's).")
-def dbc(file: str, fd: bool | None) -> None:
-    """Write a DBC describing the profile's CAN frames (taxels scaled to newtons)."""
+@click.option("--node-name", help="The DBC node, and the prefix of its message names (default: NODE<node_id>, "
+                                  "messages prefixed with the profile's name).")
+@click.option("--base-id", help="The node's first CAN ID (default: the profile's [can] base_id), e.g. 0x210.")
+def dbc(file: str | None, config_path: str | None, fd: bool | None, node_name: str | None,
+        base_id: str | None) -> None:
+    """Write a DBC describing the profile's CAN frames (taxels scaled to newtons), or
+    with --config one DBC for every CAN node of a bridge."""
+    if (file is None) == (config_path is None):
+        raise click.UsageError("give a profile FILE or --config BRIDGE.toml")
+    if config_path is not None:
+        if fd is not None or node_name is not None or base_id is not None:
+            raise click.UsageError("--fd, --node-name and --base-id go with a profile FILE; with --config each "
+                                   "[[node]] gives its own (name, fd, base_id)")
+        from .dbc_plant import plant_dbc
+
+        click.echo(plant_dbc(config_path), nl=False)
+        return
     from ..bus.can.dbc import dbc_text
     from ..bus.can.layout import CanLayout
 
+    assert file is not None
     p = load_profile(file)
-    click.echo(dbc_text(p, CanLayout.from_profile(p, fd=fd)), nl=False)
+    if base_id is not None:
+        p = _with_base_id(p, base_id)
+    click.echo(dbc_text(p, CanLayout.from_profile(p, fd=fd), node_name=node_name), nl=False)
+
+
+def _with_base_id(p: Profile, text: str) -> Profile:
+    import dataclasses
+
+    try:
+        value = int(text, 0)
+    except ValueError:
+        raise click.BadParameter(f"expected an integer such as 0x210, got {text!r}", param_hint="--base-id") from None
+    try:
+        return dataclasses.replace(p, can=dataclasses.replace(p.can, base_id=value))
+    except ValueError as exc:  # not a number, or an ID range past the format's last ID
+        raise click.BadParameter(str(exc).removeprefix("base_id: "), param_hint="--base-id") from None
 
 
 @profile.command(name="list")
