@@ -9,7 +9,6 @@ cleanly: every output is left reading BRIDGE_OFFLINE.
 
 from __future__ import annotations
 
-import signal
 import sys
 from typing import Any
 
@@ -77,7 +76,9 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     from ..bridge.config import BridgeConfig, check_sources, load_bridge_config, output_classes, resolve
     from ..bridge.config import explain as explain_node
     from ..bridge.logs import EventLog
+    from ..bridge.notify import Notifier
     from ..bridge.runtime import Bridge
+    from ..bridge.signals import EXIT_FAILED, handled_signals
     from ..bus.modbus.io import quiet_pymodbus
 
     if (config_path is None) == (profile_path is None):
@@ -114,21 +115,32 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
         raise click.UsageError("--explain goes with --check")
     quiet_pymodbus()
     log = EventLog(sys.stderr, logs.format, logs.level)
-    br = Bridge(cfg, nodes, log)
+    br = Bridge(cfg, nodes, log, notifier=Notifier.from_env())
+    # From here on, no signal but KILL ends the process without the offline image
+    # (a signal during open stops the bridge as soon as it has started).
+    with handled_signals(br.request_stop, br.request_counters) as flags:
+        try:
+            br.open()
+        except BaseException:
+            log.close()
+            raise
+        try:
+            br.start()
+            br.wait(duration_s)
+        finally:  # an unexpected error too: every block offline, the deaths sent
+            br.stop()
+            br.log_counters("final")
+            log.close()
+            br.notifier.close()
+    failure = br.failure or (f"{flags.reason} (systemd's watchdog signal: a loop hung)" if flags.failing else "")
+    if failure:
+        _say(f"eskin-bus: error: bridge stopped: {failure}")
+        sys.exit(EXIT_FAILED)
+
+
+def _say(line: str) -> None:
+    """A last line on stderr, which may be gone (a closed terminal, a dead pipe)."""
     try:
-        br.open()
-    except BaseException:
-        log.close()
-        raise
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda signum, _frame: br.request_stop(signal.Signals(signum).name))
-    try:
-        br.start()
-        br.wait(duration_s)
-    finally:
-        br.stop()
-        br.log_counters("final")
-        log.close()
-    if br.failure:
-        click.echo(f"eskin-bus: error: bridge stopped: {br.failure}", err=True)
-        sys.exit(1)
+        click.echo(line, err=True)
+    except OSError:
+        pass

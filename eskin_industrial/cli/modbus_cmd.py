@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 
@@ -75,6 +76,7 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
     (--serve / --serve-rtu).  The same loop as ``eskin-bus bridge --source rtu:PORT``."""
     from ..bridge.config import BridgeConfig, NodeConfig, resolve
     from ..bridge.runtime import SingleNode
+    from ..bridge.signals import EXIT_FAILED, handled_signals
     from ..bus.modbus.io import quiet_pymodbus
     from ..plc.sink import PlcOptions
 
@@ -103,24 +105,37 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
         node = NodeConfig.of("node", profile_path, "recording", path=recording)
     cfg = BridgeConfig(node=(node,), outputs={"plc": out})
     (resolved,) = resolve(cfg)
-    single = SingleNode(cfg, resolved)
-    loop = single.loop
-    where = "; ".join(s.where for s in loop.sinks)
-    click.echo(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {where}, base address "
-               f"{plc.base_address}", err=True)
-    end = None if duration_s is None else time.monotonic() + duration_s
-    next_status = time.monotonic() + status_every if status_every else None
-    with single:
-        try:
-            while end is None or time.monotonic() < end:
+    # The signals of `eskin-bus bridge`: each stopping one leaves the block reading
+    # BRIDGE_OFFLINE (SingleNode's exit), USR1 prints the counters.
+    with handled_signals() as flags:
+        single = SingleNode(cfg, resolved)
+        loop = single.loop
+        where = "; ".join(s.where for s in loop.sinks)
+        _say(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {where}, base address {plc.base_address}")
+        end = None if duration_s is None else time.monotonic() + duration_s
+        next_status = time.monotonic() + status_every if status_every else None
+        stop = flags.stop
+        with single:
+            while not stop.is_set() and (end is None or time.monotonic() < end):
                 loop.step()
-                if next_status is not None and time.monotonic() >= next_status:
-                    next_status += status_every
-                    click.echo(_counters(loop), err=True)
-        except KeyboardInterrupt:
-            pass
-    click.echo(_counters(loop), err=True)
+                if flags.take_counters() or (next_status is not None and time.monotonic() >= next_status):
+                    if next_status is not None and time.monotonic() >= next_status:
+                        next_status += status_every
+                    _say(_counters(loop))
+        _say(f"modbus-bridge: stopped ({flags.reason or 'duration'}), offline written: "
+             f"{'yes' if single.offline_written else 'no'}")
+        _say(_counters(loop))
+    if flags.failing:
+        sys.exit(EXIT_FAILED)
 
 
 def _counters(loop) -> str:
     return "modbus-bridge: " + " ".join(f"{k}={v}" for k, v in loop.counters().items())
+
+
+def _say(line: str) -> None:
+    """A line on stderr, which may be gone (a closed terminal, a dead pipe)."""
+    try:
+        click.echo(line, err=True)
+    except OSError:
+        pass
