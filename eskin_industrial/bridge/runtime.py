@@ -282,7 +282,8 @@ class Bridge:
         status_every = self.config.log.status_every_s
         next_status = time.monotonic() + status_every if status_every else None
         feed_every = self.notifier.watchdog_interval_s
-        next_feed = time.monotonic() if feed_every is not None else None
+        # the first WATCHDOG=1 after one period: every loop must have turned by then
+        next_feed = time.monotonic() + feed_every if feed_every is not None else None
         seen = list(self._beats)
         while not self._stop.is_set():
             if end is not None and time.monotonic() >= end:
@@ -404,6 +405,7 @@ class Bridge:
             sys.setswitchinterval(self._switch_interval)
         self.log.event("stopped", reason=self.stop_reason or ("failure" if self.failure else "end"),
                        offline_written=",".join(offline) or "-")
+        self.notifier.close()
 
     def _guarded(self, call: Callable[[], Any]) -> Any:
         """A step of the shutdown; an exception is logged and the shutdown goes on."""

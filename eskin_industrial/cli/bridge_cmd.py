@@ -131,7 +131,6 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
             br.stop()
             br.log_counters("final")
             log.close()
-            br.notifier.close()
     failure = br.failure or (f"{flags.reason} (systemd's watchdog signal: a loop hung)" if flags.failing else "")
     if failure:
         _say(f"eskin-bus: error: bridge stopped: {failure}")
