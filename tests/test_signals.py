@@ -19,7 +19,8 @@ import time
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from tests.helpers.bridge import PAPER, TimedPlc, wait_for
+from eskin_industrial.sinks.base import Publication, Sink
+from tests.helpers.bridge import PAPER, TimedPlc, can_node, channel, client_config, running_bridge, wait_for
 from tests.helpers.modbus import free_port
 
 #: docs/plc.md: STATUS (offset 0) bit 10 BRIDGE_OFFLINE; bit 1 STABLE, bit 5 DATA_VALID.
@@ -194,3 +195,34 @@ def test_modbus_bridge_leaves_the_plc_reading_offline(plc, hold_csv, how):
     assert f"stopped ({how}), offline written: yes" in err
     counter_lines = [line for line in err.splitlines() if line.startswith("modbus-bridge: scans=")]
     assert len(counter_lines) == (1 if how == "duration" else 2)  # USR1's, then the final one
+
+
+# -- an output that fails on the way out ------------------------------------------------
+class _BrokenOutput(Sink):
+    """An output whose last image and flush raise (a disk gone, a library's bug)."""
+
+    kind = "broken"
+
+    def _publish(self, publication: Publication) -> None:
+        if publication.offline:
+            raise OSError("the output is gone")
+
+    def flush(self, timeout_s: float = 1.0) -> bool:
+        raise OSError("the output is gone")
+
+
+def test_an_output_failing_at_the_stop_does_not_keep_the_plc_online(plc):
+    """The broken output comes first: the PLC behind it still gets BRIDGE_OFFLINE,
+    the failure is logged, and the stop completes."""
+    config = client_config(can_node("grip", channel()), port=plc.port)
+
+    def broken_first(bridge) -> None:
+        bridge.runs[0].loop.sinks.insert(0, _BrokenOutput())
+
+    with running_bridge(config, before_start=broken_first) as run:
+        wait_for(lambda: plc.last() is not None, timeout_s=5, what="a first write")
+    assert plc.last()["STATUS"] == OFFLINE  # type: ignore[index]
+    failures = run.log.events("stop_failed")
+    assert len(failures) == 2 and all("the output is gone" in e["error"] for e in failures)
+    (stopped,) = run.log.events("stopped")
+    assert stopped["offline_written"] == "-"  # the broken output did not take it: not every output is offline
