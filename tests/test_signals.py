@@ -22,12 +22,38 @@ from pymodbus.client import ModbusTcpClient
 from eskin_industrial.sinks.base import Publication, Sink
 from tests.helpers.bridge import PAPER, TimedPlc, can_node, channel, client_config, running_bridge, wait_for
 from tests.helpers.modbus import free_port
+from tests.helpers.paths import ROOT
 
 #: docs/plc.md: STATUS (offset 0) bit 10 BRIDGE_OFFLINE; bit 1 STABLE, bit 5 DATA_VALID.
 OFFLINE, STABLE, DATA_VALID = 1 << 10, 1 << 1, 1 << 5
-#: docs/operations.md, "Signals": the exit status of each stopping signal.
-STOPPING = {signal.SIGTERM: 0, signal.SIGINT: 0, signal.SIGHUP: 0, signal.SIGQUIT: 0, signal.SIGUSR2: 0,
-            signal.SIGABRT: 1}
+
+
+def documented_signals() -> dict[signal.Signals, tuple[str, str]]:
+    """docs/operations.md, "Signals": what the bridge does on each, and the exit."""
+    text = (ROOT / "docs" / "operations.md").read_text()
+    table = text[text.index("### Signals"):text.index("### Exit codes")]
+    rows = {}
+    for line in table.splitlines():
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if len(cells) == 4 and cells[0].isupper() and cells[0].isalnum():
+            rows[signal.Signals[f"SIG{cells[0]}"]] = (cells[2], cells[3])
+    return rows
+
+
+DOCUMENTED = documented_signals()
+#: The stopping signals and the exit status the docs give each.
+STOPPING = {sig: int(code) for sig, (does, code) in DOCUMENTED.items() if does.startswith("stops cleanly")}
+
+
+def test_the_signal_table_in_the_docs_is_the_code():
+    from eskin_industrial.bridge import signals
+
+    assert set(STOPPING) == set(signals.STOPPING) and len(STOPPING) >= 6
+    assert {sig for sig, code in STOPPING.items() if code == signals.EXIT_FAILED} == set(signals.FAILING)
+    assert {sig for sig, code in STOPPING.items() if code == 0} == set(signals.STOPPING) - set(signals.FAILING)
+    assert DOCUMENTED[signals.COUNTERS][0].startswith("logs a `counters` event")
+    assert DOCUMENTED[signal.SIGPIPE][0].startswith("ignored")
+    assert DOCUMENTED[signal.SIGKILL][1] == str(128 + signal.SIGKILL)
 
 
 def _env() -> dict[str, str]:

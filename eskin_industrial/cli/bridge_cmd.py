@@ -3,8 +3,9 @@ blocks, a recorder, ...), for months.
 
 One node from the command line (``--profile``, ``--source``, the outputs' options),
 or several from a configuration file (``--config``).  The source kinds and the output
-kinds, and their options, come from their registries.  SIGTERM and SIGINT stop it
-cleanly: every output is left reading BRIDGE_OFFLINE.
+kinds, and their options, come from their registries.  Every signal but KILL either
+stops it cleanly (every output left reading BRIDGE_OFFLINE) or has a use (USR1: the
+counters): bridge/signals.py, and the table in docs/operations.md.
 """
 
 from __future__ import annotations
@@ -61,15 +62,15 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=None,
               help="Log every counter every N seconds (default 60; 0: only at the end).")
 @click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,
-              help="Stop after this many seconds (default: until SIGTERM/SIGINT).")
+              help="Stop after this many seconds (default: until SIGTERM, SIGINT or SIGHUP).")
 @click.option("--check", is_flag=True, help="Validate the configuration and profiles, print the plan, exit.")
 @click.option("--explain", is_flag=True,
               help="With --check: also every node's resolved settings and where each came from.")
 def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, base_address, rate_hz,
            name, log_format, log_level, status_every, duration_s, check, explain, **output_values) -> None:
     """Run the bridge: decode each node's scans, detect, and keep the outputs (by
-    default the PLC's register blocks) up to date, until SIGTERM or SIGINT (then every
-    block reads BRIDGE_OFFLINE).  With no output given, the PLC as the profile
+    default the PLC's register blocks) up to date, until SIGTERM, SIGINT, SIGHUP or
+    SIGQUIT (then every block reads BRIDGE_OFFLINE; SIGUSR1 logs the counters).  With no output given, the PLC as the profile
     describes it; --plc keeps it beside another output."""
     from dataclasses import replace
 

@@ -73,7 +73,9 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
                   serve_rtu, serve_baud, duration_s, status_every) -> None:
     """Poll the node over Modbus RTU, detect, and publish the PLC register image:
     written to the PLC (client mode, the default when the profile says so) or served
-    (--serve / --serve-rtu).  The same loop as ``eskin-bus bridge --source rtu:PORT``."""
+    (--serve / --serve-rtu).  The same loop as ``eskin-bus bridge --source rtu:PORT``,
+    and the same signals: SIGTERM, SIGINT, SIGHUP or SIGQUIT (or --duration) leave the
+    PLC reading BRIDGE_OFFLINE; SIGUSR1 prints the counters."""
     from ..bridge.config import BridgeConfig, NodeConfig, resolve
     from ..bridge.runtime import SingleNode
     from ..bridge.signals import EXIT_FAILED, handled_signals
