@@ -102,7 +102,7 @@ def test_notifier_outside_systemd_does_nothing_and_a_dead_socket_is_counted(tmp_
 @pytest.mark.slow
 def test_the_bridge_says_ready_feeds_the_watchdog_and_says_stopping(tmp_path):
     with listener(tmp_path) as lst:
-        env = {**os.environ, "NOTIFY_SOCKET": lst.address, "WATCHDOG_USEC": "400000", "PYTHONPATH": os.getcwd()}
+        env = {**os.environ, "NOTIFY_SOCKET": lst.address, "WATCHDOG_USEC": "1000000", "PYTHONPATH": os.getcwd()}
         env.pop("WATCHDOG_PID", None)
         proc = subprocess.Popen([sys.executable, "-m", "eskin_industrial", "bridge", "-p",
                                  str(ROOT / "profiles" / "paper-5x5.toml"), "--source", "scene:hold",
@@ -110,7 +110,7 @@ def test_the_bridge_says_ready_feeds_the_watchdog_and_says_stopping(tmp_path):
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
         try:
             ready = lst.until("READY=1", 20)
-            lst.collect(1.5)
+            lst.collect(2.6)
             proc.send_signal(signal.SIGTERM)
             stopping = lst.until("STOPPING=1", 10)
             _, err = proc.communicate(timeout=15)
@@ -122,13 +122,14 @@ def test_the_bridge_says_ready_feeds_the_watchdog_and_says_stopping(tmp_path):
     (status,) = [f for t, fields in lst.messages if t == ready for f in fields if f.startswith("STATUS=")]
     assert status.startswith("STATUS=running: 1 node(s) -> tcp 127.0.0.1:")
     feeds = lst.times("WATCHDOG=1", after=ready)
-    assert len(feeds) >= 4  # 1.5 s at one every 0.2 s
+    assert len(feeds) >= 4  # 2.6 s at one every 0.5 s
     gaps = [b - a for a, b in zip(feeds, feeds[1:])]
-    assert max(gaps) < 0.4, gaps  # always within systemd's period
+    assert max(gaps) < 1.0, gaps  # always within systemd's period
     assert stopping > feeds[-1] - 0.01
     assert "watchdog_starved" not in err
 
 
+@pytest.mark.slow
 def test_a_hung_loop_starves_the_watchdog(tmp_path):
     """The CAN bus's loop thread blocked (its lock held elsewhere): no more WATCHDOG=1,
     one error line naming the loop; fed again once it turns."""
