@@ -246,3 +246,22 @@ def test_the_bridge_and_every_wavelet_method_run_with_memory_deny_write_execute(
     for method in ("paper", "learned"):  # PyWavelets; scikit-learn
         res = _under_mdwe("detect", "-p", profile, "--method", method, "--changes", str(rec))
         assert res.returncode == 0 and "slip" in res.stdout, (method, res.stderr[-2000:])
+
+
+@pytest.mark.slow
+def test_systemds_abort_of_a_hung_bridge_still_leaves_the_block_offline(tmp_path):
+    """What follows a starved watchdog: SIGABRT, handled as a stop while the loop is
+    still hung; the stop gives the loop its time, then the block reads BRIDGE_OFFLINE."""
+    config = server_config(can_node("grip", channel()))
+    with running_bridge(config) as run:
+        wait_for(lambda: run.block(0)["HEARTBEAT"] > 0, timeout_s=5, what="a first publication")
+        feeder = run.bridge.groups[0][0]
+        with feeder.lock:
+            run.bridge.request_stop("SIGABRT")  # what the handler does
+            t0 = time.monotonic()
+            run.bridge.stop()
+            assert time.monotonic() - t0 < 10
+            block = run.block(0)
+    assert block["STATUS"] == 1 << 10 and block["STATE"] == 0 and block["FRAME_AGE"] == 0xFFFF
+    (stopped,) = run.log.events("stopped")
+    assert stopped["reason"] == "SIGABRT" and stopped["offline_written"] == "grip"
