@@ -10,7 +10,8 @@ Threads, and why each exists:
 - whatever the sinks run themselves: a writer per node in PLC client mode (a slow or
   absent PLC never stalls detection), one Modbus server for all blocks in server mode;
 - the caller's thread supervises: it logs what changed (sensor stale, bus fault, an
-  output's connection) and the counters, and handles the stop.
+  output's connection) and the counters, feeds systemd's watchdog while every loop
+  thread turns (bridge/notify.py), and handles the stop.
 
 :meth:`Bridge.stop` stops the loops, then leaves every output reading BRIDGE_OFFLINE
 (written to the PLC before the writer lets go, or served for ``offline_linger_s``).
