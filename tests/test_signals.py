@@ -56,6 +56,21 @@ def test_the_signal_table_in_the_docs_is_the_code():
     assert DOCUMENTED[signal.SIGKILL][1] == str(128 + signal.SIGKILL)
 
 
+def test_the_handlers_set_plain_flags_and_are_restored():
+    """In this process: the first stopping signal is the reason, USR1s are counted,
+    PIPE is ignored, and the handlers before the block are back after it."""
+    from eskin_industrial.bridge.signals import handled_signals
+
+    before = {sig: signal.getsignal(sig) for sig in (*STOPPING, signal.SIGUSR1, signal.SIGPIPE)}
+    with handled_signals() as flags:
+        assert not flags.stopping
+        for sig in (signal.SIGUSR1, signal.SIGPIPE, signal.SIGHUP, signal.SIGTERM, signal.SIGUSR1):
+            os.kill(os.getpid(), sig)
+            time.sleep(0.01)  # the handler runs in this thread at its next bytecode
+        assert flags.reason == "SIGHUP" and flags.counters == 2 and not flags.failing
+    assert {sig: signal.getsignal(sig) for sig in before} == before
+
+
 def _env() -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k not in ("NOTIFY_SOCKET", "WATCHDOG_USEC", "WATCHDOG_PID")}
     return {**env, "PYTHONUNBUFFERED": "1", "PYTHONPATH": os.getcwd()}

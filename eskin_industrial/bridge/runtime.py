@@ -36,6 +36,7 @@ from .config import BridgeConfig, ResolvedNode, output_classes
 from .logs import EventLog
 from .loop import NodeLoop
 from .notify import Notifier
+from .signals import SignalFlags
 
 #: The interpreter hands the GIL between threads every 5 ms by default; a reader
 #: thread waiting that long would add 5 ms to a 1 kHz scan's latency.  Every command
@@ -141,7 +142,6 @@ class Bridge:
         self._threads: list[threading.Thread] = []
         #: +1 at every turn of each loop thread (by thread): what feeds systemd's watchdog.
         self._beats: list[int] = []
-        self._counters_asked = threading.Event()
         self._starved = False
         self._closers: list[Callable[[], None]] = []
         self.started = False
@@ -277,8 +277,9 @@ class Bridge:
                                error=sources[0].last_error or "-")
                 break
 
-    def wait(self, duration_s: float | None = None, tick_s: float = 0.1) -> None:
-        """Supervise until :meth:`request_stop`, ``duration_s``, or every source ended."""
+    def wait(self, duration_s: float | None = None, tick_s: float = 0.1, signals: SignalFlags | None = None) -> None:
+        """Supervise until :meth:`request_stop`, a stopping signal in ``signals``,
+        ``duration_s``, or every source ended; log the counters when USR1 came."""
         end = None if duration_s is None else time.monotonic() + duration_s
         status_every = self.config.log.status_every_s
         next_status = time.monotonic() + status_every if status_every else None
@@ -286,7 +287,15 @@ class Bridge:
         # the first WATCHDOG=1 after one period: every loop must have turned by then
         next_feed = time.monotonic() + feed_every if feed_every is not None else None
         seen = list(self._beats)
+        usr1 = 0
         while not self._stop.is_set():
+            if signals is not None:
+                if signals.reason:  # a signal during open() too
+                    self.request_stop(signals.reason)
+                    break
+                if signals.counters != usr1:
+                    usr1 = signals.counters
+                    self.log_counters("counters")
             if end is not None and time.monotonic() >= end:
                 break
             if self._threads and not any(t.is_alive() for t in self._threads):
@@ -296,17 +305,14 @@ class Bridge:
                 seen = self._feed_watchdog(seen)
             self._stop.wait(tick_s)
             self.check_health()
-            if self._counters_asked.is_set():  # SIGUSR1
-                self._counters_asked.clear()
-                self.log_counters("counters")
             if next_status is not None and time.monotonic() >= next_status:
                 next_status += status_every
                 self.log_counters("counters")
 
     def _feed_watchdog(self, seen: list[int]) -> list[int]:
         """WATCHDOG=1 when every loop still running has turned since the last look;
-        otherwise nothing (systemd restarts a hung bridge) and one warning naming the
-        loops that did not.  Returns the beats now."""
+        otherwise nothing (systemd restarts a hung bridge) and one error line naming
+        the loops that did not.  Returns the beats now."""
         beats = list(self._beats)
         stuck = [t.name for t, b, s in zip(self._threads, beats, seen) if t.is_alive() and b == s]
         if not stuck:
@@ -319,13 +325,9 @@ class Bridge:
             self.log.event("watchdog_starved", level="error", loops=",".join(stuck))
         return beats
 
-    def request_counters(self) -> None:
-        """Safe from a signal handler (SIGUSR1): the supervisor logs every counter
-        at its next look."""
-        self._counters_asked.set()
-
     def request_stop(self, reason: str = "") -> None:
-        """Safe from a signal handler: only sets a flag."""
+        """Stop from another thread (a signal handler sets :class:`SignalFlags`
+        instead: an Event takes a lock the interrupted thread may hold)."""
         if reason and not self._stop.is_set():
             self.stop_reason = reason
         self._stop.set()

@@ -19,15 +19,14 @@ PIPE      ignored (a closed stdout or stderr is an error on that write only)
 ========  =============================================================
 
 KILL cannot be caught: the HEARTBEAT register stops, which is what the PLC's
-watchdog is for.  The handlers only set flags (see :class:`SignalFlags`); the
-caller's supervising thread acts on them.
+watchdog is for.  The handlers only set plain attributes (:class:`SignalFlags`);
+the caller's supervising thread acts on them at its next tick.
 """
 
 from __future__ import annotations
 
 import signal
-import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
 from typing import Any
@@ -47,46 +46,37 @@ EXIT_FAILED = 1
 
 
 class SignalFlags:
-    """What the signals asked for, set from the handlers, read by the supervisor."""
+    """What the signals asked for: plain attributes, written by the handlers and read
+    by the code they interrupted, both on the main thread.  No lock and no Event:
+    a handler runs between two bytecodes of the main thread, which may hold the very
+    lock an ``Event.set()`` would wait for (a deadlock); the supervisor looks at
+    these at every tick instead."""
 
     def __init__(self) -> None:
-        self.stop = threading.Event()
-        self.counters = threading.Event()
-        self.reason = ""  #: the first stopping signal's name
+        self.reason = ""  #: the first stopping signal's name ("" while none came)
+        self.counters = 0  #: USR1s received
+
+    @property
+    def stopping(self) -> bool:
+        return bool(self.reason)
 
     @property
     def failing(self) -> bool:
         return self.reason in {s.name for s in FAILING}
 
-    def take_counters(self) -> bool:
-        """Whether USR1 came since the last call."""
-        if self.counters.is_set():
-            self.counters.clear()
-            return True
-        return False
-
 
 @contextmanager
-def handled_signals(on_stop: Callable[[str], None] | None = None,
-                    on_counters: Callable[[], None] | None = None) -> Iterator[SignalFlags]:
+def handled_signals() -> Iterator[SignalFlags]:
     """The handlers of the table above for the length of the block (the main thread
-    only, as Python requires), the previous ones restored on the way out.
-    ``on_stop(name)`` and ``on_counters()`` run in the handler too: they must only
-    set flags (a lock the interrupted code holds would never be released)."""
+    only, as Python requires), the previous ones restored on the way out."""
     flags = SignalFlags()
 
     def stop(signum: int, _frame: FrameType | None) -> None:
-        name = signal.Signals(signum).name
-        if not flags.stop.is_set():
-            flags.reason = name
-        flags.stop.set()
-        if on_stop is not None:
-            on_stop(name)
+        if not flags.reason:
+            flags.reason = signal.Signals(signum).name
 
     def counters(_signum: int, _frame: FrameType | None) -> None:
-        flags.counters.set()
-        if on_counters is not None:
-            on_counters()
+        flags.counters += 1
 
     before: dict[signal.Signals, Any] = {}
     try:

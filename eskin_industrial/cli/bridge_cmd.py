@@ -119,15 +119,16 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     br = Bridge(cfg, nodes, log, notifier=Notifier.from_env())
     # From here on, no signal but KILL ends the process without the offline image
     # (a signal during open stops the bridge as soon as it has started).
-    with handled_signals(br.request_stop, br.request_counters) as flags:
+    with handled_signals() as flags:
         try:
             br.open()
         except BaseException:
             log.close()
             raise
         try:
-            br.start()
-            br.wait(duration_s)
+            if not flags.reason:  # a signal during open: straight to the offline image
+                br.start()
+            br.wait(duration_s, signals=flags)
         finally:  # an unexpected error too: every block offline, the deaths sent
             br.stop()
             br.log_counters("final")

@@ -116,13 +116,15 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
         _say(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {where}, base address {plc.base_address}")
         end = None if duration_s is None else time.monotonic() + duration_s
         next_status = time.monotonic() + status_every if status_every else None
-        stop = flags.stop
+        usr1 = 0
         with single:
-            while not stop.is_set() and (end is None or time.monotonic() < end):
+            while not flags.reason and (end is None or time.monotonic() < end):
                 loop.step()
-                if flags.take_counters() or (next_status is not None and time.monotonic() >= next_status):
-                    if next_status is not None and time.monotonic() >= next_status:
-                        next_status += status_every
+                if flags.counters != usr1:
+                    usr1 = flags.counters
+                    _say(_counters(loop))
+                if next_status is not None and time.monotonic() >= next_status:
+                    next_status += status_every
                     _say(_counters(loop))
         _say(f"modbus-bridge: stopped ({flags.reason or 'duration'}), offline written: "
              f"{'yes' if single.offline_written else 'no'}")
