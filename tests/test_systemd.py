@@ -212,11 +212,11 @@ def test_a_bad_configuration_exits_2_before_anything_opens(tmp_path):
 
 
 # -- MemoryDenyWriteExecute=yes ----------------------------------------------------------
-MDWE = ROOT / "tests" / "helpers" / "mdwe.py"
+SANDBOX = ROOT / "tests" / "helpers" / "sandbox.py"
 
 
 def _under_mdwe(mode: str, *args: str) -> subprocess.CompletedProcess:
-    res = subprocess.run([sys.executable, str(MDWE), mode, "-m", "eskin_industrial", *args], capture_output=True,
+    res = subprocess.run([sys.executable, str(SANDBOX), mode, "-m", "eskin_industrial", *args], capture_output=True,
                          text=True, timeout=60, env={**os.environ, "PYTHONPATH": os.getcwd()})
     if res.returncode == 77:
         pytest.skip(f"this kernel cannot restrict memory by {mode}")
@@ -228,7 +228,7 @@ def test_the_restriction_refuses_writable_executable_memory(mode):
     probe = ("import ctypes, mmap\n"
              "try:\n    mmap.mmap(-1, 4096, prot=7)\nexcept OSError:\n    pass\nelse:\n    raise SystemExit(1)\n"
              "mmap.mmap(-1, 4096, prot=3)\n")  # writable alone is fine
-    res = subprocess.run([sys.executable, str(MDWE), mode, "-c", probe], capture_output=True, text=True, timeout=30)
+    res = subprocess.run([sys.executable, str(SANDBOX), mode, "-c", probe], capture_output=True, text=True, timeout=30)
     if res.returncode == 77:
         pytest.skip(f"this kernel cannot restrict memory by {mode}")
     assert res.returncode == 0, res.stderr
@@ -248,3 +248,90 @@ def test_the_bridge_and_every_wavelet_method_run_with_memory_deny_write_execute(
     for method in ("paper", "learned"):  # PyWavelets; scikit-learn
         res = _under_mdwe(mode, "detect", "-p", profile, "--method", method, "--changes", str(rec))
         assert res.returncode == 0 and "slip" in res.stdout, (method, res.stderr[-2000:])
+
+
+# -- SystemCallFilter= ---------------------------------------------------------------------
+def _unit_syscalls(analyze: str) -> list[int]:
+    """The x86-64 numbers of the system calls the unit's SystemCallFilter= lines allow
+    (systemd's always-permitted @default, plus the allowed groups, minus the ~ ones),
+    as ``systemd-analyze syscall-filter`` expands the groups."""
+    def expand(name: str) -> set[str]:
+        if not name.startswith("@"):
+            return {name}
+        out = subprocess.run([analyze, "syscall-filter", name], capture_output=True, text=True, timeout=30, check=True)
+        names: set[str] = set()
+        for line in out.stdout.splitlines()[1:]:
+            item = line.strip()
+            if item and not item.startswith("#"):
+                names |= expand(item)
+        return names
+
+    allowed, denied = expand("@default"), set()
+    for line in UNIT.read_text().splitlines():
+        if line.startswith("SystemCallFilter="):
+            value = line.partition("=")[2].strip()
+            groups = value.lstrip("~").split()
+            target = denied if value.startswith("~") else allowed
+            for g in groups:
+                target |= expand(g)
+    header = Path("/usr/include/x86_64-linux-gnu/asm/unistd_64.h")
+    if not header.exists():
+        pytest.skip("no x86-64 system call table (linux-libc-dev)")
+    numbers = dict(re.findall(r"#define __NR_(\w+) (\d+)", header.read_text()))
+    assert {"read", "write", "clone3", "ioctl"} <= numbers.keys()
+    return [int(numbers[n]) for n in allowed - denied if n in numbers]
+
+
+@pytest.mark.slow
+def test_the_bridge_runs_under_the_units_system_call_filter(tmp_path):
+    """The unit's filter, EPERM for the rest as SystemCallErrorNumber= says: the bridge
+    polls an RTU node over a serial line (pyserial's termios calls), writes the PLC over
+    TCP, records to a file, then stops on SIGHUP with the PLC reading BRIDGE_OFFLINE."""
+    import platform
+
+    from pymodbus.client import ModbusTcpClient
+
+    from tests.helpers.bridge import TimedPlc
+    from tests.helpers.modbus import pty_pair
+
+    if platform.machine() != "x86_64":
+        pytest.skip("the filter is written for x86-64")
+    allowed = ",".join(str(n) for n in _unit_syscalls(need("systemd-analyze")))
+    profile = str(ROOT / "profiles" / "paper-5x5.toml")
+    env = {**os.environ, "PYTHONPATH": os.getcwd()}
+    rec = tmp_path / "hold.csv"
+    subprocess.run([sys.executable, "-m", "eskin_industrial", "simulate", "hold", "-o", str(rec)], check=True,
+                   capture_output=True, timeout=60, env=env)
+    plc = TimedPlc(free_port()).start()
+    updates = tmp_path / "updates.csv"
+    try:
+        with pty_pair(tmp_path) as (a, b):
+            node = subprocess.Popen([sys.executable, "-m", "eskin_industrial", "modbus-node", "-p", profile, "--port",
+                                     a, "--recording", str(rec)], stderr=subprocess.DEVNULL, env=env)
+            bridge = subprocess.Popen([sys.executable, str(SANDBOX), f"syscalls={allowed}", "-m", "eskin_industrial",
+                                       "bridge", "-p", profile, "--source", f"rtu:{b}", "--plc",
+                                       f"tcp:127.0.0.1:{plc.port}", "--record", str(updates), "--log-format", "json",
+                                       "--status-every", "0"], stderr=subprocess.PIPE, text=True, env=env)
+            try:
+                wait_for(lambda: (plc.last() or {}).get("STATUS", 0) & 0b100010 == 0b100010 or bridge.poll() is not None,
+                         timeout_s=20, what="a valid stable image")  # STABLE and DATA_VALID
+                assert bridge.poll() is None, bridge.communicate(timeout=5)[1][-3000:]
+                bridge.send_signal(signal.SIGHUP)
+                _, err = bridge.communicate(timeout=20)
+            finally:
+                for proc in (bridge, node):
+                    if proc.poll() is None:
+                        proc.kill()
+                        proc.communicate(timeout=10)
+        assert bridge.returncode == 0, err[-3000:]
+        client = ModbusTcpClient("127.0.0.1", port=plc.port, timeout=2)
+        assert client.connect()
+        try:
+            status = client.read_holding_registers(0, count=1).registers[0]
+        finally:
+            client.close()
+    finally:
+        plc.stop()
+    assert status == 1 << 10  # BRIDGE_OFFLINE alone
+    assert "Traceback" not in err and '"reason": "SIGHUP"' in err
+    assert len(updates.read_text().splitlines()) > 50

@@ -1,14 +1,23 @@
-"""Run a command the way ``MemoryDenyWriteExecute=yes`` runs a service: no memory
-both writable and executable, none made executable later.
+"""Run a command inside a piece of the service unit's sandbox, set up the way systemd
+sets it up, without systemd: ``python tests/helpers/sandbox.py MODE ARGS...`` sets the
+restriction, then replaces itself with ``python ARGS...``; exit 77 when this kernel
+or machine cannot.
 
-``python tests/helpers/mdwe.py prctl|seccomp ARGS...`` sets the restriction, then
-replaces itself with ``python ARGS...``; exit 77 when this kernel cannot.
+MemoryDenyWriteExecute=yes (no memory both writable and executable, none made
+executable later), two ways, as systemd versions differ:
 
 - ``prctl``: the kernel's own (PR_SET_MDWE, Linux 6.3), which systemd 254 and later use;
 - ``seccomp``: the filter of earlier systemd versions (Debian 12 has 252), stricter: any
-  mprotect adding PROT_EXEC is refused, even to memory that was never writable.  A
-  classic BPF program written out here (x86-64 system call numbers; another
-  architecture is left unfiltered and exits 77).
+  mprotect adding PROT_EXEC is refused, even to memory that was never writable.
+
+SystemCallFilter= with SystemCallErrorNumber=EPERM:
+
+- ``syscalls=NAME,NAME,...``: every other system call fails with EPERM (the names are
+  the unit's groups as ``systemd-analyze syscall-filter`` expands them, resolved to
+  x86-64 numbers by the caller).
+
+Each is a classic BPF program written out here (x86-64 system call numbers; another
+architecture exits 77).
 """
 
 from __future__ import annotations
@@ -44,6 +53,14 @@ class _Fprog(ctypes.Structure):
     _fields_ = [("len", ctypes.c_ushort), ("filter", ctypes.c_void_p)]
 
 
+def _allow_only(numbers: list[int]) -> list[tuple[int, int, int, int]]:
+    """x86-64: these system calls pass, every other one fails with EPERM."""
+    prog = [(_LD, 0, 0, 4), (_JEQ, 1, 0, 0xC000003E), (_RET, 0, 0, _EPERM), (_LD, 0, 0, 0)]
+    for nr in sorted(set(numbers)):
+        prog += [(_JEQ, 0, 1, nr), (_RET, 0, 0, _ALLOW)]
+    return prog + [(_RET, 0, 0, _EPERM)]
+
+
 def restrict(mode: str) -> bool:
     libc = ctypes.CDLL(None, use_errno=True)
     if mode == "prctl":
@@ -51,8 +68,12 @@ def restrict(mode: str) -> bool:
             libc.prctl(PR_GET_MDWE, 0, 0, 0, 0) == PR_MDWE_REFUSE_EXEC_GAIN
     if platform.machine() != "x86_64":
         return False
-    code = ctypes.create_string_buffer(b"".join(struct.pack("HBBI", *ins) for ins in _FILTER))
-    prog = _Fprog(len(_FILTER), ctypes.addressof(code))
+    if mode.startswith("syscalls="):
+        program = _allow_only([int(n) for n in mode.partition("=")[2].split(",")])
+    else:
+        program = _FILTER
+    code = ctypes.create_string_buffer(b"".join(struct.pack("HBBI", *ins) for ins in program))
+    prog = _Fprog(len(program), ctypes.addressof(code))
     return libc.prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0) == 0 and \
         libc.prctl(PR_SET_SECCOMP, SECCOMP_MODE_FILTER, ctypes.byref(prog), 0, 0) == 0
 
