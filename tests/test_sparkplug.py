@@ -213,9 +213,10 @@ def _cli(port: int, *extra: str) -> list[str]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM, signal.SIGHUP], ids=lambda s: s.name)
 def test_the_command_line_bridge_dies_with_ndeath(tmp_path, sig):
-    """SIGKILL: the broker delivers the will; SIGTERM: the bridge sends DDEATH and NDEATH."""
+    """SIGKILL: the broker delivers the will; SIGTERM and SIGHUP (a closed terminal):
+    the bridge sends DDEATH and NDEATH, and exits 0."""
     with spb.broker(tmp_path) as port:
         cap = spb.Capture(port, tmp_path / "sub.txt")
         proc = subprocess.Popen(_cli(port), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
@@ -235,7 +236,8 @@ def test_the_command_line_bridge_dies_with_ndeath(tmp_path, sig):
     kinds = [k for k, _, _ in decoded]
     assert kinds[0] == "NBIRTH" and kinds[-1] == "NDEATH"
     assert spb.metric_value(decoded[-1][2], "bdSeq") == spb.metric_value(decoded[0][2], "bdSeq")
-    assert ("DDEATH" in kinds) == (sig == signal.SIGTERM)
+    assert ("DDEATH" in kinds) == (sig != signal.SIGKILL)
+    assert proc.returncode == (-signal.SIGKILL if sig == signal.SIGKILL else 0)
 
 
 def test_check_describes_the_output(tmp_path):

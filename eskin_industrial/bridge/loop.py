@@ -169,9 +169,15 @@ class NodeLoop:
             return
         self.offline = True
         pub = Publication(self.image.render_offline(self.health()), self.image, True, time.perf_counter(), True)
+        failed: Exception | None = None
         for sink in self.sinks:
-            sink.publish(pub)
+            try:
+                sink.publish(pub)
+            except Exception as exc:  # noqa: BLE001 - the other sinks still get the offline image
+                failed = failed or exc
         self.publications += 1
+        if failed is not None:
+            raise failed
 
     def _tare(self) -> None:
         """Move each taxel's zero to its mean over the recent scans (gripper open)."""

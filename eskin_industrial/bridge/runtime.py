@@ -10,7 +10,8 @@ Threads, and why each exists:
 - whatever the sinks run themselves: a writer per node in PLC client mode (a slow or
   absent PLC never stalls detection), one Modbus server for all blocks in server mode;
 - the caller's thread supervises: it logs what changed (sensor stale, bus fault, an
-  output's connection) and the counters, and handles the stop.
+  output's connection) and the counters, feeds systemd's watchdog while every loop
+  thread turns (bridge/notify.py), and handles the stop.
 
 :meth:`Bridge.stop` stops the loops, then leaves every output reading BRIDGE_OFFLINE
 (written to the PLC before the writer lets go, or served for ``offline_linger_s``).
@@ -34,6 +35,8 @@ from ..sinks.base import Sink
 from .config import BridgeConfig, ResolvedNode, output_classes
 from .logs import EventLog
 from .loop import NodeLoop
+from .notify import Notifier
+from .signals import SignalFlags
 
 #: The interpreter hands the GIL between threads every 5 ms by default; a reader
 #: thread waiting that long would add 5 ms to a 1 kHz scan's latency.  Every command
@@ -92,6 +95,7 @@ class SingleNode:
     def __init__(self, config: BridgeConfig, node: ResolvedNode, *, extra_sinks: Sequence[Sink] = (),
                  default_output: bool = True, all_frames: bool = False, **loop_kw: Any) -> None:
         self.closers: list[Callable[[], None]] = []
+        self.offline_written = False  #: every sink took the offline image (set on exit)
         try:
             (self.loop,) = open_nodes(config, [node], self.closers, default_output, all_frames, **loop_kw)
         except BaseException:
@@ -108,11 +112,12 @@ class SingleNode:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self.loop.shutdown()
-        for sink in self.loop.sinks:
-            sink.flush()
-        self.close()
-        sys.setswitchinterval(self._switch_interval)
+        try:
+            self.loop.shutdown()
+        finally:  # a sink that failed its offline image: the others are flushed and closed all the same
+            self.offline_written = all([sink.flush() for sink in self.loop.sinks])
+            self.close()
+            sys.setswitchinterval(self._switch_interval)
 
     def close(self) -> None:
         """Close everything opened; safe to call twice."""
@@ -123,16 +128,21 @@ class SingleNode:
 
 class Bridge:
     def __init__(self, config: BridgeConfig, nodes: list[ResolvedNode], log: EventLog,
-                 on_update: Callable[[str, Update], None] | None = None) -> None:
+                 on_update: Callable[[str, Update], None] | None = None, notifier: Notifier | None = None) -> None:
         self.config = config
         self.nodes = nodes
         self.log = log
         self.on_update = on_update
+        #: systemd's READY/STOPPING/STATUS and its watchdog (does nothing outside systemd).
+        self.notifier = notifier or Notifier(None)
         self.runs: list[NodeRun] = []
         #: Nodes stepped together: (feeder, indices of their runs).
         self.groups: list[tuple[Feeder, list[int]]] = []
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
+        #: +1 at every turn of each loop thread (by thread): what feeds systemd's watchdog.
+        self._beats: list[int] = []
+        self._starved = False
         self._closers: list[Callable[[], None]] = []
         self.started = False
         self.stopped = False
@@ -211,11 +221,14 @@ class Bridge:
             if i not in grouped:
                 self._spawn(f"node-{run.name}", self._node_loop, run)
         self.started = True
+        self.notifier.ready(f"running: {len(self.runs)} node(s) -> {self.where}")
         return self
 
     def _spawn(self, name: str, target: Callable[..., None], *args: Any) -> None:
-        t = threading.Thread(target=self._guard, args=(target, *args), name=name, daemon=True)
+        # the loop's index in _beats comes last
+        t = threading.Thread(target=self._guard, args=(target, *args, len(self._threads)), name=name, daemon=True)
         self._threads.append(t)
+        self._beats.append(0)
         t.start()
 
     def _guard(self, target: Callable[..., None], *args: Any) -> None:
@@ -229,17 +242,18 @@ class Bridge:
                            error=f"{type(exc).__name__}: {exc}")
             self._stop.set()
 
-    def _node_loop(self, run: NodeRun) -> None:
-        step, stop = run.loop.step, self._stop
+    def _node_loop(self, run: NodeRun, beat: int) -> None:
+        step, stop, beats = run.loop.step, self._stop, self._beats
         source = run.loop.source
         while not stop.is_set():
             step()
+            beats[beat] += 1
             if source.done:
                 self.log.event("source_ended", node=run.name, error=source.last_error or "-")
                 break
 
-    def _group_loop(self, feeder: Feeder, runs: list[NodeRun]) -> None:
-        stop = self._stop
+    def _group_loop(self, feeder: Feeder, runs: list[NodeRun], beat: int) -> None:
+        stop, beats = self._stop, self._beats
         loops = [r.loop for r in runs]
         sources = [lp.source for lp in loops]
 
@@ -255,6 +269,7 @@ class Bridge:
             feeder.wait(min(lp.wait_budget() for lp in loops))  # the round's one wait
             with feeder.lock:
                 serve()
+            beats[beat] += 1
             if feeder.serve_error is not None:
                 raise feeder.serve_error
             if feeder.done:
@@ -262,24 +277,57 @@ class Bridge:
                                error=sources[0].last_error or "-")
                 break
 
-    def wait(self, duration_s: float | None = None, tick_s: float = 0.1) -> None:
-        """Supervise until :meth:`request_stop`, ``duration_s``, or every source ended."""
+    def wait(self, duration_s: float | None = None, tick_s: float = 0.1, signals: SignalFlags | None = None) -> None:
+        """Supervise until :meth:`request_stop`, a stopping signal in ``signals``,
+        ``duration_s``, or every source ended; log the counters when USR1 came."""
         end = None if duration_s is None else time.monotonic() + duration_s
         status_every = self.config.log.status_every_s
         next_status = time.monotonic() + status_every if status_every else None
+        feed_every = self.notifier.watchdog_interval_s
+        # the first WATCHDOG=1 after one period: every loop must have turned by then
+        next_feed = time.monotonic() + feed_every if feed_every is not None else None
+        seen = list(self._beats)
+        usr1 = 0
         while not self._stop.is_set():
+            if signals is not None:
+                if signals.reason:  # a signal during open() too
+                    self.request_stop(signals.reason)
+                    break
+                if signals.counters != usr1:
+                    usr1 = signals.counters
+                    self.log_counters("counters")
             if end is not None and time.monotonic() >= end:
                 break
             if self._threads and not any(t.is_alive() for t in self._threads):
                 break
+            if next_feed is not None and feed_every is not None and time.monotonic() >= next_feed:
+                next_feed = time.monotonic() + feed_every
+                seen = self._feed_watchdog(seen)
             self._stop.wait(tick_s)
             self.check_health()
             if next_status is not None and time.monotonic() >= next_status:
                 next_status += status_every
                 self.log_counters("counters")
 
+    def _feed_watchdog(self, seen: list[int]) -> list[int]:
+        """WATCHDOG=1 when every loop still running has turned since the last look;
+        otherwise nothing (systemd restarts a hung bridge) and one error line naming
+        the loops that did not.  Returns the beats now."""
+        beats = list(self._beats)
+        stuck = [t.name for t, b, s in zip(self._threads, beats, seen) if t.is_alive() and b == s]
+        if not stuck:
+            self.notifier.watchdog()
+            if self._starved:
+                self._starved = False
+                self.log.event("watchdog_fed", level="info")
+        elif not self._starved:
+            self._starved = True
+            self.log.event("watchdog_starved", level="error", loops=",".join(stuck))
+        return beats
+
     def request_stop(self, reason: str = "") -> None:
-        """Safe from a signal handler: only sets a flag."""
+        """Stop from another thread (a signal handler sets :class:`SignalFlags`
+        instead: an Event takes a lock the interrupted thread may hold)."""
         if reason and not self._stop.is_set():
             self.stop_reason = reason
         self._stop.set()
@@ -345,20 +393,30 @@ class Bridge:
             return
         self.stopped = True
         self._stop.set()
+        self.notifier.stopping(f"stopping: {self.stop_reason or ('failure' if self.failure else 'end')}")
         for t in self._threads:
             t.join(timeout=5.0)
         for run in self.runs:
-            run.loop.shutdown()
+            self._guarded(run.loop.shutdown)  # one node's failure does not keep the others online
         offline = []
         for run in self.runs:
             # every sink flushed (a writer wrote the offline image, a server served it)
-            if all([sink.flush() for sink in run.sinks]):
+            if all([self._guarded(sink.flush) for sink in run.sinks]):
                 offline.append(run.name)
         self._close_all()
         if self._switch_interval is not None:  # the process's setting, as it was
             sys.setswitchinterval(self._switch_interval)
         self.log.event("stopped", reason=self.stop_reason or ("failure" if self.failure else "end"),
                        offline_written=",".join(offline) or "-")
+        self.notifier.close()
+
+    def _guarded(self, call: Callable[[], Any]) -> Any:
+        """A step of the shutdown; an exception is logged and the shutdown goes on."""
+        try:
+            return call()
+        except Exception as exc:  # noqa: BLE001 - every other output must still go offline
+            self.log.event("stop_failed", level="error", error=f"{type(exc).__name__}: {exc}")
+            return False
 
     def _close_all(self) -> None:
         for close in reversed(self._closers):

@@ -3,13 +3,13 @@ blocks, a recorder, ...), for months.
 
 One node from the command line (``--profile``, ``--source``, the outputs' options),
 or several from a configuration file (``--config``).  The source kinds and the output
-kinds, and their options, come from their registries.  SIGTERM and SIGINT stop it
-cleanly: every output is left reading BRIDGE_OFFLINE.
+kinds, and their options, come from their registries.  Every signal but KILL either
+stops it cleanly (every output left reading BRIDGE_OFFLINE) or has a use (USR1: the
+counters): bridge/signals.py, and the table in docs/operations.md.
 """
 
 from __future__ import annotations
 
-import signal
 import sys
 from typing import Any
 
@@ -63,22 +63,24 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=None,
               help="Log every counter every N seconds (default 60; 0: only at the end).")
 @click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,
-              help="Stop after this many seconds (default: until SIGTERM/SIGINT).")
+              help="Stop after this many seconds (default: until SIGTERM, SIGINT or SIGHUP).")
 @click.option("--check", is_flag=True, help="Validate the configuration and profiles, print the plan, exit.")
 @click.option("--explain", is_flag=True,
               help="With --check: also every node's resolved settings and where each came from.")
 def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, bus_extra, base_address, rate_hz,
            name, log_format, log_level, status_every, duration_s, check, explain, **output_values) -> None:
     """Run the bridge: decode each node's scans, detect, and keep the outputs (by
-    default the PLC's register blocks) up to date, until SIGTERM or SIGINT (then every
-    block reads BRIDGE_OFFLINE).  With no output given, the PLC as the profile
+    default the PLC's register blocks) up to date, until SIGTERM, SIGINT, SIGHUP or
+    SIGQUIT (then every block reads BRIDGE_OFFLINE; SIGUSR1 logs the counters).  With no output given, the PLC as the profile
     describes it; --plc keeps it beside another output."""
     from dataclasses import replace
 
     from ..bridge.config import BridgeConfig, check_sources, load_bridge_config, output_classes, probe_outputs, resolve
     from ..bridge.config import explain as explain_node
     from ..bridge.logs import EventLog
+    from ..bridge.notify import Notifier
     from ..bridge.runtime import Bridge
+    from ..bridge.signals import EXIT_FAILED, handled_signals
     from ..bus.modbus.io import quiet_pymodbus
 
     if (config_path is None) == (profile_path is None):
@@ -118,21 +120,32 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
         raise click.UsageError("--explain goes with --check")
     quiet_pymodbus()
     log = EventLog(sys.stderr, logs.format, logs.level)
-    br = Bridge(cfg, nodes, log)
+    br = Bridge(cfg, nodes, log, notifier=Notifier.from_env())
+    # From here on, no signal but KILL ends the process without the offline image
+    # (a signal during open stops the bridge as soon as it has started).
+    with handled_signals() as flags:
+        try:
+            br.open()
+        except BaseException:
+            log.close()
+            raise
+        try:
+            if not flags.reason:  # a signal during open: straight to the offline image
+                br.start()
+            br.wait(duration_s, signals=flags)
+        finally:  # an unexpected error too: every block offline, the deaths sent
+            br.stop()
+            br.log_counters("final")
+            log.close()
+    failure = br.failure or (f"{flags.reason} (systemd's watchdog signal: a loop hung)" if flags.failing else "")
+    if failure:
+        _say(f"eskin-bus: error: bridge stopped: {failure}")
+        sys.exit(EXIT_FAILED)
+
+
+def _say(line: str) -> None:
+    """A last line on stderr, which may be gone (a closed terminal, a dead pipe)."""
     try:
-        br.open()
-    except BaseException:
-        log.close()
-        raise
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda signum, _frame: br.request_stop(signal.Signals(signum).name))
-    try:
-        br.start()
-        br.wait(duration_s)
-    finally:
-        br.stop()
-        br.log_counters("final")
-        log.close()
-    if br.failure:
-        click.echo(f"eskin-bus: error: bridge stopped: {br.failure}", err=True)
-        sys.exit(1)
+        click.echo(line, err=True)
+    except OSError:
+        pass

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 
@@ -72,9 +73,12 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
                   serve_rtu, serve_baud, duration_s, status_every) -> None:
     """Poll the node over Modbus RTU, detect, and publish the PLC register image:
     written to the PLC (client mode, the default when the profile says so) or served
-    (--serve / --serve-rtu).  The same loop as ``eskin-bus bridge --source rtu:PORT``."""
+    (--serve / --serve-rtu).  The same loop as ``eskin-bus bridge --source rtu:PORT``,
+    and the same signals: SIGTERM, SIGINT, SIGHUP or SIGQUIT (or --duration) leave the
+    PLC reading BRIDGE_OFFLINE; SIGUSR1 prints the counters."""
     from ..bridge.config import BridgeConfig, NodeConfig, resolve
     from ..bridge.runtime import SingleNode
+    from ..bridge.signals import EXIT_FAILED, handled_signals
     from ..bus.modbus.io import quiet_pymodbus
     from ..plc.sink import PlcOptions
 
@@ -103,24 +107,39 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
         node = NodeConfig.of("node", profile_path, "recording", path=recording)
     cfg = BridgeConfig(node=(node,), outputs={"plc": out})
     (resolved,) = resolve(cfg)
-    single = SingleNode(cfg, resolved)
-    loop = single.loop
-    where = "; ".join(s.where for s in loop.sinks)
-    click.echo(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {where}, base address "
-               f"{plc.base_address}", err=True)
-    end = None if duration_s is None else time.monotonic() + duration_s
-    next_status = time.monotonic() + status_every if status_every else None
-    with single:
-        try:
-            while end is None or time.monotonic() < end:
+    # The signals of `eskin-bus bridge`: each stopping one leaves the block reading
+    # BRIDGE_OFFLINE (SingleNode's exit), USR1 prints the counters.
+    with handled_signals() as flags:
+        single = SingleNode(cfg, resolved)
+        loop = single.loop
+        where = "; ".join(s.where for s in loop.sinks)
+        _say(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {where}, base address {plc.base_address}")
+        end = None if duration_s is None else time.monotonic() + duration_s
+        next_status = time.monotonic() + status_every if status_every else None
+        usr1 = 0
+        with single:
+            while not flags.reason and (end is None or time.monotonic() < end):
                 loop.step()
+                if flags.counters != usr1:
+                    usr1 = flags.counters
+                    _say(_counters(loop))
                 if next_status is not None and time.monotonic() >= next_status:
                     next_status += status_every
-                    click.echo(_counters(loop), err=True)
-        except KeyboardInterrupt:
-            pass
-    click.echo(_counters(loop), err=True)
+                    _say(_counters(loop))
+        _say(f"modbus-bridge: stopped ({flags.reason or 'duration'}), offline written: "
+             f"{'yes' if single.offline_written else 'no'}")
+        _say(_counters(loop))
+    if flags.failing:
+        sys.exit(EXIT_FAILED)
 
 
 def _counters(loop) -> str:
     return "modbus-bridge: " + " ".join(f"{k}={v}" for k, v in loop.counters().items())
+
+
+def _say(line: str) -> None:
+    """A line on stderr, which may be gone (a closed terminal, a dead pipe)."""
+    try:
+        click.echo(line, err=True)
+    except OSError:
+        pass
