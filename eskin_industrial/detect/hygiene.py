@@ -50,6 +50,8 @@ def time_verdicts(t: np.ndarray) -> np.ndarray:
     before it (a backward jump: every frame until time passes the newest kept one).
     The one rule the stream (:meth:`FrameHygiene.push`) and the batch code apply."""
     t = np.asarray(t, dtype=np.float64)
+    if t.size and -TIME_LIMIT_S < t[0] and t[-1] < TIME_LIMIT_S and (np.diff(t) > 0).all():
+        return np.zeros(t.shape, np.int8)  # the usual recording: every time after the one before
     ok = np.abs(t) < TIME_LIMIT_S  # False for NaN
     # the newest kept time before each frame; fmax skips NaN, so a time that is none
     # never becomes it
@@ -61,6 +63,31 @@ def time_verdicts(t: np.ndarray) -> np.ndarray:
     out[t == newest] = TIME_REPEATED
     out[~ok] = TIME_NOT_A_TIME
     return out
+
+
+#: A recording whose timestamps show a rate more than this factor away from the
+#: expected one (``--rate``, else the profile's ``rate_hz``) is refused: its times are
+#: in another unit (ms, us) or are no clock at all.
+RATE_TOLERANCE = 10.0
+
+
+def rate_problem(t: np.ndarray, expected_hz: float, what: str = "") -> str | None:
+    """Why the timestamps ``t`` cannot be a recording at ``expected_hz`` (None: they
+    can): no two kept times differ, or their median rate lies outside
+    [expected / RATE_TOLERANCE, expected x RATE_TOLERANCE].  ``what`` names where the
+    expected rate comes from, for the message."""
+    t = np.asarray(t, dtype=np.float64)
+    if t.size < 2:
+        return None
+    kept = t[time_verdicts(t) == TIME_KEPT]
+    if kept.size < 2:
+        return f"the timestamps never advance ({t.size} frames, {kept.size} usable distinct time)"
+    rate = 1.0 / float(np.median(np.diff(kept)))
+    lo, hi = expected_hz / RATE_TOLERANCE, expected_hz * RATE_TOLERANCE
+    if not lo <= rate <= hi:
+        return (f"the timestamps show {rate:.4g} Hz, implausible for {what or 'a rate of'} {expected_hz:g} Hz "
+                f"(accepted: {lo:g} to {hi:g} Hz); are the times in seconds?")
+    return None
 
 
 class FrameHygiene:

@@ -62,15 +62,16 @@ def regularize(t: np.ndarray, forces: np.ndarray, rate_hz: float, max_fill: int,
     t, forces, flags = t[keep_idx], forces[keep_idx], flags[keep_idx]
 
     # 2. sanitize values
+    given = forces
     finite = np.isfinite(forces)
-    huge = forces > FORCE_LIMIT_N  # (False for NaN; +inf counts as not finite, below)
-    huge &= finite
-    if huge.any():
-        flags |= np.where(huge.any(axis=1), _SAT, 0)
-        forces = np.where(huge, FORCE_LIMIT_N, forces)
     if not finite.all():
         flags |= np.where(finite.all(axis=1), 0, _INVALID)
         forces = forward_fill_rows(forces, finite, np.zeros(forces.shape[1]))
+    if forces.size and forces.max() > FORCE_LIMIT_N:  # rare: one reduction decides
+        # flagged where a finite force was past the limit (a held copy of one, as the
+        # stream holds the clipped value, is not), then clipped everywhere
+        flags |= np.where((finite & (given > FORCE_LIMIT_N)).any(axis=1), _SAT, 0)
+        forces = np.minimum(forces, FORCE_LIMIT_N)
     negative = forces < 0
     if negative.any():
         flags |= np.where(negative.any(axis=1), _NEG, 0)
