@@ -139,6 +139,7 @@ class Bridge:
         self._switch_interval: float | None = None
         self.failure = ""
         self.stop_reason = ""  #: the signal's name, when one stopped the bridge
+        self.failed_sources: list[str] = []  #: "node: error" of each source that failed
 
     # -- building: everything is opened before anything runs ----------------------
     def open(self) -> "Bridge":
@@ -235,7 +236,7 @@ class Bridge:
         while not stop.is_set():
             step()
             if source.done:
-                self.log.event("source_ended", node=run.name, error=source.last_error or "-")
+                self._source_end([run])
                 break
 
     def _group_loop(self, feeder: Feeder, runs: list[NodeRun]) -> None:
@@ -257,10 +258,23 @@ class Bridge:
                 serve()
             if feeder.serve_error is not None:
                 raise feeder.serve_error
-            if feeder.done:
-                self.log.event("source_ended", node=",".join(r.name for r in runs),
-                               error=sources[0].last_error or "-")
+            if feeder.done or any(src.failed for src in sources):
+                self._source_end(runs)
                 break
+
+    def _source_end(self, runs: list[NodeRun]) -> None:
+        """Finite sources have ended.  A clean end is news; a failed one (a corrupt log,
+        one of another layout) is an error: its node's image is published once more, with
+        BUS_FAULT, and the bridge will exit non-zero once no loop runs."""
+        clean = [r.name for r in runs if not r.loop.source.failed]
+        if clean:
+            self.log.event("source_ended", node=",".join(clean), error="-")
+        for run in runs:
+            source = run.loop.source
+            if source.failed:
+                self.log.event("source_failed", level="error", node=run.name, error=source.last_error)
+                run.loop.publish_if_due(True)  # BUS_FAULT now, before the loop lets go
+                self.failed_sources.append(f"{run.name}: {source.last_error}")
 
     def wait(self, duration_s: float | None = None, tick_s: float = 0.1) -> None:
         """Supervise until :meth:`request_stop`, ``duration_s``, or every source ended."""
@@ -271,6 +285,8 @@ class Bridge:
             if end is not None and time.monotonic() >= end:
                 break
             if self._threads and not any(t.is_alive() for t in self._threads):
+                if self.failed_sources and not self.failure:  # nothing runs, and a source failed
+                    self.failure = "source failed: " + "; ".join(self.failed_sources)
                 break
             self._stop.wait(tick_s)
             self.check_health()

@@ -158,6 +158,12 @@ class Source(abc.ABC):
     def last_error(self) -> str:
         return ""
 
+    @property
+    def failed(self) -> bool:
+        """A finite source ended on an error (a corrupt log, or one of another layout):
+        what it gave up to then cannot be trusted to be all there is."""
+        return self.done and bool(self.last_error)
+
     def bus_errors(self) -> int:
         """Bus errors counted since start (the register image's BUS_ERRORS)."""
         return 0
