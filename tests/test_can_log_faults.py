@@ -16,6 +16,7 @@ from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
 from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.plc.image import Status
+from eskin_industrial.plant.sparkplug import DEVICE_METRICS
 from eskin_industrial.plc.sink import PlcOptions
 from tests.helpers.bridge import PAPER, LogCapture, TimedPlc, hold_raw
 from tests.helpers.can_frames import scans_to_messages
@@ -155,3 +156,43 @@ def test_the_bridge_command_exits_non_zero_when_its_only_source_fails(paper, tmp
     assert "Traceback" not in res.stderr
     assert "source_failed" in res.stderr and "the log is truncated" in res.stderr
     assert res.stderr.strip().splitlines()[-1].startswith("eskin-bus: error: bridge stopped: source failed: ")
+
+
+@pytest.mark.slow
+def test_sparkplug_hears_the_bus_fault_then_the_device_death(paper, tmp_path):
+    from eskin_industrial.plant.sparkplug import SparkplugOptions
+    from tests.helpers import sparkplug as spb
+
+    layout = CanLayout.from_profile(paper)
+    path = tmp_path / "traffic.blf"
+    msgs = scans_to_messages(layout, np.arange(250) % 4096, hold_raw(paper, 250))
+    with can.Logger(path, max_container_size=4096) as log:  # many containers: the damage is in the last
+        for m in msgs:
+            log.on_message_received(m)
+    data = bytearray(path.read_bytes())
+    data[-100] ^= 0x10
+    path.write_bytes(bytes(data))
+    with spb.broker(tmp_path) as port:
+        cap = spb.Capture(port, tmp_path / "sub.txt")
+        try:
+            cfg = BridgeConfig(node=(NodeConfig.of("grip", PAPER, "can-log", path=str(path)),),
+                               outputs={"sparkplug": SparkplugOptions(f"mqtt://127.0.0.1:{port}", "plant1", "cell7")},
+                               log=LogSettings(format="json", status_every_s=0))
+            log_ = EventLog(LogCapture(), "json", "debug")
+            bridge = Bridge(cfg, resolve(cfg), log_)
+            bridge.open()
+            try:
+                bridge.start()
+                bridge.wait(10.0, tick_s=0.02)
+            finally:
+                bridge.stop()
+                log_.close()
+            msgs_ = cap.wait(lambda m: any("/NDEATH/" in t for t, _ in m))
+        finally:
+            cap.close()
+    assert bridge.failure.startswith("source failed: grip: ")
+    kinds = [t.split("/")[2] for t, _ in msgs_]
+    assert kinds[-2:] == ["DDEATH", "NDEATH"]
+    faults = [spb.value(m) for t, p in msgs_ if "/DDATA/" in t for m in spb.parse(p).metrics
+              if m.alias == 1000 + [d.name for d in DEVICE_METRICS].index("Bus Fault")]
+    assert faults and faults[-1] is True, (kinds, faults)

@@ -225,7 +225,9 @@ class CanLogSource(CanSource):
 
     @property
     def bus_fault(self) -> bool:
-        return bool(self._refused) or super().bus_fault
+        # the player's error ends the replay: frames it queued before are still
+        # decoded, and must not clear the fault as a live bus's frames would
+        return bool(self._refused or self.reader.last_error) or super().bus_fault
 
     @property
     def last_error(self) -> str:
