@@ -110,3 +110,58 @@ def test_state_changes_is_one_count_in_the_register_and_the_counter(paper_profil
     assert expected >= 2
     assert pipe.counters.state_changes == image.state_changes == expected
     assert decode_registers(image.render(Health(frame_age_s=0.0)), "big")["STATE_CHANGES"] == expected
+
+
+@pytest.mark.slow
+def test_lost_scans_grow_while_an_rtu_outage_lasts(paper_profile, tmp_path):
+    """Before: the failed polls reached LOST_SCANS only once a poll succeeded again
+    (BUS_ERRORS 44 and LOST_SCANS 0 at a frame age of 2.2 s)."""
+    from eskin_industrial.bridge.loop import NodeLoop
+    from eskin_industrial.bus.modbus.rtu import RtuSource
+    from eskin_industrial.sim.modbus_node import NodeSimulator
+    from eskin_industrial.sinks.base import Sink
+    from tests.helpers.modbus import pty_pair
+
+    class Keep(Sink):
+        def __init__(self):
+            super().__init__()
+            self.values: list[dict[str, int]] = []
+
+        def _publish(self, publication):
+            self.values.append(decode_registers(publication.registers, "big"))
+
+    f = grasp(300, seed=2)
+    with pty_pair(tmp_path) as (a, b):
+        node = NodeSimulator(paper_profile, a, f, 100.0).start()
+        poller = RtuSource(paper_profile, b).open()
+        sink = Keep()
+        loop = NodeLoop(paper_profile, poller, [sink])
+        try:
+            deadline = time.monotonic() + 5
+            while not poller.stats.scans >= 20:
+                assert time.monotonic() < deadline
+                loop.step()
+            node.stop()  # the node falls silent
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < 0.8:
+                loop.step()
+            loop.publish_if_due(True)
+            during = sink.values[-1]
+            failed = poller.stats.failed_polls
+            node = NodeSimulator(paper_profile, a, f, 100.0).start()
+            deadline = time.monotonic() + 5
+            while poller.consecutive_failures or not poller.stats.scans > 25:
+                assert time.monotonic() < deadline
+                loop.step()
+            loop.publish_if_due(True)
+            after = sink.values[-1]
+        finally:
+            poller.close()
+            node.stop()
+    assert during["STATUS"] & Status.BUS_FAULT and failed >= 5
+    assert during["LOST_SCANS"] == failed  # every failed poll, while the outage lasts
+    assert during["BUS_ERRORS"] >= failed
+    shown = [v["LOST_SCANS"] for v in sink.values]
+    assert shown == sorted(shown)  # never back
+    assert after["LOST_SCANS"] == loop.pipeline.counters.lost_scans == poller.stats.failed_polls
+    assert loop.counters()["lost_scans"] == after["LOST_SCANS"]

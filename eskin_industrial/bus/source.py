@@ -168,6 +168,12 @@ class Source(abc.ABC):
         """Bus errors counted since start (the register image's BUS_ERRORS)."""
         return 0
 
+    def lost_pending(self) -> int:
+        """Scans known lost in an outage under way, that no scan has confirmed yet (the
+        pipeline counts a gap only when the next scan arrives; LOST_SCANS must grow
+        while the outage lasts)."""
+        return 0
+
     def health(self, now: float | None = None) -> SourceHealth:
         return SourceHealth(self.frame_age(now), self.bus_fault, self.bus_errors(), self.last_error, self.done)
 
