@@ -56,6 +56,11 @@ class Pipeline:
         self.last_update: Update | None = None
         self._last_seq: int | None = None
 
+    def time_faults(self) -> dict[str, int]:
+        """Frames the detector refused for their time, by kind (``not_a_time``,
+        ``repeated_time``, ``backward_time``; they sum to ``dropped_by_detector``)."""
+        return dict(self.detector.time_faults)
+
     def calibrate(self, scan: RawScan) -> Frame:
         forces, flags = self.calibrator.to_newtons(scan.raw)
         return Frame(scan.seq, scan.t, forces, scan.flags | int(flags))

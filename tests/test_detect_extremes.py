@@ -115,3 +115,19 @@ def test_time_refusals_are_counted_by_kind_the_same_in_stream_and_batch(paper_pr
     det.feed(t, grasp(1000, N, seed=1))
     assert det.time_faults == counts
     assert det.dropped == sum(counts.values())
+
+
+@pytest.mark.parametrize("name", ["paper", "cof-track"])
+def test_the_pipeline_counts_them_by_kind_too(paper_profile, name):
+    from eskin_industrial.calibration import Calibrator
+    from eskin_industrial.frames import RawScan
+    from eskin_industrial.pipeline import Pipeline
+
+    raw = Calibrator.from_section(paper_profile.calibration, N).to_raw(grasp(300, N, seed=2))
+    t = np.arange(300) / RATE
+    t[10], t[20], t[200:] = math.nan, t[19], t[200:] - 1.005
+    pipe = Pipeline(paper_profile, method=name)
+    for k in range(300):
+        pipe.push(RawScan(k, float(t[k]), raw[k]))
+    assert pipe.time_faults() == {"not_a_time": 1, "repeated_time": 1, "backward_time": 100}
+    assert pipe.counters.dropped_by_detector == 102

@@ -211,6 +211,7 @@ class NodeLoop:
         c = self.pipeline.counters
         out = {"scans": c.scans, "updates": c.updates, "lost_scans": self.lost_scans(),
                "state_changes": c.state_changes, "publications": self.publications, "tares": self.tares}
+        out.update(self.pipeline.time_faults())
         out.update(self.source.counters())
         for sink in self.sinks:
             out.update(sink.counters())

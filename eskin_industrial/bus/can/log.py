@@ -147,7 +147,7 @@ def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: 
     table = UpdateTable.from_updates(replay(scans, pipeline))
     if not quiet:
         c = pipeline.counters
-        summary = {k: v for k, v in vars(c).items() if k != "extra"} | asm.counters
+        summary = {k: v for k, v in vars(c).items() if k != "extra"} | pipeline.time_faults() | asm.counters
         print(f"{path}: " + json.dumps(summary), file=sys.stderr)
     return table
 
