@@ -20,7 +20,7 @@ from ...pipeline import Pipeline
 from ...schema import in_range
 from ..source import DEFAULT_QUEUE_FRAMES, NodeLike, OpenContext
 from .layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
-from .logcheck import READ_ERRORS, check_complete, layout_mismatch
+from .logcheck import MISMATCH_FLOOR, READ_ERRORS, check_complete, layout_mismatch
 from .reader import FrameThread
 from .source import CanSource
 
@@ -211,8 +211,11 @@ class CanLogSource(CanSource):
         if self._refused:
             return None
         scan = super()._poll(timeout_s)
+        c = self.assembler.counters
+        if c["malformed_frames"] <= MISMATCH_FLOOR:  # the usual case, decided at once
+            return scan
         lay = self.assembler.layout
-        mismatch = layout_mismatch(self.assembler.counters, f"IDs {lay.base_id:#x}-{lay.base_id + ID_RANGE - 1:#x}")
+        mismatch = layout_mismatch(c, f"IDs {lay.base_id:#x}-{lay.base_id + ID_RANGE - 1:#x}")
         if mismatch is None:
             return scan
         self._refused = f"{getattr(self.reader, 'path', 'log')}: {mismatch}"
