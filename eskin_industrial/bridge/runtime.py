@@ -258,7 +258,7 @@ class Bridge:
                 serve()
             if feeder.serve_error is not None:
                 raise feeder.serve_error
-            if feeder.done or any(src.failed for src in sources):
+            if feeder.done:  # (a log refused for its layout stops its player: done too)
                 self._source_end(runs)
                 break
 
@@ -276,6 +276,12 @@ class Bridge:
                 run.loop.publish_if_due(True)  # BUS_FAULT now, before the loop lets go
                 self.failed_sources.append(f"{run.name}: {source.last_error}")
 
+    def _fail_if_sources_failed(self) -> None:
+        """A bridge whose sources have all ended, one of them failed, has failed (exit 1):
+        a service manager must restart it, not take it for a finished replay."""
+        if self.failed_sources and not self.failure and all(r.loop.source.done for r in self.runs):
+            self.failure = "source failed: " + "; ".join(self.failed_sources)
+
     def wait(self, duration_s: float | None = None, tick_s: float = 0.1) -> None:
         """Supervise until :meth:`request_stop`, ``duration_s``, or every source ended."""
         end = None if duration_s is None else time.monotonic() + duration_s
@@ -285,8 +291,7 @@ class Bridge:
             if end is not None and time.monotonic() >= end:
                 break
             if self._threads and not any(t.is_alive() for t in self._threads):
-                if self.failed_sources and not self.failure:  # nothing runs, and a source failed
-                    self.failure = "source failed: " + "; ".join(self.failed_sources)
+                self._fail_if_sources_failed()
                 break
             self._stop.wait(tick_s)
             self.check_health()
@@ -363,6 +368,7 @@ class Bridge:
         self._stop.set()
         for t in self._threads:
             t.join(timeout=5.0)
+        self._fail_if_sources_failed()
         for run in self.runs:
             run.loop.shutdown()
         offline = []
