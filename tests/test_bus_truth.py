@@ -82,6 +82,8 @@ def test_bus_off_sets_bus_fault_and_counts_in_bus_errors(paper_profile):
             after = run.block(0)
         finally:
             tx.shutdown()
+    fault = run.log.events("bus_fault")[0]
+    assert "error frames in a row" in fault["error"] and "bus-off reported" in fault["error"], fault
     assert during["STATUS"] & Status.SENSOR_STALE and not during["STATUS"] & Status.DATA_VALID
     assert during["BUS_ERRORS"] >= 1
     assert counters["error_frames"] == 50 and counters["bus_off"] == 50

@@ -380,6 +380,14 @@ class ScanAssembler:
         the node moves ``frames`` past the run's mark)."""
         return self.counters["frames"] == self._err_mark and (self._err_bus_off or self._err_run >= ERROR_RUN_FAULT)
 
+    @property
+    def error_reason(self) -> str:
+        """What :attr:`error_fault` is about, for the log ("" when there is none)."""
+        if not self.error_fault:
+            return ""
+        what = "bus-off reported" if self._err_bus_off else "no bus-off reported"
+        return f"{self._err_run} error frames in a row and no frame of the node since ({what})"
+
     def _clock_wraps(self, elapsed: float) -> bool:
         """Whether a silence of ``elapsed`` seconds is long enough for the receipt times
         to count the counter's wraps (and short enough to be a clock at all: NaN and

@@ -235,3 +235,7 @@ class CanLogSource(CanSource):
     @property
     def last_error(self) -> str:
         return self._refused or super().last_error
+
+    @property
+    def failed(self) -> bool:
+        return bool(self._refused) or super().failed

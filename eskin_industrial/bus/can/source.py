@@ -93,7 +93,13 @@ class CanSource(Source):
 
     @property
     def last_error(self) -> str:
-        return self.reader.last_error
+        return self.reader.last_error or self.assembler.error_reason
+
+    @property
+    def failed(self) -> bool:
+        # only the reader ends a source on an error (a log that cannot be read further);
+        # error frames say the bus fails, not that the source has
+        return self.done and bool(self.reader.last_error)
 
     def bus_errors(self) -> int:
         """Failed reads of the bus, and the error frames the controller reported."""
