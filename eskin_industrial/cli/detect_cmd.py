@@ -33,8 +33,9 @@ from .common import open_profile, profile_option
               help="Vectorized over the whole file, or frame by frame as the bridge runs (same output).")
 @click.option("--changes", is_flag=True, help="Write only the updates where the state changes (and the first).")
 @click.option("--fail-on-time-faults", is_flag=True,
-              help="Exit 2 (after writing the output) if any frame was refused for its time: repeated, "
-                   "backward, or no time (NaN, infinite, beyond 1e10 s).")
+              help="Exit 2 (after writing the output) if any frame of INPUT.csv was refused for its time: "
+                   "repeated, backward, or no time (NaN, infinite, beyond 1e10 s).  (A CAN log's scans are "
+                   "timed by the node's counter.)")
 @click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
 def detect(profile_path: str, input_path: str | None, can_log: str | None, output: str, method: str | None,
            rate_hz: float | None, engine: str, changes: bool, fail_on_time_faults: bool, quiet: bool) -> None:
@@ -44,6 +45,7 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
     if (input_path is None) == (can_log is None):
         raise click.UsageError("give exactly one of INPUT.csv or --can-log LOG")
     time_faults: dict[str, int] = {}
+    name = ""
     if can_log is not None:  # the live receiver's path, on recorded traffic: same output
         from ..bus.can.log import detect_log
 
@@ -51,6 +53,7 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
     else:
         assert input_path is not None  # exactly one of the two, checked above
         rec = read_recording(input_path, prof.taxels)
+        name = rec.name
         if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
             raise InputFormatError(f"--rate: expected a positive sample rate, got {rate_hz}")
         expected = rate_hz if rate_hz is not None else prof.sensor.rate_hz
@@ -85,8 +88,7 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
     write_updates(output, table)
     refused = sum(time_faults.values())
     if fail_on_time_faults and refused:
-        assert input_path is not None  # only a recording's times are its own
-        raise InputFormatError(f"{input_path}: {refused} frames refused for their time ({_faults(time_faults)}); "
+        raise InputFormatError(f"{name}: {refused} frames refused for their time ({_faults(time_faults)}); "
                                "--fail-on-time-faults")
 
 
