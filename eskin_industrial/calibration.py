@@ -23,6 +23,16 @@ _NO_FLAGS = np.zeros((), dtype=np.int64)  # the flags of a clean scan (shared: r
 _NO_FLAGS.flags.writeable = False
 
 
+def full_scale(forces: np.ndarray, full_scale_n: float) -> tuple[np.ndarray, np.ndarray]:
+    """Forces already in newtons (a recording in N) held to the rule a calibrated scan
+    follows: at or over ``full_scale_n`` they are kept at full scale and set SATURATED.
+    Returns the forces and per-scan flags (shape ``forces.shape[:-1]``)."""
+    forces = np.asarray(forces, dtype=np.float64)
+    saturated = forces >= full_scale_n  # (False for NaN: the detector flags those INVALID)
+    flags = np.where(saturated.any(axis=-1), int(FrameFlag.SATURATED), 0).astype(np.int64)
+    return np.minimum(forces, full_scale_n, where=saturated, out=forces.copy()), flags
+
+
 @dataclass(frozen=True)
 class Calibrator:
     zero: np.ndarray  #: reading at 0 N, per taxel, in the raw unit

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from .calibration import Calibrator
 from .detect.learned import Model
 from .detect.methods import get_method
-from .detect.updates import Update
+from .detect.updates import Update, state_changed
 from .frames import Frame, FrameFlag, RawScan
 from .profile import Profile
 
@@ -26,7 +26,7 @@ class Counters:
     saturated_scans: int = 0
     lost_scans: int = 0  #: gaps in the sequence numbers
     dropped_by_detector: int = 0  #: duplicate or out-of-order times
-    state_changes: int = 0
+    state_changes: int = 0  #: :func:`~.detect.updates.state_changed` (the STATE_CHANGES register's count)
     extra: dict[str, int] = field(default_factory=dict)  #: transport-specific counters
 
 
@@ -56,6 +56,11 @@ class Pipeline:
         self.last_update: Update | None = None
         self._last_seq: int | None = None
 
+    def time_faults(self) -> dict[str, int]:
+        """Frames the detector refused for their time, by kind (``not_a_time``,
+        ``repeated_time``, ``backward_time``; they sum to ``dropped_by_detector``)."""
+        return dict(self.detector.time_faults)
+
     def calibrate(self, scan: RawScan) -> Frame:
         forces, flags = self.calibrator.to_newtons(scan.raw)
         return Frame(scan.seq, scan.t, forces, scan.flags | int(flags))
@@ -77,7 +82,7 @@ class Pipeline:
         updates = self.detector.push(frame.t, frame.forces, frame.flags)
         c.dropped_by_detector += self.detector.dropped - before
         for u in updates:
-            if self.last_update is None or u.state != self.last_update.state:
+            if state_changed(self.last_update, u):
                 c.state_changes += 1
             self.last_update = u
         c.updates += len(updates)

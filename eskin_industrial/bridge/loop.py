@@ -51,6 +51,7 @@ class NodeLoop:
         self.publications = 0
         self._last_pub = float("-inf")
         self._last_status = -1
+        self._lost_shown = 0
         self._refresh_s = profile.modbus.plc.refresh_s
         self._stop = threading.Event()
         self.on_update = on_update
@@ -74,7 +75,17 @@ class NodeLoop:
     def health(self, now: float | None = None) -> Health:
         src = self.source
         return Health(frame_age_s=src.frame_age(now), bus_fault=src.bus_fault,
-                      lost_scans=self.pipeline.counters.lost_scans, bus_errors=src.bus_errors())
+                      lost_scans=self.lost_scans(), bus_errors=src.bus_errors())
+
+    def lost_scans(self) -> int:
+        """Gaps the pipeline counted, plus the scans an outage under way has lost so far
+        (LOST_SCANS grows while it lasts); never less than shown before, so a PLC that
+        takes differences never sees it go back when the outage's estimate is confirmed."""
+        lost = self.pipeline.counters.lost_scans + self.source.lost_pending()
+        if lost < self._lost_shown:
+            return self._lost_shown
+        self._lost_shown = lost
+        return lost
 
     def step(self, timeout_s: float | None = None) -> bool:
         """One poll (waiting up to ``timeout_s`` for traffic, default: until a
@@ -212,9 +223,10 @@ class NodeLoop:
 
     def counters(self) -> dict[str, int]:
         c = self.pipeline.counters
-        out = {"scans": c.scans, "updates": c.updates, "lost_scans": c.lost_scans,
+        out = {"scans": c.scans, "updates": c.updates, "lost_scans": self.lost_scans(),
                "state_changes": c.state_changes, "publications": self.publications, "tares": self.tares,
                "tares_refused": self.tares_refused}
+        out.update(self.pipeline.time_faults())
         out.update(self.source.counters())
         for sink in self.sinks:
             out.update(sink.counters())

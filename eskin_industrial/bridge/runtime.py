@@ -149,6 +149,7 @@ class Bridge:
         self._switch_interval: float | None = None
         self.failure = ""
         self.stop_reason = ""  #: the signal's name, when one stopped the bridge
+        self.failed_sources: list[str] = []  #: "node: error" of each source that failed
 
     # -- building: everything is opened before anything runs ----------------------
     def open(self) -> "Bridge":
@@ -249,7 +250,7 @@ class Bridge:
             step()
             beats[beat] += 1
             if source.done:
-                self.log.event("source_ended", node=run.name, error=source.last_error or "-")
+                self._source_end([run])
                 break
 
     def _group_loop(self, feeder: Feeder, runs: list[NodeRun], beat: int) -> None:
@@ -272,10 +273,29 @@ class Bridge:
             beats[beat] += 1
             if feeder.serve_error is not None:
                 raise feeder.serve_error
-            if feeder.done:
-                self.log.event("source_ended", node=",".join(r.name for r in runs),
-                               error=sources[0].last_error or "-")
+            if feeder.done:  # (a log refused for its layout stops its player: done too)
+                self._source_end(runs)
                 break
+
+    def _source_end(self, runs: list[NodeRun]) -> None:
+        """Finite sources have ended.  A clean end is news; a failed one (a corrupt log,
+        one of another layout) is an error: its node's image is published once more, with
+        BUS_FAULT, and the bridge will exit non-zero once no loop runs."""
+        clean = [r.name for r in runs if not r.loop.source.failed]
+        if clean:
+            self.log.event("source_ended", node=",".join(clean), error="-")
+        for run in runs:
+            source = run.loop.source
+            if source.failed:
+                self.log.event("source_failed", level="error", node=run.name, error=source.last_error)
+                run.loop.publish_if_due(True)  # BUS_FAULT now, before the loop lets go
+                self.failed_sources.append(f"{run.name}: {source.last_error}")
+
+    def _fail_if_sources_failed(self) -> None:
+        """A bridge whose sources have all ended, one of them failed, has failed (exit 1):
+        a service manager must restart it, not take it for a finished replay."""
+        if self.failed_sources and not self.failure and all(r.loop.source.done for r in self.runs):
+            self.failure = "source failed: " + "; ".join(self.failed_sources)
 
     def wait(self, duration_s: float | None = None, tick_s: float = 0.1, signals: SignalFlags | None = None) -> None:
         """Supervise until :meth:`request_stop`, a stopping signal in ``signals``,
@@ -299,6 +319,7 @@ class Bridge:
             if end is not None and time.monotonic() >= end:
                 break
             if self._threads and not any(t.is_alive() for t in self._threads):
+                self._fail_if_sources_failed()
                 break
             if next_feed is not None and feed_every is not None and time.monotonic() >= next_feed:
                 next_feed = time.monotonic() + feed_every
@@ -396,6 +417,7 @@ class Bridge:
         self.notifier.stopping(f"stopping: {self.stop_reason or ('failure' if self.failure else 'end')}")
         for t in self._threads:
             t.join(timeout=5.0)
+        self._fail_if_sources_failed()
         for run in self.runs:
             self._guarded(run.loop.shutdown)  # one node's failure does not keep the others online
         offline = []

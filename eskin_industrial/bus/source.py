@@ -160,8 +160,20 @@ class Source(abc.ABC):
     def last_error(self) -> str:
         return ""
 
+    @property
+    def failed(self) -> bool:
+        """A finite source ended on an error (a corrupt log, or one of another layout):
+        what it gave up to then cannot be trusted to be all there is."""
+        return self.done and bool(self.last_error)
+
     def bus_errors(self) -> int:
         """Bus errors counted since start (the register image's BUS_ERRORS)."""
+        return 0
+
+    def lost_pending(self) -> int:
+        """Scans known lost in an outage under way, that no scan has confirmed yet (the
+        pipeline counts a gap only when the next scan arrives; LOST_SCANS must grow
+        while the outage lasts)."""
         return 0
 
     def health(self, now: float | None = None) -> SourceHealth:

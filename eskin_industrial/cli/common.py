@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import click
 import numpy as np
 
-from ..calibration import Calibrator
+from ..calibration import Calibrator, full_scale
 from ..errors import InputFormatError
 from ..profile import Profile, load_profile
 from ..recording import read_recording
@@ -98,4 +98,4 @@ def scene_or_recording(prof: Profile, scene: str | None, recording: str | None, 
     if rec.unit == "raw":
         forces, _ = Calibrator.from_section(prof.calibration, prof.taxels).to_newtons(rec.values)
         return NodeScans(rec.t, forces, rate, rec.values)
-    return NodeScans(rec.t, rec.values, rate)
+    return NodeScans(rec.t, full_scale(rec.values, prof.calibration.full_scale_n)[0], rate)

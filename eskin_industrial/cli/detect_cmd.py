@@ -7,7 +7,8 @@ import sys
 import click
 import numpy as np
 
-from ..calibration import Calibrator
+from ..calibration import Calibrator, full_scale
+from ..detect.hygiene import TIME_FAULTS, rate_problem, time_verdicts
 from ..detect.methods import METHODS, get_method
 from ..detect.state import GraspState
 from ..detect.updates import COLUMNS, UpdateTable
@@ -31,14 +32,20 @@ from .common import open_profile, profile_option
 @click.option("--engine", type=click.Choice(["batch", "stream"]), default="batch", show_default=True,
               help="Vectorized over the whole file, or frame by frame as the bridge runs (same output).")
 @click.option("--changes", is_flag=True, help="Write only the updates where the state changes (and the first).")
+@click.option("--fail-on-time-faults", is_flag=True,
+              help="Exit 2 (after writing the output) if any frame of INPUT.csv was refused for its time: "
+                   "repeated, backward, or no time (NaN, infinite, beyond 1e10 s).  (A CAN log's scans are "
+                   "timed by the node's counter.)")
 @click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
 def detect(profile_path: str, input_path: str | None, can_log: str | None, output: str, method: str | None,
-           rate_hz: float | None, engine: str, changes: bool, quiet: bool) -> None:
+           rate_hz: float | None, engine: str, changes: bool, fail_on_time_faults: bool, quiet: bool) -> None:
     """Detect grasp states in a recording CSV (header t,f0,...,f{n-1} in newtons,
     or t,raw0,... in the profile's raw unit), or in a CAN log (--can-log)."""
     prof = open_profile(profile_path)
     if (input_path is None) == (can_log is None):
         raise click.UsageError("give exactly one of INPUT.csv or --can-log LOG")
+    time_faults: dict[str, int] = {}
+    name = ""
     if can_log is not None:  # the live receiver's path, on recorded traffic: same output
         from ..bus.can.log import detect_log
 
@@ -46,13 +53,21 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
     else:
         assert input_path is not None  # exactly one of the two, checked above
         rec = read_recording(input_path, prof.taxels)
-        flags = None
+        name = rec.name
+        if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
+            raise InputFormatError(f"--rate: expected a positive sample rate, got {rate_hz}")
+        expected = rate_hz if rate_hz is not None else prof.sensor.rate_hz
+        problem = rate_problem(rec.t, expected, "--rate" if rate_hz is not None else f"profile {prof.name}'s rate_hz")
+        if problem is not None:
+            raise InputFormatError(f"{rec.name}: {problem}")
         values = rec.values
         if rec.unit == "raw":
             values, flags = Calibrator.from_section(prof.calibration, prof.taxels).to_newtons(values)
+        else:  # newtons: the same full-scale rule as a calibrated scan
+            values, flags = full_scale(values, prof.calibration.full_scale_n)
+        verdicts = time_verdicts(rec.t)
+        time_faults = {name: int(np.count_nonzero(verdicts == code)) for code, name in TIME_FAULTS.items()}
         rate = rate_hz if rate_hz is not None else rec.rate_hz(prof.sensor.rate_hz)
-        if not (rate > 0 and np.isfinite(rate)):
-            raise InputFormatError(f"--rate: expected a positive sample rate, got {rate}")
         settings = prof.detector
         chosen = get_method(method or settings.method)
         if chosen.needs_model:  # learned: the default model, trained on the tuning seeds
@@ -65,21 +80,32 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
         else:
             table = UpdateTable.from_updates(chosen.stream(settings, x, y, rate).feed(rec.t, values, flags))
         if not quiet:
-            _summary(rec.name, len(rec.t), rate, chosen.name, table)
+            _summary(rec.name, len(rec.t), rate, chosen.name, table, time_faults)
     if changes:
         keep = np.ones(len(table), bool)
         keep[1:] = table.state[1:] != table.state[:-1]
         table = UpdateTable(**{c: getattr(table, c)[keep] for c in COLUMNS})
     write_updates(output, table)
+    refused = sum(time_faults.values())
+    if fail_on_time_faults and refused:
+        raise InputFormatError(f"{name}: {refused} frames refused for their time ({_faults(time_faults)}); "
+                               "--fail-on-time-faults")
 
 
-def _summary(name: str, frames: int, rate: float, method: str, table: UpdateTable) -> None:
+def _faults(time_faults: dict[str, int]) -> str:
+    return ", ".join(f"{k} {v}" for k, v in time_faults.items() if v)
+
+
+def _summary(name: str, frames: int, rate: float, method: str, table: UpdateTable,
+             time_faults: dict[str, int]) -> None:
     counts = {s.label: int(np.sum(table.state == s)) for s in GraspState}
     flagged = int(np.sum(table.flags & ~int(FrameFlag.WARMUP) != 0))
     states = ", ".join(f"{k} {v}" for k, v in counts.items())
+    refused = sum(time_faults.values())
     click.echo(
         f"{name}: {frames} frames at {rate:.1f} Hz, method {method} -> {len(table)} updates "
-        f"({int(table.valid.sum())} valid, {flagged} with flagged frames); {states}",
+        f"({int(table.valid.sum())} valid, {flagged} with flagged frames); {states}; "
+        f"{refused} frames refused for their time" + (f" ({_faults(time_faults)})" if refused else ""),
         err=True,
     )
     sys.stderr.flush()

@@ -32,6 +32,10 @@ class PaperDetector:
     def dropped(self) -> int:
         return self.indicators.dropped
 
+    @property
+    def time_faults(self) -> dict[str, int]:
+        return self.indicators.time_faults
+
     def push(self, t: float, forces: np.ndarray, flags: int = 0) -> list[Update]:
         raw = self.indicators.push(t, forces, flags)
         if not raw:

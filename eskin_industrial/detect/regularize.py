@@ -1,9 +1,11 @@
 """Make a recording fit for the detector: the batch form of what the stream does
 frame by frame (see :class:`~eskin_industrial.detect.stream.IndicatorStream`).
 
-1. A frame whose timestamp is not after every earlier one (duplicate, out of order,
-   NaN) is dropped; the next kept frame carries DUPLICATE.
-2. A non-finite force is replaced by that taxel's last finite value (0 before any),
+1. A frame whose timestamp is not after every earlier kept one (duplicate, out of
+   order) or is no time (NaN, infinite, beyond +-1e10 s) is dropped
+   (:func:`~.hygiene.time_verdicts`); the next kept frame carries DUPLICATE.
+2. A force beyond :data:`~.hygiene.FORCE_LIMIT_N` is clipped to it, flag SATURATED;
+   a non-finite force is replaced by that taxel's last finite value (0 before any),
    flag INVALID; a negative force becomes 0, flag NEGATIVE.
 3. A gap of ``m`` missing periods (``m = round(dt * rate) - 1``) is filled with ``m``
    copies of the previous frame (flag FILLED) when ``m <= max_fill``, so that the lag
@@ -16,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .hygiene import _DUP, _FILLED, _GAP, _INVALID, _NEG, _RESET
+from .hygiene import _DUP, _FILLED, _GAP, _INVALID, _NEG, _RESET, _SAT, FORCE_LIMIT_N, TIME_KEPT, time_verdicts
 
 
 @dataclass(frozen=True)
@@ -49,12 +51,8 @@ def regularize(t: np.ndarray, forces: np.ndarray, rate_hz: float, max_fill: int,
         raise ValueError(f"expected forces of shape (len(t), taxels), got {forces.shape} for {t.shape[0]} timestamps")
     flags = np.zeros(t.shape[0], np.int64) if flags is None else np.asarray(flags, dtype=np.int64).copy()
 
-    # 1. drop frames whose time does not advance (fmax ignores NaN in the running max)
-    before = np.empty_like(t)
-    if t.size:
-        before[0] = -np.inf
-        before[1:] = np.fmax.accumulate(t)[:-1]
-    keep = t > before  # False for NaN
+    # 1. drop frames whose time does not advance, or is no time
+    keep = time_verdicts(t) == TIME_KEPT
     keep_idx = np.flatnonzero(keep)
     dropped_idx = np.flatnonzero(~keep)
     if dropped_idx.size and keep_idx.size:
@@ -64,10 +62,16 @@ def regularize(t: np.ndarray, forces: np.ndarray, rate_hz: float, max_fill: int,
     t, forces, flags = t[keep_idx], forces[keep_idx], flags[keep_idx]
 
     # 2. sanitize values
+    given = forces
     finite = np.isfinite(forces)
     if not finite.all():
         flags |= np.where(finite.all(axis=1), 0, _INVALID)
         forces = forward_fill_rows(forces, finite, np.zeros(forces.shape[1]))
+    if forces.size and forces.max() > FORCE_LIMIT_N:  # rare: one reduction decides
+        # flagged where a finite force was past the limit (a held copy of one, as the
+        # stream holds the clipped value, is not), then clipped everywhere
+        flags |= np.where((finite & (given > FORCE_LIMIT_N)).any(axis=1), _SAT, 0)
+        forces = np.minimum(forces, FORCE_LIMIT_N)
     negative = forces < 0
     if negative.any():
         flags |= np.where(negative.any(axis=1), _NEG, 0)
@@ -77,7 +81,9 @@ def regularize(t: np.ndarray, forces: np.ndarray, rate_hz: float, max_fill: int,
     k = t.shape[0]
     missing = np.zeros(k, np.int64)
     if k > 1:
-        missing[1:] = np.maximum(np.rint(np.diff(t) * rate_hz).astype(np.int64) - 1, 0)
+        # (clipped before the cast: a gap of 2e10 s at a high rate overflows an int64)
+        steps = np.minimum(np.rint(np.diff(t) * rate_hz), max_fill + 2.0)
+        missing[1:] = np.maximum(steps.astype(np.int64) - 1, 0)
     reset = missing > max_fill
     fill = np.where(reset, 0, missing)
     flags |= np.where(missing > 0, _GAP, 0) | np.where(reset, _RESET, 0)

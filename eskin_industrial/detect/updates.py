@@ -28,6 +28,14 @@ class Update(NamedTuple):
     flags: int  #: OR of the hop's frame flags plus WARMUP / SHORT_WINDOW / RESET
 
 
+def state_changed(before: Update | None, update: Update) -> bool:
+    """The one definition of a state change, for the STATE_CHANGES register and the
+    ``state_changes`` counter alike: ``update``'s state code differs from the previous
+    update's.  The first update changes nothing, and a change of validity alone (a
+    warm-up after a gap) is none: DATA_VALID says that."""
+    return before is not None and before.state != update.state
+
+
 @dataclass(frozen=True)
 class UpdateTable:
     """Columns of updates; ``len()`` is the number of updates."""

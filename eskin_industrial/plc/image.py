@@ -27,7 +27,7 @@ from ..bus.modbus.codec import (
     split32,
 )
 from ..detect.state import GraspState
-from ..detect.updates import Update
+from ..detect.updates import Update, state_changed
 from ..errors import Refused
 from ..profile import ModbusPlcSection
 
@@ -66,7 +66,8 @@ BIT_DOC: dict[Status, str] = {
     Status.SLIP_LATCHED: "a slip was seen since the last acknowledge (stays set while slip lasts)",
     Status.DATA_VALID: "the state is a verdict: indicators valid, sensor fresh, no bus fault, enabled",
     Status.SENSOR_STALE: "no scan from the sensor for longer than stale_s (default 2.5 scan periods)",
-    Status.BUS_FAULT: "the sensor bus fails (consecutive polls failed, or the node is unreachable)",
+    Status.BUS_FAULT: "the sensor bus fails: consecutive polls failed (RTU); reads fail, or bus-off or a run of "
+                      "error frames with nothing of the node since (CAN)",
     Status.BRIDGE_ALIVE: "toggles at every publication (life bit; HEARTBEAT counts the same)",
     Status.ENABLED: "detection enabled by the PLC (ENABLE register)",
     Status.BRIDGE_OFFLINE: "the bridge has shut down (last image it wrote); no state is claimed",
@@ -100,9 +101,10 @@ REGISTERS: tuple[Register, ...] = (
     Register("HEARTBEAT", 8, "u16", "count", "+1 at every publication, wraps at 65535"),
     Register("FRAME_AGE", 9, "u16", "ms", "age of the newest frame at publication, 65535 = none or older"),
     Register("SLIP_EVENTS", 10, "u32", "count", "entries into slip since start"),
-    Register("STATE_CHANGES", 12, "u32", "count", "state changes since start"),
+    Register("STATE_CHANGES", 12, "u32", "count", "changes of STATE since start (not of validity; the first state is none)"),
     Register("LOST_SCANS", 14, "u32", "count", "scans lost: failed polls and sequence gaps"),
-    Register("BUS_ERRORS", 16, "u32", "count", "timeouts + CRC/framing errors + exception responses"),
+    Register("BUS_ERRORS", 16, "u32", "count",
+             "RTU: timeouts + CRC/framing errors + exception responses; CAN: failed reads + error frames"),
     Register("FLAGS", 18, "u16", "bits", "frame/update flags of the newest update (FrameFlag, low 16 bits)"),
     Register("RESERVED", 19, "u16", "-", "reads 0 (room for a later value)"),
     Register("COMMAND", 20, "bits", "-", "write: bit 0 acknowledge slip latch, bit 1 tare; reads 0 once done",
@@ -269,7 +271,7 @@ class PlcImage:
         before = self.update
         self.update = update
         changed = before is None or before.state != update.state or before.valid != update.valid
-        if changed and before is not None:
+        if state_changed(before, update):  # (a change of validity alone is urgent, but no state change)
             self.state_changes += 1
         if update.state == GraspState.SLIP and (before is None or before.state != GraspState.SLIP):
             self.slip_events += 1

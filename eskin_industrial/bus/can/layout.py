@@ -258,6 +258,10 @@ ASSEMBLER_COUNTERS = (
 )
 
 _CAN_ERR_BUSOFF = 0x040  # linux/can/error.h: error class bit in the error frame's ID
+#: Error frames in a row, with no frame of the node between, that make a bus fault
+#: (one bus-off report does at once): one error frame between scans is noise; a run
+#: of them with nothing else is a controller that cannot talk (error passive, no ACK).
+ERROR_RUN_FAULT = 5
 #: Receipt-time gaps from this long on are no clock (a garbled log, a clock jump of
 #: decades): the unwrap then trusts the counter alone.  It also bounds the wraps the
 #: clock can add, so ``RawScan.t`` stays a finite float.
@@ -295,6 +299,11 @@ class ScanAssembler:
         self._last12: int | None = None  # counter of the last delivered scan
         self._last_rx = math.nan
         self._abs = 0
+        # the newest run of error frames: ``frames`` when it began (a frame of the node
+        # since ends it), its length, and whether it reported bus-off
+        self._err_mark = -1
+        self._err_run = 0
+        self._err_bus_off = False
         # half the counter's period, in seconds: beyond it, receipt times count wraps
         self._horizon = (SEQ_MODULO / 2) / self.rate_hz
 
@@ -302,8 +311,13 @@ class ScanAssembler:
         c = self.counters
         if msg.is_error_frame:
             c["error_frames"] += 1
-            if msg.arbitration_id & _CAN_ERR_BUSOFF:
+            bus_off = bool(msg.arbitration_id & _CAN_ERR_BUSOFF)
+            if bus_off:
                 c["bus_off"] += 1
+            if c["frames"] != self._err_mark:  # a frame of the node came since: a new run
+                self._err_mark, self._err_run, self._err_bus_off = c["frames"], 0, False
+            self._err_run += 1
+            self._err_bus_off |= bus_off
             return None
         can_id = msg.arbitration_id
         if not (self._lo <= can_id < self._hi) or msg.is_extended_id != self.layout.extended_id:
@@ -358,6 +372,21 @@ class ScanAssembler:
         if self._have != self._full:
             return None
         return self._emit(seq, rx)
+
+    @property
+    def error_fault(self) -> bool:
+        """The controller reported bus-off, or ERROR_RUN_FAULT error frames in a row,
+        and no frame of the node has come since (no cost per data frame: a frame of
+        the node moves ``frames`` past the run's mark)."""
+        return self.counters["frames"] == self._err_mark and (self._err_bus_off or self._err_run >= ERROR_RUN_FAULT)
+
+    @property
+    def error_reason(self) -> str:
+        """What :attr:`error_fault` is about, for the log ("" when there is none)."""
+        if not self.error_fault:
+            return ""
+        what = "bus-off reported" if self._err_bus_off else "no bus-off reported"
+        return f"{self._err_run} error frames in a row and no frame of the node since ({what})"
 
     def _clock_wraps(self, elapsed: float) -> bool:
         """Whether a silence of ``elapsed`` seconds is long enough for the receipt times

@@ -21,6 +21,7 @@ from ...preflight import check_readable
 from ...schema import in_range
 from ..source import DEFAULT_QUEUE_FRAMES, NodeLike, OpenContext
 from .layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
+from .logcheck import MISMATCH_FLOOR, READ_ERRORS, check_complete, layout_mismatch
 from .reader import FrameThread
 from .source import CanSource
 
@@ -30,7 +31,8 @@ class LogPlayer(FrameThread):
 
     Frames keep their relative timing; their timestamps are moved to the replay's
     clock (the assembler times scans by them).  A log that fails to parse half-way
-    stops the replay; the error is kept in ``last_error``.
+    stops the replay; the error is kept in ``last_error`` and counted in
+    ``bus_errors`` (the node's source then reports ``failed``).
     """
 
     thread_name = "can-log-player"
@@ -65,6 +67,9 @@ class LogPlayer(FrameThread):
         except EskinError as exc:
             self.last_error = str(exc)
             self.counters["bus_errors"] += 1
+        except Exception as exc:  # noqa: BLE001 - whatever a reader raises ends the replay as a failure, never a traceback
+            self.last_error = f"{self.path}: {type(exc).__name__}: {exc}"
+            self.counters["bus_errors"] += 1
         finally:
             self.done = True
             self.arrived.set()
@@ -72,22 +77,45 @@ class LogPlayer(FrameThread):
 
 def read_can_log(path: str | Path) -> Iterator[can.Message]:
     """Messages of a CAN log in any format python-can reads (``.log``, ``.blf``,
-    ``.asc``, ``.trc``, ``.csv``, ...); a file that does not parse is one line."""
+    ``.asc``, ``.trc``, ``.csv``, ...); a file that does not parse, or was cut short,
+    is one :class:`InputFormatError` line naming the message and, where the format
+    has one, the byte."""
     path = Path(path)
     if not path.is_file():
         raise InputFormatError(f"{path}: cannot read CAN log: no such file")
     try:
+        check_complete(path)  # python-can's readers stop silently at a cut record
         reader = can.LogReader(path)
-    except (ValueError, OSError) as exc:
-        raise InputFormatError(f"{path}: cannot read CAN log: {exc}") from None
+    except InputFormatError:
+        raise
+    except READ_ERRORS as exc:
+        raise InputFormatError(f"{path}: cannot read CAN log: {_detail(exc)}") from None
     count = 0
-    try:
-        with reader:
+    with reader:
+        try:
             for msg in reader:
                 count += 1
                 yield msg
-    except (ValueError, IndexError, OSError, can.CanError) as exc:
-        raise InputFormatError(f"{path}: message {count + 1}: not a valid log entry: {exc}") from None
+        except READ_ERRORS as exc:  # (the position is read while the file is still open)
+            raise InputFormatError(f"{path}: message {count + 1}{_at_byte(reader)}: not a valid log entry: "
+                                   f"{_detail(exc)}") from None
+
+
+def _detail(exc: BaseException) -> str:
+    kind = type(exc).__name__
+    if kind == "error":  # zlib.error, struct.error: the module says what it is
+        kind = f"{type(exc).__module__}.error"
+    text = str(exc).splitlines()[0] if str(exc) else ""
+    return f"{kind}: {text}" if text else kind
+
+
+def _at_byte(reader: object) -> str:
+    """", near byte N" for a binary log (a text reader cannot tell while it iterates)."""
+    f = getattr(reader, "file", None)
+    try:
+        return f", near byte {f.tell()}" if f is not None and "b" in getattr(f, "mode", "") else ""
+    except (OSError, ValueError):
+        return ""
 
 
 def replay(scans: list[RawScan], pipeline: Pipeline) -> list[Update]:
@@ -113,13 +141,21 @@ def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: 
     table, and (unless ``quiet``) the counters on stderr."""
     rate = rate_hz or profile.sensor.rate_hz
     scans, asm = log_scans(profile, path, rate)
+    mismatch = layout_mismatch(asm.counters, _ids(profile))
+    if mismatch is not None:  # never "valid" verdicts from frames read with the wrong layout
+        raise InputFormatError(f"{path}: {mismatch}")
     pipeline = Pipeline(profile, rate_hz=rate, method=method)
     table = UpdateTable.from_updates(replay(scans, pipeline))
     if not quiet:
         c = pipeline.counters
-        summary = {k: v for k, v in vars(c).items() if k != "extra"} | asm.counters
+        summary = {k: v for k, v in vars(c).items() if k != "extra"} | pipeline.time_faults() | asm.counters
         print(f"{path}: " + json.dumps(summary), file=sys.stderr)
     return table
+
+
+def _ids(profile) -> str:
+    lo = profile.can.base_id
+    return f"IDs {lo:#x}-{lo + ID_RANGE - 1:#x} (profile {profile.name})"
 
 
 @dataclass(frozen=True)
@@ -168,3 +204,39 @@ class CanLogSource(CanSource):
 
     def describe_where(self) -> str:
         return f"log {getattr(self.reader, 'path', '?')}"
+
+    # -- a log is checked, not trusted: frames that do not fit the layout fail it ----
+    _refused = ""
+
+    def _poll(self, timeout_s: float | None) -> RawScan | None:
+        if self._refused:
+            return None
+        scan = super()._poll(timeout_s)
+        c = self.assembler.counters
+        if c["malformed_frames"] <= MISMATCH_FLOOR:  # the usual case, decided at once
+            return scan
+        lay = self.assembler.layout
+        mismatch = layout_mismatch(c, f"IDs {lay.base_id:#x}-{lay.base_id + ID_RANGE - 1:#x}")
+        if mismatch is None:
+            return scan
+        self._refused = f"{getattr(self.reader, 'path', 'log')}: {mismatch}"
+        self.reader.stop()  # the replay ends here: no verdict comes from it
+        return None
+
+    @property
+    def done(self) -> bool:
+        return bool(self._refused) or super().done
+
+    @property
+    def bus_fault(self) -> bool:
+        # the player's error ends the replay: frames it queued before are still
+        # decoded, and must not clear the fault as a live bus's frames would
+        return bool(self._refused or self.reader.last_error) or super().bus_fault
+
+    @property
+    def last_error(self) -> str:
+        return self._refused or super().last_error
+
+    @property
+    def failed(self) -> bool:
+        return bool(self._refused) or super().failed

@@ -92,8 +92,9 @@ class CanSource(Source):
         ready = self._ready
         while not ready and q:
             scan = self.assembler.feed(q.popleft())
-            self._errors_seen = self.reader.counters["bus_errors"]  # a frame arrived: the bus works
             if scan is not None:
+                # a scan arrived: the bus works (an error frame, which also arrives, does not say so)
+                self._errors_seen = self.reader.counters["bus_errors"]
                 ready.append(scan)
         return ready.popleft() if ready else None
 
@@ -103,8 +104,9 @@ class CanSource(Source):
 
     @property
     def bus_fault(self) -> bool:
-        """Bus errors were reported and no frame has arrived since."""
-        return self.reader.counters["bus_errors"] > self._errors_seen
+        """The bus failed to read and no scan has arrived since, or the controller
+        reports bus-off or a run of error frames and no frame of the node came since."""
+        return self.reader.counters["bus_errors"] > self._errors_seen or self.assembler.error_fault
 
     @property
     def done(self) -> bool:
@@ -112,10 +114,17 @@ class CanSource(Source):
 
     @property
     def last_error(self) -> str:
-        return self.reader.last_error
+        return self.reader.last_error or self.assembler.error_reason
+
+    @property
+    def failed(self) -> bool:
+        # only the reader ends a source on an error (a log that cannot be read further);
+        # error frames say the bus fails, not that the source has
+        return self.done and bool(self.reader.last_error)
 
     def bus_errors(self) -> int:
-        return self.reader.counters["bus_errors"]
+        """Failed reads of the bus, and the error frames the controller reported."""
+        return self.reader.counters["bus_errors"] + self.assembler.counters["error_frames"]
 
     def counters(self) -> dict[str, int]:
         return {**self.assembler.counters, **self.feeder.counters()}

@@ -7,7 +7,9 @@ clock, with a scan polled twice used once).  A failed read is retried within the
 number is skipped, so the pipeline counts it) and never blocks longer than
 ``(retries + 1) x timeout_s``.  Timeouts, garbled frames (bad CRC) and exception
 responses are counted apart; ``bus_fault`` is set after ``fault_after_failures``
-consecutive failed polls and cleared by the next good one.
+consecutive failed polls and cleared by the next good one.  The failed polls of an
+outage under way are lost scans at once (:meth:`RtuSource.lost_pending`), not only
+when a poll succeeds again.
 """
 
 from __future__ import annotations
@@ -168,6 +170,17 @@ class RtuSource(Source):
 
     def bus_errors(self) -> int:
         return self.stats.bus_errors
+
+    def lost_pending(self) -> int:
+        """The failed polls since the last good one, once a scan was delivered (the
+        pipeline counts a gap from there); with a scan counter, the node scans those
+        polls spanned at least (``poll_hz`` paces polls, a failed one takes longer)."""
+        n = self.consecutive_failures
+        if not n or not self.stats.scans:
+            return 0
+        if self.node.counter_register:
+            return int(n * min(1.0, self.node_rate_hz / self.poll_hz))
+        return n
 
     def counters(self) -> dict[str, int]:
         return self.stats.as_dict()
