@@ -105,7 +105,7 @@ def test_recorded_traffic_replays_to_the_live_output(paper_profile, tmp_path, su
     log.stop()
     live = tmp_path / "live.csv"
     write_updates(live, UpdateTable.from_updates(source.updates))
-    res = cli("detect", "--profile", PAPER, "--can-log", str(log_path), "-o", str(tmp_path / "replay.csv"))
+    res = cli("detect", "--profile", PAPER, "--can-log", str(log_path), "-o", str(tmp_path / "replay.csv"), "--json")
     assert res.returncode == 0, res.stderr
     assert (tmp_path / "replay.csv").read_text() == live.read_text()
     assert '"lost_scans": %d' % source.pipeline.counters.lost_scans in res.stderr

@@ -92,7 +92,8 @@ def test_a_truncated_blf_whose_header_was_never_closed_is_found_by_its_objects(p
 
 @pytest.mark.parametrize("suffix", [".blf", ".asc", ".log"])
 def test_an_intact_log_still_decodes(paper, tmp_path, suffix):
-    res = cli("detect", "-p", PAPER, "--can-log", str(good_log(tmp_path, paper, suffix)), "-o", str(tmp_path / "o.csv"))
+    res = cli("detect", "-p", PAPER, "--can-log", str(good_log(tmp_path, paper, suffix)), "-o", str(tmp_path / "o.csv"),
+              "--json")
     assert res.returncode == 0, res.stderr
     assert '"scans": 150' in res.stderr
 

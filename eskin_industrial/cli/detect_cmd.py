@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sys
 
 import click
@@ -21,8 +22,10 @@ from .common import open_profile, profile_option
 @click.command()
 @profile_option()
 @click.argument("input_path", metavar="INPUT.csv", required=False, type=click.Path(dir_okay=False, allow_dash=True))
-@click.option("--can-log", default=None, type=click.Path(dir_okay=False),
-              help="Instead of INPUT.csv: a CAN log (.log candump, .blf, .asc, ...) of the profile's node.")
+@click.option("--can-log", default=None, type=click.Path(dir_okay=False, allow_dash=True),
+              help="Instead of INPUT.csv: a CAN log (.log candump, .blf, .asc, ...) of the profile's node; "
+                   "'-': candump -L lines from stdin, each update written as soon as its scan is complete "
+                   "(candump -L can0 | eskin-bus detect -p P --can-log -).")
 @click.option("-o", "--output", default="-", type=click.Path(dir_okay=False, allow_dash=True), show_default=True,
               help="Output CSV, one row per detector update ('-' for stdout).")
 @click.option("--method", type=click.Choice(sorted(METHODS)), default=None,
@@ -36,9 +39,13 @@ from .common import open_profile, profile_option
               help="Exit 2 (after writing the output) if any frame of INPUT.csv was refused for its time: "
                    "repeated, backward, or no time (NaN, infinite, beyond 1e10 s).  (A CAN log's scans are "
                    "timed by the node's counter.)")
+@click.option("--json", "as_json", is_flag=True,
+              help="The summary on stderr as one JSON object (input, frames, rate, method, updates, states, "
+                   "refused times, and a CAN log's transport counters).")
 @click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
 def detect(profile_path: str, input_path: str | None, can_log: str | None, output: str, method: str | None,
-           rate_hz: float | None, engine: str, changes: bool, fail_on_time_faults: bool, quiet: bool) -> None:
+           rate_hz: float | None, engine: str, changes: bool, fail_on_time_faults: bool, as_json: bool,
+           quiet: bool) -> None:
     """Detect grasp states in a recording CSV (header t,f0,...,f{n-1} in newtons,
     or t,raw0,... in the profile's raw unit), or in a CAN log (--can-log)."""
     prof = open_profile(profile_path)
@@ -46,10 +53,16 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
         raise click.UsageError("give exactly one of INPUT.csv or --can-log LOG")
     time_faults: dict[str, int] = {}
     name = ""
+    if can_log == "-":  # live: a row as soon as its scan is complete
+        _detect_live(prof, output, rate_hz, method, changes, as_json, quiet)
+        return
     if can_log is not None:  # the live receiver's path, on recorded traffic: same output
         from ..bus.can.log import detect_log
 
-        table = detect_log(prof, can_log, rate_hz, method, quiet)
+        table, counters = detect_log(prof, can_log, rate_hz, method)
+        if not quiet:
+            _summary(can_log, counters["scans"], rate_hz or prof.sensor.rate_hz, method or prof.detector.method,
+                     table, {k: counters[k] for k in TIME_FAULTS.values()}, as_json, counters)
     else:
         assert input_path is not None  # exactly one of the two, checked above
         rec = read_recording(input_path, prof.taxels)
@@ -80,7 +93,7 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
         else:
             table = UpdateTable.from_updates(chosen.stream(settings, x, y, rate).feed(rec.t, values, flags))
         if not quiet:
-            _summary(rec.name, len(rec.t), rate, chosen.name, table, time_faults)
+            _summary(rec.name, len(rec.t), rate, chosen.name, table, time_faults, as_json)
     if changes:
         keep = np.ones(len(table), bool)
         keep[1:] = table.state[1:] != table.state[:-1]
@@ -96,16 +109,53 @@ def _faults(time_faults: dict[str, int]) -> str:
     return ", ".join(f"{k} {v}" for k, v in time_faults.items() if v)
 
 
-def _summary(name: str, frames: int, rate: float, method: str, table: UpdateTable,
-             time_faults: dict[str, int]) -> None:
+def _summary(name: str, frames: int, rate: float, method: str, table: UpdateTable, time_faults: dict[str, int],
+             as_json: bool, transport: dict[str, int] | None = None) -> None:
+    """One line on stderr: prose, or with --json one object; the same figures for a
+    recording, a CAN log and a live log."""
     counts = {s.label: int(np.sum(table.state == s)) for s in GraspState}
     flagged = int(np.sum(table.flags & ~int(FrameFlag.WARMUP) != 0))
-    states = ", ".join(f"{k} {v}" for k, v in counts.items())
+    valid = int(table.valid.sum())
     refused = sum(time_faults.values())
-    click.echo(
-        f"{name}: {frames} frames at {rate:.1f} Hz, method {method} -> {len(table)} updates "
-        f"({int(table.valid.sum())} valid, {flagged} with flagged frames); {states}; "
-        f"{refused} frames refused for their time" + (f" ({_faults(time_faults)})" if refused else ""),
-        err=True,
-    )
+    if as_json:
+        line = json.dumps({"input": name, "frames": frames, "rate_hz": rate, "method": method,
+                           "updates": len(table), "valid": valid, "flagged": flagged, "states": counts,
+                           "refused_times": time_faults, **({"transport": transport} if transport else {})})
+    else:
+        states = ", ".join(f"{k} {v}" for k, v in counts.items())
+        line = (f"{name}: {frames} {'scans' if transport else 'frames'} at {rate:.1f} Hz, method {method} -> "
+                f"{len(table)} updates ({valid} valid, {flagged} with flagged frames); {states}; "
+                f"{refused} frames refused for their time" + (f" ({_faults(time_faults)})" if refused else ""))
+        if transport:
+            line += "; " + ", ".join(f"{k} {v}" for k, v in transport.items()
+                                     if v and k not in time_faults and k not in ("scans", "updates"))
+    click.echo(line, err=True)
     sys.stderr.flush()
+
+
+def _detect_live(prof, output: str, rate_hz: float | None, method: str | None, changes: bool, as_json: bool,
+                 quiet: bool) -> None:
+    from ..bus.can.log import detect_live_log
+    from ..detect.updates import Update
+    from ..recording import update_row
+
+    updates: list[Update] = []
+    last: list[int] = []
+
+    with click.open_file(output, "w", encoding="utf-8") as out:
+        out.write(",".join(COLUMNS) + "\n")
+        out.flush()
+
+        def emit(u: Update) -> None:
+            updates.append(u)
+            if changes and last and last[0] == u.state:
+                return
+            last[:] = [u.state]
+            out.write(update_row(u, GraspState(u.state).label))
+            out.flush()  # a pipe's reader sees each row as it comes
+
+        counters = detect_live_log(prof, click.get_text_stream("stdin"), emit, rate_hz, method)
+    if not quiet:
+        table = UpdateTable.from_updates(updates)
+        _summary("<stdin>", counters["scans"], rate_hz or prof.sensor.rate_hz, method or prof.detector.method,
+                 table, {k: counters[k] for k in TIME_FAULTS.values()}, as_json, counters)

@@ -43,13 +43,11 @@ def plot(profile_path: str, input_path: str | None, can_log: str | None, output:
     prof = open_profile(profile_path)
     cal = Calibrator.from_section(prof.calibration, prof.taxels)
     if can_log is not None:
-        from ..bus.can.log import log_scans
+        from ..bus.can.log import log_scans, require_scans
 
         rate = prof.sensor.rate_hz
-        scans, _ = log_scans(prof, can_log, rate)
-        if not scans:
-            raise InputFormatError(f"{can_log}: no complete scan of node {prof.can.node_id} "
-                                   f"(IDs {prof.can.base_id:#x}..{prof.can.base_id + 15:#x})")
+        scans, asm = log_scans(prof, can_log, rate)
+        require_scans(prof, {**asm.counters, "scans": len(scans)}, can_log)
         t = np.array([sc.t for sc in scans])
         values, _ = cal.to_newtons(np.stack([sc.raw for sc in scans]))
         name = can_log

@@ -3,13 +3,11 @@ and decode a node's scans from one through the live path's assembler and pipelin
 
 from __future__ import annotations
 
-import json
-import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import can
 
@@ -135,10 +133,10 @@ def log_scans(profile, path: str | Path, rate_hz: float | None = None) -> tuple[
     return decode_messages(layout, messages, rate_hz or profile.sensor.rate_hz)
 
 
-def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: str | None = None,
-               quiet: bool = True):
+def detect_log(profile, path: str | Path, rate_hz: float | None = None,
+               method: str | None = None) -> tuple[UpdateTable, dict[str, int]]:
     """A CAN log through the live path's assembler and pipeline: the updates as a
-    table, and (unless ``quiet``) the counters on stderr."""
+    table, and the counters (the pipeline's, the refused times, the assembler's)."""
     rate = rate_hz or profile.sensor.rate_hz
     scans, asm = log_scans(profile, path, rate)
     mismatch = layout_mismatch(asm.counters, _ids(profile))
@@ -146,11 +144,79 @@ def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: 
         raise InputFormatError(f"{path}: {mismatch}")
     pipeline = Pipeline(profile, rate_hz=rate, method=method)
     table = UpdateTable.from_updates(replay(scans, pipeline))
-    if not quiet:
-        c = pipeline.counters
-        summary = {k: v for k, v in vars(c).items() if k != "extra"} | pipeline.time_faults() | asm.counters
-        print(f"{path}: " + json.dumps(summary), file=sys.stderr)
-    return table
+    counters = _log_counters(pipeline, asm)
+    require_scans(profile, counters, str(path))
+    return table, counters
+
+
+def _log_counters(pipeline: Pipeline, asm: ScanAssembler) -> dict[str, int]:
+    c = pipeline.counters
+    return {k: v for k, v in vars(c).items() if k != "extra"} | pipeline.time_faults() | asm.counters
+
+
+#: How often a live log's layout is checked (messages): early enough to refuse a log
+#: of another layout before many "scans", rarely enough to cost nothing per frame.
+_CHECK_EVERY = 256
+
+
+def detect_live_log(profile, stream: TextIO, emit: Callable[[Update], None], rate_hz: float | None = None,
+                    method: str | None = None, name: str = "<stdin>") -> dict[str, int]:
+    """A candump-format log (``candump -L``: ``(time) iface ID#DATA``) read as it comes,
+    each update handed to ``emit`` as soon as its scan is complete; the counters at
+    the end.  The same assembler, checks and pipeline as :func:`detect_log`."""
+    rate = rate_hz or profile.sensor.rate_hz
+    pipeline = Pipeline(profile, rate_hz=rate, method=method)
+    lo = profile.can.base_id
+    asm: ScanAssembler | None = None
+    before = 0  # frames of other IDs before the node's first (the assembler counts the rest)
+    count = 0
+    messages = iter(can.io.CanutilsLogReader(stream))
+    while True:
+        try:  # only the reading: what emit raises (a closed pipe downstream) is not the log's fault
+            msg = next(messages, None)
+        except READ_ERRORS as exc:
+            raise InputFormatError(f"{name}: message {count + 1}: not a valid candump -L line: "
+                                   f"{_detail(exc)}") from None
+        if msg is None:
+            break
+        count += 1
+        if asm is None:
+            if not lo <= msg.arbitration_id < lo + ID_RANGE:
+                before += 1
+                continue
+            # the node's first frame tells classic from FD, as a whole log's first frames do
+            asm = ScanAssembler(CanLayout.from_profile(profile, fd=msg.is_fd or profile.can.fd), rate)
+        scan = asm.feed(msg)
+        if scan is not None:
+            for u in pipeline.push(scan):
+                emit(u)
+        if count % _CHECK_EVERY == 0:
+            mismatch = layout_mismatch(asm.counters, _ids(profile))
+            if mismatch is not None:
+                raise InputFormatError(f"{name}: {mismatch}")
+    if asm is None:
+        counters = {**_log_counters(pipeline, ScanAssembler(CanLayout.from_profile(profile), rate)),
+                    "foreign_frames": before}
+    else:
+        asm.flush()
+        mismatch = layout_mismatch(asm.counters, _ids(profile))
+        if mismatch is not None:
+            raise InputFormatError(f"{name}: {mismatch}")
+        counters = _log_counters(pipeline, asm)
+        counters["foreign_frames"] += before
+    require_scans(profile, counters, name)
+    return counters
+
+
+def require_scans(profile, counters: dict[str, int], name: str) -> None:
+    """A log with no complete scan of the node is refused in one line (another node's
+    log, a wrong base_id): never an empty output that looks like a quiet sensor."""
+    if counters["scans"] == 0:
+        lo = profile.can.base_id
+        raise InputFormatError(
+            f"{name}: no complete scan of profile {profile.name}'s node {profile.can.node_id} on IDs "
+            f"{lo:#x}-{lo + ID_RANGE - 1:#x} ({counters.get('frames', 0)} frames there, "
+            f"{counters.get('foreign_frames', 0)} of other IDs): another node's log, or set base_id")
 
 
 def _ids(profile) -> str:
