@@ -11,9 +11,10 @@ Where a setting can come from, the first that gives it wins: the command line
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
 
+from ..profile import ModbusPlcSection
 from ..schema import in_range, positive
 from ..sinks.base import CliOption, Sink
 
@@ -38,10 +39,23 @@ class PlcOptions:
     #: Server mode, on shutdown: keep serving the "bridge offline" image this long,
     #: so that a polling PLC reads it before the connection goes.
     offline_linger_s: float = field(default=0.5, metadata=in_range(0, 60))
+    #: Client mode: how long the PLC has to answer, and the back-off after a failure
+    #: (doubling from ``backoff_s`` to ``backoff_max_s``); unset: the profile's.
+    timeout_s: float | None = field(default=None, metadata=in_range(0.01, 30))
+    backoff_s: float | None = field(default=None, metadata=in_range(0.01, 60))
+    backoff_max_s: float | None = field(default=None, metadata=in_range(0.01, 600))
 
     def __post_init__(self) -> None:
         if self.transport == "rtu" and self.serial_port is None:
             raise ValueError("serial_port: missing key (transport = 'rtu' needs it)")
+        if self.backoff_s is not None and self.backoff_max_s is not None and self.backoff_max_s < self.backoff_s:
+            raise ValueError("backoff_max_s: expected at least backoff_s")
+
+    def client_settings(self, plc: ModbusPlcSection) -> ModbusPlcSection:
+        """A node's ``[modbus.plc]`` with this section's timeout and back-off laid over it;
+        ValueError when the two together leave ``backoff_max_s`` below ``backoff_s``."""
+        given = {k: getattr(self, k) for k in ("timeout_s", "backoff_s", "backoff_max_s") if getattr(self, k) is not None}
+        return replace(plc, **given) if given else plc
 
 
 def plc_mode(options: PlcOptions, nodes: Sequence[NodeLike]) -> Literal["client", "server"]:
@@ -85,17 +99,28 @@ class PlcSink(Sink):
 
     kind = "plc"
     Options = PlcOptions
-    profile_keys = {"mode": "modbus.plc.mode", "host": "modbus.plc.host", "port": "modbus.plc.port"}
+    profile_keys = {"mode": "modbus.plc.mode", "host": "modbus.plc.host", "port": "modbus.plc.port",
+                    "timeout_s": "modbus.plc.timeout_s", "backoff_s": "modbus.plc.backoff_s",
+                    "backoff_max_s": "modbus.plc.backoff_max_s"}
     cli_options = (
         CliOption("--plc", "plc", "tcp:HOST:PORT (write into the PLC), rtu:PORT (PLC as RTU slave), serve:HOST:PORT "
                   "(serve, the PLC reads), serve-rtu:PORT; default: the profile's [modbus.plc].", metavar="SPEC"),
         CliOption("--plc-baud", "plc_baud", "Baud rate for rtu: and serve-rtu:.", type=int, default=115200),
+        CliOption("--plc-timeout", "plc_timeout", "Client mode: seconds the PLC has to answer a write "
+                  "(0.01 to 30); default: the profile's [modbus.plc] timeout_s.", metavar="S", type=float),
     )
 
     @classmethod
     def options_from_cli(cls, values: dict[str, Any]) -> PlcOptions | None:
-        spec = values.get("plc")
-        return None if spec is None else parse_plc_spec(spec, values.get("plc_baud") or 115200)
+        spec, timeout = values.get("plc"), values.get("plc_timeout")
+        if spec is None and timeout is None:
+            return None
+        options = PlcOptions() if spec is None else parse_plc_spec(spec, values.get("plc_baud") or 115200)
+        if timeout is not None:
+            if not 0.01 <= timeout <= 30:
+                raise ValueError(f"--plc-timeout: expected 0.01 to 30 s, got {timeout:g}")
+            options = replace(options, timeout_s=timeout)
+        return options
 
     @classmethod
     def describe(cls, options: PlcOptions, node: NodeLike) -> str:
@@ -106,6 +131,8 @@ class PlcSink(Sink):
         if options.transport == "rtu" and plc_mode(options, nodes) == "client" and len(nodes) > 1:
             raise ValueError("transport: a PLC on a serial line takes one node in client mode "
                              "(use server mode, or TCP)")
+        for n in nodes:
+            options.client_settings(n.profile.modbus.plc)  # the back-off bounds, with the profile's
 
     @classmethod
     def open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
@@ -126,7 +153,8 @@ class PlcSink(Sink):
             return [server.block(i) for i in range(len(nodes))]
         sinks: list[Sink] = []
         for n in nodes:
-            w = PlcWriter(n.profile.modbus.plc, options.host, options.port, serial=serial).start()
+            w = PlcWriter(options.client_settings(n.profile.modbus.plc), options.host, options.port,
+                          serial=serial).start()
             context.closers.append(w.close)
             sinks.append(w)
         return sinks
