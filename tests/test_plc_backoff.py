@@ -89,16 +89,17 @@ def test_a_plc_that_accepts_then_resets_gets_a_doubling_back_off(paper_profile):
         try:
             with Offering(writer):
                 time.sleep(4.0)
-            connects = list(plc.seen.connects)
         finally:
             writer.stop(flush_s=0.0)
+        time.sleep(0.1)  # the stand-in notes the last connection
+        connects = list(plc.seen.connects)
     # The old writer reconnected at once after each reset: thousands in 4 s.
     assert 4 <= len(connects) <= most_attempts(4.0, settings.backoff_s, settings.backoff_max_s) + 1
     gaps = [b - a for a, b in zip(connects, connects[1:])]
     # Each wait doubles (jitter takes at most a quarter off): 0.1, 0.2, 0.4, 0.8, 1.6 s...
     for before, after in zip(gaps[:3], gaps[1:4]):
         assert after > 1.3 * before, gaps
-    assert writer.stats.writes == 0 and writer.stats.connects == len(connects)
+    assert writer.stats.writes == 0 and writer.stats.connect_attempts == len(connects)
     # One outage, logged once, still going on.
     assert events.names() == ["plc_unreachable"]
     assert events.named("plc_unreachable")[0]["cause"] == "connection"
@@ -243,3 +244,23 @@ def test_the_slip_latch_reaches_a_plc_that_comes_back(paper_profile):
     finally:
         writer.stop(flush_s=0.0)
         plc.go_down()
+
+
+def test_a_plc_that_takes_writes_but_refuses_command_reads_is_no_outage(paper_profile):
+    """A PLC whose map has no COMMAND/ENABLE: the image lands; the refused reads are
+    counted per code, logged once, and backed off (not one every refresh_s)."""
+    settings = paper_profile.modbus.plc  # refresh_s 0.05: 60 reads in 3 s without back-off
+    with PlcStandIn("no-reads", code=2) as plc:
+        writer = PlcWriter(settings, "127.0.0.1", plc.port).start()
+        events = Events(writer)
+        try:
+            with Offering(writer):
+                time.sleep(3.0)
+        finally:
+            writer.stop(flush_s=0.0)
+    c = writer.counters()
+    assert 3 <= plc.seen.reads <= most_attempts(3.0, settings.backoff_s, settings.backoff_max_s)
+    assert c["plc_command_reads_refused"] == plc.seen.reads and c["plc_exception_02"] == plc.seen.reads
+    assert c["plc_writes"] >= 50 and c["plc_write_failures"] == 0 and c["plc_outages"] == 0
+    assert sorted(events.names()) == ["plc_commands_refused", "plc_connected"]
+    assert events.named("plc_commands_refused")[0]["exception"] == 2

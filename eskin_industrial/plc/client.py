@@ -64,6 +64,7 @@ class WriterStats:
     outages: int = 0  #: episodes from a first failure to the next acknowledged write
     superseded: int = 0  #: images replaced by a newer one before they were written
     sent_inline: int = 0  #: urgent images sent by the offering thread (no hand-off)
+    command_reads_refused: int = 0  #: reads of COMMAND/ENABLE answered with an exception
     last_error: str = ""
     #: offer -> acknowledged write (urgent only); the newest ones, so months of
     #: running do not grow it
@@ -128,6 +129,8 @@ class PlcWriter(Sink):
         self._outage: _Outage | None = None
         self._late_since: tuple[float, int] | None = None  #: (monotonic, late writes) when answers went late
         self._ever_written = False
+        self._commands_after = 0.0  #: monotonic: no command read before (a back-off)
+        self._commands_delay: float | None = None  #: while the PLC refuses command reads
 
         if serial is not None:
             self.where = f"rtu {serial.port} at {serial.baudrate} baud, unit {settings.unit_id} (client)"
@@ -223,8 +226,8 @@ class PlcWriter(Sink):
                 item = None  # written: a failure of the read below does not bring it back
             if time.monotonic() >= next_refresh:
                 next_refresh = time.monotonic() + s.refresh_s
-                if self.poll_commands:
-                    self._read_commands()
+                if self.poll_commands and time.monotonic() >= self._commands_after:
+                    self._poll_commands()
         except ModbusFault as exc:
             self._fail(exc, item)
             return False, next_refresh
@@ -299,7 +302,7 @@ class PlcWriter(Sink):
         st.last_error = str(exc)
         if exc.kind == "exception":
             st.exceptions[exc.code] += 1
-        elif exc.kind == "timeout" and self.serial is None:
+        elif exc.kind == "timeout":
             st.timeouts += 1
         if item is not None:
             with self._cond:  # keep it: the next connection writes it first
@@ -332,6 +335,28 @@ class PlcWriter(Sink):
                 if left <= 0:
                     return
                 self._cond.wait(left)
+
+    def _poll_commands(self) -> None:
+        """Read the PLC's commands.  A PLC that accepts the image but answers the read
+        with an exception (no COMMAND/ENABLE in its map) is no outage: the refusal is
+        counted, logged once, and the reads back off as writes do."""
+        st = self.stats
+        try:
+            self._read_commands()
+        except ModbusFault as exc:
+            if exc.kind != "exception":
+                raise
+            st.exceptions[exc.code] += 1
+            st.command_reads_refused += 1
+            if self._commands_delay is None:
+                self._commands_delay = self.settings.backoff_s
+                self._event("plc_commands_refused", "warning", plc=self.where, exception=exc.code, error=str(exc))
+            self._commands_after = time.monotonic() + self._commands_delay
+            self._commands_delay = min(2 * self._commands_delay, self.settings.backoff_max_s)
+            return
+        if self._commands_delay is not None:
+            self._commands_delay = None
+            self._event("plc_commands_read", plc=self.where, refused=st.command_reads_refused)
 
     def _read_commands(self) -> None:
         s = self.settings
@@ -387,6 +412,7 @@ class PlcWriter(Sink):
         out = {"plc_writes": st.writes, "plc_late_writes": st.late_writes, "plc_write_failures": st.failures,
                "plc_write_timeouts": st.timeouts, "plc_exceptions": sum(n for _, n in exceptions),
                "plc_connects": st.connects, "plc_connect_attempts": st.connect_attempts, "plc_outages": st.outages,
-               "plc_superseded": st.superseded, "plc_sent_inline": st.sent_inline}
+               "plc_superseded": st.superseded, "plc_sent_inline": st.sent_inline,
+               "plc_command_reads_refused": st.command_reads_refused}
         out.update((f"plc_exception_{code:02d}", n) for code, n in exceptions)
         return out

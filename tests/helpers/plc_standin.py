@@ -7,6 +7,7 @@ PLC can misbehave.  Its ``mode`` can be changed while it runs:
 - ``silent``: accepts and reads, never answers;
 - ``late``: answers correctly after ``delay_s``;
 - ``exception``: answers every request with exception ``code`` (02, 04, ...);
+- ``no-reads``: takes writes, answers reads (FC3) with exception ``code``;
 - ``down``: not listening at all (connections refused), see :meth:`go_down`.
 
 Everything it sees is counted: connections accepted, requests, and every FC16
@@ -21,11 +22,14 @@ import threading
 import time
 from dataclasses import dataclass, field
 
+from eskin_industrial.plc.image import REG
+
 
 @dataclass
 class Seen:
     connects: list[float] = field(default_factory=list)  #: monotonic time of each accepted connection
     requests: int = 0
+    reads: int = 0  #: FC3 requests
     #: every FC16 request received: (monotonic, address, values)
     writes: list[tuple[float, int, tuple[int, ...]]] = field(default_factory=list)
 
@@ -35,6 +39,7 @@ class PlcStandIn:
         self.mode, self.delay_s, self.code = mode, delay_s, code
         self.seen = Seen()
         self.regs = [0] * 2048
+        self.regs[REG["ENABLE"].offset] = 1  # the PLC program enables detection (base address 0)
         self.port = port
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -134,7 +139,9 @@ class PlcStandIn:
             self.seen.writes.append((time.monotonic(), address, values))
         if self.mode == "silent":
             return None
-        if self.mode == "exception":
+        elif fc == 3:
+            self.seen.reads += 1
+        if self.mode == "exception" or (self.mode == "no-reads" and fc == 3):
             body = bytes([fc | 0x80, self.code])
         elif fc == 16:
             self.regs[address:address + count] = values
