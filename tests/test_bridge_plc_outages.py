@@ -72,7 +72,7 @@ def test_bad_plc_timing_in_the_file_is_one_line(tmp_path, key, value, expected):
 
 
 def test_bad_timeout_in_the_profile_is_refused():
-    text = Path(PAPER).read_text().replace("backoff_max_s = 2.0", "backoff_max_s = 2.0\ntimeout_s = 31")
+    text = Path(PAPER).read_text().replace("timeout_s = 0.5 ", "timeout_s = 31 ")
     with pytest.raises(ProfileError, match=r"timeout_s: expected a value in \[0.01, 30\]"):
         parse_profile(text, "p.toml")
 
