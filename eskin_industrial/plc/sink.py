@@ -54,7 +54,8 @@ class PlcOptions:
     def client_settings(self, plc: ModbusPlcSection) -> ModbusPlcSection:
         """A node's ``[modbus.plc]`` with this section's timeout and back-off laid over it;
         ValueError when the two together leave ``backoff_max_s`` below ``backoff_s``."""
-        given = {k: getattr(self, k) for k in ("timeout_s", "backoff_s", "backoff_max_s") if getattr(self, k) is not None}
+        keys = ("timeout_s", "backoff_s", "backoff_max_s")
+        given = {k: getattr(self, k) for k in keys if getattr(self, k) is not None}
         return replace(plc, **given) if given else plc
 
 
