@@ -96,9 +96,10 @@ def test_a_plc_that_accepts_then_resets_gets_a_doubling_back_off(paper_profile):
     # The old writer reconnected at once after each reset: thousands in 4 s.
     assert 4 <= len(connects) <= most_attempts(4.0, settings.backoff_s, settings.backoff_max_s) + 1
     gaps = [b - a for a, b in zip(connects, connects[1:])]
-    # Each wait doubles (jitter takes at most a quarter off): 0.1, 0.2, 0.4, 0.8, 1.6 s...
-    for before, after in zip(gaps[:3], gaps[1:4]):
-        assert after > 1.3 * before, gaps
+    # Each wait doubles (jitter takes at most a quarter off): 0.1, 0.2, 0.4, 0.8 s...
+    # (a loaded machine only makes them longer)
+    for i, gap in enumerate(gaps[:4]):
+        assert gap >= (1 - JITTER) * settings.backoff_s * 2 ** i - 0.005, gaps
     assert writer.stats.writes == 0 and writer.stats.connect_attempts == len(connects)
     # One outage, logged once, still going on.
     assert events.names() == ["plc_unreachable"]
