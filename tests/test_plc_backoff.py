@@ -202,6 +202,53 @@ def test_a_plc_that_answers_late_gets_every_write_and_none_counts_as_failed(pape
     assert "plc_unreachable" not in events.names()
 
 
+def test_late_answers_end_when_the_plc_is_quick_again(paper_profile):
+    settings = paper_profile.modbus.plc
+    with PlcStandIn("late", delay_s=0.6) as plc:
+        writer = PlcWriter(settings, "127.0.0.1", plc.port, poll_commands=False).start()
+        events = Events(writer)
+        try:
+            with Offering(writer):
+                wait_for(lambda: writer.stats.late_writes >= 2, what="late writes")
+                plc.mode = "ok"
+                wait_for(lambda: events.named("plc_on_time"), what="plc_on_time")
+        finally:
+            writer.stop(flush_s=0.0)
+    (back,) = events.named("plc_on_time")
+    assert back["late_writes"] == writer.stats.late_writes >= 2 and back["late_s"] > 0.5
+    assert writer.stats.failures == 0
+
+
+def test_events_before_the_log_is_wired_are_held_for_it(paper_profile):
+    writer = PlcWriter(paper_profile.modbus.plc, "127.0.0.1", free_port()).start()  # refused
+    try:
+        wait_for(lambda: writer.stats.failures >= 1, what="a refused connection")
+        events = Events(writer)  # wired after the outage began
+        assert events.names() == ["plc_unreachable"]
+    finally:
+        writer.stop(flush_s=0.0)
+
+
+def test_a_stop_during_a_long_back_off_tries_the_offline_image_at_once(paper_profile):
+    """The bridge's last image (BRIDGE_OFFLINE) is tried as soon as the writer is
+    stopped, not after the back-off it was waiting out."""
+    settings = replace(paper_profile.modbus.plc, backoff_s=5.0, backoff_max_s=5.0)
+    port = free_port()
+    writer = PlcWriter(settings, "127.0.0.1", port, poll_commands=False).start()
+    try:
+        wait_for(lambda: writer.stats.failures >= 1, what="a refused connection")  # now in a 5 s wait
+        with PlcStandIn("ok", port=port) as plc:
+            writer.offer(image(7, Status.BRIDGE_OFFLINE), urgent=True)
+            time.sleep(0.3)
+            assert not plc.seen.writes  # the urgent image did not end the wait
+            t0 = time.monotonic()
+            writer.stop(flush_s=1.0)
+            assert time.monotonic() - t0 < 1.5 and writer.flushed
+            assert plc.seen.writes and plc.seen.writes[-1][2][0] == int(Status.BRIDGE_OFFLINE)
+    finally:
+        writer.stop(flush_s=0.0)
+
+
 def test_a_longer_timeout_takes_the_same_slow_plc_as_on_time(paper_profile):
     settings = replace(paper_profile.modbus.plc, timeout_s=1.0)
     with PlcStandIn("late", delay_s=0.6) as plc:
