@@ -244,9 +244,13 @@ class ModbusPlcSection:
     host: str = "127.0.0.1"
     port: int = field(default=502, metadata=in_range(1, 65535))
     refresh_s: float = field(default=0.05, metadata=positive_at_most(60.0))
-    #: Client mode: reconnection delay, doubled after each failure up to the maximum.
-    backoff_s: float = field(default=0.1, metadata=positive())
-    backoff_max_s: float = field(default=2.0, metadata=positive())
+    #: Client mode: the delay after a failed connection or write (refused, reset, no
+    #: answer, an exception reply), doubled after each failure up to the maximum.
+    backoff_s: float = field(default=0.1, metadata=in_range(0.01, 60))
+    backoff_max_s: float = field(default=2.0, metadata=in_range(0.01, 600))
+    #: Client mode: how long the PLC has to answer a request (an answer up to as long
+    #: again is still taken, and counted as late).
+    timeout_s: float = field(default=0.5, metadata=in_range(0.01, 30))
     #: Server mode: the address to listen on (loopback unless told otherwise).
     bind: str = "127.0.0.1"
     #: Server mode over TCP: client connections at once (beyond: see docs/operations.md),

@@ -7,20 +7,33 @@ on.  The image is written at once when it is urgent (a state change), otherwise
 every ``refresh_s``; an older image not yet written is replaced by the newer one
 (the PLC wants the present; events survive in the latch and the counters).  After
 each refresh the writer reads COMMAND and ENABLE from the PLC, hands their commands
-to the bridge, and writes COMMAND back to 0 (the handshake).  A lost connection is
-retried with a delay doubling from ``backoff_s`` up to ``backoff_max_s``.
+to the bridge, and writes COMMAND back to 0 (the handshake).
+
+One request at a time, and a PLC that fails is not hammered.  A request has
+``timeout_s`` to be answered; an answer up to as long again still counts as written,
+late (``plc_late_writes``), beyond it the request failed.  After any failure (refused,
+reset, no answer, an exception reply) the writer waits, and the wait doubles from
+``backoff_s`` to ``backoff_max_s`` (each drawn from its last quarter at random, so that
+bridges restarted together do not retry in step) until the PLC acknowledges a write.
+Nothing wakes that wait but a stop: an urgent image offered meanwhile only replaces
+the pending one, and the newest image (with the slip latch) is the first written when
+the PLC answers again.  An outage (from the first failure to the next acknowledged
+write) is logged by the writer itself, once at its start (``plc_unreachable``) and
+once at its end (``plc_connected``, with its duration and the images it superseded).
 
 Over TCP, an urgent image offered while the writer is idle is sent by the offering
 thread itself (the bridge's loop): the request goes out at once, with no hand-off to
 the writer thread, which only collects the answer.  A slow or hung PLC still never
 stalls the loop: a send of one small request into an idle connection does not wait,
-and while an answer is outstanding the next image waits for the writer as before.
+and while an answer is outstanding (or the writer waits out a back-off) the next
+image waits for the writer as before.
 """
 
 from __future__ import annotations
 
 import collections
 import queue
+import random
 import threading
 import time
 from collections.abc import Callable
@@ -34,46 +47,76 @@ from ..sinks.base import Publication, Sink, SinkHealth
 from .image import REG, Command, parse_register_write
 
 
+#: Each back-off wait is the current delay less up to this share of it, at random.
+JITTER = 0.25
+
+
 @dataclass
 class WriterStats:
-    writes: int = 0
+    writes: int = 0  #: writes the PLC acknowledged, late ones included
+    late_writes: int = 0  #: acknowledged after ``timeout_s`` (within as long again)
     urgent_writes: int = 0
-    failures: int = 0
+    failures: int = 0  #: failed connections and requests (refused, reset, no answer, exception)
+    timeouts: int = 0  #: requests given up: no answer within twice ``timeout_s``
+    exceptions: collections.Counter[int] = field(default_factory=collections.Counter)  #: replies, by code
     connects: int = 0
+    connect_attempts: int = 0
+    outages: int = 0  #: episodes from a first failure to the next acknowledged write
     superseded: int = 0  #: images replaced by a newer one before they were written
     sent_inline: int = 0  #: urgent images sent by the offering thread (no hand-off)
+    command_reads_refused: int = 0  #: reads of COMMAND/ENABLE answered with an exception
     last_error: str = ""
     #: offer -> acknowledged write (urgent only); the newest ones, so months of
     #: running do not grow it
     latencies_s: collections.deque[float] = field(default_factory=lambda: collections.deque(maxlen=100_000))
 
 
+@dataclass
+class _Outage:
+    """From the first failure to the next acknowledged write."""
+
+    t0: float  #: monotonic, at the first failure
+    cause: str  #: the first failure's kind: connection, timeout, exception, crc
+    superseded: int  #: the writer's counts at the start
+    failures: int
+    attempts: int
+    exceptions: dict[int, int]
+
+
+def _by_code(now: collections.Counter[int], before: dict[int, int]) -> str:
+    """``02:13,04:2``: the exception replies since ``before``, by code; ``-`` for none."""
+    return ",".join(f"{c:02d}:{n - before.get(c, 0)}" for c, n in sorted(now.items()) if n > before.get(c, 0)) or "-"
+
+
 class PlcWriter(Sink):
     # A sink of the "plc" output kind, opened by plc.sink.PlcSink: not a subclass of
     # it, so that the two modules do not import each other.
     kind = "plc"
+    logs_connection = True  # outages are logged from the writer's own transitions
 
     def __init__(self, settings: ModbusPlcSection, host: str | None = None, port: int | None = None,
-                 *, timeout_s: float = 0.5, poll_commands: bool = True, serial: SerialSettings | None = None,
+                 *, timeout_s: float | None = None, poll_commands: bool = True, serial: SerialSettings | None = None,
                  on_written: Callable[[float, float], None] | None = None) -> None:
         super().__init__()
         self.settings = settings
         self.host = host or settings.host
         self.port = port or settings.port
         self.serial = serial
+        self.timeout_s = settings.timeout_s if timeout_s is None else timeout_s
         self.master: PipelinedTcpMaster | RtuMaster
         if serial is not None:  # the PLC as a Modbus RTU slave
-            self.master = RtuMaster(serial, settings.unit_id, timeout_s)
+            self.master = RtuMaster(serial, settings.unit_id, self.timeout_s)
         else:
-            self.master = PipelinedTcpMaster(self.host, self.port, settings.unit_id, timeout_s)
+            self.master = PipelinedTcpMaster(self.host, self.port, settings.unit_id, self.timeout_s,
+                                             late_s=self.timeout_s)
         self.poll_commands = poll_commands
         self.on_written = on_written
         self.stats = WriterStats()
         self.commands: queue.SimpleQueue[Command] = queue.SimpleQueue()
         self._cond = threading.Condition()
         self._pending: tuple[list[int], bool, float] | None = None
-        #: An urgent image the offering thread sent: (transaction id, registers, t_event).
-        self._outstanding: tuple[int, list[int], float] | None = None
+        #: An urgent image the offering thread sent: (transaction id, registers, t_event, monotonic sent).
+        self._outstanding: tuple[int, list[int], float, float] | None = None
         self._busy = False  #: the writer thread is in a transaction (the connection is its)
         self._inline = isinstance(self.master, PipelinedTcpMaster)
         self._last: list[int] | None = None
@@ -81,6 +124,13 @@ class PlcWriter(Sink):
         self._flush_until = 0.0  #: on stop, an image still pending is written until then
         self._thread: threading.Thread | None = None
         self.connected = False
+        self._delay = settings.backoff_s  #: the next back-off wait (before jitter)
+        self._random = random.Random()
+        self._outage: _Outage | None = None
+        self._late_since: tuple[float, int] | None = None  #: (monotonic, late writes) when answers went late
+        self._ever_written = False
+        self._commands_after = 0.0  #: monotonic: no command read before (a back-off)
+        self._commands_delay: float | None = None  #: while the PLC refuses command reads
 
         if serial is not None:
             self.where = f"rtu {serial.port} at {serial.baudrate} baud, unit {settings.unit_id} (client)"
@@ -110,7 +160,7 @@ class PlcWriter(Sink):
                     if pending is not None:  # a refresh not yet written: this newer image replaces it
                         self._pending = None
                         self.stats.superseded += 1
-                    self._outstanding = (tid, list(registers), t0)
+                    self._outstanding = (tid, list(registers), t0, time.monotonic())
                     self.stats.sent_inline += 1
                     self._cond.notify()  # the writer collects the answer
                     return
@@ -131,18 +181,15 @@ class PlcWriter(Sink):
                 return out
 
     def _run(self) -> None:
-        s = self.settings
-        delay = s.backoff_s
         next_refresh = time.monotonic()
         while True:
             with self._cond:
                 self._busy = False
-                if self._stop and not self._flushing() and self._outstanding is None:
+                if self._finished():
                     break
-                timeout = max(0.0, next_refresh - time.monotonic())
                 if self._outstanding is None and not (self._pending is not None and self._pending[1]):
-                    self._cond.wait(timeout)
-                if self._stop and not self._flushing() and self._outstanding is None:
+                    self._cond.wait(max(0.0, next_refresh - time.monotonic()))
+                if self._finished():
                     break
                 self._busy = True
                 sent, self._outstanding = self._outstanding, None
@@ -150,59 +197,90 @@ class PlcWriter(Sink):
                 if sent is None:
                     self._pending = None
             if sent is not None:
-                self._collect(sent)
-                continue
-            if not self.connected:
-                try:
-                    self.master.connect()
-                    self.connected = True
-                    self.stats.connects += 1
-                    delay = s.backoff_s
-                except ModbusFault as exc:
-                    self._fail(exc, item)
-                    self._sleep(delay)
-                    delay = min(delay * 2, s.backoff_max_s)
-                    continue
-            registers = item[0] if item is not None else self._last
-            urgent = item is not None and item[1]
-            try:
-                if registers is not None:
-                    self.master.write_registers(s.base_address, registers)
-                    self._written(registers, item[2] if urgent and item is not None else None)
-                if time.monotonic() >= next_refresh:
-                    next_refresh = time.monotonic() + s.refresh_s
-                    if self.poll_commands:
-                        self._read_commands()
-            except ModbusFault as exc:
-                self._fail(exc, item)
-                if exc.kind == "connection" or (exc.kind != "exception" and self.serial is None):
-                    self._disconnect()
-            except Exception as exc:  # noqa: BLE001 - the writer must outlive any one failure
-                self._fail(ModbusFault("connection", f"{type(exc).__name__}: {exc}"), item)
-                self._disconnect()
+                ok = self._collect(sent)
+            else:
+                ok, next_refresh = self._cycle(item, next_refresh)
+            if not ok:
+                self._backoff()
 
-    def _collect(self, sent: tuple[int, list[int], float]) -> None:
+    def _finished(self) -> bool:
+        return self._stop and not self._flushing() and self._outstanding is None
+
+    def _cycle(self, item: tuple[list[int], bool, float] | None, next_refresh: float) -> tuple[bool, float]:
+        """Connect if need be, write the image (or the last one again), and on refresh
+        read the PLC's commands; False when something failed."""
+        s = self.settings
+        try:
+            if not self.connected:
+                self.stats.connect_attempts += 1
+                self.master.connect()
+                with self._cond:
+                    self.connected = True
+                self.stats.connects += 1
+            registers = item[0] if item is not None else self._last
+            if registers is not None:
+                t_sent = time.monotonic()
+                self.master.write_registers(s.base_address, registers)
+                self._written(registers, item[2] if item is not None and item[1] else None,
+                              time.monotonic() - t_sent)
+                item = None  # written: a failure of the read below does not bring it back
+            if time.monotonic() >= next_refresh:
+                next_refresh = time.monotonic() + s.refresh_s
+                if self.poll_commands and time.monotonic() >= self._commands_after:
+                    self._poll_commands()
+        except ModbusFault as exc:
+            self._fail(exc, item)
+            return False, next_refresh
+        except Exception as exc:  # noqa: BLE001 - the writer must outlive any one failure
+            self._fail(ModbusFault("connection", f"{type(exc).__name__}: {exc}"), item)
+            return False, next_refresh
+        return True, next_refresh
+
+    def _collect(self, sent: tuple[int, list[int], float, float]) -> bool:
         """The answer to an image the offering thread sent."""
-        tid, registers, t_event = sent
+        tid, registers, t_event, t_sent = sent
         try:
             self.master.await_response(tid)  # type: ignore[union-attr]
         except ModbusFault as exc:
             self._fail(exc, (registers, True, t_event))  # written again once the PLC answers
-            if exc.kind != "exception":
-                self._disconnect()
-            return
-        self._written(registers, t_event)
+            return False
+        self._written(registers, t_event, time.monotonic() - t_sent)
+        return True
 
-    def _written(self, registers: list[int], t_event: float | None) -> None:
-        """A write the PLC acknowledged; ``t_event`` dates an urgent one."""
+    def _written(self, registers: list[int], t_event: float | None, took_s: float) -> None:
+        """A write the PLC acknowledged ``took_s`` after it was sent; ``t_event`` dates an urgent one."""
         t_ack = time.perf_counter()
         self._last = registers
-        self.stats.writes += 1
+        st = self.stats
+        st.writes += 1
         if t_event is not None:
-            self.stats.urgent_writes += 1
-            self.stats.latencies_s.append(t_ack - t_event)
+            st.urgent_writes += 1
+            st.latencies_s.append(t_ack - t_event)
             if self.on_written is not None:
                 self.on_written(t_event, t_ack)
+        self._delay = self.settings.backoff_s
+        if took_s > self.timeout_s:
+            st.late_writes += 1
+            if self._late_since is None:
+                self._late_since = (time.monotonic(), st.late_writes - 1)
+                self._event("plc_late", "warning", plc=self.where, answer_s=round(took_s, 3),
+                            timeout_s=self.timeout_s)
+        elif self._late_since is not None:
+            t0, before = self._late_since
+            self._late_since = None
+            self._event("plc_on_time", plc=self.where, late_s=round(time.monotonic() - t0, 3),
+                        late_writes=st.late_writes - before)
+        out = self._outage
+        if out is not None:
+            self._outage = None
+            self._event("plc_connected", plc=self.where, outage_s=round(time.monotonic() - out.t0, 3),
+                        cause=out.cause, superseded=st.superseded - out.superseded,
+                        failures=st.failures - out.failures, attempts=st.connect_attempts - out.attempts,
+                        exceptions=_by_code(st.exceptions, out.exceptions))
+        elif not self._ever_written:
+            self._event("plc_connected", plc=self.where, outage_s=0.0, cause="-", superseded=0, failures=0,
+                        attempts=st.connect_attempts, exceptions="-")
+        self._ever_written = True
 
     def _disconnect(self) -> None:
         with self._cond:  # no inline send into a connection being closed
@@ -213,20 +291,72 @@ class PlcWriter(Sink):
         """Stopping, but the last image (``bridge offline``) is not written yet."""
         return self._pending is not None and time.monotonic() < self._flush_until
 
-    def _fail(self, exc: ModbusFault, item) -> None:
-        self.stats.failures += 1
-        self.stats.last_error = str(exc)
+    def _fail(self, exc: ModbusFault, item: tuple[list[int], bool, float] | None) -> None:
+        st = self.stats
+        starts = self._outage is None
+        if starts:  # the counts before this failure, for the outage's end
+            st.outages += 1
+            self._outage = _Outage(time.monotonic(), exc.kind, st.superseded, st.failures,
+                                   st.connect_attempts - (0 if self.connected else 1), dict(st.exceptions))
+        st.failures += 1
+        st.last_error = str(exc)
+        if exc.kind == "exception":
+            st.exceptions[exc.code] += 1
+        elif exc.kind == "timeout":
+            st.timeouts += 1
         if item is not None:
             with self._cond:  # keep it: the next connection writes it first
                 if self._pending is None:
                     self._pending = item
+                else:
+                    st.superseded += 1  # a newer image came meanwhile, and goes first
+        if starts:
+            self._event("plc_unreachable", "warning", plc=self.where, cause=exc.kind, error=str(exc),
+                        exception=exc.code)
+        # An exception reply comes over a working connection; so does a timeout on a
+        # serial line.  Anything else leaves a TCP connection in an unknown state.
+        if exc.kind == "connection" or (exc.kind != "exception" and self.serial is None):
+            self._disconnect()
 
-    def _sleep(self, delay: float) -> None:
+    def _backoff(self) -> None:
+        """Wait after a failure, the delay doubling up to ``backoff_max_s``.  An offer
+        does not end the wait (it only replaces the pending image); a stop does, once,
+        so that the offline image is tried at once."""
+        wait = self._delay * (1.0 - JITTER * self._random.random())
+        self._delay = min(self._delay * 2, self.settings.backoff_max_s)
+        deadline = time.monotonic() + wait
         with self._cond:
-            if not self._stop:
-                self._cond.wait(delay)
-            elif self._flushing():
-                self._cond.wait(min(delay, self._flush_until - time.monotonic()))
+            stopping = self._stop
+            while True:
+                if self._stop and not stopping:
+                    return
+                end = min(deadline, self._flush_until) if self._stop else deadline
+                left = end - time.monotonic()
+                if left <= 0:
+                    return
+                self._cond.wait(left)
+
+    def _poll_commands(self) -> None:
+        """Read the PLC's commands.  A PLC that accepts the image but answers the read
+        with an exception (no COMMAND/ENABLE in its map) is no outage: the refusal is
+        counted, logged once, and the reads back off as writes do."""
+        st = self.stats
+        try:
+            self._read_commands()
+        except ModbusFault as exc:
+            if exc.kind != "exception":
+                raise
+            st.exceptions[exc.code] += 1
+            st.command_reads_refused += 1
+            if self._commands_delay is None:
+                self._commands_delay = self.settings.backoff_s
+                self._event("plc_commands_refused", "warning", plc=self.where, exception=exc.code, error=str(exc))
+            self._commands_after = time.monotonic() + self._commands_delay
+            self._commands_delay = min(2 * self._commands_delay, self.settings.backoff_max_s)
+            return
+        if self._commands_delay is not None:
+            self._commands_delay = None
+            self._event("plc_commands_read", plc=self.where, refused=st.command_reads_refused)
 
     def _read_commands(self) -> None:
         s = self.settings
@@ -268,10 +398,21 @@ class PlcWriter(Sink):
         with self._cond:
             return self._pending is None and self._outstanding is None
 
+    @property
+    def in_outage(self) -> bool:
+        """A failure since the last acknowledged write."""
+        return self._outage is not None
+
     def health(self) -> SinkHealth:
-        return SinkHealth(self.connected, self.stats.failures, self.stats.last_error)
+        return SinkHealth(self.connected and self._outage is None, self.stats.failures, self.stats.last_error)
 
     def counters(self) -> dict[str, int]:
         st = self.stats
-        return {"plc_writes": st.writes, "plc_write_failures": st.failures, "plc_connects": st.connects,
-                "plc_superseded": st.superseded, "plc_sent_inline": st.sent_inline}
+        exceptions = sorted(list(st.exceptions.items()))
+        out = {"plc_writes": st.writes, "plc_late_writes": st.late_writes, "plc_write_failures": st.failures,
+               "plc_write_timeouts": st.timeouts, "plc_exceptions": sum(n for _, n in exceptions),
+               "plc_connects": st.connects, "plc_connect_attempts": st.connect_attempts, "plc_outages": st.outages,
+               "plc_superseded": st.superseded, "plc_sent_inline": st.sent_inline,
+               "plc_command_reads_refused": st.command_reads_refused}
+        out.update((f"plc_exception_{code:02d}", n) for code, n in exceptions)
+        return out

@@ -16,12 +16,12 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from ..netaddr import check_host, listen_problem, parse_endpoint
 from ..preflight import check_serial
+from ..profile import ModbusPlcSection
 from ..schema import in_range, ip_network, positive
 from ..sinks.base import CliOption, Sink
 
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
-    from ..profile import ModbusPlcSection
 
 
 @dataclass(frozen=True)
@@ -49,12 +49,26 @@ class PlcOptions:
     allow_write: tuple[str, ...] | None = field(default=None, metadata=ip_network())
     read_only: bool | None = None
     unit_ids: tuple[int, ...] | None = field(default=None, metadata=in_range(0, 255))
+    #: Client mode: how long the PLC has to answer, and the back-off after a failure
+    #: (doubling from ``backoff_s`` to ``backoff_max_s``); unset: the profile's.
+    timeout_s: float | None = field(default=None, metadata=in_range(0.01, 30))
+    backoff_s: float | None = field(default=None, metadata=in_range(0.01, 60))
+    backoff_max_s: float | None = field(default=None, metadata=in_range(0.01, 600))
 
     def __post_init__(self) -> None:
         if self.transport == "rtu" and self.serial_port is None:
             raise ValueError("serial_port: missing key (transport = 'rtu' needs it)")
         if self.host is not None:
             check_host(self.host)
+        if self.backoff_s is not None and self.backoff_max_s is not None and self.backoff_max_s < self.backoff_s:
+            raise ValueError("backoff_max_s: expected at least backoff_s")
+
+    def client_settings(self, plc: ModbusPlcSection) -> ModbusPlcSection:
+        """A node's ``[modbus.plc]`` with this section's timeout and back-off laid over it;
+        ValueError when the two together leave ``backoff_max_s`` below ``backoff_s``."""
+        keys = ("timeout_s", "backoff_s", "backoff_max_s")
+        given = {k: getattr(self, k) for k in keys if getattr(self, k) is not None}
+        return replace(plc, **given) if given else plc
 
 
 #: The ``[plc]`` keys that override the first node's ``[modbus.plc]`` for the server.
@@ -113,18 +127,28 @@ class PlcSink(Sink):
     kind = "plc"
     Options = PlcOptions
     profile_keys = {"mode": "modbus.plc.mode", "host": "modbus.plc.host", "port": "modbus.plc.port",
-                    **{k: f"modbus.plc.{k}" for k in SERVER_KEYS}}
+                    "timeout_s": "modbus.plc.timeout_s", "backoff_s": "modbus.plc.backoff_s",
+                    "backoff_max_s": "modbus.plc.backoff_max_s", **{k: f"modbus.plc.{k}" for k in SERVER_KEYS}}
     cli_options = (
         CliOption("--plc", "plc", "tcp:HOST:PORT (write into the PLC), rtu:PORT (PLC as RTU slave), serve:HOST:PORT "
                   "or serve:PORT (serve, the PLC reads; the host: the profile's bind), serve-rtu:PORT; IPv6 in "
                   "brackets ([::1]:1502); default: the profile's [modbus.plc].", metavar="SPEC"),
         CliOption("--plc-baud", "plc_baud", "Baud rate for rtu: and serve-rtu:.", type=int, default=115200),
+        CliOption("--plc-timeout", "plc_timeout", "Client mode: seconds the PLC has to answer a write "
+                  "(0.01 to 30); default: the profile's [modbus.plc] timeout_s.", metavar="S", type=float),
     )
 
     @classmethod
     def options_from_cli(cls, values: dict[str, Any]) -> PlcOptions | None:
-        spec = values.get("plc")
-        return None if spec is None else parse_plc_spec(spec, values.get("plc_baud") or 115200)
+        spec, timeout = values.get("plc"), values.get("plc_timeout")
+        if spec is None and timeout is None:
+            return None
+        options = PlcOptions() if spec is None else parse_plc_spec(spec, values.get("plc_baud") or 115200)
+        if timeout is not None:
+            if not 0.01 <= timeout <= 30:
+                raise ValueError(f"--plc-timeout: expected 0.01 to 30 s, got {timeout:g}")
+            options = replace(options, timeout_s=timeout)
+        return options
 
     @classmethod
     def describe(cls, options: PlcOptions, node: NodeLike) -> str:
@@ -135,6 +159,8 @@ class PlcSink(Sink):
         if options.transport == "rtu" and plc_mode(options, nodes) == "client" and len(nodes) > 1:
             raise ValueError("transport: a PLC on a serial line takes one node in client mode "
                              "(use server mode, or TCP)")
+        for n in nodes:
+            options.client_settings(n.profile.modbus.plc)  # the back-off bounds, with the profile's
 
     @classmethod
     def explain_keys(cls, options: PlcOptions, nodes: Sequence[NodeLike]) -> dict[str, str]:
@@ -179,7 +205,8 @@ class PlcSink(Sink):
             return [server.block(i) for i in range(len(nodes))]
         sinks: list[Sink] = []
         for n in nodes:
-            w = PlcWriter(n.profile.modbus.plc, options.host, options.port, serial=serial).start()
+            w = PlcWriter(options.client_settings(n.profile.modbus.plc), options.host, options.port,
+                          serial=serial).start()
             context.closers.append(w.close)
             sinks.append(w)
         return sinks

@@ -27,6 +27,16 @@ MAX_WRITE = 123  #: registers in one FC16 request
 MAX_READ = 125  #: registers in one FC3 response
 
 
+#: Exception codes (Modbus Application Protocol v1.1b3, section 7), for messages.
+EXCEPTIONS = {1: "illegal function", 2: "illegal data address", 3: "illegal data value",
+              4: "server device failure", 5: "acknowledge", 6: "server device busy", 8: "memory parity error",
+              10: "gateway path unavailable", 11: "gateway target device failed to respond"}
+
+
+def exception_name(code: int) -> str:
+    return EXCEPTIONS.get(code, "unknown exception")
+
+
 class Response(NamedTuple):
     tid: int
     unit: int

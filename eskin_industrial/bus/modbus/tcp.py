@@ -20,8 +20,11 @@ from . import mbap
 
 
 class PipelinedTcpMaster:
-    def __init__(self, host: str, port: int, unit_id: int = 1, timeout_s: float = 1.0) -> None:
+    def __init__(self, host: str, port: int, unit_id: int = 1, timeout_s: float = 1.0, late_s: float = 0.0) -> None:
         self.host, self.port, self.unit_id, self.timeout_s = host, port, unit_id, timeout_s
+        #: An answer up to this long after ``timeout_s`` is still taken (the caller,
+        #: who knows when it sent, counts it as late); only then is the request given up.
+        self.late_s = late_s
         self.sock: socket.socket | None = None
         self.stale_answers = 0
         self._tid = 0
@@ -81,20 +84,23 @@ class PipelinedTcpMaster:
 
     # -- receiving: the owner thread only ----------------------------------------------
     def await_response(self, tid: int, timeout_s: float | None = None) -> mbap.Response:
-        """The answer to transaction ``tid``; ModbusFault ``timeout``, ``connection``
-        or ``exception`` (with its code)."""
-        deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
+        """The answer to transaction ``tid`` within ``timeout_s`` (default: the master's)
+        plus ``late_s``; ModbusFault ``timeout``, ``connection`` or ``exception`` (with
+        its code)."""
+        wait = (self.timeout_s if timeout_s is None else timeout_s) + self.late_s
+        deadline = time.monotonic() + wait
         while True:
-            resp = self._next_frame(deadline, tid)
+            resp = self._next_frame(deadline, tid, wait)
             if resp.tid != tid:
                 self.stale_answers += 1  # the answer to a request given up on
                 continue
             if resp.exception:
-                raise ModbusFault("exception", f"{self.where} answered exception {resp.exception} to function "
-                                  f"{resp.function}", resp.exception)
+                raise ModbusFault("exception", f"{self.where} answered exception {resp.exception:02d} "
+                                  f"({mbap.exception_name(resp.exception)}) to function {resp.function}",
+                                  resp.exception)
             return resp
 
-    def _next_frame(self, deadline: float, tid: int) -> mbap.Response:
+    def _next_frame(self, deadline: float, tid: int, wait_s: float) -> mbap.Response:
         rx = self._rx
         while True:
             if len(rx) >= mbap.HEADER_BYTES:
@@ -114,8 +120,7 @@ class PipelinedTcpMaster:
                 raise ModbusFault("connection", f"{self.where}: not connected")
             left = deadline - time.monotonic()
             if left <= 0:
-                raise ModbusFault("timeout", f"{self.where}: no answer to transaction {tid} within "
-                                  f"{self.timeout_s:g} s")
+                raise ModbusFault("timeout", f"{self.where}: no answer to transaction {tid} within {wait_s:g} s")
             try:
                 sock.settimeout(left)
                 chunk = sock.recv(4096)
