@@ -154,7 +154,7 @@ def _detect_live(prof, output: str, rate_hz: float | None, method: str | None, c
             out.write(update_row(u, GraspState(u.state).label))
             out.flush()  # a pipe's reader sees each row as it comes
 
-        counters = detect_live_log(prof, click.get_text_stream("stdin"), emit, rate_hz, method)
+        counters = detect_live_log(prof, sys.stdin, emit, rate_hz, method)
     if not quiet:
         table = UpdateTable.from_updates(updates)
         _summary("<stdin>", counters["scans"], rate_hz or prof.sensor.rate_hz, method or prof.detector.method,
