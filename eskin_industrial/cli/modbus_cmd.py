@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import logging
 import sys
 import threading
 import time
@@ -61,6 +62,8 @@ def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, du
 @click.option("--plc-port", type=int, default=None, help="Client mode: the PLC's port (default: the profile's).")
 @click.option("--plc-rtu", default=None, metavar="PORT", help="Client mode over Modbus RTU: the PLC's serial port.")
 @click.option("--plc-baud", type=int, default=115200, show_default=True, help="Baud rate for --plc-rtu.")
+@click.option("--plc-timeout", type=click.FloatRange(0.01, 30.0), default=None,
+              help="Client mode: seconds the PLC has to answer (default: the profile's timeout_s).")
 @click.option("--serve", "serve", default=None, metavar="HOST:PORT",
               help="Server mode over TCP (default host: the profile's [modbus.plc] bind).")
 @click.option("--serve-rtu", default=None, metavar="PORT", help="Server mode over Modbus RTU on this serial port.")
@@ -69,8 +72,8 @@ def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, du
               help="Stop after this many seconds (default: until interrupted).")
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=0.0,
               help="Print counters every N seconds (0: only at the end).")
-def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_port, plc_rtu, plc_baud, serve,
-                  serve_rtu, serve_baud, duration_s, status_every) -> None:
+def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_port, plc_rtu, plc_baud, plc_timeout,
+                  serve, serve_rtu, serve_baud, duration_s, status_every) -> None:
     """Poll the node over Modbus RTU, detect, and publish the PLC register image:
     written to the PLC (client mode, the default when the profile says so) or served
     (--serve / --serve-rtu).  The same loop as ``eskin-bus bridge --source rtu:PORT``,
@@ -89,7 +92,7 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
         raise click.UsageError("give one of --rtu PORT or --recording REC.csv")
     if serve and serve_rtu:
         raise click.UsageError("--serve and --serve-rtu exclude each other")
-    client_asked = plc_host is not None or plc_port is not None or plc_rtu is not None
+    client_asked = plc_host is not None or plc_port is not None or plc_rtu is not None or plc_timeout is not None
     if client_asked and (serve or serve_rtu):
         raise click.UsageError("client options (--plc-*) and server options (--serve*) exclude each other")
     if serve_rtu:
@@ -98,9 +101,9 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
         host, port = host_port(serve, "--serve", require_port=True)
         out = PlcOptions(mode="server", host=host, port=port)  # no host: the profile's bind
     elif plc_rtu:
-        out = PlcOptions(mode="client", transport="rtu", serial_port=plc_rtu, baudrate=plc_baud)
+        out = PlcOptions(mode="client", transport="rtu", serial_port=plc_rtu, baudrate=plc_baud, timeout_s=plc_timeout)
     else:
-        out = PlcOptions(mode="client" if client_asked else None, host=plc_host, port=plc_port)
+        out = PlcOptions(mode="client" if client_asked else None, host=plc_host, port=plc_port, timeout_s=plc_timeout)
     if rtu_port is not None:
         node = NodeConfig.of("node", profile_path, "modbus-rtu", serial_port=rtu_port, baudrate=baudrate)
     else:
@@ -109,32 +112,53 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
     (resolved,) = resolve(cfg)
     # The signals of `eskin-bus bridge`: each stopping one leaves the block reading
     # BRIDGE_OFFLINE (SingleNode's exit), USR1 prints the counters.
-    with handled_signals() as flags:
-        single = SingleNode(cfg, resolved)
-        loop = single.loop
-        where = "; ".join(s.where for s in loop.sinks)
-        _say(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {where}, base address {plc.base_address}")
-        end = None if duration_s is None else time.monotonic() + duration_s
-        next_status = time.monotonic() + status_every if status_every else None
-        usr1 = 0
-        with single:
-            while not flags.reason and (end is None or time.monotonic() < end):
-                loop.step()
-                if flags.counters != usr1:
-                    usr1 = flags.counters
-                    _say(_counters(loop))
-                if next_status is not None and time.monotonic() >= next_status:
-                    next_status += status_every
-                    _say(_counters(loop))
-        _say(f"modbus-bridge: stopped ({flags.reason or 'duration'}), offline written: "
-             f"{'yes' if single.offline_written else 'no'}")
-        _say(_counters(loop))
+    package_log = logging.getLogger("eskin_industrial")  # the server's refusals: a line each
+    lines, level = _Lines(), package_log.level
+    package_log.addHandler(lines)
+    package_log.setLevel(logging.INFO)
+    try:
+        with handled_signals() as flags:
+            single = SingleNode(cfg, resolved)
+            loop = single.loop
+            for sink in loop.sinks:  # the writer's outages: a line each
+                sink.on_events(_event_line)
+            where = "; ".join(s.where for s in loop.sinks)
+            _say(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {where}, base address {plc.base_address}")
+            end = None if duration_s is None else time.monotonic() + duration_s
+            next_status = time.monotonic() + status_every if status_every else None
+            usr1 = 0
+            with single:
+                while not flags.reason and (end is None or time.monotonic() < end):
+                    loop.step()
+                    if flags.counters != usr1:
+                        usr1 = flags.counters
+                        _say(_counters(loop))
+                    if next_status is not None and time.monotonic() >= next_status:
+                        next_status += status_every
+                        _say(_counters(loop))
+            _say(f"modbus-bridge: stopped ({flags.reason or 'duration'}), offline written: "
+                 f"{'yes' if single.offline_written else 'no'}")
+            _say(_counters(loop))
+    finally:
+        package_log.removeHandler(lines)
+        package_log.setLevel(level)
     if flags.failing:
         sys.exit(EXIT_FAILED)
 
 
 def _counters(loop) -> str:
     return "modbus-bridge: " + " ".join(f"{k}={v}" for k, v in loop.counters().items())
+
+
+class _Lines(logging.Handler):
+    """The package's own log records (the Modbus server's events) as lines on stderr."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        _event_line(record.getMessage(), record.levelname.lower(), getattr(record, "fields", {}))
+
+
+def _event_line(name: str, level: str, fields: dict) -> None:
+    _say(f"modbus-bridge: {level} {name} " + " ".join(f"{k}={v}" for k, v in fields.items()))
 
 
 def _say(line: str) -> None:
