@@ -21,9 +21,9 @@ from typing import Any
 
 from ...errors import EskinError
 from . import pdu, rtu_frame
-from .codec import DEVICE_FAILURE, ILLEGAL_FUNCTION
+from .codec import ILLEGAL_FUNCTION
 from .io import SerialSettings
-from .server import RateLimitedLog
+from .server import RateLimitedLog, answer
 
 #: After a failure of the port, how long before opening it again.
 REOPEN_S = 0.5
@@ -151,13 +151,7 @@ class RtuServer:
             self.log.event("modbus_write_denied", port=self.settings.port, function=fc, reason="read_only")
             resp = pdu.exception(fc, ILLEGAL_FUNCTION)
         else:
-            try:
-                resp = pdu.handle(req, self.handler, self.identity, self.unit_id)
-            except Exception as exc:  # noqa: BLE001 - a handler's bug must not end the server
-                c.handler_errors += 1
-                self.log.event("modbus_handler_error", level=logging.ERROR, function=fc,
-                               error=f"{type(exc).__name__}: {exc}")
-                resp = pdu.exception(fc, DEVICE_FAILURE)
+            resp = answer(req, self.handler, self.identity, self.unit_id, self.log, c)
         if unit == 0:
             return  # broadcast: acted on, never answered
         port = self._port

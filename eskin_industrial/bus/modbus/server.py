@@ -99,6 +99,17 @@ def _peer_ip(peer: Any) -> Address | None:
     return mapped if mapped is not None else ip
 
 
+def answer(req: bytes, handler: Any, identity: Any, server_id: int, log: "RateLimitedLog", counters: Any) -> bytes:
+    """The response PDU to a request (TCP and RTU alike): a handler that raises is a
+    bug, answered SERVER DEVICE FAILURE, counted and logged, never the end of the server."""
+    try:
+        return pdu.handle(req, handler, identity, server_id)
+    except Exception as exc:  # noqa: BLE001 - a handler's bug must not end the server
+        counters.handler_errors += 1
+        log.event("modbus_handler_error", level=logging.ERROR, function=req[0], error=f"{type(exc).__name__}: {exc}")
+        return pdu.exception(req[0], DEVICE_FAILURE)
+
+
 class RateLimitedLog:
     """Structured events on ``logger``, at most one per name per ``every_s``."""
 
@@ -271,12 +282,7 @@ class TcpServer:
             return mbap.frame(tid, unit, pdu.exception(fc, ILLEGAL_FUNCTION))
         token = PEER.set(conn.peer)
         try:
-            resp = pdu.handle(req, self.handler, self.identity, self.server_id)
-        except Exception as exc:  # noqa: BLE001 - a handler's bug must not end the server
-            c.handler_errors += 1
-            self.log.event("modbus_handler_error", level=logging.ERROR, function=fc,
-                           error=f"{type(exc).__name__}: {exc}")
-            resp = pdu.exception(fc, DEVICE_FAILURE)
+            resp = answer(req, self.handler, self.identity, self.server_id, self.log, c)
         finally:
             PEER.reset(token)
         return mbap.frame(tid, unit, resp)
