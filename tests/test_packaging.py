@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.helpers.modbus import free_port
 from tests.helpers.paths import ROOT
 
 pytestmark = pytest.mark.slow
@@ -94,3 +95,21 @@ def test_installed_profiles_and_examples_copy_out_and_check(installed: tuple[Pat
     _run([eskin, "examples", "-o", "cell"], tmp_path)
     plan = _run([eskin, "bridge", "--config", "cell/bridge.toml", "--check"], tmp_path).stdout
     assert "gripper-left" in plan and "gripper-right" in plan
+
+
+def test_pipx_installs_the_wheel_with_a_working_command(installed: tuple[Path, Path], tmp_path: Path) -> None:
+    """pipx, the way an integrator installs a command-line tool: its own virtualenv,
+    the command on PATH, run from an empty folder."""
+    wheel, bin_dir = installed
+    _run([str(bin_dir / "pip"), "install", "-q", "--disable-pip-version-check", "pipx>=1.4,<2"], tmp_path)
+    env = {"PIPX_HOME": str(tmp_path / "pipx"), "PIPX_BIN_DIR": str(tmp_path / "bin")}
+    done = subprocess.run([str(bin_dir / "pipx"), "install", "--pip-args", f"-c {ROOT / 'constraints.txt'}",
+                           str(wheel)], cwd=tmp_path, env={**os.environ, **env}, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    listed = _run([str(tmp_path / "bin" / "eskin-bus"), "profile", "list"], tmp_path).stdout
+    assert listed.startswith("hand-4x5")
+    checked = _run([str(tmp_path / "bin" / "eskin-bus"), "bridge", "-p", "paper-5x5", "--source", "scene:case2",
+                    "--plc", f"serve:127.0.0.1:{free_port()}", "--check"], tmp_path).stdout
+    assert "case2" in checked
+
