@@ -152,6 +152,8 @@ class Bridge:
             run = NodeRun(node, loop)
             loop.on_update = self._update_hook(run)
             loop.on_command = self._command_hook(run)
+            for sink in loop.sinks:  # a sink's own events (a PLC outage's start and end)
+                sink.on_events(self._sink_event_hook(run))
             self.runs.append(run)
         feeders: dict[int, tuple[Feeder, list[int]]] = {}
         for i, run in enumerate(self.runs):
@@ -194,6 +196,9 @@ class Bridge:
 
     def _command_hook(self, run: NodeRun) -> Callable[[str], None]:
         return lambda name: self.log.event("plc_command", node=run.name, command=name)
+
+    def _sink_event_hook(self, run: NodeRun) -> Callable[[str, str, dict[str, Any]], None]:
+        return lambda name, level, fields: self.log.event(name, level, node=run.name, **fields)
 
     # -- running --------------------------------------------------------------------
     def start(self) -> "Bridge":
@@ -297,7 +302,7 @@ class Bridge:
             sink: Sink | None  # (each output, then the one a change is about)
             for sink in run.sinks:
                 health = sink.health()
-                if health.connected is not None:
+                if health.connected is not None and not sink.logs_connection:
                     seen[f"{sink.kind}_connected"] = (health.connected, sink)
             for key, (value, sink) in seen.items():
                 before = run.logged.get(key)

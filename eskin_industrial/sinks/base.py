@@ -6,7 +6,9 @@ cheap, for a recorder) and every publication of the register image
 it is urgent, and when the deciding scan arrived).  A sink that can be commanded (the
 PLC: acknowledge, tare, enable) hands the commands back through
 :meth:`Sink.take_commands`.  Each sink reports :meth:`Sink.health` (connected,
-failures, last error) and :meth:`Sink.counters`, and :meth:`Sink.flush` /
+failures, last error) and :meth:`Sink.counters`; a sink that knows when its own
+episodes start and end (the PLC writer's outages) says so with :meth:`Sink._event`,
+which the bridge routes to its log (:meth:`Sink.on_events`).  :meth:`Sink.flush` /
 :meth:`Sink.close` end it (close is safe to call twice).
 
 The public methods are written once here over private hooks (``_publish``,
@@ -25,7 +27,9 @@ An example of a new kind, run by ``tests/test_seams.py``: ``docs/architecture.md
 from __future__ import annotations
 
 import abc
-from collections.abc import Sequence
+import collections
+import threading
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
@@ -43,6 +47,12 @@ SINKS: dict[str, str] = {
     "recorder": "eskin_industrial.sinks.recorder:Recorder",
     "sparkplug": "eskin_industrial.plant.sparkplug:SparkplugDevice",
 }
+#: A sink's own events held until a handler is attached (the first ones of a writer
+#: that starts before the bridge's log is wired); beyond it the oldest are dropped.
+EVENTS_HELD = 64
+#: ``(name, level, fields)`` of a sink's own log event.
+EventHandler = Callable[[str, str, dict[str, Any]], None]
+
 #: With no output configured at all, the bridge publishes to this one (the PLC as
 #: each node's profile describes it).
 DEFAULT_OUTPUT = "plc"
@@ -92,11 +102,17 @@ class Sink(abc.ABC):
     cli_options: ClassVar[tuple[CliOption, ...]] = ()
     #: Option -> the (first node's) profile key it falls back to when unset.
     profile_keys: ClassVar[dict[str, str]] = {}
+    #: The sink logs its connection's ups and downs itself (:meth:`_event`): the
+    #: bridge does not infer them from :meth:`health`.
+    logs_connection: ClassVar[bool] = False
 
     def __init__(self) -> None:
         self._closed = False
         #: Where the results go, for logs (``tcp 10.0.0.5:502 (client)``, a file path).
         self.where = self.kind
+        self._events_lock = threading.Lock()
+        self._events_held: collections.deque[tuple[str, str, dict[str, Any]]] = collections.deque(maxlen=EVENTS_HELD)
+        self._event_handler: EventHandler | None = None
 
     # -- the data path --------------------------------------------------------------
     def on_update(self, update: Update) -> None:
@@ -123,6 +139,27 @@ class Sink(abc.ABC):
     def counters(self) -> dict[str, int]:
         """The kind's counters, with names unique across kinds (``plc_writes``)."""
         return {}
+
+    def on_events(self, handler: EventHandler) -> None:
+        """Hand the sink's own events to ``handler`` (called on the thread that has
+        them: it must not block); the events held until now first."""
+        with self._events_lock:
+            held = list(self._events_held)
+            self._events_held.clear()
+            self._event_handler = handler
+        for name, level, fields in held:
+            handler(name, level, fields)
+
+    def _event(self, name: str, level: str = "info", **fields: Any) -> None:
+        """A log event of the sink's own (``plc_unreachable``); held until a handler is attached."""
+        handler = self._event_handler
+        if handler is None:
+            with self._events_lock:
+                handler = self._event_handler
+                if handler is None:
+                    self._events_held.append((name, level, fields))
+                    return
+        handler(name, level, fields)
 
     # -- the end ----------------------------------------------------------------------
     def flush(self, timeout_s: float = 1.0) -> bool:
