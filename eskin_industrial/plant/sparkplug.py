@@ -13,6 +13,7 @@ and on an NCMD (rebirth).  One lock orders the ``seq`` numbers with the messages
 
 from __future__ import annotations
 
+import collections
 import threading
 import time
 from collections.abc import Sequence
@@ -24,9 +25,10 @@ from .. import __version__
 from ..detect.state import LABELS
 from ..errors import EskinError
 from ..plc.image import Status, decode_registers
-from ..schema import in_range
+from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Publication, Sink, SinkHealth
 from . import payload as pb
+from .store import Forwarder, Held, store_path
 
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
@@ -66,11 +68,22 @@ class SparkplugOptions:
     deadband: float = field(default=0.01, metadata=in_range(0, 1e9))
     #: An analog value is published at most this often (a state change goes at once).
     min_interval_s: float = field(default=0.5, metadata=in_range(0, 3600))
+    #: Back-off between connection attempts: from this, doubling up to ``reconnect_max_s``.
+    reconnect_min_s: float = field(default=0.2, metadata=in_range(0.05, 60))
+    reconnect_max_s: float = field(default=5.0, metadata=in_range(0.05, 600))
+    #: Store-and-forward: the folder of the on-disk queue of an outage's data messages
+    #: (``<group_id>-<edge_node_id>.sqlite3``); unset: the queue is in memory.
+    store_dir: str | None = None
+    #: Data messages held at most (0: none); past it they are counted and dropped.
+    store_max: int = field(default=10000, metadata=in_range(0, 10_000_000))
 
     def __post_init__(self) -> None:
         parse_broker(self.broker)
         check_id("group_id", self.group_id)
         check_id("edge_node_id", self.edge_node_id)
+        if self.reconnect_max_s < self.reconnect_min_s:
+            raise ValueError(f"reconnect_max_s: {self.reconnect_max_s:g} is below reconnect_min_s "
+                             f"({self.reconnect_min_s:g})")
 
 
 class MetricDef(NamedTuple):
@@ -106,7 +119,7 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
 _ANALOG = tuple(m.analog for m in DEVICE_METRICS)
 _FLOATS = tuple(m.datatype == pb.FLOAT for m in DEVICE_METRICS)
 #: Node metrics (aliases 1..); a device's metrics start at 1000 x (its index + 1).
-NODE_METRICS = ("bdSeq", REBIRTH, "Node Info/Version", "Node Info/Uptime")
+NODE_METRICS = ("bdSeq", REBIRTH, "Node Info/Version", "Node Info/Uptime", "Store/Pending", "Store/Overflow")
 
 
 def metric_values(pub: Publication, r_scale: float, word_order: str) -> tuple[Any, ...]:
@@ -146,8 +159,20 @@ class EdgeNode:
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
         self.client.on_message = self._on_message
-        self.client.reconnect_delay_set(0.2, 5)
+        self.client.reconnect_delay_set(options.reconnect_min_s, options.reconnect_max_s)
         self._set_will()
+        self.forwarder = Forwarder(store_path(options.store_dir, g, e), options.store_max, self._send_held,
+                                   lambda: self.connected and not self.stopping, self._event, self._store_drained)
+        self.serial = self.forwarder.next_serial  #: of the next data message (the replay order)
+        #: Data messages handed to paho with QoS 1 and not yet acknowledged: a lost
+        #: connection sends them through the store instead (paho would resend them
+        #: before the new births, out of Sparkplug's order).
+        self.inflight: collections.deque[tuple[Any, Held]] = collections.deque()
+
+    def _event(self, name: str, level: str = "info", **fields: Any) -> None:
+        """An event of the edge node, logged with its first device."""
+        if self.devices:
+            self.devices[0]._event(name, level, **fields)
 
     # -- messages -----------------------------------------------------------------------
     def _death(self) -> bytes:
@@ -172,6 +197,54 @@ class EdgeNode:
             else:
                 self.dropped += 1
 
+    def send_data(self, device: SparkplugDevice, ms: int, metrics: tuple[pb.Metric, ...]) -> None:
+        """A DDATA: published when connected, else held for later (under the lock)."""
+        serial = self.serial
+        self.serial += 1
+        held = Held(serial, device.device_id, device.base, ms, metrics)
+        if not self.connected:
+            self.forwarder.hold(held)
+            return
+        payload = pb.Payload(ms, metrics, self._next_seq())
+        self._publish_tracked(device.topic["DDATA"], pb.encode(payload), held)
+
+    def _publish_tracked(self, topic: str, data: bytes, held: Held) -> None:
+        info = self.client.publish(topic, data, qos=self.options.qos)
+        if info.rc != 0 and self.options.qos == 0:
+            self.forwarder.hold(held)  # not sent (the connection went): held instead
+            return
+        self.published += 1
+        if self.options.qos:
+            inflight = self.inflight
+            while inflight and inflight[0][0].is_published():
+                inflight.popleft()
+            inflight.append((info, held))
+
+    def _send_held(self, serial: int, device_id: str, base: int, body: bytes) -> bool | None:
+        """A held message as a historical DDATA (the forwarder's thread): False when not
+        connected, None when its device is no longer here."""
+        with self.lock:
+            if not self.connected or self.stopping:
+                return False
+            dev = next((d for d in self.devices if d.device_id == device_id), None)
+            if dev is None or dev.base != base or dev.dead:
+                return None
+            data = body + pb.encode(pb.Payload(seq=self._next_seq()))
+            self._publish_tracked(dev.topic["DDATA"], data, Held(serial, device_id, base, 0, (), body))
+            return True
+
+    def _store_drained(self) -> None:
+        """The store is empty again: the node metrics say so (NDATA)."""
+        with self.lock:
+            if self.connected and not self.stopping:
+                now = _now_ms()
+                self.send(self.topic["NDATA"], pb.Payload(now, self._store_metrics(now, named=False)))
+
+    def _store_metrics(self, now: int, named: bool = True) -> tuple[pb.Metric, ...]:
+        f = self.forwarder
+        return (pb.Metric("Store/Pending" if named else None, 5, now, pb.UINT64, f.pending),
+                pb.Metric("Store/Overflow" if named else None, 6, now, pb.UINT64, f.overflow))
+
     def births(self) -> None:
         """NBIRTH (seq 0) and every device's DBIRTH."""
         with self.lock:
@@ -181,7 +254,8 @@ class EdgeNode:
                        pb.Metric(REBIRTH, 2, now, pb.BOOLEAN, False),
                        pb.Metric("Node Info/Version", 3, now, pb.STRING, __version__),
                        pb.Metric("Node Info/Uptime", 4, now, pb.UINT64, int(time.monotonic() - self.started),
-                                 properties=(("engUnit", (pb.STRING, "s")),)))
+                                 properties=(("engUnit", (pb.STRING, "s")),)),
+                       *self._store_metrics(now))
             self.send(self.topic["NBIRTH"], pb.Payload(now, metrics))
             for d in self.devices:
                 if not d.dead:
@@ -195,9 +269,20 @@ class EdgeNode:
             return
         self.connects += 1
         client.subscribe(self.topic["NCMD"], qos=1)
+        # What the last session left unacknowledged would be resent by paho before the
+        # births: it goes through the store, as historical data, after them.
+        client.drop_out_messages()
         with self.lock:
+            self._hold_unacknowledged()
             self.births()
             self.connected = True
+        self.forwarder.wake()
+
+    def _hold_unacknowledged(self) -> None:
+        for info, held in self.inflight:
+            if not info.is_published():
+                self.forwarder.hold(held)
+        self.inflight.clear()
 
     def _on_disconnect(self, client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
         with self.lock:
@@ -227,6 +312,7 @@ class EdgeNode:
 
     # -- life ----------------------------------------------------------------------------
     def start(self) -> EdgeNode:
+        self.forwarder.start()
         self.client.connect_async(self.host, self.port, keepalive=self.options.keepalive_s)
         self.client.loop_start()
         return self
@@ -242,13 +328,15 @@ class EdgeNode:
         with self.lock:
             if self.stopping:
                 return
+            self.stopping = True  # the forwarder sends nothing more
+        self.forwarder.stop()
+        with self.lock:
             for d in self.devices:
                 d.death()
             info = None
             if self.connected:
                 info = self.client.publish(self.topic["NDEATH"], self._death(), qos=1)
                 self.published += 1
-            self.stopping = True
         if info is not None:
             try:
                 info.wait_for_publish(timeout_s)
@@ -256,11 +344,18 @@ class EdgeNode:
                 pass
         self.client.disconnect()
         self.client.loop_stop()
+        with self.lock:
+            self._hold_unacknowledged()
+        self.forwarder.close()  # what is held stays on disk for the next start
 
     def counters(self) -> dict[str, int]:
+        f = self.forwarder
         return {"sparkplug_published": self.published, "sparkplug_dropped": self.dropped,
                 "sparkplug_connects": self.connects, "sparkplug_failures": self.failures,
-                "sparkplug_bad_commands": self.bad_commands, "sparkplug_rebirths": self.rebirths}
+                "sparkplug_bad_commands": self.bad_commands, "sparkplug_rebirths": self.rebirths,
+                "sparkplug_store_held": f.held, "sparkplug_store_pending": f.pending,
+                "sparkplug_store_overflow": f.overflow, "sparkplug_store_forwarded": f.forwarded,
+                "sparkplug_store_discarded": f.discarded}
 
 
 class SparkplugDevice(Sink):
@@ -273,7 +368,18 @@ class SparkplugDevice(Sink):
                   "(mqtt://HOST:PORT); needs --group-id and --edge-node-id.", metavar="URL"),
         CliOption("--group-id", "group_id", "Sparkplug group id (with --sparkplug).", metavar="ID"),
         CliOption("--edge-node-id", "edge_node_id", "Sparkplug edge node id (with --sparkplug).", metavar="ID"),
+        CliOption("--sparkplug-qos", "sparkplug_qos", "MQTT QoS of the data messages (0 or 1; 1: nothing lost "
+                  "to a broker that dies, with the store).", type=int, metavar="N"),
+        CliOption("--sparkplug-keepalive", "sparkplug_keepalive_s", "MQTT keepalive, seconds.", type=int,
+                  metavar="S"),
+        CliOption("--sparkplug-store-dir", "sparkplug_store_dir", "Folder of the on-disk queue of the data "
+                  "messages of a broker outage (default: in memory).", metavar="DIR"),
+        CliOption("--sparkplug-store-max", "sparkplug_store_max", "Data messages held at most during an "
+                  "outage (the rest are counted).", type=int, metavar="N"),
     )
+    #: ``--sparkplug-*`` option -> the ``[sparkplug]`` key it sets.
+    _CLI_KEYS = {"sparkplug_qos": "qos", "sparkplug_keepalive_s": "keepalive_s",
+                 "sparkplug_store_dir": "store_dir", "sparkplug_store_max": "store_max"}
 
     def __init__(self, node: EdgeNode, device_id: str, index: int, r_scale: float, word_order: str) -> None:
         super().__init__()
@@ -320,7 +426,7 @@ class SparkplugDevice(Sink):
         node = self.node
         with node.lock:
             self.current = values
-            if not node.connected or self.dead:
+            if self.dead:
                 return
             sent, sent_at = self.sent, self.sent_at
             changed = [i for i, v in enumerate(values) if v != sent[i] and not _ANALOG[i]]
@@ -338,7 +444,7 @@ class SparkplugDevice(Sink):
             for i in sorted(changed):
                 sent[i], sent_at[i] = values[i], now
                 metrics.append(pb.Metric(None, self.base + i, None, DEVICE_METRICS[i].datatype, values[i]))
-            node.send(self.topic["DDATA"], pb.Payload(ms, tuple(metrics)))
+            node.send_data(self, ms, tuple(metrics))
 
     def health(self) -> SinkHealth:
         return SinkHealth(self.node.connected, self.node.failures, self.node.last_error)
@@ -353,13 +459,20 @@ class SparkplugDevice(Sink):
     @classmethod
     def options_from_cli(cls, values: dict[str, Any]) -> SparkplugOptions | None:
         url = values.get("sparkplug")
+        extra = {key: values[dest] for dest, key in cls._CLI_KEYS.items() if values.get(dest) is not None}
         if url is None:
-            if values.get("group_id") is not None or values.get("edge_node_id") is not None:
-                raise ValueError("--group-id/--edge-node-id: give --sparkplug URL too")
+            given = [o.flag for o in cls.cli_options[1:] if values.get(o.dest) is not None]
+            if given:
+                raise ValueError(f"{'/'.join(given)}: give --sparkplug URL too")
             return None
         if not values.get("group_id") or not values.get("edge_node_id"):
             raise ValueError("give --group-id and --edge-node-id with --sparkplug")
-        return SparkplugOptions(url, values["group_id"], values["edge_node_id"])
+        try:
+            return build(SparkplugOptions, {"broker": url, "group_id": values["group_id"],
+                                            "edge_node_id": values["edge_node_id"], **extra})
+        except SchemaError as exc:  # the flag, not the key, in the one line
+            flag = next((o.flag for o in cls.cli_options if cls._CLI_KEYS.get(o.dest) == exc.key), exc.key)
+            raise ValueError(f"{flag}: {exc.message}") from None
 
     @classmethod
     def describe(cls, options: SparkplugOptions, node: NodeLike) -> str:
@@ -373,25 +486,29 @@ class SparkplugDevice(Sink):
 
     @classmethod
     def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
-        try:
-            import paho.mqtt.client as mqtt
-        except ImportError:  # pragma: no cover - a runtime dependency
-            from ..errors import MissingExtra
-
-            raise MissingExtra("the sparkplug output needs paho-mqtt (pip install paho-mqtt)") from None
-        client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
-                             client_id=f"{options.group_id}-{options.edge_node_id}", clean_session=True)
-        edge = EdgeNode(options, client)
+        edge = open_edge(options, [(n.name, n.profile.modbus.plc.r_scale, n.profile.modbus.plc.word_order)
+                                   for n in nodes])
         context.closers.append(edge.close)  # closers run last first: the devices' DDEATH, then NDEATH
-        sinks: list[Sink] = []
-        for i, n in enumerate(nodes):
-            plc = n.profile.modbus.plc
-            dev = cls(edge, n.name, i, plc.r_scale, plc.word_order)
-            edge.devices.append(dev)
+        for dev in edge.devices:
             context.closers.append(dev.close)
-            sinks.append(dev)
         edge.start()
-        return sinks
+        return list(edge.devices)
+
+
+def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, float, str]]) -> EdgeNode:
+    """An edge node (not started) with one device per ``(name, r_scale, word_order)``."""
+    try:
+        import paho.mqtt.client as mqtt
+    except ImportError:  # pragma: no cover - a runtime dependency
+        from ..errors import MissingExtra
+
+        raise MissingExtra("the sparkplug output needs paho-mqtt (pip install paho-mqtt)") from None
+    client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
+                         client_id=f"{options.group_id}-{options.edge_node_id}", clean_session=True)
+    edge = EdgeNode(options, client)
+    for i, (name, r_scale, word_order) in enumerate(devices):
+        edge.devices.append(SparkplugDevice(edge, name, i, r_scale, word_order))
+    return edge
 
 
 _TYPE_NAMES = {pb.INT8: "Int8", pb.INT16: "Int16", pb.INT32: "Int32", pb.INT64: "Int64", pb.UINT8: "UInt8",
