@@ -24,10 +24,11 @@ from urllib.parse import urlsplit
 from .. import __version__
 from ..detect.state import LABELS
 from ..errors import EskinError
-from ..plc.image import Status, decode_registers
+from ..plc.image import Command, PlcImage, Status, decode_registers
 from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Publication, Sink, SinkHealth
 from . import payload as pb
+from .commands import BadCommand, birth_metrics, parse_device_command
 from .store import Forwarder, Held, store_path
 
 if TYPE_CHECKING:
@@ -146,6 +147,7 @@ class EdgeNode:
         self.host, self.port = parse_broker(options.broker)
         g, e = options.group_id, options.edge_node_id
         self.topic = {kind: f"{NAMESPACE}/{g}/{kind}/{e}" for kind in ("NBIRTH", "NDEATH", "NDATA", "NCMD")}
+        self.topic["DCMD"] = f"{NAMESPACE}/{g}/DCMD/{e}/+"
         self.devices: list[SparkplugDevice] = []
         self.lock = threading.RLock()
         self.seq = 0
@@ -154,6 +156,8 @@ class EdgeNode:
         self.connected = False
         self.stopping = False
         self.published = self.dropped = self.connects = self.failures = self.bad_commands = self.rebirths = 0
+        self.unknown_devices = self.commands = self.commands_refused = 0
+        self._bad_logged: dict[str, tuple[float, int]] = {}
         self.last_error = ""
         self.client = client_factory
         self.client.on_connect = self._on_connect
@@ -268,7 +272,7 @@ class EdgeNode:
             self.last_error = str(reason)
             return
         self.connects += 1
-        client.subscribe(self.topic["NCMD"], qos=1)
+        client.subscribe([(self.topic["NCMD"], 1), (self.topic["DCMD"], 1)])
         # What the last session left unacknowledged would be resent by paho before the
         # births: it goes through the store, as historical data, after them.
         client.drop_out_messages()
@@ -296,19 +300,48 @@ class EdgeNode:
             self._set_will()
 
     def _on_message(self, client: Any, userdata: Any, message: Any) -> None:
+        """An NCMD or a DCMD (paho's thread): whatever it holds is counted and logged,
+        never raised."""
+        topic = str(message.topic)
+        parts = topic.split("/")
+        device = None
+        if parts[2] == "DCMD":
+            device = next((d for d in self.devices if d.device_id == parts[-1] and len(parts) == 5), None)
+            if device is None:
+                self.unknown_devices += 1
+                self._bad("sparkplug_unknown_device", topic, "no such device on this edge node")
+                return
         try:
             cmd = pb.decode(message.payload)
-        except EskinError:  # malformed: counted and dropped, never a crash
+        except EskinError as exc:  # malformed: counted and dropped, never a crash
             self.bad_commands += 1
+            self._bad("sparkplug_bad_command", topic, str(exc), device)
+            return
+        if device is not None:
+            device.command(cmd, topic)
             return
         rebirth = any((m.name == REBIRTH or m.alias == 2) and m.value is True for m in cmd.metrics)
         if not rebirth:
             self.bad_commands += 1
+            self._bad("sparkplug_bad_command", topic, f"expected {REBIRTH} = true")
             return
         self.rebirths += 1
         with self.lock:
-            if self.connected:
+            if self.connected and not self.stopping:
                 self.births()
+
+    def _bad(self, event: str, topic: str, error: str, device: SparkplugDevice | None = None) -> None:
+        """One warning per event name and second at most (a flood of bad commands must
+        not flood the log); the lines left out are counted in the next one."""
+        now = time.monotonic()
+        last, quiet = self._bad_logged.get(event, (float("-inf"), 0))
+        if now - last < 1.0:
+            self._bad_logged[event] = (last, quiet + 1)
+            return
+        self._bad_logged[event] = (now, 0)
+        target = device if device is not None else (self.devices[0] if self.devices else None)
+        if target is not None:
+            target._event(event, "warning", topic=topic, error=error, not_logged=quiet)
 
     # -- life ----------------------------------------------------------------------------
     def start(self) -> EdgeNode:
@@ -355,7 +388,8 @@ class EdgeNode:
                 "sparkplug_bad_commands": self.bad_commands, "sparkplug_rebirths": self.rebirths,
                 "sparkplug_store_held": f.held, "sparkplug_store_pending": f.pending,
                 "sparkplug_store_overflow": f.overflow, "sparkplug_store_forwarded": f.forwarded,
-                "sparkplug_store_discarded": f.discarded}
+                "sparkplug_store_discarded": f.discarded, "sparkplug_commands": self.commands,
+                "sparkplug_commands_refused": self.commands_refused, "sparkplug_unknown_devices": self.unknown_devices}
 
 
 class SparkplugDevice(Sink):
@@ -394,6 +428,36 @@ class SparkplugDevice(Sink):
         self.sent: list[Any] = [None] * len(DEVICE_METRICS)  #: the values last sent, per metric
         self.sent_at = [float("-inf")] * len(DEVICE_METRICS)
         self.dead = False
+        self.image: PlcImage | None = None  #: of the newest publication (for a command's refusal)
+        self._commands: collections.deque[Command] = collections.deque()
+
+    def command(self, payload: pb.Payload, topic: str) -> None:
+        """A DCMD for this device (paho's thread): queued for the loop, or refused as a
+        whole under the PLC's rule, or counted as malformed."""
+        node = self.node
+        try:
+            cmds = parse_device_command(payload, self.base)
+        except BadCommand as exc:
+            node.bad_commands += 1
+            node._bad("sparkplug_bad_command", topic, str(exc), self)
+            return
+        image = self.image
+        for cmd in cmds:
+            why = "contact_unknown" if image is None else image.refusal(cmd)
+            if why is not None:
+                node.commands_refused += 1
+                self._event("sparkplug_command_refused", "warning", command=cmd.name, reason=why)
+                return
+        node.commands += len(cmds)
+        self._commands.extend(cmds)
+        self._event("sparkplug_command", "info", commands=",".join(c.name for c in cmds))
+
+    def take_commands(self) -> list[Command]:
+        out = []
+        commands = self._commands
+        while commands:
+            out.append(commands.popleft())
+        return out
 
     def birth(self) -> None:
         """DBIRTH: every metric with name, alias, datatype, unit and its newest value."""
@@ -405,6 +469,7 @@ class SparkplugDevice(Sink):
             value = None if values is None else values[i]
             metrics.append(pb.Metric(m.name, self.base + i, now, m.datatype, value, is_null=True if value is None
                                      else None, properties=props))
+        metrics += birth_metrics(self.base, now)
         self.sent = list(values) if values is not None else [None] * len(DEVICE_METRICS)
         self.sent_at = [time.monotonic()] * len(DEVICE_METRICS)
         self.node.send(self.topic["DBIRTH"], pb.Payload(now, tuple(metrics)))
@@ -421,6 +486,7 @@ class SparkplugDevice(Sink):
         if publication.offline:
             self.death()
             return
+        self.image = publication.image
         values = metric_values(publication, self.r_scale, self.word_order)
         now = time.monotonic()
         node = self.node
