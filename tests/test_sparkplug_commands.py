@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import subprocess
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -108,8 +109,8 @@ def test_dcmds_are_applied_by_the_loop_and_garbage_is_counted(paper_profile, tmp
                     wait_for(lambda: not loop.image.enabled, what="disabled")
                     _publish(port, dcmd, _dcmd(Acknowledge_Slip=True, Enable=True), tmp_path)
                     wait_for(lambda: loop.image.enabled, what="enabled again")
-                    msgs = cap.wait(lambda m: [spb.value(x) for t, p in m if "/DDATA/" in t
-                                               for x in spb.parse(p).metrics if x.alias == ENABLED][-2:] == [False, True])
+                    msgs = cap.wait(lambda m: [spb.value(x) for t, p in m if "/DDATA/" in t for x in
+                                               spb.parse(p).metrics if x.alias == ENABLED][-2:] == [False, True])
                     nt.join(15)
                 assert c()["sparkplug_commands"] == 4 and c()["sparkplug_commands_refused"] == 1
                 events = run.log.events()
@@ -148,3 +149,62 @@ def test_no_tare_while_something_is_held(tmp_path):
             assert loop.tares == 0
             (e,) = run.log.events("sparkplug_command_refused")
             assert e["reason"] == "in_contact"
+
+
+def _props(metric) -> dict:
+    out = {}
+    for k, v in zip(metric.properties.keys, metric.properties.values):
+        field = {11: "boolean_value", 12: "string_value", 10: "double_value", 4: "long_value"}[v.type]
+        out[k] = getattr(v, field)
+    return out
+
+
+@pytest.mark.slow
+def test_a_source_that_ends_is_a_ddeath_while_the_bridge_goes_on(tmp_path):
+    """Two nodes; one's scene ends after 2 s: its DDEATH, while the other's DDATA goes on;
+    DBIRTH carries the layout and the method with its thresholds; a scans counter."""
+    from eskin_industrial.profile import load_profile
+    from eskin_industrial import scenes
+
+    short = tmp_path / "short.toml"
+    hold = Path(scenes.__file__).parent / "builtin" / "hold.toml"
+    short.write_text(hold.read_text().replace("duration_s = 72.0", "duration_s = 2.0"))
+    with spb.broker(tmp_path) as port:
+        cap = spb.Capture(port, tmp_path / "sub.txt")
+        try:
+            nodes = (NodeConfig.of("short", PAPER, "scene", scene=str(short), loop=False),
+                     NodeConfig.of("long", PAPER, "scene", scene="hold", base_address=100))
+            config = BridgeConfig(nodes, {"sparkplug": SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e",
+                                                                        min_interval_s=0.1)},
+                                  LogSettings(format="json", status_every_s=0))
+            with running_bridge(config) as run:
+                before = cap.wait(lambda m: any(t.endswith("/DDEATH/e/short") for t, _ in m), timeout_s=15)
+                cap.wait(lambda m: len(m) > len(before) + 3
+                         and any(t.endswith("/DDATA/e/long") for t, _ in m[len(before):]))
+                assert run.bridge.runs[1].loop.source.done is False
+            scans = {r.name: r.loop.pipeline.counters.scans for r in run.bridge.runs}
+            msgs = cap.wait(lambda m: any("/NDEATH/" in t for t, _ in m))
+        finally:
+            cap.close()
+    topics = [t for t, _ in msgs]
+    ends = [i for i, t in enumerate(topics) if t.endswith("/DDEATH/e/short")]
+    assert len(ends) == 1, "one DDEATH"
+    assert not any(t.endswith("/short") and "/DDATA/" in t for t in topics[ends[0]:])
+    assert any(t.endswith("/DDATA/e/long") for t in topics[ends[0]:topics.index("spBv1.0/g/DDEATH/e/long")])
+    assert topics[-1] == "spBv1.0/g/NDEATH/e" and topics.count("spBv1.0/g/NDEATH/e") == 1
+    # the DBIRTH's properties, against the profile read here
+    profile = load_profile(PAPER)
+    dbirth = spb.parse(next(p for t, p in msgs if t == "spBv1.0/g/DBIRTH/e/long"))
+    by_name = {m.name: m for m in dbirth.metrics}
+    assert _props(by_name["CoF X"]) == {"engUnit": "mm", "rows": 5, "cols": 5, "pitch_mm": profile.layout.pitch_mm}
+    method = _props(by_name["State"])
+    assert method["method"] == profile.detector.method == "cof-track"
+    assert method["detector.cof_track.z"] == profile.detector.cof_track.z
+    assert method["detector.contact_threshold_n"] == profile.detector.contact_threshold_n
+    assert method["detector.cof_track.ramp_horizons_s"] == ",".join(f"{v:g}" for v in
+                                                                    profile.detector.cof_track.ramp_horizons_s)
+    # the scans counter: by exception, rising, never past what the loop counted
+    alias = by_name["Counters/Scans"].alias
+    seen = [spb.value(m) for t, p in msgs if t == "spBv1.0/g/DDATA/e/long" for m in spb.parse(p).metrics
+            if m.alias == alias]
+    assert len(seen) > 3 and seen == sorted(seen) and 0 < seen[-1] <= scans["long"]

@@ -34,9 +34,10 @@ def publication(i: int) -> Publication:
 def edge(port: int, tmp_path, **kw) -> EdgeNode:
     opts = SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e", qos=1, reconnect_min_s=2.0,
                             reconnect_max_s=2.0, **kw)
-    node = open_edge(opts, [("grip", 1000.0, "big")])
-    node.events = []  # type: ignore[attr-defined]
-    node.devices[0].on_events(lambda name, level, fields: node.events.append((name, level, fields)))  # type: ignore[attr-defined]
+    node = open_edge(opts, [("grip", 1000.0, "big", {})])
+    events: list = []
+    node.events = events  # type: ignore[attr-defined]
+    node.devices[0].on_events(lambda name, level, fields: events.append((name, level, fields)))
     return node
 
 

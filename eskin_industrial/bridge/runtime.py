@@ -241,6 +241,7 @@ class Bridge:
             step()
             if source.done:
                 self.log.event("source_ended", node=run.name, error=source.last_error or "-")
+                self._sinks_source_ended([run])
                 break
 
     def _group_loop(self, feeder: Feeder, runs: list[NodeRun]) -> None:
@@ -265,7 +266,15 @@ class Bridge:
             if feeder.done:
                 self.log.event("source_ended", node=",".join(r.name for r in runs),
                                error=sources[0].last_error or "-")
+                self._sinks_source_ended(runs)
                 break
+
+    @staticmethod
+    def _sinks_source_ended(runs: list[NodeRun]) -> None:
+        """Each sink of a node whose source ended hears it (a Sparkplug device's DDEATH)."""
+        for run in runs:
+            for sink in run.sinks:
+                sink.source_ended(run.loop.source.last_error or "")
 
     def wait(self, duration_s: float | None = None, tick_s: float = 0.1) -> None:
         """Supervise until :meth:`request_stop`, ``duration_s``, or every source ended."""

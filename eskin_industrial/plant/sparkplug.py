@@ -28,7 +28,8 @@ from ..plc.image import Command, PlcImage, Status, decode_registers
 from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Publication, Sink, SinkHealth
 from . import payload as pb
-from .commands import BadCommand, birth_metrics, parse_device_command
+from .commands import COMMAND_ALIAS, COMMANDS, BadCommand, birth_metrics, parse_device_command
+from .properties import Property, layout_properties, method_properties
 from .store import Forwarder, Held, store_path
 
 if TYPE_CHECKING:
@@ -106,8 +107,9 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Bus Fault", pb.BOOLEAN, "", False, "the sensor bus fails"),
     MetricDef("Contact", pb.BOOLEAN, "", False, "total force at or above the contact threshold"),
     MetricDef("Enabled", pb.BOOLEAN, "", False, "detection enabled"),
-    MetricDef("R_coe", pb.FLOAT, "", True, "decorrelation indicator (R_COE / r_scale)"),
-    MetricDef("R_dw", pb.FLOAT, "", True, "wavelet indicator (R_DW / r_scale)"),
+    MetricDef("R_coe", pb.FLOAT, "", True,
+              "R_coe (paper methods), else the method's first score, 1 = its threshold (R_COE / r_scale)"),
+    MetricDef("R_dw", pb.FLOAT, "", True, "R_dw (paper methods), else the method's second score (R_DW / r_scale)"),
     MetricDef("Total Force", pb.FLOAT, "N", True, "total force of the newest frame"),
     MetricDef("CoF X", pb.FLOAT, "mm", True, "centre of force, x"),
     MetricDef("CoF Y", pb.FLOAT, "mm", True, "centre of force, y"),
@@ -116,7 +118,11 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Counters/State Changes", pb.UINT32, "count", True, "state changes since start"),
     MetricDef("Counters/Lost Scans", pb.UINT32, "count", True, "failed polls and sequence gaps"),
     MetricDef("Counters/Bus Errors", pb.UINT32, "count", True, "timeouts, CRC and exception responses"),
+    MetricDef("Counters/Scans", pb.UINT64, "count", True, "scans the node's loop has taken since start"),
 )
+#: The metric whose DBIRTH properties describe the method (``method_properties``) and
+#: the one with the layout (``layout_properties``).
+METHOD_METRIC, LAYOUT_METRIC = "State", "CoF X"
 _ANALOG = tuple(m.analog for m in DEVICE_METRICS)
 _FLOATS = tuple(m.datatype == pb.FLOAT for m in DEVICE_METRICS)
 #: Node metrics (aliases 1..); a device's metrics start at 1000 x (its index + 1).
@@ -132,7 +138,7 @@ def metric_values(pub: Publication, r_scale: float, word_order: str) -> tuple[An
             bool(st & Status.SENSOR_STALE), bool(st & Status.BUS_FAULT), bool(st & Status.CONTACT),
             bool(st & Status.ENABLED), v["R_COE"] / r_scale, v["R_DW"] / r_scale, v["F_SUM"] / 1000.0,
             v["XC"] / 100.0, v["YC"] / 100.0, v["FRAME_AGE"], v["SLIP_EVENTS"], v["STATE_CHANGES"],
-            v["LOST_SCANS"], v["BUS_ERRORS"])
+            v["LOST_SCANS"], v["BUS_ERRORS"], pub.scans)
 
 
 def _now_ms() -> int:
@@ -415,7 +421,8 @@ class SparkplugDevice(Sink):
     _CLI_KEYS = {"sparkplug_qos": "qos", "sparkplug_keepalive_s": "keepalive_s",
                  "sparkplug_store_dir": "store_dir", "sparkplug_store_max": "store_max"}
 
-    def __init__(self, node: EdgeNode, device_id: str, index: int, r_scale: float, word_order: str) -> None:
+    def __init__(self, node: EdgeNode, device_id: str, index: int, r_scale: float, word_order: str,
+                 properties: dict[str, tuple[Property, ...]] | None = None) -> None:
         super().__init__()
         self.node = node
         self.device_id = device_id
@@ -424,6 +431,8 @@ class SparkplugDevice(Sink):
         self.topic = {k: f"{NAMESPACE}/{g}/{k}/{e}/{device_id}" for k in ("DBIRTH", "DDATA", "DDEATH")}
         self.base = 1000 * (index + 1)
         self.r_scale, self.word_order = r_scale, word_order
+        #: Metric name -> DBIRTH properties beyond its unit (the layout, the method).
+        self.properties = properties or {}
         self.current: tuple[Any, ...] | None = None  #: the newest values (births declare them)
         self.sent: list[Any] = [None] * len(DEVICE_METRICS)  #: the values last sent, per metric
         self.sent_at = [float("-inf")] * len(DEVICE_METRICS)
@@ -452,6 +461,11 @@ class SparkplugDevice(Sink):
         self._commands.extend(cmds)
         self._event("sparkplug_command", "info", commands=",".join(c.name for c in cmds))
 
+    def source_ended(self, error: str) -> None:
+        """The node's source is gone while the bridge goes on: DDEATH (its last
+        publication, with Bus Fault when it failed, went before)."""
+        self.death()
+
     def take_commands(self) -> list[Command]:
         out = []
         commands = self._commands
@@ -465,7 +479,7 @@ class SparkplugDevice(Sink):
         values = self.current
         metrics = []
         for i, m in enumerate(DEVICE_METRICS):
-            props = (("engUnit", (pb.STRING, m.unit)),) if m.unit else ()
+            props = ((("engUnit", (pb.STRING, m.unit)),) if m.unit else ()) + self.properties.get(m.name, ())
             value = None if values is None else values[i]
             metrics.append(pb.Metric(m.name, self.base + i, now, m.datatype, value, is_null=True if value is None
                                      else None, properties=props))
@@ -552,8 +566,9 @@ class SparkplugDevice(Sink):
 
     @classmethod
     def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
-        edge = open_edge(options, [(n.name, n.profile.modbus.plc.r_scale, n.profile.modbus.plc.word_order)
-                                   for n in nodes])
+        edge = open_edge(options, [(n.name, n.profile.modbus.plc.r_scale, n.profile.modbus.plc.word_order,
+                                    {METHOD_METRIC: method_properties(n.profile),
+                                     LAYOUT_METRIC: layout_properties(n.profile)}) for n in nodes])
         context.closers.append(edge.close)  # closers run last first: the devices' DDEATH, then NDEATH
         for dev in edge.devices:
             context.closers.append(dev.close)
@@ -561,8 +576,10 @@ class SparkplugDevice(Sink):
         return list(edge.devices)
 
 
-def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, float, str]]) -> EdgeNode:
-    """An edge node (not started) with one device per ``(name, r_scale, word_order)``."""
+def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, float, str, dict[str, tuple[Property, ...]]]]
+              ) -> EdgeNode:
+    """An edge node (not started) with one device per ``(name, r_scale, word_order,
+    properties)``."""
     try:
         import paho.mqtt.client as mqtt
     except ImportError:  # pragma: no cover - a runtime dependency
@@ -572,8 +589,8 @@ def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, float, str
     client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
                          client_id=f"{options.group_id}-{options.edge_node_id}", clean_session=True)
     edge = EdgeNode(options, client)
-    for i, (name, r_scale, word_order) in enumerate(devices):
-        edge.devices.append(SparkplugDevice(edge, name, i, r_scale, word_order))
+    for i, (name, r_scale, word_order, props) in enumerate(devices):
+        edge.devices.append(SparkplugDevice(edge, name, i, r_scale, word_order, props))
     return edge
 
 
@@ -588,4 +605,6 @@ def metric_table() -> list[str]:
     for i, m in enumerate(DEVICE_METRICS):
         sent = "deadband, min interval" if m.analog else "at once"
         rows.append(f"| base+{i} | `{m.name}` | {_TYPE_NAMES[m.datatype]} | {m.unit or '-'} | {sent} | {m.doc} |")
+    for i, c in enumerate(COMMANDS):
+        rows.append(f"| base+{COMMAND_ALIAS + i} | `{c.name}` | Boolean | - | DBIRTH (false); DCMD | {c.doc} |")
     return rows
