@@ -19,11 +19,10 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NamedTuple
-from urllib.parse import urlsplit
 
 from .. import __version__
 from ..detect.state import LABELS
-from ..errors import EskinError
+from ..errors import EskinError, ProfileError
 from ..plc.image import Command, PlcImage, Status, decode_registers
 from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Publication, Sink, SinkHealth
@@ -31,6 +30,7 @@ from . import payload as pb
 from .commands import COMMAND_ALIAS, COMMANDS, BadCommand, birth_metrics, parse_device_command
 from .properties import Property, layout_properties, method_properties
 from .store import Forwarder, Held, store_path
+from .transport import check_files, check_security, configure, parse_broker
 
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
@@ -38,18 +38,6 @@ if TYPE_CHECKING:
 NAMESPACE = "spBv1.0"
 REBIRTH = "Node Control/Rebirth"
 _FORBIDDEN = set("+#/")
-
-
-def parse_broker(url: str) -> tuple[str, int]:
-    """``mqtt://HOST[:PORT]`` -> (host, port); ValueError, one line, when malformed."""
-    parts = urlsplit(url)
-    try:
-        port = parts.port
-    except ValueError:
-        port = -1
-    if parts.scheme != "mqtt" or not parts.hostname or port == -1 or parts.path not in ("", "/"):
-        raise ValueError(f"expected mqtt://HOST:PORT, got {url!r}")
-    return parts.hostname, port or 1883
 
 
 def check_id(key: str, value: str) -> None:
@@ -61,7 +49,7 @@ def check_id(key: str, value: str) -> None:
 class SparkplugOptions:
     """``[sparkplug]``: the broker and this edge node's ids, and report by exception."""
 
-    broker: str  #: ``mqtt://HOST:PORT``
+    broker: str  #: ``mqtt://HOST:PORT``, or ``mqtts://HOST:PORT`` (TLS)
     group_id: str
     edge_node_id: str
     qos: int = field(default=0, metadata=in_range(0, 1))
@@ -79,8 +67,19 @@ class SparkplugOptions:
     #: Data messages held at most (0: none); past it they are counted and dropped.
     store_max: int = field(default=10000, metadata=in_range(0, 10_000_000))
 
+    #: mqtts: the CA certificates (PEM) the broker's certificate must chain to (unset: the system's).
+    ca_file: str | None = None
+    #: mqtts: this edge node's client certificate and its key (PEM), for a broker that asks for one.
+    cert_file: str | None = None
+    key_file: str | None = None
+    username: str | None = None
+    #: The password: the first line of this file, or this environment variable (never
+    #: a command-line value).
+    password_file: str | None = None
+    password_env: str | None = None
+
     def __post_init__(self) -> None:
-        parse_broker(self.broker)
+        check_security(self)
         check_id("group_id", self.group_id)
         check_id("edge_node_id", self.edge_node_id)
         if self.reconnect_max_s < self.reconnect_min_s:
@@ -150,7 +149,7 @@ class EdgeNode:
 
     def __init__(self, options: SparkplugOptions, client_factory: Any) -> None:
         self.options = options
-        self.host, self.port = parse_broker(options.broker)
+        self.host, self.port, _ = parse_broker(options.broker)
         g, e = options.group_id, options.edge_node_id
         self.topic = {kind: f"{NAMESPACE}/{g}/{kind}/{e}" for kind in ("NBIRTH", "NDEATH", "NDATA", "NCMD")}
         self.topic["DCMD"] = f"{NAMESPACE}/{g}/DCMD/{e}/+"
@@ -168,6 +167,7 @@ class EdgeNode:
         self.client = client_factory
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
+        self.client.on_connect_fail = self._on_connect_fail
         self.client.on_message = self._on_message
         self.client.reconnect_delay_set(options.reconnect_min_s, options.reconnect_max_s)
         self._set_will()
@@ -294,13 +294,21 @@ class EdgeNode:
                 self.forwarder.hold(held)
         self.inflight.clear()
 
+    def _on_connect_fail(self, client: Any, userdata: Any) -> None:
+        """No connection at all (refused, unreachable): counted; paho tries again after
+        its back-off."""
+        self.failures += 1
+        self.last_error = "connection failed (broker unreachable)"
+
     def _on_disconnect(self, client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
         with self.lock:
+            was = self.connected
             self.connected = False
             if self.stopping:
                 return
-            self.failures += 1
-            self.last_error = str(reason)
+            if was:  # (a refused CONNECT was counted by _on_connect)
+                self.failures += 1
+                self.last_error = str(reason)
             # A new session, a new death certificate: the next NBIRTH repeats it.
             self.bd_seq = (self.bd_seq + 1) & 0xFF
             self._set_will()
@@ -416,10 +424,24 @@ class SparkplugDevice(Sink):
                   "messages of a broker outage (default: in memory).", metavar="DIR"),
         CliOption("--sparkplug-store-max", "sparkplug_store_max", "Data messages held at most during an "
                   "outage (the rest are counted).", type=int, metavar="N"),
+        CliOption("--sparkplug-ca-file", "sparkplug_ca_file", "mqtts: CA certificates (PEM) of the broker's "
+                  "certificate (default: the system's).", metavar="FILE"),
+        CliOption("--sparkplug-cert-file", "sparkplug_cert_file", "mqtts: client certificate (PEM), with "
+                  "--sparkplug-key-file.", metavar="FILE"),
+        CliOption("--sparkplug-key-file", "sparkplug_key_file", "mqtts: the client certificate's key (PEM).",
+                  metavar="FILE"),
+        CliOption("--sparkplug-username", "sparkplug_username", "MQTT username.", metavar="NAME"),
+        CliOption("--sparkplug-password-file", "sparkplug_password_file", "MQTT password: the first line of "
+                  "this file (no password option takes the secret itself).", metavar="FILE"),
+        CliOption("--sparkplug-password-env", "sparkplug_password_env", "MQTT password: this environment "
+                  "variable.", metavar="NAME"),
     )
     #: ``--sparkplug-*`` option -> the ``[sparkplug]`` key it sets.
     _CLI_KEYS = {"sparkplug_qos": "qos", "sparkplug_keepalive_s": "keepalive_s",
-                 "sparkplug_store_dir": "store_dir", "sparkplug_store_max": "store_max"}
+                 "sparkplug_store_dir": "store_dir", "sparkplug_store_max": "store_max",
+                 "sparkplug_ca_file": "ca_file", "sparkplug_cert_file": "cert_file", "sparkplug_key_file": "key_file",
+                 "sparkplug_username": "username", "sparkplug_password_file": "password_file",
+                 "sparkplug_password_env": "password_env"}
 
     def __init__(self, node: EdgeNode, device_id: str, index: int, r_scale: float, word_order: str,
                  properties: dict[str, tuple[Property, ...]] | None = None) -> None:
@@ -547,22 +569,26 @@ class SparkplugDevice(Sink):
             return None
         if not values.get("group_id") or not values.get("edge_node_id"):
             raise ValueError("give --group-id and --edge-node-id with --sparkplug")
+        flags = {cls._CLI_KEYS[o.dest]: o.flag for o in cls.cli_options if o.dest in cls._CLI_KEYS}
         try:
             return build(SparkplugOptions, {"broker": url, "group_id": values["group_id"],
                                             "edge_node_id": values["edge_node_id"], **extra})
         except SchemaError as exc:  # the flag, not the key, in the one line
-            flag = next((o.flag for o in cls.cli_options if cls._CLI_KEYS.get(o.dest) == exc.key), exc.key)
-            raise ValueError(f"{flag}: {exc.message}") from None
+            raise ValueError(f"{flags.get(exc.key, exc.key)}: {exc.message}") from None
+        except ValueError as exc:  # a rule across keys: named by its first key
+            key, sep, rest = str(exc).partition(": ")
+            raise ValueError(f"{flags[key]}: {rest}" if sep and key in flags else str(exc)) from None
 
     @classmethod
     def describe(cls, options: SparkplugOptions, node: NodeLike) -> str:
-        host, port = parse_broker(options.broker)
+        host, port, _ = parse_broker(options.broker)
         return f"Sparkplug B {NAMESPACE}/{options.group_id}/DDATA/{options.edge_node_id}/{node.name} at {host}:{port}"
 
     @classmethod
     def check(cls, options: SparkplugOptions, nodes: Sequence[NodeLike]) -> None:
         for n in nodes:
             check_id("device id (node name)", n.name)
+        check_files(options)
 
     @classmethod
     def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
@@ -588,6 +614,10 @@ def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, float, str
         raise MissingExtra("the sparkplug output needs paho-mqtt (pip install paho-mqtt)") from None
     client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
                          client_id=f"{options.group_id}-{options.edge_node_id}", clean_session=True)
+    try:
+        configure(client, options)
+    except ValueError as exc:  # a password file emptied since --check
+        raise ProfileError(f"[sparkplug] {exc}") from None
     edge = EdgeNode(options, client)
     for i, (name, r_scale, word_order, props) in enumerate(devices):
         edge.devices.append(SparkplugDevice(edge, name, i, r_scale, word_order, props))
