@@ -14,6 +14,7 @@ and on an NCMD (rebirth).  One lock orders the ``seq`` numbers with the messages
 from __future__ import annotations
 
 import collections
+import json
 import threading
 import time
 from collections.abc import Sequence
@@ -77,11 +78,17 @@ class SparkplugOptions:
     #: a command-line value).
     password_file: str | None = None
     password_env: str | None = None
+    #: Sparkplug 3.0 primary host awareness: births (and data) only while the host
+    #: application of this id says online on ``spBv1.0/STATE/<id>``; held while it is
+    #: away, births again when it comes back.
+    primary_host_id: str | None = None
 
     def __post_init__(self) -> None:
         check_security(self)
         check_id("group_id", self.group_id)
         check_id("edge_node_id", self.edge_node_id)
+        if self.primary_host_id is not None:
+            check_id("primary_host_id", self.primary_host_id)
         if self.reconnect_max_s < self.reconnect_min_s:
             raise ValueError(f"reconnect_max_s: {self.reconnect_max_s:g} is below reconnect_min_s "
                              f"({self.reconnect_min_s:g})")
@@ -158,10 +165,15 @@ class EdgeNode:
         self.seq = 0
         self.bd_seq = 0
         self.started = time.monotonic()
-        self.connected = False
+        self.connected = False  #: publishing: a session, the births sent (and the primary host online)
+        self.session = False  #: an MQTT session
+        self.host_online = False
+        self._host_ts = -1  #: timestamp of the newest STATE taken (older ones are stale)
+        host = options.primary_host_id
+        self.state_topic = None if host is None else f"{NAMESPACE}/STATE/{host}"
         self.stopping = False
         self.published = self.dropped = self.connects = self.failures = self.bad_commands = self.rebirths = 0
-        self.unknown_devices = self.commands = self.commands_refused = 0
+        self.unknown_devices = self.commands = self.commands_refused = self.bad_states = 0
         self._bad_logged: dict[str, tuple[float, int]] = {}
         self.last_error = ""
         self.client = client_factory
@@ -278,14 +290,25 @@ class EdgeNode:
             self.last_error = str(reason)
             return
         self.connects += 1
-        client.subscribe([(self.topic["NCMD"], 1), (self.topic["DCMD"], 1)])
+        topics = [(self.topic["NCMD"], 1), (self.topic["DCMD"], 1)]
+        if self.state_topic is not None:
+            topics.append((self.state_topic, 1))
+        client.subscribe(topics)
         # What the last session left unacknowledged would be resent by paho before the
         # births: it goes through the store, as historical data, after them.
         client.drop_out_messages()
         with self.lock:
+            self.session = True
             self._hold_unacknowledged()
-            self.births()
-            self.connected = True
+            if self.state_topic is None:
+                self._go_live()
+            else:  # births once the primary host says it is online (its retained STATE)
+                self.last_error = f"waiting for the primary host {self.options.primary_host_id}"
+
+    def _go_live(self) -> None:
+        """Births, then data (live, and what the store holds) (under the lock)."""
+        self.births()
+        self.connected = True
         self.forwarder.wake()
 
     def _hold_unacknowledged(self) -> None:
@@ -302,8 +325,8 @@ class EdgeNode:
 
     def _on_disconnect(self, client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
         with self.lock:
-            was = self.connected
-            self.connected = False
+            was = self.session
+            self.connected = self.session = self.host_online = False
             if self.stopping:
                 return
             if was:  # (a refused CONNECT was counted by _on_connect)
@@ -317,6 +340,9 @@ class EdgeNode:
         """An NCMD or a DCMD (paho's thread): whatever it holds is counted and logged,
         never raised."""
         topic = str(message.topic)
+        if topic == self.state_topic:
+            self._on_state(message.payload)
+            return
         parts = topic.split("/")
         device = None
         if parts[2] == "DCMD":
@@ -343,6 +369,32 @@ class EdgeNode:
         with self.lock:
             if self.connected and not self.stopping:
                 self.births()
+
+    def _on_state(self, data: bytes) -> None:
+        """The primary host's STATE (Sparkplug 3.0: JSON ``{"online": bool, "timestamp":
+        ms}``, retained): births when it comes online, data held while it is away."""
+        try:
+            state = json.loads(data)
+            online, ts = state["online"], state["timestamp"]
+            if not isinstance(online, bool) or not isinstance(ts, int) or isinstance(ts, bool):
+                raise ValueError("expected a Boolean online and an integer timestamp")
+        except (ValueError, KeyError, TypeError) as exc:
+            self.bad_states += 1
+            self._bad("sparkplug_bad_state", str(self.state_topic), f"{type(exc).__name__}: {exc}")
+            return
+        with self.lock:
+            if ts < self._host_ts or self.stopping:
+                return  # an older STATE than one already taken
+            self._host_ts = ts
+            was, self.host_online = self.host_online, online
+            if online and not was:
+                self._event("sparkplug_primary_host", "info", host=self.options.primary_host_id, online=1)
+                if self.session:
+                    self._go_live()  # a rebirth when it comes back
+            elif not online and was:
+                self._event("sparkplug_primary_host", "warning", host=self.options.primary_host_id, online=0)
+                self.connected = False  # data is held until it is back
+                self.last_error = f"primary host {self.options.primary_host_id} offline"
 
     def _bad(self, event: str, topic: str, error: str, device: SparkplugDevice | None = None) -> None:
         """One warning per event name and second at most (a flood of bad commands must
@@ -381,7 +433,7 @@ class EdgeNode:
             for d in self.devices:
                 d.death()
             info = None
-            if self.connected:
+            if self.session:
                 info = self.client.publish(self.topic["NDEATH"], self._death(), qos=1)
                 self.published += 1
         if info is not None:
@@ -403,7 +455,8 @@ class EdgeNode:
                 "sparkplug_store_held": f.held, "sparkplug_store_pending": f.pending,
                 "sparkplug_store_overflow": f.overflow, "sparkplug_store_forwarded": f.forwarded,
                 "sparkplug_store_discarded": f.discarded, "sparkplug_commands": self.commands,
-                "sparkplug_commands_refused": self.commands_refused, "sparkplug_unknown_devices": self.unknown_devices}
+                "sparkplug_commands_refused": self.commands_refused, "sparkplug_unknown_devices": self.unknown_devices,
+                "sparkplug_bad_states": self.bad_states, "sparkplug_host_online": int(self.host_online)}
 
 
 class SparkplugDevice(Sink):
@@ -430,6 +483,8 @@ class SparkplugDevice(Sink):
                   "--sparkplug-key-file.", metavar="FILE"),
         CliOption("--sparkplug-key-file", "sparkplug_key_file", "mqtts: the client certificate's key (PEM).",
                   metavar="FILE"),
+        CliOption("--sparkplug-primary-host", "sparkplug_primary_host_id", "Publish only while this Sparkplug "
+                  "primary host application is online (its STATE topic).", metavar="ID"),
         CliOption("--sparkplug-username", "sparkplug_username", "MQTT username.", metavar="NAME"),
         CliOption("--sparkplug-password-file", "sparkplug_password_file", "MQTT password: the first line of "
                   "this file (no password option takes the secret itself).", metavar="FILE"),
@@ -440,7 +495,7 @@ class SparkplugDevice(Sink):
     _CLI_KEYS = {"sparkplug_qos": "qos", "sparkplug_keepalive_s": "keepalive_s",
                  "sparkplug_store_dir": "store_dir", "sparkplug_store_max": "store_max",
                  "sparkplug_ca_file": "ca_file", "sparkplug_cert_file": "cert_file", "sparkplug_key_file": "key_file",
-                 "sparkplug_username": "username", "sparkplug_password_file": "password_file",
+                 "sparkplug_username": "username", "sparkplug_primary_host_id": "primary_host_id", "sparkplug_password_file": "password_file",
                  "sparkplug_password_env": "password_env"}
 
     def __init__(self, node: EdgeNode, device_id: str, index: int, r_scale: float, word_order: str,
