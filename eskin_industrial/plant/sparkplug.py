@@ -466,7 +466,7 @@ class SparkplugDevice(Sink):
     Options = SparkplugOptions
     cli_options = (
         CliOption("--sparkplug", "sparkplug", "Publish as a Sparkplug B edge node to this MQTT broker "
-                  "(mqtt://HOST:PORT); needs --group-id and --edge-node-id.", metavar="URL"),
+                  "(mqtt://HOST:PORT, or mqtts:// for TLS); needs --group-id and --edge-node-id.", metavar="URL"),
         CliOption("--group-id", "group_id", "Sparkplug group id (with --sparkplug).", metavar="ID"),
         CliOption("--edge-node-id", "edge_node_id", "Sparkplug edge node id (with --sparkplug).", metavar="ID"),
         CliOption("--sparkplug-qos", "sparkplug_qos", "MQTT QoS of the data messages (0 or 1; 1: nothing lost "
