@@ -15,6 +15,7 @@ from .evaluate_cmd import evaluate_cmd
 from .modbus_cmd import modbus_bridge, modbus_node
 from .monitor_cmd import monitor
 from .node_cmd import node
+from .plant_cmd import plant
 from .plc_cmd import plc
 from .plc_sim_cmd import plc_sim
 from .plot_cmd import plot
@@ -62,3 +63,4 @@ main.add_command(modbus_bridge)
 main.add_command(node)
 main.add_command(receive)
 main.add_command(monitor)
+main.add_command(plant)
