@@ -216,3 +216,13 @@ def test_the_queue_on_disk_outlives_the_edge_node(tmp_path):
 def test_store_options_are_checked():
     with pytest.raises(ValueError, match="reconnect_max_s: 1 is below reconnect_min_s"):
         SparkplugOptions("mqtt://h:1", "g", "e", reconnect_min_s=2, reconnect_max_s=1)
+
+
+def test_check_finds_a_store_dir_that_cannot_be_written(tmp_path):
+    from eskin_industrial.plant.sparkplug import SparkplugDevice
+
+    f = tmp_path / "a-file"
+    f.write_text("")
+    with pytest.raises(ValueError, match="store_dir: .* is not a writable folder"):
+        SparkplugDevice.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(f / "sub")), [])
+    SparkplugDevice.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(tmp_path / "new" / "dir")), [])

@@ -7,18 +7,24 @@ register image as the PLC reads it (:func:`~eskin_industrial.plc.image.decode_re
 of each publication), so that the plant and the PLC see the same state.
 
 The loop's thread only encodes and enqueues: paho-mqtt's network thread
-(``loop_start``) writes to the broker, reconnects, and calls back on connect (births)
-and on an NCMD (rebirth).  One lock orders the ``seq`` numbers with the messages.
+(``loop_start``) writes to the broker, reconnects, and calls back on connect (births),
+on a command (NCMD rebirth; DCMDs, queued for the loop: :mod:`.commands`) and on the
+primary host's STATE.  While the node cannot publish (no broker, no primary host) its
+data messages go to the store (:mod:`.store`), whose own thread writes them to SQLite
+and sends them, historical, after the next births.  One lock orders the ``seq``
+numbers with the messages.  The connection's security: :mod:`.transport`.
 """
 
 from __future__ import annotations
 
 import collections
 import json
+import os
 import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 from .. import __version__
@@ -644,6 +650,12 @@ class SparkplugDevice(Sink):
         for n in nodes:
             check_id("device id (node name)", n.name)
         check_files(options)
+        if options.store_dir is not None:
+            d = Path(options.store_dir)
+            while not d.exists() and d != d.parent:  # created at open: its first existing parent
+                d = d.parent
+            if not d.is_dir() or not os.access(d, os.W_OK | os.X_OK):
+                raise ValueError(f"store_dir: {options.store_dir!r}: {str(d)!r} is not a writable folder")
 
     @classmethod
     def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
