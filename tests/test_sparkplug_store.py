@@ -226,3 +226,23 @@ def test_check_finds_a_store_dir_that_cannot_be_written(tmp_path):
     with pytest.raises(ValueError, match="store_dir: .* is not a writable folder"):
         SparkplugDevice.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(f / "sub")), [])
     SparkplugDevice.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(tmp_path / "new" / "dir")), [])
+
+
+def test_a_store_that_fails_to_write_is_counted_and_logged_and_goes_on():
+    from eskin_industrial.plant.store import Forwarder, Held
+
+    events: list = []
+    f = Forwarder(":memory:", 10, lambda *a: False, lambda: False, lambda *a, **k: events.append((a, k))).start()
+    try:
+        for i in range(3):
+            f.hold(Held(i, "grip", 1000, i, ()))
+        wait_for(lambda: f.rows == 3, what="written")
+        f.db.close()  # any sqlite3.Error from here on
+        for i in range(3, 5):
+            f.hold(Held(i, "grip", 1000, i, ()))
+        wait_for(lambda: f.failures == 1, what="the failure seen")
+        assert f.overflow == 2 and f._thread.is_alive()
+        ((name, level), fields) = [e for e in events if e[0][0] == "sparkplug_store_failed"][0]
+        assert level == "error" and fields["failures"] == 1
+    finally:
+        f.stop()

@@ -343,8 +343,15 @@ class EdgeNode:
             self._set_will()
 
     def _on_message(self, client: Any, userdata: Any, message: Any) -> None:
-        """An NCMD or a DCMD (paho's thread): whatever it holds is counted and logged,
-        never raised."""
+        """An NCMD, a DCMD or a STATE (paho's thread): whatever it holds is counted and
+        logged, never raised (an exception would end paho's network thread)."""
+        try:
+            self._message(message)
+        except Exception as exc:  # noqa: BLE001 - a bug here must not end the connection
+            self.bad_commands += 1
+            self._bad("sparkplug_bad_command", str(message.topic), f"{type(exc).__name__}: {exc}")
+
+    def _message(self, message: Any) -> None:
         topic = str(message.topic)
         if topic == self.state_topic:
             self._on_state(message.payload)
@@ -460,7 +467,7 @@ class EdgeNode:
                 "sparkplug_bad_commands": self.bad_commands, "sparkplug_rebirths": self.rebirths,
                 "sparkplug_store_held": f.held, "sparkplug_store_pending": f.pending,
                 "sparkplug_store_overflow": f.overflow, "sparkplug_store_forwarded": f.forwarded,
-                "sparkplug_store_discarded": f.discarded, "sparkplug_commands": self.commands,
+                "sparkplug_store_discarded": f.discarded, "sparkplug_store_failures": f.failures, "sparkplug_commands": self.commands,
                 "sparkplug_commands_refused": self.commands_refused, "sparkplug_unknown_devices": self.unknown_devices,
                 "sparkplug_bad_states": self.bad_states, "sparkplug_host_online": int(self.host_online)}
 

@@ -85,7 +85,7 @@ class Forwarder:
         #: The next serial: after anything a previous run left behind.
         self.next_serial = int(self.db.execute("SELECT COALESCE(MAX(serial), -1) FROM held").fetchone()[0]) + 1
         self.incoming: collections.deque[Held] = collections.deque()
-        self.held = self.overflow = self.forwarded = self.discarded = 0
+        self.held = self.overflow = self.forwarded = self.discarded = self.failures = 0
         self._outage_overflow = self._outage_held = self._outage_sent = 0
         self._wake = threading.Event()
         self._stop = False
@@ -131,15 +131,23 @@ class Forwarder:
             with self._lock:
                 if self._stop:
                     return
-                self._persist()
-                while self.rows and self._connected() and not self._stop:
-                    if not self._drain_chunk():
-                        break
+                try:
+                    self._persist()
+                    while self.rows and self._connected() and not self._stop:
+                        if not self._drain_chunk():
+                            break
+                except sqlite3.Error as exc:  # a full disk, a broken file: logged, the thread goes on
+                    self.failures += 1
+                    if self.failures == 1 or self.failures % 1000 == 0:
+                        self._log("sparkplug_store_failed", "error", store=self.path, error=str(exc),
+                                  failures=self.failures)
+                    self._wake.wait(1.0)
 
     def _persist(self) -> None:
         if not self.incoming:
             return
         rows: list[tuple[int, str, int, int, bytes]] = []
+        # (a batch a failed write loses is counted as overflow: taken off the deque first)
         while self.incoming:
             item = self.incoming.popleft()
             if self.rows + len(rows) >= self.bound:
@@ -153,10 +161,19 @@ class Forwarder:
             if self._outage_held == 0:
                 self._log("sparkplug_store_holding", "warning", store=self.path, bound=self.bound)
             self._outage_held += len(rows)
-            self.db.execute("BEGIN")
-            # OR REPLACE: a message sent but never acknowledged comes back with its serial
-            self.db.executemany("INSERT OR REPLACE INTO held VALUES (?, ?, ?, ?, ?)", rows)
-            self.db.execute("COMMIT")
+            try:
+                self.db.execute("BEGIN")
+                # OR REPLACE: a message sent but never acknowledged comes back with its serial
+                self.db.executemany("INSERT OR REPLACE INTO held VALUES (?, ?, ?, ?, ?)", rows)
+                self.db.execute("COMMIT")
+            except sqlite3.Error:
+                self.overflow += len(rows)
+                try:
+                    if self.db.in_transaction:
+                        self.db.execute("ROLLBACK")
+                except sqlite3.Error:
+                    pass  # (the file is beyond use: the next write says so again)
+                raise
             self.rows = int(self.db.execute("SELECT COUNT(*) FROM held").fetchone()[0])
             self.held += len(rows)
 
