@@ -29,6 +29,8 @@ def _opts(**kw) -> SparkplugOptions:
 def test_urls_and_the_rules_between_the_keys(tmp_path, monkeypatch):
     assert parse_broker("mqtts://broker.plant") == ("broker.plant", 8883, True)
     assert parse_broker("mqtt://broker.plant") == ("broker.plant", 1883, False)
+    with pytest.raises(ValueError, match="expected mqtt://HOST:PORT or mqtts://HOST:PORT, got 'mqtts://h:0'"):
+        parse_broker("mqtts://h:0")
     with pytest.raises(ValueError, match="ca_file: only with an mqtts:// broker"):
         _opts(broker="mqtt://h:1", ca_file="ca.pem")
     with pytest.raises(ValueError, match="cert_file: give the client certificate and its key_file together"):

@@ -20,7 +20,7 @@ def parse_broker(url: str) -> tuple[str, int, bool]:
         port = parts.port
     except ValueError:
         port = -1
-    if parts.scheme not in DEFAULT_PORTS or not parts.hostname or port == -1 or parts.path not in ("", "/"):
+    if parts.scheme not in DEFAULT_PORTS or not parts.hostname or port in (-1, 0) or parts.path not in ("", "/"):
         raise ValueError(f"expected mqtt://HOST:PORT or mqtts://HOST:PORT, got {url!r}")
     return parts.hostname, port or DEFAULT_PORTS[parts.scheme], parts.scheme == "mqtts"
 
