@@ -160,8 +160,7 @@ class NodeLoop:
         if self.offline:
             return
         self.offline = True
-        pub = Publication(self.image.render_offline(self.health()), self.image, True, time.perf_counter(), True,
-                          self.pipeline.counters.scans)
+        pub = Publication(self.image.render_offline(self.health()), self.image, True, time.perf_counter(), True)
         for sink in self.sinks:
             sink.publish(pub)
         self.publications += 1

@@ -67,7 +67,7 @@ class Publication(NamedTuple):
     urgent: bool  #: a state or status change: to be written at once
     t_event: float  #: ``time.perf_counter()`` when the deciding scan arrived
     offline: bool = False  #: the bridge's last image (BRIDGE_OFFLINE)
-    scans: int = 0  #: scans the node's loop has taken since start
+    scans: int = 0  #: scans the node's loop has taken since start (0 in the offline image)
 
 
 @dataclass(frozen=True)
