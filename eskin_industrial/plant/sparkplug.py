@@ -685,7 +685,8 @@ def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, float, str
     except ImportError:  # pragma: no cover - a runtime dependency
         from ..errors import MissingExtra
 
-        raise MissingExtra("the sparkplug output needs paho-mqtt (pip install paho-mqtt)") from None
+        # a dependency of the package itself: only a damaged install lacks it
+        raise MissingExtra("the sparkplug output needs paho-mqtt: pip install 'paho-mqtt>=2.1,<2.3'") from None
     client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
                          client_id=f"{options.group_id}-{options.edge_node_id}", clean_session=True)
     try:
