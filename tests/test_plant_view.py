@@ -116,3 +116,35 @@ def test_the_command_shows_what_the_subscriber_received(tmp_path):
     (dev,) = [e for e in summary if "device" in e]
     assert dev["slips"] == 2 and dev["last_slip_ms"] is not None and not dev["online"]
     assert [e for e in summary if "device" not in e][0]["seq_gaps"] == 0
+
+
+def test_data_before_any_birth_is_an_unborn_node_once():
+    m = PlantModel()
+    first = m.take("spBv1.0/g/DDATA/e/grip", _p(4, a=dict(alias=1000, datatype=12, string_value="slip")), 0.0)
+    assert first == [{"event": "unborn", "group": "g", "edge": "e"}], "aliases unknown: no state shown"
+    assert m.take("spBv1.0/g/DDATA/e/grip", _p(5, a=dict(alias=1000, datatype=12, string_value="stable")), 0.1) == []
+
+
+@pytest.mark.slow
+def test_rebirth_asks_a_node_born_before_the_view_started(tmp_path):
+    with spb.broker(tmp_path) as port:
+        edge = open_edge(SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e"), [("grip", 1000.0, "big", {})])
+        edge.start()
+        try:
+            assert edge.wait_connected(5)
+            edge.devices[0].publish(_pub(1, 0))
+            proc = subprocess.Popen([sys.executable, "-m", "eskin_industrial", "plant", f"mqtt://127.0.0.1:{port}",
+                                     "--json", "--rebirth", "--duration", "4"], stdout=subprocess.PIPE,
+                                    stderr=subprocess.DEVNULL, text=True, env={**os.environ, "PYTHONPATH": os.getcwd()})
+            time.sleep(1.5)  # subscribed by now
+            edge.devices[0].publish(_pub(3, 1))  # data of a node the view has not seen born
+            out, _ = proc.communicate(timeout=15)
+            rebirths = edge.rebirths
+        finally:
+            edge.close()
+    events = [json.loads(x) for x in out.splitlines()]
+    names = [e["event"] for e in events]
+    assert names[:2] == ["connected", "unborn"] and rebirths == 1
+    assert names.count("online") == 2
+    states = [e["state"] for e in events if e["event"] == "state"]
+    assert states == ["slip"], "the rebirth's DBIRTH carries the newest values"

@@ -39,6 +39,8 @@ def _line(e: dict[str, Any]) -> str:
 @click.option("--plain", is_flag=True, help="One line per event (births, deaths, state changes) instead of the live "
               "table (the default when stdout is not a terminal).")
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per event instead of the live table.")
+@click.option("--rebirth", is_flag=True, help="Ask an edge node seen before its birth for a rebirth (an NCMD "
+              "Node Control/Rebirth, once per node): the only thing this command then publishes.")
 @click.option("--duration", "duration_s", type=float, default=None, help="Stop after this many seconds.")
 @click.option("--ca-file", default=None, metavar="FILE", help="mqtts: CA certificates (PEM) of the broker.")
 @click.option("--cert-file", default=None, metavar="FILE", help="mqtts: client certificate (PEM).")
@@ -46,14 +48,14 @@ def _line(e: dict[str, Any]) -> str:
 @click.option("--username", default=None, help="MQTT username.")
 @click.option("--password-file", default=None, metavar="FILE", help="MQTT password: the first line of this file.")
 @click.option("--password-env", default=None, metavar="NAME", help="MQTT password: this environment variable.")
-def plant(broker, group_id, plain, as_json, duration_s, ca_file, cert_file, key_file, username, password_file,
+def plant(broker, group_id, plain, as_json, rebirth, duration_s, ca_file, cert_file, key_file, username, password_file,
           password_env) -> None:
     """Watch every Sparkplug B edge node and device on a broker: online or offline (from
     births and deaths), state, data valid, last slip, slip count, message rate, seq gaps.
     Live on a terminal; one line (--plain) or one JSON object (--json) per event
-    otherwise.  Read-only: it publishes nothing."""
+    otherwise.  Read-only (it publishes nothing) unless --rebirth."""
     from ..plant.transport import check_files, check_security, configure, parse_broker
-    from ..plant.watch import PlantModel
+    from ..plant.watch import PlantModel, rebirth_command
 
     conn = _Conn(broker, ca_file, cert_file, key_file, username, password_file, password_env)
     try:
@@ -79,6 +81,8 @@ def plant(broker, group_id, plain, as_json, duration_s, ca_file, cert_file, key_
         with lock:
             for e in model.take(msg.topic, msg.payload, time.monotonic()):
                 events.put(e)
+                if rebirth and e["event"] == "unborn":
+                    client.publish(f"spBv1.0/{e['group']}/NCMD/{e['edge']}", rebirth_command(), qos=1)
 
     def on_connect(client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
         if reason.is_failure:

@@ -11,6 +11,7 @@ last :data:`RATE_WINDOW_S`; and gaps in each edge node's ``seq``.
 from __future__ import annotations
 
 import collections
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,6 +48,7 @@ class EdgeView:
     bd_seq: int | None = None
     next_seq: int | None = None
     seq_gaps: int = 0
+    unborn: bool = False  #: data seen before any birth (a rebirth would tell its aliases)
     devices: dict[str, DeviceView] = field(default_factory=dict)
 
 
@@ -73,6 +75,9 @@ class PlantModel:
         edge = self.edges.setdefault((group, edge_id), EdgeView(group, edge_id))
         where = {"group": group, "edge": edge_id}
         out: list[dict[str, Any]] = []
+        if kind in ("NDATA", "DDATA", "DBIRTH", "DDEATH") and edge.bd_seq is None and not edge.unborn:
+            edge.unborn = True  # a node born before we looked: its aliases are unknown
+            out.append({"event": "unborn", **where})
         if kind != "NDEATH" and p.seq is not None:
             if kind == "NBIRTH":
                 edge.next_seq = p.seq
@@ -146,3 +151,9 @@ def _named(p: pb.Payload, name: str) -> Any:
         if m.name == name:
             return m.value
     return None
+
+
+def rebirth_command(now_ms: int | None = None) -> bytes:
+    """An NCMD payload asking an edge node for its births again."""
+    ts = int(time.time() * 1000) if now_ms is None else now_ms
+    return pb.encode(pb.Payload(ts, (pb.Metric("Node Control/Rebirth", None, ts, pb.BOOLEAN, True),)))
