@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.errors import ProfileError
 from eskin_industrial.plant import payload as pb
+from eskin_industrial.plant.commands import COMMANDS
 from eskin_industrial.plant.sparkplug import DEVICE_METRICS, SparkplugDevice, SparkplugOptions
 from eskin_industrial.sinks.base import SINKS, sink_class
 from tests.helpers import sparkplug as spb
@@ -121,7 +122,7 @@ def _check_sequence(decoded, device="grip"):
     births = [p for k, _, p in decoded if k == "DBIRTH"]
     assert births
     declared = {m.alias: (m.name, m.datatype) for m in births[0].metrics}
-    assert [n for n, _ in declared.values()] == [m.name for m in DEVICE_METRICS]
+    assert [n for n, _ in declared.values()] == [m.name for m in DEVICE_METRICS] + [c.name for c in COMMANDS]
     assert all(dt == m.datatype for (_, dt), m in zip(declared.values(), DEVICE_METRICS))
     units = {m.name: dict(zip(m.properties.keys, [v.string_value for v in m.properties.values]))
              for m in births[0].metrics}
@@ -164,7 +165,8 @@ def test_a_bridge_publishes_births_the_slip_and_deaths(paper_profile, tmp_path, 
     states, _ = _check_sequence(decoded)
     assert "slip" in states and states[states.index("slip") - 1] != "slip"
     topics = {t for _, t, _ in decoded}
-    assert topics == {f"spBv1.0/plant1/{k}/cell7" for k in ("NBIRTH", "NDEATH")} | \
+    # NDATA: the store's metrics, when what came before the connection was forwarded
+    assert topics - {"spBv1.0/plant1/NDATA/cell7"} == {f"spBv1.0/plant1/{k}/cell7" for k in ("NBIRTH", "NDEATH")} | \
         {f"spBv1.0/plant1/{k}/cell7/grip" for k in ("DBIRTH", "DDATA", "DDEATH")}
 
 

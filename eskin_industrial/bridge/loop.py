@@ -152,7 +152,7 @@ class NodeLoop:
         if not urgent and status == self._last_status and now - self._last_pub < self._refresh_s:
             return False
         pub = Publication(self.image.render(health), self.image, urgent or status != self._last_status,
-                          time.perf_counter() if t_event is None else t_event)
+                          time.perf_counter() if t_event is None else t_event, False, self.pipeline.counters.scans)
         for sink in self.sinks:
             sink.publish(pub)
         self._last_status = status

@@ -295,6 +295,14 @@ class Bridge:
                 self.log.event("source_failed", level="error", node=run.name, error=source.last_error)
                 run.loop.publish_if_due(True)  # BUS_FAULT now, before the loop lets go
                 self.failed_sources.append(f"{run.name}: {source.last_error}")
+        self._sinks_source_ended(runs)  # a Sparkplug device's DDEATH, after the BUS_FAULT image
+
+    @staticmethod
+    def _sinks_source_ended(runs: list[NodeRun]) -> None:
+        """Each sink of a node whose source ended hears it (a Sparkplug device's DDEATH)."""
+        for run in runs:
+            for sink in run.sinks:
+                sink.source_ended(run.loop.source.last_error or "")
 
     def _fail_if_sources_failed(self) -> None:
         """A bridge whose sources have all ended, one of them failed, has failed (exit 1):

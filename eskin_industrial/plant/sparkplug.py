@@ -7,27 +7,37 @@ register image as the PLC reads it (:func:`~eskin_industrial.plc.image.decode_re
 of each publication), so that the plant and the PLC see the same state.
 
 The loop's thread only encodes and enqueues: paho-mqtt's network thread
-(``loop_start``) writes to the broker, reconnects, and calls back on connect (births)
-and on an NCMD (rebirth).  One lock orders the ``seq`` numbers with the messages.
+(``loop_start``) writes to the broker, reconnects, and calls back on connect (births),
+on a command (NCMD rebirth; DCMDs, queued for the loop: :mod:`.commands`) and on the
+primary host's STATE.  While the node cannot publish (no broker, no primary host) its
+data messages go to the store (:mod:`.store`), whose own thread writes them to SQLite
+and sends them, historical, after the next births.  One lock orders the ``seq``
+numbers with the messages.  The connection's security: :mod:`.transport`.
 """
 
 from __future__ import annotations
 
+import collections
+import json
+import os
 import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
-from urllib.parse import urlsplit
 
 from .. import __version__
 from ..detect.state import LABELS
-from ..errors import EskinError
-from ..plc.image import Status, decode_registers
-from ..netaddr import check_host
-from ..schema import in_range
+from ..errors import EskinError, ProfileError
+from ..plc.image import Command, PlcImage, Status, decode_registers
+from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Publication, Sink, SinkHealth
 from . import payload as pb
+from .commands import COMMAND_ALIAS, COMMANDS, BadCommand, birth_metrics, parse_device_command
+from .properties import Property, layout_properties, method_properties
+from .store import Forwarder, Held, store_path
+from .transport import check_files, check_security, configure, parse_broker
 
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
@@ -35,19 +45,6 @@ if TYPE_CHECKING:
 NAMESPACE = "spBv1.0"
 REBIRTH = "Node Control/Rebirth"
 _FORBIDDEN = set("+#/")
-
-
-def parse_broker(url: str) -> tuple[str, int]:
-    """``mqtt://HOST[:PORT]`` -> (host, port); ValueError, one line, when malformed."""
-    parts = urlsplit(url)
-    try:
-        port = parts.port
-    except ValueError:
-        port = -1
-    if parts.scheme != "mqtt" or not parts.hostname or port in (-1, 0) or parts.path not in ("", "/"):
-        raise ValueError(f"expected mqtt://HOST:PORT, got {url!r}")
-    check_host(parts.hostname, "broker host")  # the one host parser (999.1.1.1 is refused here, not retried)
-    return parts.hostname, port or 1883
 
 
 def check_id(key: str, value: str) -> None:
@@ -59,7 +56,7 @@ def check_id(key: str, value: str) -> None:
 class SparkplugOptions:
     """``[sparkplug]``: the broker and this edge node's ids, and report by exception."""
 
-    broker: str  #: ``mqtt://HOST:PORT``
+    broker: str  #: ``mqtt://HOST:PORT``, or ``mqtts://HOST:PORT`` (TLS)
     group_id: str
     edge_node_id: str
     qos: int = field(default=0, metadata=in_range(0, 1))
@@ -68,11 +65,39 @@ class SparkplugOptions:
     deadband: float = field(default=0.01, metadata=in_range(0, 1e9))
     #: An analog value is published at most this often (a state change goes at once).
     min_interval_s: float = field(default=0.5, metadata=in_range(0, 3600))
+    #: Back-off between connection attempts: from this, doubling up to ``reconnect_max_s``.
+    reconnect_min_s: float = field(default=0.2, metadata=in_range(0.05, 60))
+    reconnect_max_s: float = field(default=5.0, metadata=in_range(0.05, 600))
+    #: Store-and-forward: the folder of the on-disk queue of an outage's data messages
+    #: (``<group_id>-<edge_node_id>.sqlite3``); unset: the queue is in memory.
+    store_dir: str | None = None
+    #: Data messages held at most (0: none); past it they are counted and dropped.
+    store_max: int = field(default=10000, metadata=in_range(0, 10_000_000))
+
+    #: mqtts: the CA certificates (PEM) the broker's certificate must chain to (unset: the system's).
+    ca_file: str | None = None
+    #: mqtts: this edge node's client certificate and its key (PEM), for a broker that asks for one.
+    cert_file: str | None = None
+    key_file: str | None = None
+    username: str | None = None
+    #: The password: the first line of this file, or this environment variable (never
+    #: a command-line value).
+    password_file: str | None = None
+    password_env: str | None = None
+    #: Sparkplug 3.0 primary host awareness: births (and data) only while the host
+    #: application of this id says online on ``spBv1.0/STATE/<id>``; held while it is
+    #: away, births again when it comes back.
+    primary_host_id: str | None = None
 
     def __post_init__(self) -> None:
-        parse_broker(self.broker)
+        check_security(self)
         check_id("group_id", self.group_id)
         check_id("edge_node_id", self.edge_node_id)
+        if self.primary_host_id is not None:
+            check_id("primary_host_id", self.primary_host_id)
+        if self.reconnect_max_s < self.reconnect_min_s:
+            raise ValueError(f"reconnect_max_s: {self.reconnect_max_s:g} is below reconnect_min_s "
+                             f"({self.reconnect_min_s:g})")
 
 
 class MetricDef(NamedTuple):
@@ -94,8 +119,9 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Bus Fault", pb.BOOLEAN, "", False, "the sensor bus fails"),
     MetricDef("Contact", pb.BOOLEAN, "", False, "total force at or above the contact threshold"),
     MetricDef("Enabled", pb.BOOLEAN, "", False, "detection enabled"),
-    MetricDef("R_coe", pb.FLOAT, "", True, "decorrelation indicator (R_COE / r_scale)"),
-    MetricDef("R_dw", pb.FLOAT, "", True, "wavelet indicator (R_DW / r_scale)"),
+    MetricDef("R_coe", pb.FLOAT, "", True,
+              "R_coe (paper methods), else the method's first score, 1 = its threshold (R_COE / r_scale)"),
+    MetricDef("R_dw", pb.FLOAT, "", True, "R_dw (paper methods), else the method's second score (R_DW / r_scale)"),
     MetricDef("Total Force", pb.FLOAT, "N", True, "total force of the newest frame"),
     MetricDef("CoF X", pb.FLOAT, "mm", True, "centre of force, x"),
     MetricDef("CoF Y", pb.FLOAT, "mm", True, "centre of force, y"),
@@ -104,11 +130,15 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Counters/State Changes", pb.UINT32, "count", True, "state changes since start"),
     MetricDef("Counters/Lost Scans", pb.UINT32, "count", True, "failed polls and sequence gaps"),
     MetricDef("Counters/Bus Errors", pb.UINT32, "count", True, "timeouts, CRC and exception responses"),
+    MetricDef("Counters/Scans", pb.UINT64, "count", True, "scans the node's loop has taken since start"),
 )
+#: The metric whose DBIRTH properties describe the method (``method_properties``) and
+#: the one with the layout (``layout_properties``).
+METHOD_METRIC, LAYOUT_METRIC = "State", "CoF X"
 _ANALOG = tuple(m.analog for m in DEVICE_METRICS)
 _FLOATS = tuple(m.datatype == pb.FLOAT for m in DEVICE_METRICS)
 #: Node metrics (aliases 1..); a device's metrics start at 1000 x (its index + 1).
-NODE_METRICS = ("bdSeq", REBIRTH, "Node Info/Version", "Node Info/Uptime")
+NODE_METRICS = ("bdSeq", REBIRTH, "Node Info/Version", "Node Info/Uptime", "Store/Pending", "Store/Overflow")
 
 
 def metric_values(pub: Publication, r_scale: float, word_order: str) -> tuple[Any, ...]:
@@ -120,7 +150,7 @@ def metric_values(pub: Publication, r_scale: float, word_order: str) -> tuple[An
             bool(st & Status.SENSOR_STALE), bool(st & Status.BUS_FAULT), bool(st & Status.CONTACT),
             bool(st & Status.ENABLED), v["R_COE"] / r_scale, v["R_DW"] / r_scale, v["F_SUM"] / 1000.0,
             v["XC"] / 100.0, v["YC"] / 100.0, v["FRAME_AGE"], v["SLIP_EVENTS"], v["STATE_CHANGES"],
-            v["LOST_SCANS"], v["BUS_ERRORS"])
+            v["LOST_SCANS"], v["BUS_ERRORS"], pub.scans)
 
 
 def _now_ms() -> int:
@@ -132,24 +162,45 @@ class EdgeNode:
 
     def __init__(self, options: SparkplugOptions, client_factory: Any) -> None:
         self.options = options
-        self.host, self.port = parse_broker(options.broker)
+        self.host, self.port, _ = parse_broker(options.broker)
         g, e = options.group_id, options.edge_node_id
         self.topic = {kind: f"{NAMESPACE}/{g}/{kind}/{e}" for kind in ("NBIRTH", "NDEATH", "NDATA", "NCMD")}
+        self.topic["DCMD"] = f"{NAMESPACE}/{g}/DCMD/{e}/+"
         self.devices: list[SparkplugDevice] = []
         self.lock = threading.RLock()
         self.seq = 0
         self.bd_seq = 0
         self.started = time.monotonic()
-        self.connected = False
+        self.connected = False  #: publishing: a session, the births sent (and the primary host online)
+        self.session = False  #: an MQTT session
+        self.host_online = False
+        self._host_ts = -1  #: timestamp of the newest STATE taken (older ones are stale)
+        host = options.primary_host_id
+        self.state_topic = None if host is None else f"{NAMESPACE}/STATE/{host}"
         self.stopping = False
         self.published = self.dropped = self.connects = self.failures = self.bad_commands = self.rebirths = 0
+        self.unknown_devices = self.commands = self.commands_refused = self.bad_states = 0
+        self._bad_logged: dict[str, tuple[float, int]] = {}
         self.last_error = ""
         self.client = client_factory
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
+        self.client.on_connect_fail = self._on_connect_fail
         self.client.on_message = self._on_message
-        self.client.reconnect_delay_set(0.2, 5)
+        self.client.reconnect_delay_set(options.reconnect_min_s, options.reconnect_max_s)
         self._set_will()
+        self.forwarder = Forwarder(store_path(options.store_dir, g, e), options.store_max, self._send_held,
+                                   lambda: self.connected and not self.stopping, self._event, self._store_drained)
+        self.serial = self.forwarder.next_serial  #: of the next data message (the replay order)
+        #: Data messages handed to paho with QoS 1 and not yet acknowledged: a lost
+        #: connection sends them through the store instead (paho would resend them
+        #: before the new births, out of Sparkplug's order).
+        self.inflight: collections.deque[tuple[Any, Held]] = collections.deque()
+
+    def _event(self, name: str, level: str = "info", **fields: Any) -> None:
+        """An event of the edge node, logged with its first device."""
+        if self.devices:
+            self.devices[0]._event(name, level, **fields)
 
     # -- messages -----------------------------------------------------------------------
     def _death(self) -> bytes:
@@ -174,6 +225,54 @@ class EdgeNode:
             else:
                 self.dropped += 1
 
+    def send_data(self, device: SparkplugDevice, ms: int, metrics: tuple[pb.Metric, ...]) -> None:
+        """A DDATA: published when connected, else held for later (under the lock)."""
+        serial = self.serial
+        self.serial += 1
+        held = Held(serial, device.device_id, device.base, ms, metrics)
+        if not self.connected:
+            self.forwarder.hold(held)
+            return
+        payload = pb.Payload(ms, metrics, self._next_seq())
+        self._publish_tracked(device.topic["DDATA"], pb.encode(payload), held)
+
+    def _publish_tracked(self, topic: str, data: bytes, held: Held) -> None:
+        info = self.client.publish(topic, data, qos=self.options.qos)
+        if info.rc != 0 and self.options.qos == 0:
+            self.forwarder.hold(held)  # not sent (the connection went): held instead
+            return
+        self.published += 1
+        if self.options.qos:
+            inflight = self.inflight
+            while inflight and inflight[0][0].is_published():
+                inflight.popleft()
+            inflight.append((info, held))
+
+    def _send_held(self, serial: int, device_id: str, base: int, body: bytes) -> bool | None:
+        """A held message as a historical DDATA (the forwarder's thread): False when not
+        connected, None when its device is no longer here."""
+        with self.lock:
+            if not self.connected or self.stopping:
+                return False
+            dev = next((d for d in self.devices if d.device_id == device_id), None)
+            if dev is None or dev.base != base or dev.dead:
+                return None
+            data = body + pb.encode(pb.Payload(seq=self._next_seq()))
+            self._publish_tracked(dev.topic["DDATA"], data, Held(serial, device_id, base, 0, (), body))
+            return True
+
+    def _store_drained(self) -> None:
+        """The store is empty again: the node metrics say so (NDATA)."""
+        with self.lock:
+            if self.connected and not self.stopping:
+                now = _now_ms()
+                self.send(self.topic["NDATA"], pb.Payload(now, self._store_metrics(now, named=False)))
+
+    def _store_metrics(self, now: int, named: bool = True) -> tuple[pb.Metric, ...]:
+        f = self.forwarder
+        return (pb.Metric("Store/Pending" if named else None, 5, now, pb.UINT64, f.pending),
+                pb.Metric("Store/Overflow" if named else None, 6, now, pb.UINT64, f.overflow))
+
     def births(self) -> None:
         """NBIRTH (seq 0) and every device's DBIRTH."""
         with self.lock:
@@ -183,7 +282,8 @@ class EdgeNode:
                        pb.Metric(REBIRTH, 2, now, pb.BOOLEAN, False),
                        pb.Metric("Node Info/Version", 3, now, pb.STRING, __version__),
                        pb.Metric("Node Info/Uptime", 4, now, pb.UINT64, int(time.monotonic() - self.started),
-                                 properties=(("engUnit", (pb.STRING, "s")),)))
+                                 properties=(("engUnit", (pb.STRING, "s")),)),
+                       *self._store_metrics(now))
             self.send(self.topic["NBIRTH"], pb.Payload(now, metrics))
             for d in self.devices:
                 if not d.dead:
@@ -196,39 +296,135 @@ class EdgeNode:
             self.last_error = str(reason)
             return
         self.connects += 1
-        client.subscribe(self.topic["NCMD"], qos=1)
+        topics = [(self.topic["NCMD"], 1), (self.topic["DCMD"], 1)]
+        if self.state_topic is not None:
+            topics.append((self.state_topic, 1))
+        client.subscribe(topics)
+        # What the last session left unacknowledged would be resent by paho before the
+        # births: it goes through the store, as historical data, after them.
+        client.drop_out_messages()
         with self.lock:
-            self.births()
-            self.connected = True
+            self.session = True
+            self._hold_unacknowledged()
+            if self.state_topic is None:
+                self._go_live()
+            else:  # births once the primary host says it is online (its retained STATE)
+                self.last_error = f"waiting for the primary host {self.options.primary_host_id}"
+
+    def _go_live(self) -> None:
+        """Births, then data (live, and what the store holds) (under the lock)."""
+        self.births()
+        self.connected = True
+        self.forwarder.wake()
+
+    def _hold_unacknowledged(self) -> None:
+        for info, held in self.inflight:
+            if not info.is_published():
+                self.forwarder.hold(held)
+        self.inflight.clear()
+
+    def _on_connect_fail(self, client: Any, userdata: Any) -> None:
+        """No connection at all (refused, unreachable): counted; paho tries again after
+        its back-off."""
+        self.failures += 1
+        self.last_error = "connection failed (broker unreachable)"
 
     def _on_disconnect(self, client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
         with self.lock:
-            self.connected = False
+            was = self.session
+            self.connected = self.session = self.host_online = False
             if self.stopping:
                 return
-            self.failures += 1
-            self.last_error = str(reason)
+            if was:  # (a refused CONNECT was counted by _on_connect)
+                self.failures += 1
+                self.last_error = str(reason)
             # A new session, a new death certificate: the next NBIRTH repeats it.
             self.bd_seq = (self.bd_seq + 1) & 0xFF
             self._set_will()
 
     def _on_message(self, client: Any, userdata: Any, message: Any) -> None:
+        """An NCMD, a DCMD or a STATE (paho's thread): whatever it holds is counted and
+        logged, never raised (an exception would end paho's network thread)."""
+        try:
+            self._message(message)
+        except Exception as exc:  # noqa: BLE001 - a bug here must not end the connection
+            self.bad_commands += 1
+            self._bad("sparkplug_bad_command", str(message.topic), f"{type(exc).__name__}: {exc}")
+
+    def _message(self, message: Any) -> None:
+        topic = str(message.topic)
+        if topic == self.state_topic:
+            self._on_state(message.payload)
+            return
+        parts = topic.split("/")
+        device = None
+        if parts[2] == "DCMD":
+            device = next((d for d in self.devices if d.device_id == parts[-1] and len(parts) == 5), None)
+            if device is None:
+                self.unknown_devices += 1
+                self._bad("sparkplug_unknown_device", topic, "no such device on this edge node")
+                return
         try:
             cmd = pb.decode(message.payload)
-        except EskinError:  # malformed: counted and dropped, never a crash
+        except EskinError as exc:  # malformed: counted and dropped, never a crash
             self.bad_commands += 1
+            self._bad("sparkplug_bad_command", topic, str(exc), device)
+            return
+        if device is not None:
+            device.command(cmd, topic)
             return
         rebirth = any((m.name == REBIRTH or m.alias == 2) and m.value is True for m in cmd.metrics)
         if not rebirth:
             self.bad_commands += 1
+            self._bad("sparkplug_bad_command", topic, f"expected {REBIRTH} = true")
             return
         self.rebirths += 1
         with self.lock:
-            if self.connected:
+            if self.connected and not self.stopping:
                 self.births()
+
+    def _on_state(self, data: bytes) -> None:
+        """The primary host's STATE (Sparkplug 3.0: JSON ``{"online": bool, "timestamp":
+        ms}``, retained): births when it comes online, data held while it is away."""
+        try:
+            state = json.loads(data)
+            online, ts = state["online"], state["timestamp"]
+            if not isinstance(online, bool) or not isinstance(ts, int) or isinstance(ts, bool):
+                raise ValueError("expected a Boolean online and an integer timestamp")
+        except (ValueError, KeyError, TypeError) as exc:
+            self.bad_states += 1
+            self._bad("sparkplug_bad_state", str(self.state_topic), f"{type(exc).__name__}: {exc}")
+            return
+        with self.lock:
+            if ts < self._host_ts or self.stopping:
+                return  # an older STATE than one already taken
+            self._host_ts = ts
+            was, self.host_online = self.host_online, online
+            if online and not was:
+                self._event("sparkplug_primary_host", "info", host=self.options.primary_host_id, online=1)
+                if self.session:
+                    self._go_live()  # a rebirth when it comes back
+            elif not online and was:
+                self._event("sparkplug_primary_host", "warning", host=self.options.primary_host_id, online=0)
+                self.connected = False  # data is held until it is back
+                self.last_error = f"primary host {self.options.primary_host_id} offline"
+
+    def _bad(self, event: str, topic: str, error: str, device: SparkplugDevice | None = None) -> None:
+        """One warning per event name and second at most (a flood of bad commands must
+        not flood the log); the lines left out are counted in the next one."""
+        now = time.monotonic()
+        last, quiet = self._bad_logged.get(event, (float("-inf"), 0))
+        if now - last < 1.0:
+            self._bad_logged[event] = (last, quiet + 1)
+            return
+        self._bad_logged[event] = (now, 0)
+        target = device if device is not None else (self.devices[0] if self.devices else None)
+        if target is not None:
+            target._event(event, "warning", topic=topic, error=error, not_logged=quiet)
 
     # -- life ----------------------------------------------------------------------------
     def start(self) -> EdgeNode:
+        self.forwarder.start()
         self.client.connect_async(self.host, self.port, keepalive=self.options.keepalive_s)
         self.client.loop_start()
         return self
@@ -244,13 +440,15 @@ class EdgeNode:
         with self.lock:
             if self.stopping:
                 return
+            self.stopping = True  # the forwarder sends nothing more
+        self.forwarder.stop()
+        with self.lock:
             for d in self.devices:
                 d.death()
             info = None
-            if self.connected:
+            if self.session:
                 info = self.client.publish(self.topic["NDEATH"], self._death(), qos=1)
                 self.published += 1
-            self.stopping = True
         if info is not None:
             try:
                 info.wait_for_publish(timeout_s)
@@ -258,11 +456,20 @@ class EdgeNode:
                 pass
         self.client.disconnect()
         self.client.loop_stop()
+        with self.lock:
+            self._hold_unacknowledged()
+        self.forwarder.close()  # what is held stays on disk for the next start
 
     def counters(self) -> dict[str, int]:
+        f = self.forwarder
         return {"sparkplug_published": self.published, "sparkplug_dropped": self.dropped,
                 "sparkplug_connects": self.connects, "sparkplug_failures": self.failures,
-                "sparkplug_bad_commands": self.bad_commands, "sparkplug_rebirths": self.rebirths}
+                "sparkplug_bad_commands": self.bad_commands, "sparkplug_rebirths": self.rebirths,
+                "sparkplug_store_held": f.held, "sparkplug_store_pending": f.pending,
+                "sparkplug_store_overflow": f.overflow, "sparkplug_store_forwarded": f.forwarded,
+                "sparkplug_store_discarded": f.discarded, "sparkplug_store_failures": f.failures, "sparkplug_commands": self.commands,
+                "sparkplug_commands_refused": self.commands_refused, "sparkplug_unknown_devices": self.unknown_devices,
+                "sparkplug_bad_states": self.bad_states, "sparkplug_host_online": int(self.host_online)}
 
 
 class SparkplugDevice(Sink):
@@ -272,12 +479,40 @@ class SparkplugDevice(Sink):
     Options = SparkplugOptions
     cli_options = (
         CliOption("--sparkplug", "sparkplug", "Publish as a Sparkplug B edge node to this MQTT broker "
-                  "(mqtt://HOST:PORT); needs --group-id and --edge-node-id.", metavar="URL"),
+                  "(mqtt://HOST:PORT, or mqtts:// for TLS); needs --group-id and --edge-node-id.", metavar="URL"),
         CliOption("--group-id", "group_id", "Sparkplug group id (with --sparkplug).", metavar="ID"),
         CliOption("--edge-node-id", "edge_node_id", "Sparkplug edge node id (with --sparkplug).", metavar="ID"),
+        CliOption("--sparkplug-qos", "sparkplug_qos", "MQTT QoS of the data messages (0 or 1; 1: nothing lost "
+                  "to a broker that dies, with the store).", type=int, metavar="N"),
+        CliOption("--sparkplug-keepalive", "sparkplug_keepalive_s", "MQTT keepalive, seconds.", type=int,
+                  metavar="S"),
+        CliOption("--sparkplug-store-dir", "sparkplug_store_dir", "Folder of the on-disk queue of the data "
+                  "messages of a broker outage (default: in memory).", metavar="DIR"),
+        CliOption("--sparkplug-store-max", "sparkplug_store_max", "Data messages held at most during an "
+                  "outage (the rest are counted).", type=int, metavar="N"),
+        CliOption("--sparkplug-ca-file", "sparkplug_ca_file", "mqtts: CA certificates (PEM) of the broker's "
+                  "certificate (default: the system's).", metavar="FILE"),
+        CliOption("--sparkplug-cert-file", "sparkplug_cert_file", "mqtts: client certificate (PEM), with "
+                  "--sparkplug-key-file.", metavar="FILE"),
+        CliOption("--sparkplug-key-file", "sparkplug_key_file", "mqtts: the client certificate's key (PEM).",
+                  metavar="FILE"),
+        CliOption("--sparkplug-primary-host", "sparkplug_primary_host_id", "Publish only while this Sparkplug "
+                  "primary host application is online (its STATE topic).", metavar="ID"),
+        CliOption("--sparkplug-username", "sparkplug_username", "MQTT username.", metavar="NAME"),
+        CliOption("--sparkplug-password-file", "sparkplug_password_file", "MQTT password: the first line of "
+                  "this file (no password option takes the secret itself).", metavar="FILE"),
+        CliOption("--sparkplug-password-env", "sparkplug_password_env", "MQTT password: this environment "
+                  "variable.", metavar="NAME"),
     )
+    #: ``--sparkplug-*`` option -> the ``[sparkplug]`` key it sets.
+    _CLI_KEYS = {"sparkplug_qos": "qos", "sparkplug_keepalive_s": "keepalive_s",
+                 "sparkplug_store_dir": "store_dir", "sparkplug_store_max": "store_max",
+                 "sparkplug_ca_file": "ca_file", "sparkplug_cert_file": "cert_file", "sparkplug_key_file": "key_file",
+                 "sparkplug_username": "username", "sparkplug_primary_host_id": "primary_host_id", "sparkplug_password_file": "password_file",
+                 "sparkplug_password_env": "password_env"}
 
-    def __init__(self, node: EdgeNode, device_id: str, index: int, r_scale: float, word_order: str) -> None:
+    def __init__(self, node: EdgeNode, device_id: str, index: int, r_scale: float, word_order: str,
+                 properties: dict[str, tuple[Property, ...]] | None = None) -> None:
         super().__init__()
         self.node = node
         self.device_id = device_id
@@ -286,10 +521,47 @@ class SparkplugDevice(Sink):
         self.topic = {k: f"{NAMESPACE}/{g}/{k}/{e}/{device_id}" for k in ("DBIRTH", "DDATA", "DDEATH")}
         self.base = 1000 * (index + 1)
         self.r_scale, self.word_order = r_scale, word_order
+        #: Metric name -> DBIRTH properties beyond its unit (the layout, the method).
+        self.properties = properties or {}
         self.current: tuple[Any, ...] | None = None  #: the newest values (births declare them)
         self.sent: list[Any] = [None] * len(DEVICE_METRICS)  #: the values last sent, per metric
         self.sent_at = [float("-inf")] * len(DEVICE_METRICS)
         self.dead = False
+        self.image: PlcImage | None = None  #: of the newest publication (for a command's refusal)
+        self._commands: collections.deque[Command] = collections.deque()
+
+    def command(self, payload: pb.Payload, topic: str) -> None:
+        """A DCMD for this device (paho's thread): queued for the loop, or refused as a
+        whole under the PLC's rule, or counted as malformed."""
+        node = self.node
+        try:
+            cmds = parse_device_command(payload, self.base)
+        except BadCommand as exc:
+            node.bad_commands += 1
+            node._bad("sparkplug_bad_command", topic, str(exc), self)
+            return
+        image = self.image
+        for cmd in cmds:
+            why = "contact_unknown" if image is None else image.refusal(cmd)
+            if why is not None:
+                node.commands_refused += 1
+                self._event("sparkplug_command_refused", "warning", command=cmd.name, reason=why)
+                return
+        node.commands += len(cmds)
+        self._commands.extend(cmds)
+        self._event("sparkplug_command", "info", commands=",".join(c.name for c in cmds))
+
+    def source_ended(self, error: str) -> None:
+        """The node's source is gone while the bridge goes on: DDEATH (its last
+        publication, with Bus Fault when it failed, went before)."""
+        self.death()
+
+    def take_commands(self) -> list[Command]:
+        out = []
+        commands = self._commands
+        while commands:
+            out.append(commands.popleft())
+        return out
 
     def birth(self) -> None:
         """DBIRTH: every metric with name, alias, datatype, unit and its newest value."""
@@ -297,10 +569,11 @@ class SparkplugDevice(Sink):
         values = self.current
         metrics = []
         for i, m in enumerate(DEVICE_METRICS):
-            props = (("engUnit", (pb.STRING, m.unit)),) if m.unit else ()
+            props = ((("engUnit", (pb.STRING, m.unit)),) if m.unit else ()) + self.properties.get(m.name, ())
             value = None if values is None else values[i]
             metrics.append(pb.Metric(m.name, self.base + i, now, m.datatype, value, is_null=True if value is None
                                      else None, properties=props))
+        metrics += birth_metrics(self.base, now)
         self.sent = list(values) if values is not None else [None] * len(DEVICE_METRICS)
         self.sent_at = [time.monotonic()] * len(DEVICE_METRICS)
         self.node.send(self.topic["DBIRTH"], pb.Payload(now, tuple(metrics)))
@@ -317,12 +590,13 @@ class SparkplugDevice(Sink):
         if publication.offline:
             self.death()
             return
+        self.image = publication.image
         values = metric_values(publication, self.r_scale, self.word_order)
         now = time.monotonic()
         node = self.node
         with node.lock:
             self.current = values
-            if not node.connected or self.dead:
+            if self.dead:
                 return
             sent, sent_at = self.sent, self.sent_at
             changed = [i for i, v in enumerate(values) if v != sent[i] and not _ANALOG[i]]
@@ -340,7 +614,7 @@ class SparkplugDevice(Sink):
             for i in sorted(changed):
                 sent[i], sent_at[i] = values[i], now
                 metrics.append(pb.Metric(None, self.base + i, None, DEVICE_METRICS[i].datatype, values[i]))
-            node.send(self.topic["DDATA"], pb.Payload(ms, tuple(metrics)))
+            node.send_data(self, ms, tuple(metrics))
 
     def health(self) -> SinkHealth:
         return SinkHealth(self.node.connected, self.node.failures, self.node.last_error)
@@ -355,46 +629,74 @@ class SparkplugDevice(Sink):
     @classmethod
     def options_from_cli(cls, values: dict[str, Any]) -> SparkplugOptions | None:
         url = values.get("sparkplug")
+        extra = {key: values[dest] for dest, key in cls._CLI_KEYS.items() if values.get(dest) is not None}
         if url is None:
-            if values.get("group_id") is not None or values.get("edge_node_id") is not None:
-                raise ValueError("--group-id/--edge-node-id: give --sparkplug URL too")
+            given = [o.flag for o in cls.cli_options[1:] if values.get(o.dest) is not None]
+            if given:
+                raise ValueError(f"{'/'.join(given)}: give --sparkplug URL too")
             return None
         if not values.get("group_id") or not values.get("edge_node_id"):
             raise ValueError("give --group-id and --edge-node-id with --sparkplug")
-        return SparkplugOptions(url, values["group_id"], values["edge_node_id"])
+        flags = {cls._CLI_KEYS[o.dest]: o.flag for o in cls.cli_options if o.dest in cls._CLI_KEYS}
+        try:
+            return build(SparkplugOptions, {"broker": url, "group_id": values["group_id"],
+                                            "edge_node_id": values["edge_node_id"], **extra})
+        except SchemaError as exc:  # the flag, not the key, in the one line
+            raise ValueError(f"{flags.get(exc.key, exc.key)}: {exc.message}") from None
+        except ValueError as exc:  # a rule across keys: named by its first key
+            key, sep, rest = str(exc).partition(": ")
+            raise ValueError(f"{flags[key]}: {rest}" if sep and key in flags else str(exc)) from None
 
     @classmethod
     def describe(cls, options: SparkplugOptions, node: NodeLike) -> str:
-        host, port = parse_broker(options.broker)
+        host, port, _ = parse_broker(options.broker)
         return f"Sparkplug B {NAMESPACE}/{options.group_id}/DDATA/{options.edge_node_id}/{node.name} at {host}:{port}"
 
     @classmethod
     def check(cls, options: SparkplugOptions, nodes: Sequence[NodeLike]) -> None:
         for n in nodes:
             check_id("device id (node name)", n.name)
+        check_files(options)
+        if options.store_dir is not None:
+            d = Path(options.store_dir)
+            while not d.exists() and d != d.parent:  # created at open: its first existing parent
+                d = d.parent
+            if not d.is_dir() or not os.access(d, os.W_OK | os.X_OK):
+                raise ValueError(f"store_dir: {options.store_dir!r}: {str(d)!r} is not a writable folder")
 
     @classmethod
     def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
-        try:
-            import paho.mqtt.client as mqtt
-        except ImportError:  # pragma: no cover - a runtime dependency
-            from ..errors import MissingExtra
-
-            # a dependency of the package itself: only a damaged install lacks it
-            raise MissingExtra("the sparkplug output needs paho-mqtt: pip install 'paho-mqtt>=2.1,<2.3'") from None
-        client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
-                             client_id=f"{options.group_id}-{options.edge_node_id}", clean_session=True)
-        edge = EdgeNode(options, client)
+        edge = open_edge(options, [(n.name, n.profile.modbus.plc.r_scale, n.profile.modbus.plc.word_order,
+                                    {METHOD_METRIC: method_properties(n.profile),
+                                     LAYOUT_METRIC: layout_properties(n.profile)}) for n in nodes])
         context.closers.append(edge.close)  # closers run last first: the devices' DDEATH, then NDEATH
-        sinks: list[Sink] = []
-        for i, n in enumerate(nodes):
-            plc = n.profile.modbus.plc
-            dev = cls(edge, n.name, i, plc.r_scale, plc.word_order)
-            edge.devices.append(dev)
+        for dev in edge.devices:
             context.closers.append(dev.close)
-            sinks.append(dev)
         edge.start()
-        return sinks
+        return list(edge.devices)
+
+
+def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, float, str, dict[str, tuple[Property, ...]]]]
+              ) -> EdgeNode:
+    """An edge node (not started) with one device per ``(name, r_scale, word_order,
+    properties)``."""
+    try:
+        import paho.mqtt.client as mqtt
+    except ImportError:  # pragma: no cover - a runtime dependency
+        from ..errors import MissingExtra
+
+        # a dependency of the package itself: only a damaged install lacks it
+        raise MissingExtra("the sparkplug output needs paho-mqtt: pip install 'paho-mqtt>=2.1,<2.3'") from None
+    client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
+                         client_id=f"{options.group_id}-{options.edge_node_id}", clean_session=True)
+    try:
+        configure(client, options)
+    except ValueError as exc:  # a password file emptied since --check
+        raise ProfileError(f"[sparkplug] {exc}") from None
+    edge = EdgeNode(options, client)
+    for i, (name, r_scale, word_order, props) in enumerate(devices):
+        edge.devices.append(SparkplugDevice(edge, name, i, r_scale, word_order, props))
+    return edge
 
 
 _TYPE_NAMES = {pb.INT8: "Int8", pb.INT16: "Int16", pb.INT32: "Int32", pb.INT64: "Int64", pb.UINT8: "UInt8",
@@ -408,4 +710,6 @@ def metric_table() -> list[str]:
     for i, m in enumerate(DEVICE_METRICS):
         sent = "deadband, min interval" if m.analog else "at once"
         rows.append(f"| base+{i} | `{m.name}` | {_TYPE_NAMES[m.datatype]} | {m.unit or '-'} | {sent} | {m.doc} |")
+    for i, c in enumerate(COMMANDS):
+        rows.append(f"| base+{COMMAND_ALIAS + i} | `{c.name}` | Boolean | - | DBIRTH (false); DCMD | {c.doc} |")
     return rows

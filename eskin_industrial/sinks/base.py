@@ -67,6 +67,7 @@ class Publication(NamedTuple):
     urgent: bool  #: a state or status change: to be written at once
     t_event: float  #: ``time.perf_counter()`` when the deciding scan arrived
     offline: bool = False  #: the bridge's last image (BRIDGE_OFFLINE)
+    scans: int = 0  #: scans the node's loop has taken since start (0 in the offline image)
 
 
 @dataclass(frozen=True)
@@ -128,6 +129,11 @@ class Sink(abc.ABC):
     def take_commands(self) -> list[Command]:
         """Commands received since the last call (acknowledge, tare, enable)."""
         return []
+
+    def source_ended(self, error: str) -> None:
+        """The node's source ended (``error``: why it failed, "" for a clean end) while
+        the bridge may go on with other nodes; called after the node's last
+        publication.  Default: nothing (the image turns stale by itself)."""
 
     def commands_done(self) -> None:
         """The loop has applied the commands it took."""

@@ -75,10 +75,12 @@ def metric_value(p: Any, name: str) -> Any:
 class Broker:
     """A mosquitto of the test's own on a loopback port; killed by its pid."""
 
-    def __init__(self, tmp: Path, port: int | None = None) -> None:
+    def __init__(self, tmp: Path, port: int | None = None, conf_lines: str = "allow_anonymous true\n") -> None:
         self.port = port or free_port()
         conf = tmp / f"mosquitto-{self.port}.conf"
-        conf.write_text(f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n")
+        # user root: a broker started as root keeps reading the test's own files (no
+        # effect when the tests run as another user)
+        conf.write_text(f"listener {self.port} 127.0.0.1\npersistence false\nuser root\n{conf_lines}")
         self.proc = subprocess.Popen([need("mosquitto"), "-c", str(conf)], stdout=subprocess.DEVNULL,
                                      stderr=subprocess.DEVNULL)
         try:
@@ -119,11 +121,11 @@ def _wait_port(port: int, proc: subprocess.Popen) -> None:
 class Capture:
     """``mosquitto_sub`` (the third-party peer): every message as (topic, payload bytes)."""
 
-    def __init__(self, port: int, out: Path) -> None:
+    def __init__(self, port: int, out: Path, *args: str) -> None:
         self.out = out
         self._file = open(out, "w")
         self.proc = subprocess.Popen([need("mosquitto_sub"), "-h", "127.0.0.1", "-p", str(port), "-t", "spBv1.0/#",
-                                      "-v", "-F", "%t %x"], stdout=self._file, stderr=subprocess.DEVNULL)
+                                      "-v", "-F", "%t %x", *args], stdout=self._file, stderr=subprocess.DEVNULL)
         time.sleep(0.3)  # subscribed before the node connects (no retained messages in Sparkplug)
 
     def messages(self) -> list[tuple[str, bytes]]:
@@ -156,3 +158,34 @@ def send_rebirth(port: int, group: str, edge: str, tmp: Path) -> None:
     f.write_bytes(cmd.SerializeToString())
     subprocess.run([need("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(port), "-q", "1",
                     "-t", f"spBv1.0/{group}/NCMD/{edge}", "-f", str(f)], check=True, timeout=10)
+
+
+def certificates(tmp: Path) -> dict[str, Path]:
+    """A CA of the test's own (``openssl``), a server certificate for 127.0.0.1 and a
+    client certificate, both signed by it; PEM files in ``tmp``."""
+    openssl = need("openssl")
+    ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
+    files = {k: tmp / f"{k}.pem" for k in ("ca", "ca_key", "server", "server_key", "client", "client_key")}
+
+    def run(*args: str) -> None:
+        subprocess.run([openssl, *args], check=True, capture_output=True, timeout=30)
+
+    run("req", "-x509", *ec, "-keyout", str(files["ca_key"]), "-out", str(files["ca"]), "-days", "1",
+        "-subj", "/CN=eskin test CA")
+    ext = tmp / "san.ext"
+    ext.write_text("subjectAltName = IP:127.0.0.1\n")
+    for who, cn in (("server", "127.0.0.1"), ("client", "cell7")):
+        csr = tmp / f"{who}.csr"
+        run("req", *ec, "-keyout", str(files[f"{who}_key"]), "-out", str(csr), "-subj", f"/CN={cn}")
+        run("x509", "-req", "-in", str(csr), "-CA", str(files["ca"]), "-CAkey", str(files["ca_key"]),
+            "-CAcreateserial", "-out", str(files[who]), "-days", "1", *(["-extfile", str(ext)] if who == "server" else []))
+    return files
+
+
+def password_file(tmp: Path, users: dict[str, str]) -> Path:
+    """A mosquitto password file made by ``mosquitto_passwd``."""
+    f = tmp / "mosquitto.passwd"
+    for i, (user, pw) in enumerate(users.items()):
+        subprocess.run([need("mosquitto_passwd"), "-b", *(["-c"] if i == 0 else []), str(f), user, pw], check=True,
+                       capture_output=True, timeout=10)
+    return f

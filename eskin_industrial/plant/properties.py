@@ -1,0 +1,59 @@
+"""What a device's DBIRTH says about the sensor and the deciding method, as Sparkplug
+metric properties (a PropertySet of scalar values): the layout, and the method with
+the profile keys that set its thresholds, named as in the profile."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, Any
+
+from . import payload as pb
+
+if TYPE_CHECKING:
+    from ..profile import Profile
+
+Property = tuple[str, tuple[int, Any]]
+
+#: The ``[detector]`` keys of the paper's rule (and of the methods built on its indicators).
+PAPER_KEYS = ("slip_r_coe", "slip_r_dw", "slip_rule", "variable_r_coe", "variable_r_dw", "hysteresis",
+              "slip_confirm_updates", "hold_s")
+
+
+def _typed(value: Any) -> tuple[int, Any] | None:
+    if isinstance(value, bool):
+        return (pb.BOOLEAN, value)
+    if isinstance(value, int):
+        return (pb.INT64, value)
+    if isinstance(value, float):
+        return (pb.DOUBLE, value)
+    if isinstance(value, str):
+        return (pb.STRING, value)
+    if isinstance(value, tuple) and all(isinstance(v, (int, float)) for v in value):
+        return (pb.STRING, ",".join(f"{v:g}" for v in value))
+    return None  # (nothing else is a threshold)
+
+
+def layout_properties(profile: Profile) -> tuple[Property, ...]:
+    lay = profile.layout
+    return (("rows", (pb.INT64, lay.rows)), ("cols", (pb.INT64, lay.cols)), ("pitch_mm", (pb.DOUBLE, lay.pitch_mm)))
+
+
+def method_properties(profile: Profile) -> tuple[Property, ...]:
+    """``method`` and the keys that set its decision, by their profile name
+    (``detector.slip_r_coe``, ``detector.cof_track.z``); ``detector.contact_threshold_n``
+    for every method."""
+    det = profile.detector
+    out: list[Property] = [("method", (pb.STRING, det.method))]
+    section = getattr(det, det.method.replace("-", "_"), None)
+    if dataclasses.is_dataclass(section):
+        prefix = f"detector.{det.method.replace('-', '_')}."
+        items = [(f.name, getattr(section, f.name)) for f in dataclasses.fields(section)]
+    else:  # the paper's rule and its one-indicator variants
+        prefix = "detector."
+        items = [(k, getattr(det, k)) for k in PAPER_KEYS]
+    items.append(("contact_threshold_n", det.contact_threshold_n))
+    for key, value in items:
+        typed = _typed(value)
+        if typed is not None:
+            out.append((("detector." if key == "contact_threshold_n" else prefix) + key, typed))
+    return tuple(out)
