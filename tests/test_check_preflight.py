@@ -145,7 +145,7 @@ def test_host_of_plc_and_sparkplug_sections_are_parsed(tmp_path):
     cfg.write_text('[sparkplug]\nbroker = "mqtt://999.1.1.1:1883"\ngroup_id = "g"\nedge_node_id = "e"\n' + node)
     refused(run("bridge", "--config", str(cfg), "--check"), f"{cfg}: [sparkplug] ", "broker host: expected an IPv4")
     cfg.write_text('[sparkplug]\nbroker = "mqtt://broker.cell:0"\ngroup_id = "g"\nedge_node_id = "e"\n' + node)
-    refused(run("bridge", "--config", str(cfg), "--check"), "expected mqtt://HOST:PORT, got 'mqtt://broker.cell:0'")
+    refused(run("bridge", "--config", str(cfg), "--check"), "expected mqtt://HOST:PORT or mqtts://HOST:PORT, got 'mqtt://broker.cell:0'")
 
 
 def test_a_port_in_use_is_named_by_check_and_by_the_run():
