@@ -1,4 +1,4 @@
-"""The two places the package reaches past a library's public API, pinned: when a
+"""The three places the package reaches past a library's public API, pinned: when a
 release moves them, this names what moved (docs/architecture.md says why each is
 used).  The behaviour behind each is tested elsewhere: the SocketCAN drain in
 tests/vcan, the simulators' Modbus server wherever a PLC stand-in or an RTU node runs."""
@@ -31,3 +31,15 @@ def test_pymodbus_server_context_hooks_of_the_simulators() -> None:
     init = inspect.getsource(ModbusServerContext.__init__)
     assert "self.old_simulator" in init and "self.simdevices" in init
     assert pymodbus.__version__.startswith("3.16")  # pyproject.toml: pymodbus>=3.16,<3.17
+
+
+def test_paho_closes_its_wake_up_socket_pair_on_reset() -> None:
+    import paho.mqtt.client as mqtt
+
+    client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2)
+    client.loop_start()  # opens the pair
+    client.loop_stop()
+    pair = (client._sockpairR, client._sockpairW)
+    assert all(sock is not None and sock.fileno() >= 0 for sock in pair)  # still open after loop_stop
+    client._reset_sockets()
+    assert all(sock.fileno() == -1 for sock in pair)

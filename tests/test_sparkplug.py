@@ -198,6 +198,7 @@ def test_ncmd_rebirth_and_malformed_commands(tmp_path):
                 finally:
                     pub.disconnect()
                     pub.loop_stop()
+                    pub._reset_sockets()  # its wake-up socket pair (tests/test_private_apis.py)
             msgs = cap.wait(lambda m: any("/NDEATH/" in t for t, _ in m))
         finally:
             cap.close()

@@ -456,6 +456,11 @@ class EdgeNode:
                 pass
         self.client.disconnect()
         self.client.loop_stop()
+        # paho's loop_start opens a socket pair to wake its thread, and loop_stop leaves it
+        # open until the client is collected (a ResourceWarning then): close it now.
+        reset = getattr(self.client, "_reset_sockets", None)
+        if reset is not None:
+            reset()
         with self.lock:
             self._hold_unacknowledged()
         self.forwarder.close()  # what is held stays on disk for the next start
