@@ -157,3 +157,76 @@ def test_evaluate_prints_the_share_of_events_found_within_a_delay():
     assert 0 < quick < score.events  # case2 is faster than 50 ms, creep slower
     assert line == (f"# cof-track: of {score.events} slip events, {100 * quick / score.events:.0f} % within 50 ms, "
                     f"{100 * score.found / score.events:.0f} % within 100000 ms")
+
+
+def stability_truth():
+    """60 s at 100 Hz: a grab, two varying-force episodes (10-12 s, 20-24 s), a slip
+    (30-31 s), stable elsewhere."""
+    t = np.arange(6000) / 100.0
+    labels = np.full(t.size, "stable", dtype=object)
+    labels[t < 1] = "no_contact"
+    labels[(t >= 1) & (t < 1.5)] = "transition"
+    labels[(t >= 10) & (t < 12)] = "variable_force"
+    labels[(t >= 20) & (t < 24)] = "variable_force"
+    labels[(t >= 30) & (t < 31)] = "slip"
+    return t, labels
+
+
+def test_stability_metrics_on_a_known_sequence():
+    t, labels = stability_truth()
+    times = np.round(np.arange(1, 600) / 10.0, 6)  # an update every 100 ms
+    states = np.full(times.size, int(S.STABLE))
+    states[times < 1.0] = S.NO_CONTACT
+    states[(times >= 10.3) & (times < 12.4)] = S.VARIABLE_FORCE  # one entry, one exit, 0.3 s late
+    flap = (times >= 20.0) & (times < 24.0) & (np.round(times * 10) % 4 < 2)  # 0.2 s on, 0.2 s off
+    states[flap] = S.VARIABLE_FORCE
+    states[(times >= 30.1) & (times < 30.5)] = S.SLIP
+    states[(times >= 45.0) & (times < 45.5)] = S.VARIABLE_FORCE  # a false entry in a still hold
+    s = score_scene(table(times, states), t, labels)
+    assert s.vf_episodes == 2 and s.vf_found == 2 and s.vf_recall == 1.0
+    # episode 1: counted from 10.15 to 12.0, covered from 10.3; episode 2: half of 3.85 s
+    first, second = s.vf_coverages
+    assert first == pytest.approx(1.7 / 1.85)
+    assert second == pytest.approx(0.5, abs=0.03)
+    assert s.vf_coverage == pytest.approx((1.7 + 3.85 * second) / (1.85 + 3.85))
+    assert s.vf_covered_share(0.9) == 0.5
+    # episode 1: entry (10.3) and exit (12.4, within the allowance); episode 2: a change
+    # every 0.2 s from 20.0 (the last, at 23.8, back to stable)
+    assert s.vf_episode_changes == [2, 20]
+    # inside the labels: 10.3 and the 20 changes 20.0 .. 23.8
+    assert s.vf_span_s == pytest.approx(6.0)
+    assert s.vf_span_changes == 1 + 20
+    assert s.vf_changes_per_min == pytest.approx(21 / 0.1)
+    # still time: stable at least 1 s after anything else: 2.5-10, 13-20, 25-30, 32-60 s;
+    # the false entry and its exit are its only changes (the slip's exit at 30.5 is not)
+    assert s.still_s == pytest.approx(7.5 + 7 + 5 + 28)
+    assert s.still_changes == 2
+    assert s.still_changes_per_min == pytest.approx(2 / (47.5 / 60))
+
+
+def test_stability_of_a_steady_detector_and_of_one_that_never_sees_varying_force():
+    t, labels = stability_truth()
+    times = np.round(np.arange(1, 600) / 10.0, 6)
+    quiet = np.where(times < 1.0, int(S.NO_CONTACT), int(S.STABLE))
+    s = score_scene(table(times, quiet), t, labels)
+    assert (s.vf_found, s.vf_coverage, s.vf_episode_changes, s.still_changes) == (0, 0.0, [0, 0], 0)
+    assert s.vf_recall == 0.0
+    # an episode's exit that comes after the allowance is a change in the still hold
+    late = quiet.copy()
+    late[(times >= 10.0) & (times < 13.5)] = S.VARIABLE_FORCE
+    s = score_scene(table(times, late), t, labels)
+    assert s.vf_episode_changes == [1, 0] and s.vf_coverages[0] == 1.0
+    assert s.still_changes == 1
+
+
+def test_stability_figures_add_over_scenes():
+    t, labels = stability_truth()
+    times = np.round(np.arange(1, 600) / 10.0, 6)
+    states = np.where(times < 1.0, int(S.NO_CONTACT), int(S.STABLE))
+    states[(times >= 10.0) & (times < 12.5)] = S.VARIABLE_FORCE
+    one = score_scene(table(times, states), t, labels)
+    both = score_scene(table(times, states), t, labels)
+    both += one
+    assert both.vf_episodes == 4 and both.vf_episode_changes == one.vf_episode_changes * 2
+    assert both.vf_coverage == pytest.approx(one.vf_coverage)
+    assert both.still_changes_per_min == pytest.approx(one.still_changes_per_min)

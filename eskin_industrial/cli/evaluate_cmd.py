@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import click
+import numpy as np
 
 from ..detect.methods import METHODS
 from ..evaluation.suite import (
@@ -66,7 +67,9 @@ def _seeds(value: str) -> tuple[int, ...]:
 def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, long_holds,
                  profile_path, within_ms) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
-    force read as slip, and cost per frame, for each method."""
+    force read as slip, and cost per frame, for each method; then how steady the
+    reported state is: varying-force episodes found, their time read as varying force,
+    state changes per episode, per minute in varying force and in still holds."""
     if charts_dir is not None:
         from ..evaluation.charts import all_charts
 
@@ -103,10 +106,34 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
             for scene, ss in r.per_scene.items():
                 click.echo(f"|   {scene} | {ss.events} | {ss.found} | {ss.f1:.3f} | {ss.false_alarms} | {ss.vf_as_slip} | "
                            f"{_delays(ss)} | | |")
+    _stability_table(res, per_scene)
     for name, r in res.items():
         if within_ms:
             shares = ", ".join(f"{_within(r.score, ms):.0f} % within {ms} ms" for ms in within_ms)
             click.echo(f"# {name}: of {r.score.events} slip events, {shares}")
+
+
+def _stability_table(res: dict[str, Any], per_scene: bool) -> None:
+    """The second table: how steady the reported state is (evaluation/metrics.py)."""
+    click.echo("")
+    click.echo("| method | varying-force episodes | found (recall) | coverage after 150 ms: pooled / worst / episodes >= 90 % "
+               "| state changes per episode: mean / max | changes per min in varying force | "
+               "changes per min in still holds (min held) |")
+    click.echo("|---|---|---|---|---|---|---|")
+    for name, r in res.items():
+        rows = [(name, r.score)] + ([(f"  {scene}", ss) for scene, ss in r.per_scene.items()] if per_scene else [])
+        for label, s in rows:
+            click.echo(f"| {label} | {_stability(s)} |")
+
+
+def _stability(s: Any) -> str:
+    ch = s.vf_episode_changes
+    cov = s.vf_coverages
+    coverage = (f"{_num(100 * s.vf_coverage, ' %', 0)} / {_num(100 * min(cov), ' %', 0)} / "
+                f"{_num(100 * s.vf_covered_share(0.9), ' %', 0)}") if cov else "- / - / -"
+    changes = f"{np.mean(ch):.1f} / {max(ch)}" if ch else "- / -"
+    return (f"{s.vf_episodes} | {s.vf_found} ({_num(s.vf_recall, '', 2)}) | {coverage} | {changes} | "
+            f"{_num(s.vf_changes_per_min)} | {_num(s.still_changes_per_min, '', 2)} ({s.still_s / 60:.1f})")
 
 
 def _num(value: float, unit: str = "", digits: int = 1) -> str:
