@@ -202,6 +202,12 @@ def test_stability_metrics_on_a_known_sequence():
     assert s.still_s == pytest.approx(7.5 + 7 + 5 + 28)
     assert s.still_changes == 2
     assert s.still_changes_per_min == pytest.approx(2 / (47.5 / 60))
+    # entered 0.3 s after onset and left 0.4 s after the end; the flapping one entered
+    # at its onset and reads stable at its end
+    assert s.vf_entry_s == pytest.approx([0.3, 0.0])
+    assert s.vf_exit_s == pytest.approx([0.4, 0.0])
+    # the slip, 30.0-31.0 s, found at 30.1 and left at 30.5, before its end: at its end
+    assert s.slip_exit_s == pytest.approx([0.0])
 
 
 def test_stability_of_a_steady_detector_and_of_one_that_never_sees_varying_force():
@@ -230,3 +236,20 @@ def test_stability_figures_add_over_scenes():
     assert both.vf_episodes == 4 and both.vf_episode_changes == one.vf_episode_changes * 2
     assert both.vf_coverage == pytest.approx(one.vf_coverage)
     assert both.still_changes_per_min == pytest.approx(one.still_changes_per_min)
+
+
+def test_evaluate_prints_how_steady_the_state_is():
+    from click.testing import CliRunner
+
+    from eskin_industrial.cli import main
+
+    res = CliRunner().invoke(main, ["evaluate", "-m", "cof-track", "-s", "case1", "--seeds", "1"])
+    assert res.exit_code == 0, res.output
+    header = next(ln for ln in res.output.splitlines() if ln.startswith("| method | varying-force episodes"))
+    row = [c.strip() for c in res.output.splitlines()[res.output.splitlines().index(header) + 2].split("|")[1:-1]]
+    s = evaluate(by_name("cof-track"), scenes=("case1",), seeds=(1,))["cof-track"].score
+    assert len(row) == len(header.split("|")) - 2
+    assert row[0] == "cof-track" and row[1] == str(s.vf_episodes) == "4"
+    assert row[2] == f"{s.vf_found} ({s.vf_recall:.2f})"
+    assert row[4] == f"{np.mean(s.vf_episode_changes):.1f} / {max(s.vf_episode_changes)}"
+    assert row[7] == f"{np.percentile(s.vf_entry_s, 50) * 1000:.0f} / {np.percentile(s.vf_entry_s, 90) * 1000:.0f}"

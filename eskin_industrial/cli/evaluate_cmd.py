@@ -118,8 +118,9 @@ def _stability_table(res: dict[str, Any], per_scene: bool) -> None:
     click.echo("")
     click.echo("| method | varying-force episodes | found (recall) | coverage after 150 ms: pooled / worst / episodes >= 90 % "
                "| state changes per episode: mean / max | changes per min in varying force | "
-               "changes per min in still holds (min held) |")
-    click.echo("|---|---|---|---|---|---|---|")
+               "changes per min in still holds (min held) | varying force entered after onset, p50 / p90 (ms) "
+               "| left after its end | slip left after its end |")
+    click.echo("|---|---|---|---|---|---|---|---|---|---|")
     for name, r in res.items():
         rows = [(name, r.score)] + ([(f"  {scene}", ss) for scene, ss in r.per_scene.items()] if per_scene else [])
         for label, s in rows:
@@ -133,7 +134,14 @@ def _stability(s: Any) -> str:
                 f"{_num(100 * s.vf_covered_share(0.9), ' %', 0)}") if cov else "- / - / -"
     changes = f"{np.mean(ch):.1f} / {max(ch)}" if ch else "- / -"
     return (f"{s.vf_episodes} | {s.vf_found} ({_num(s.vf_recall, '', 2)}) | {coverage} | {changes} | "
-            f"{_num(s.vf_changes_per_min)} | {_num(s.still_changes_per_min, '', 2)} ({s.still_s / 60:.1f})")
+            f"{_num(s.vf_changes_per_min)} | {_num(s.still_changes_per_min, '', 2)} ({s.still_s / 60:.1f}) | "
+            f"{_ms(s.vf_entry_s)} | {_ms(s.vf_exit_s)} | {_ms(s.slip_exit_s)}")
+
+
+def _ms(values: list[float]) -> str:
+    """p50 / p90 of some delays, in ms."""
+    p = [np.percentile(values, q) * 1000 for q in (50, 90)] if values else [math.nan, math.nan]
+    return f"{_num(p[0], digits=0)} / {_num(p[1], digits=0)}"
 
 
 def _num(value: float, unit: str = "", digits: int = 1) -> str:

@@ -26,7 +26,12 @@ update whose state differs from the update before it:
 - changes per minute *in still holds*: changes at updates inside *still* time, per
   minute of it: frames labelled ``stable`` at least ``EXIT_ALLOWANCE_S`` after the
   last frame labelled anything else (the state may take that long to come back
-  after a grab, a slide or a varying force).
+  after a grab, a slide or a varying force);
+- how fast the states come and go: a varying-force episode is *entered* at its first
+  update reading ``variable_force`` from its onset on (before ``EXIT_ALLOWANCE_S``
+  after its end), and *left* at the first update from its end on that reads
+  anything else (before the next span not labelled ``stable``); a found slip event
+  is left at the first update after its end not reading ``slip``.
 """
 
 from __future__ import annotations
@@ -75,6 +80,9 @@ class SceneScore:
     vf_span_changes: int = 0
     still_s: float = 0.0
     still_changes: int = 0
+    vf_entry_s: list[float] = field(default_factory=list)  #: episode onset -> variable_force
+    vf_exit_s: list[float] = field(default_factory=list)  #: episode end -> any other state
+    slip_exit_s: list[float] = field(default_factory=list)  #: slip event end -> any other state
 
     def __iadd__(self, other: "SceneScore") -> "SceneScore":
         self.events += other.events
@@ -93,6 +101,9 @@ class SceneScore:
         self.vf_span_changes += other.vf_span_changes
         self.still_s += other.still_s
         self.still_changes += other.still_changes
+        self.vf_entry_s += other.vf_entry_s
+        self.vf_exit_s += other.vf_exit_s
+        self.slip_exit_s += other.slip_exit_s
         return self
 
     @property
@@ -115,6 +126,10 @@ class SceneScore:
 
     def delay_percentile(self, q: float) -> float:
         return float(np.percentile(self.delays_s, q)) if self.delays_s else float("nan")
+
+    @staticmethod
+    def percentile(values: list[float], q: float) -> float:
+        return float(np.percentile(values, q)) if values else float("nan")
 
     @property
     def vf_recall(self) -> float:
@@ -160,6 +175,10 @@ def score_scene(updates: UpdateTable, t: np.ndarray, labels: np.ndarray, toleran
         if hits.size:
             out.found += 1
             out.delays_s.append(float(updates.t[hits[0]] - onset))
+            stop = t[b - 1] + dt[b - 1]
+            after = np.flatnonzero((updates.t >= stop) & ~flagged)
+            if after.size:
+                out.slip_exit_s.append(float(updates.t[after[0]] - stop))
     for a, b in spans(flagged):
         if credited[a:b].any() or (up_label[a:b] == "transition").all():
             continue
@@ -203,5 +222,13 @@ def _score_stability(out: SceneScore, updates: UpdateTable, t: np.ndarray, dt: n
         out.vf_covered_s += covered_s
         out.vf_coverages.append(covered_s / span_s if span_s > 0 else 1.0)
         nxt = np.flatnonzero(other[b:])
-        limit = min(end + EXIT_ALLOWANCE_S, t[b + nxt[0]] if nxt.size else np.inf)
+        next_t = t[b + nxt[0]] if nxt.size else np.inf
+        limit = min(end + EXIT_ALLOWANCE_S, next_t)
         out.vf_episode_changes.append(int(((change_t >= onset) & (change_t < limit)).sum()))
+        up_t = np.asarray(updates.t)
+        entered = np.flatnonzero((up_t >= onset) & (up_t < limit) & (state == _VARIABLE))
+        if entered.size:
+            out.vf_entry_s.append(float(up_t[entered[0]] - onset))
+            left = np.flatnonzero((up_t >= end) & (up_t < next_t) & (state != _VARIABLE))
+            if left.size:
+                out.vf_exit_s.append(float(up_t[left[0]] - end))
