@@ -253,3 +253,17 @@ def test_evaluate_prints_how_steady_the_state_is():
     assert row[2] == f"{s.vf_found} ({s.vf_recall:.2f})"
     assert row[4] == f"{np.mean(s.vf_episode_changes):.1f} / {max(s.vf_episode_changes)}"
     assert row[7] == f"{np.percentile(s.vf_entry_s, 50) * 1000:.0f} / {np.percentile(s.vf_entry_s, 90) * 1000:.0f}"
+
+
+def test_the_timing_diagrams_of_the_state_policy_are_drawn_by_one_command(tmp_path):
+    from click.testing import CliRunner
+
+    from eskin_industrial.cli import main
+
+    res = CliRunner().invoke(main, ["evaluate", "--charts", str(tmp_path), "--only", "timing"])
+    assert res.exit_code == 0, res.output
+    for name in ("state-timing.png", "state-timing-detail.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not (tmp_path / "failure-map.png").exists()  # only what was asked for
+    res = CliRunner().invoke(main, ["evaluate", "--only", "timing"])
+    assert res.exit_code == 2 and "--charts" in res.output

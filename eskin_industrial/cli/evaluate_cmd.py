@@ -11,6 +11,7 @@ import click
 import numpy as np
 
 from ..detect.methods import METHODS
+from ..evaluation.charts import CHARTS
 from ..evaluation.suite import (
     DEFAULT_SETTINGS,
     EVALUATION_SEEDS,
@@ -56,6 +57,9 @@ def _seeds(value: str) -> tuple[int, ...]:
 @click.option("--charts", "charts_dir", type=click.Path(file_okay=False), default=None,
               help="Regenerate the evaluation charts (PNG) into this directory instead (a few minutes).")
 @click.option("--quick", is_flag=True, help="With --charts: fewer seeds.")
+@click.option("--only", "only_charts", multiple=True, type=click.Choice(CHARTS),
+              help="With --charts: draw only these (repeatable); 'timing' is the state policy's timing diagrams "
+                   "of docs/plc.md (seconds).")
 @click.option("--long-holds", is_flag=True,
               help="False alarms over hours of still holding instead: the hold scenes over 100 held-out seeds "
                    "(2000-2099, 3.8 h; with --seeds tuning, the 300 tuning seeds 100-399, 11.3 h), "
@@ -64,7 +68,7 @@ def _seeds(value: str) -> tuple[int, ...]:
               help="Take the detector settings from this profile's [detector] (default: the built-in defaults).")
 @click.option("--within", "within_ms", multiple=True, type=click.IntRange(min=0),
               help="Also print the share of slip events found within this many ms of onset (repeatable).")
-def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, long_holds,
+def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, only_charts, long_holds,
                  profile_path, within_ms) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
     force read as slip, and cost per frame, for each method; then how steady the
@@ -73,8 +77,10 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
     if charts_dir is not None:
         from ..evaluation.charts import all_charts
 
-        all_charts(Path(charts_dir), lambda line: click.echo(line, err=True), quick=quick)
+        all_charts(Path(charts_dir), lambda line: click.echo(line, err=True), quick=quick, only=only_charts)
         return
+    if only_charts:
+        raise click.UsageError("--only chooses among the charts: give --charts DIR too")
     if long_holds:
         if scenes:
             raise click.UsageError("--long-holds scores the hold scenes; leave out --scene")
