@@ -134,3 +134,16 @@ def test_a_profile_refuses_a_bad_varying_force_setting(tmp_path):
     bad.write_text(text)
     with pytest.raises(EskinError, match="exit_fraction"):
         load_profile(bad)
+
+
+@pytest.mark.parametrize("a", [1.0, 0.5, 1 / 3.0, 1 / 300.0, 1 / 3000.0])
+def test_the_batch_learner_is_the_streams_running_mean(a):
+    from eskin_industrial.detect.vforce import running_mean
+
+    x = np.random.default_rng(6).chisquare(1, 20000) * 0.003
+    q, expected = 0.0, []
+    for m, v in enumerate(x.tolist(), start=1):
+        q += max(1.0 / m, a) * (v - q)
+        expected.append(q)
+    np.testing.assert_allclose(running_mean(x, a), expected, rtol=1e-10, atol=1e-15)
+    assert running_mean(np.zeros(0), a).size == 0

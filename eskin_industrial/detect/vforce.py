@@ -164,31 +164,58 @@ def force_variation_batch(s: np.ndarray, contact: np.ndarray, filled: np.ndarray
         # whose two predecessors (and themselves) are no held copies
         usable = np.zeros(len(run), bool)
         usable[2:] = ~held[2:] & ~held[1:-1] & ~held[:-2]
-        d2 = np.zeros(len(run))
-        d2[2:] = (run[2:] - 2.0 * run[1:-1] + run[:-2]) ** 2 / 6.0
-        last = np.maximum.accumulate(np.where(usable, np.arange(len(run)), -1))  # the newest usable frame
-        noise = np.where(last >= 0, _learnt_values(d2, usable, a_noise)[np.maximum(last, 0)], 0.0)
+        d2 = (run[2:] - 2.0 * run[1:-1] + run[:-2]) ** 2 / 6.0
+        learnt = running_mean(d2[usable[2:]], a_noise)
+        last = np.cumsum(usable) - 1  # how many usable frames so far, less one
+        noise = np.where(last >= 0, learnt[np.maximum(last, 0)] if learnt.size else 0.0, 0.0)
         if len(run) < n:
             continue
-        windows = np.lib.stride_tricks.sliding_window_view(run, n)  # frame n-1 onwards
-        num = np.abs(windows @ g.T)  # (frames, horizons)
+        num = np.abs(_against_rows(run, g))
         sigma = np.sqrt(noise[n - 1:])
         with np.errstate(divide="ignore", invalid="ignore"):
             score = num / (sd * settings.z) / sigma[:, None]
             if settings.min_rate_per_s > 0:
-                rate = np.abs(windows @ slope.T) * rate_hz / run[n - 1:, None] / settings.min_rate_per_s
-                score = np.minimum(score, rate)
+                rate = np.abs(_against_rows(run, slope))
+                score = np.minimum(score, rate * rate_hz / run[n - 1:, None] / settings.min_rate_per_s)
         best = np.where(noise[n - 1:] > 0, score.max(axis=1), 0.0)
         out[a + n - 1:b] = best
     return out
 
 
-def _learnt_values(d2: np.ndarray, usable: np.ndarray, a_noise: float) -> np.ndarray:
-    """The running mean after each usable frame (index by frame; 0 elsewhere)."""
-    out = np.zeros(len(d2))
-    q, learnt = 0.0, 0
-    for k in np.flatnonzero(usable).tolist():
-        learnt += 1
-        q += max(1.0 / learnt, a_noise) * (d2[k] - q)
-        out[k] = q
+def _against_rows(x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(frames from n - 1 on, rows): each row (oldest first, n long) against the newest n
+    values, correlated over the row's nonzero tail only."""
+    n = rows.shape[1]
+    out = np.empty((len(x) - n + 1, len(rows)))
+    for h, row in enumerate(rows):
+        start = int(np.flatnonzero(row)[0]) if row.any() else n - 1
+        out[:, h] = np.correlate(x[start:], row[start:], mode="valid")
+    return out
+
+
+def running_mean(x: np.ndarray, a: float) -> np.ndarray:
+    """The stream's learner after each value of ``x``: q += max(1 / m, a) (x_m - q), from
+    q = 0: the plain mean while 1 / m >= a, then an exponential mean of gain ``a``.
+    Vectorized in blocks short enough that the powers of (1 - a) stay well scaled."""
+    x = np.asarray(x, dtype=np.float64)
+    out = np.empty(len(x))
+    if not len(x):
+        return out
+    head = min(len(x), int(math.floor(1.0 / a)) if a > 0 else len(x))  # 1 / m >= a up to here
+    out[:head] = np.cumsum(x[:head]) / np.arange(1, head + 1)
+    r = 1.0 - a
+    if head == len(x):
+        return out
+    if r <= 0.0:
+        out[head:] = x[head:]
+        return out
+    block = int(min(4096, max(1, 20.0 / -math.log(r))))  # r^-block <= e^20
+    q = out[head - 1] if head else 0.0
+    for i in range(head, len(x), block):
+        chunk = x[i:i + block]
+        k = np.arange(1, len(chunk) + 1)
+        rk = r ** k
+        # q_k = r^k q + a sum_{j<=k} r^(k-j) x_j
+        out[i:i + len(chunk)] = rk * (q + a * np.cumsum(chunk / rk))
+        q = out[i + len(chunk) - 1]
     return out
