@@ -15,13 +15,13 @@ from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
 from ..scenes import render
 from .conditions import CONDITIONS
+from .shading import shade_labels
 from .suite import EVALUATION_SEEDS, evaluate, run_one
 from .sweeps import defaults, sweep
 
 COLOURS = {"paper": "tab:blue", "paper-coe": "tab:cyan", "paper-dw": "tab:purple", "force-rate": "tab:orange",
            "hf-energy": "tab:brown", "cof-velocity": "tab:gray", "cof-track": "tab:red",
            "learned": "tab:green"}
-LABEL_COLOURS = {"slip": "tab:red", "variable_force": "tab:orange", "transition": "0.85", "stable": "white", "no_contact": "white"}
 
 
 def _plt():
@@ -84,7 +84,7 @@ def figure3(out: Path, seed: int) -> None:
     for ax, scene in zip(axes, scenes):
         rec = render(scene, 100.0, seed)
         table, _ = run_one(get_method("paper").stream, settings, rec)
-        _shade(ax, rec.t, rec.labels)
+        shade_labels(ax, rec.t, rec.labels)
         ax.plot(table.t, table.r_coe, color="tab:blue", lw=1.2, label="R_coe")
         ax.plot(table.t, table.r_dw, color="tab:purple", lw=1.2, label="R_dw")
         ax.axhline(settings.slip_r_coe, color="k", ls="--", lw=0.8, label="threshold 2.5")
@@ -98,16 +98,6 @@ def figure3(out: Path, seed: int) -> None:
     fig.tight_layout()
     fig.savefig(out / "figure3-indicators.png", dpi=100)
     plt.close(fig)
-
-
-def _shade(ax: Any, t: np.ndarray, labels: np.ndarray) -> None:
-    from .metrics import spans
-
-    for label, colour in LABEL_COLOURS.items():
-        if colour == "white":
-            continue
-        for a, b in spans(labels == label):
-            ax.axvspan(t[a], t[b - 1], color=colour, alpha=0.3, lw=0)
 
 
 def failure_map(out: Path, seeds: tuple[int, ...], log: Any) -> dict[str, dict[str, list[float]]]:

@@ -21,6 +21,7 @@ from ..detect.updates import UpdateTable
 from ..detect.vforce import force_variation_batch
 from ..scenes import Rendered, render
 from .corpus import TUNING_SEEDS
+from .shading import shade_labels
 from .suite import DEFAULT_SETTINGS, run_one
 
 #: The demo's scene and seed (``eskin-bus demo``); case 1 at a tuning seed for the detail.
@@ -40,13 +41,11 @@ def _traces(rec: Rendered, settings: DetectorSettings) -> tuple[UpdateTable, np.
 
 def _panels(axes: Any, rec: Rendered, table: UpdateTable, score: np.ndarray, settings: DetectorSettings,
             span: tuple[float, float]) -> None:
-    from .charts import _shade
-
     ax_f, ax_v, ax_s, ax_state = axes
     keep = (rec.t >= span[0]) & (rec.t <= span[1])
     up = (table.t >= span[0]) & (table.t <= span[1])
     for ax in axes:
-        _shade(ax, rec.t[keep], rec.labels[keep])
+        shade_labels(ax, rec.t[keep], rec.labels[keep])
         ax.set_xlim(*span)
         ax.grid(alpha=0.3)
     ax_f.plot(rec.t[keep], rec.forces[keep].sum(axis=1), color="k", lw=0.9)
