@@ -267,3 +267,23 @@ def test_the_timing_diagrams_of_the_state_policy_are_drawn_by_one_command(tmp_pa
     assert not (tmp_path / "failure-map.png").exists()  # only what was asked for
     res = CliRunner().invoke(main, ["evaluate", "--only", "timing"])
     assert res.exit_code == 2 and "--charts" in res.output
+
+
+def test_evaluate_pushes_a_failure_map_condition_on_every_scene():
+    from click.testing import CliRunner
+
+    from eskin_industrial.cli import main
+    from eskin_industrial.evaluation.conditions import noise
+
+    args = ["evaluate", "-m", "cof-track", "-s", "case1", "--seeds", "10"]
+    res = CliRunner().invoke(main, args + ["--condition", "noise=0.1"])
+    assert res.exit_code == 0, res.output
+    assert res.output.startswith("# eskin-bus evaluate --seeds 10 --rate 100 --condition noise=0.1 ")
+    row = next(ln for ln in res.output.splitlines() if ln.startswith("| cof-track | 4 |"))
+    s = evaluate(by_name("cof-track"), scenes=("case1",), seeds=(10,), spec_hook=noise(0.1))["cof-track"].score
+    plain = evaluate(by_name("cof-track"), scenes=("case1",), seeds=(10,))["cof-track"].score
+    assert s.vf_coverages != plain.vf_coverages  # the noise changed what the detector saw
+    assert f"{100 * s.vf_coverage:.0f} %" in row.split("|")[4]
+    for bad in ("rate=3", "noise=x", "loud=1"):
+        res = CliRunner().invoke(main, args + ["--condition", bad])
+        assert res.exit_code == 2 and "--condition" in res.output

@@ -66,10 +66,13 @@ def _seeds(value: str) -> tuple[int, ...]:
                    "about 25 s per 100 seeds and method.")
 @click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None,
               help="Take the detector settings from this profile's [detector] (default: the built-in defaults).")
+@click.option("--condition", "conditions", multiple=True, metavar="NAME=VALUE",
+              help="Push one property of every scene as the failure map does (repeatable), e.g. noise=0.1, "
+                   "vibration=0.3, drops=0.2, dead=8, force=0.15, onset=1 (evaluation/conditions.py).")
 @click.option("--within", "within_ms", multiple=True, type=click.IntRange(min=0),
               help="Also print the share of slip events found within this many ms of onset (repeatable).")
 def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, only_charts, long_holds,
-                 profile_path, within_ms) -> None:
+                 profile_path, conditions, within_ms) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
     force read as slip, and cost per frame, for each method; then how steady the
     reported state is: varying-force episodes found, their time read as varying force,
@@ -96,9 +99,10 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
         names = _prepare_learned(names, explicit=bool(methods))
     settings = open_profile(profile_path).detector if profile_path else DEFAULT_SETTINGS
     res = evaluate(by_name(*names), scenes=tuple(scenes) or SUITE, seeds=seed_set, rate_hz=rate_hz,
-                   tolerance_s=tolerance_s, settings=settings)
+                   tolerance_s=tolerance_s, settings=settings, spec_hook=_conditions(conditions))
     held = sum(r.score.holding_s for r in res.values()) / max(1, len(res)) / 3600
-    click.echo(f"# eskin-bus evaluate --seeds {seeds} --rate {rate_hz:g}  "
+    click.echo(f"# eskin-bus evaluate --seeds {seeds} --rate {rate_hz:g}"
+               + "".join(f" --condition {c}" for c in conditions) + "  "
                f"({len(scenes) or len(SUITE)} scenes x {len(seed_set)} seeds, {held:.2f} h of holding, "
                f"{time.perf_counter() - start:.0f} s)")
     click.echo("| method | events | found | F1 | false alarms (per h holding) | varying force as slip | delay p50 / p90 (ms) | cost (us/frame) | cost / paper |")
@@ -117,6 +121,33 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
         if within_ms:
             shares = ", ".join(f"{_within(r.score, ms):.0f} % within {ms} ms" for ms in within_ms)
             click.echo(f"# {name}: of {r.score.events} slip events, {shares}")
+
+
+def _conditions(items: tuple[str, ...]) -> Any:
+    """One scene hook from NAME=VALUE items (the failure map's conditions, but the rate)."""
+    from ..evaluation.conditions import CONDITIONS
+
+    hooks = []
+    for item in items:
+        name, _, value = item.partition("=")
+        entry = CONDITIONS.get(name)
+        if entry is None or entry[2] is None:
+            known = ", ".join(n for n, c in CONDITIONS.items() if c[2] is not None)
+            raise click.BadParameter(f"{item!r}: expected NAME=VALUE with NAME one of {known} (the rate is --rate)",
+                                     param_hint="--condition")
+        try:
+            hooks.append(entry[2](float(value)))
+        except ValueError:
+            raise click.BadParameter(f"{item!r}: expected a number after '='", param_hint="--condition") from None
+    if not hooks:
+        return None
+
+    def hook(spec: Any) -> Any:
+        for h in hooks:
+            spec = h(spec)
+        return spec
+
+    return hook
 
 
 def _stability_table(res: dict[str, Any], per_scene: bool) -> None:
