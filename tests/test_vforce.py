@@ -169,3 +169,23 @@ def test_the_hands_pour_is_below_any_threshold_for_its_first_quarter_second_at_1
     change = force[first] - force[t < pour.t_s][-1]
     snr = float(np.sqrt((change ** 2).sum()) / sigma)
     assert (snr > 5.0) == reachable
+
+
+def test_held_copies_across_lost_frames_do_not_make_noise_look_like_a_change():
+    """A fifth of the frames lost and held over: each held copy repeats a noise draw,
+    which the ramp's sums count twice.  The noise used grows with the share of held
+    copies, so white noise crosses a (low, to count often) threshold about as often as
+    with every frame there; without it, four times as often."""
+    rng = np.random.default_rng(8)
+    k = 300_000
+    s = 6.0 + 0.05 * rng.standard_normal(k)
+    contact = np.ones(k, bool)
+    cfg = VaryingForceSettings(z=3.0, min_rate_per_s=0.0)
+    whole = (force_variation_batch(s, contact, np.zeros(k, bool), cfg, 100.0) >= 1.0).mean()
+    lost = rng.random(k) < 0.2
+    lost[0] = False
+    held = s.copy()
+    for i in np.flatnonzero(lost).tolist():
+        held[i] = held[i - 1]
+    with_gaps = (force_variation_batch(held, contact, lost, cfg, 100.0) >= 1.0).mean()
+    assert 0.005 < whole and with_gaps < 1.5 * whole

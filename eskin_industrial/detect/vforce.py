@@ -27,7 +27,10 @@ sigma^2 = mean of (S_k - 2 S_{k-1} + S_{k-2})^2 / 6: a ramp or a slow swing has
 almost none, so the noise can be learnt while the force changes, and a varying
 force does not teach the test to ignore itself.  (A machine's vibration is learnt
 as noise: the test then needs a larger change.)  A held copy across a gap is no
-sample of the noise.
+sample of the noise; it repeats one, which the ramp's sums then count twice, so the
+noise used is sigma^2 (1 + 2 f), f the share of held copies among the last max L + B
+frames (with a fifth of the frames lost, a still hold otherwise entered the state
+about once a minute).
 
 Contact lost: everything is forgotten; the score is 0 until ``max L + B`` frames of
 contact have come.  :class:`ForceVariation` is the streaming form (bounded state:
@@ -77,6 +80,8 @@ class ForceVariation:
 
     def reset(self) -> None:
         self._ring = [0.0] * self.n  # the last n totals (zeros before the first)
+        self._held = [False] * self.n  # which of them are held copies
+        self._held_count = 0
         h = len(self.horizons)
         self._w, self._p, self._b = [0.0] * h, [0.0] * h, [0.0] * h
         self._i = 0
@@ -109,6 +114,10 @@ class ForceVariation:
             p[h] += s - leave
             b[h] += leave - ring[i - length - base]
         ring[i] = s
+        held = self._held
+        if held[i] != filled:
+            self._held_count += 1 if filled else -1
+            held[i] = filled
         self._i = i + 1 if i + 1 < self.n else 0
         self.count = count = self.count + 1
         if count % self._resync_every == 0:
@@ -116,6 +125,8 @@ class ForceVariation:
         noise = self.noise
         if count < self.n or noise <= 0.0:
             return 0.0
+        if self._held_count:
+            noise *= 1.0 + 2.0 * self._held_count / self.n
         inv_sigma = 1.0 / math.sqrt(noise)
         inv_s = 1.0 / s
         best = 0.0
@@ -171,7 +182,8 @@ def force_variation_batch(s: np.ndarray, contact: np.ndarray, filled: np.ndarray
         if len(run) < n:
             continue
         num = np.abs(_against_rows(run, g))
-        sigma = np.sqrt(noise[n - 1:])
+        held_n = np.convolve(held.astype(float), np.ones(n), mode="valid")  # held copies among the last n
+        sigma = np.sqrt(noise[n - 1:] * (1.0 + 2.0 * held_n / n))
         with np.errstate(divide="ignore", invalid="ignore"):
             score = num / (sd * settings.z) / sigma[:, None]
             if settings.min_rate_per_s > 0:
