@@ -202,6 +202,11 @@ def test_stability_metrics_on_a_known_sequence():
     assert s.still_s == pytest.approx(7.5 + 7 + 5 + 28)
     assert s.still_changes == 2
     assert s.still_changes_per_min == pytest.approx(2 / (47.5 / 60))
+    # while holding: every change but the grab's (1.0, labelled transition) and the
+    # slip's two (30.1 and 30.5, labelled slip): episode 1's 2, the flapping 20, the
+    # false entry's 2
+    assert s.holding_changes == 2 + 20 + 2
+    assert s.holding_changes_per_min == pytest.approx(24 / (s.holding_s / 60))
     # entered 0.3 s after onset and left 0.4 s after the end; the flapping one entered
     # at its onset and reads stable at its end
     assert s.vf_entry_s == pytest.approx([0.3, 0.0])
@@ -287,3 +292,17 @@ def test_evaluate_pushes_a_failure_map_condition_on_every_scene():
     for bad in ("rate=3", "noise=x", "loud=1"):
         res = CliRunner().invoke(main, args + ["--condition", bad])
         assert res.exit_code == 2 and "--condition" in res.output
+
+
+def test_the_delay_against_changes_chart_marks_the_front_of_lower_delay_and_fewer_changes(tmp_path):
+    from eskin_industrial.evaluation.charts import _delay_vs_changes, pareto
+
+    rows = [{"family": "cof-track", "delay_ms": 50.0, "still_min": 0.1, "vf_min": 38.0},
+            {"family": "paper", "delay_ms": float("nan"), "still_min": 0.0, "vf_min": 38.0},
+            {"family": "cof-velocity", "delay_ms": 90.0, "still_min": 12.0, "vf_min": 40.0}]
+    own = [{"family": "cof-track", "delay_ms": 50.0, "still_min": 0.0, "vf_min": 216.0}]
+    _delay_vs_changes(tmp_path, rows, own, (1000, 1002))
+    assert (tmp_path / "delay-vs-changes.png").read_bytes()[:4] == b"\x89PNG"
+    # lower delay and fewer changes are better: cof-velocity is dominated by cof-track
+    pts = [(50.0, -0.1), (3000.0, -0.0), (90.0, -12.0)]
+    assert sorted(pareto(pts)) == [0, 1]

@@ -23,6 +23,8 @@ update whose state differs from the update before it:
   ``stable``: one entry and one exit make 2;
 - changes per minute *inside varying-force spans*: changes at updates inside
   ``variable_force`` labels, per minute of such labels;
+- changes per minute *while holding*: changes at updates labelled ``stable`` or
+  ``variable_force``, per minute of holding time (the charts' measure);
 - changes per minute *in still holds*: changes at updates inside *still* time, per
   minute of it: frames labelled ``stable`` at least ``EXIT_ALLOWANCE_S`` after the
   last frame labelled anything else (the state may take that long to come back
@@ -80,6 +82,7 @@ class SceneScore:
     vf_span_changes: int = 0
     still_s: float = 0.0
     still_changes: int = 0
+    holding_changes: int = 0  #: changes at updates labelled stable or variable_force
     vf_entry_s: list[float] = field(default_factory=list)  #: episode onset -> variable_force
     vf_exit_s: list[float] = field(default_factory=list)  #: episode end -> any other state
     slip_exit_s: list[float] = field(default_factory=list)  #: slip event end -> any other state
@@ -101,6 +104,7 @@ class SceneScore:
         self.vf_span_changes += other.vf_span_changes
         self.still_s += other.still_s
         self.still_changes += other.still_changes
+        self.holding_changes += other.holding_changes
         self.vf_entry_s += other.vf_entry_s
         self.vf_exit_s += other.vf_exit_s
         self.slip_exit_s += other.slip_exit_s
@@ -148,6 +152,11 @@ class SceneScore:
     @property
     def vf_changes_per_min(self) -> float:
         return self.vf_span_changes / (self.vf_span_s / 60.0) if self.vf_span_s else float("nan")
+
+    @property
+    def holding_changes_per_min(self) -> float:
+        """Every state change while holding (labelled stable or variable_force), per minute of it."""
+        return self.holding_changes / (self.holding_s / 60.0) if self.holding_s else float("nan")
 
     @property
     def still_changes_per_min(self) -> float:
@@ -210,6 +219,7 @@ def _score_stability(out: SceneScore, updates: UpdateTable, t: np.ndarray, dt: n
     out.still_changes += int(still[up_idx][changed].sum())
     out.vf_span_s += float(dt[vf].sum())
     out.vf_span_changes += int((change_label == "variable_force").sum())
+    out.holding_changes += int(((change_label == "variable_force") | (change_label == "stable")).sum())
     for a, b in spans(vf):
         out.vf_episodes += 1
         onset, end = t[a], t[b - 1] + dt[b - 1]
