@@ -189,3 +189,14 @@ def test_held_copies_across_lost_frames_do_not_make_noise_look_like_a_change():
         held[i] = held[i - 1]
     with_gaps = (force_variation_batch(held, contact, lost, cfg, 100.0) >= 1.0).mean()
     assert 0.005 < whole and with_gaps < 1.5 * whole
+
+
+def test_a_profile_refuses_no_horizon(tmp_path):
+    from eskin_industrial import load_profile
+    from eskin_industrial.errors import EskinError
+    from tests.helpers.paths import PROFILES
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text((PROFILES / "paper-5x5.toml").read_text() + "\n[detector.varying_force]\nhorizons_s = []\n")
+    with pytest.raises(EskinError, match="horizons_s: expected at least one horizon"):
+        load_profile(bad)

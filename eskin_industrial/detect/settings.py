@@ -102,6 +102,10 @@ class VaryingForceSettings:
     #: ... and the state has lasted at least this long.
     min_dwell_s: float = field(default=0.5, metadata=non_negative())
 
+    def __post_init__(self) -> None:
+        if not self.horizons_s:
+            raise ValueError("horizons_s: expected at least one horizon, such as [0.1, 0.2, 0.4]")
+
 
 @dataclass(frozen=True)
 class ForceRateSettings:
