@@ -191,12 +191,14 @@ def test_held_copies_across_lost_frames_do_not_make_noise_look_like_a_change():
     assert 0.005 < whole and with_gaps < 1.5 * whole
 
 
-def test_a_profile_refuses_no_horizon(tmp_path):
+@pytest.mark.parametrize("section, key", [("varying_force", "horizons_s"), ("cof_track", "ramp_horizons_s")])
+def test_a_profile_refuses_no_horizon(tmp_path, section, key):
+    """(An empty list passed the check and crashed the detector at start.)"""
     from eskin_industrial import load_profile
     from eskin_industrial.errors import EskinError
     from tests.helpers.paths import PROFILES
 
     bad = tmp_path / "bad.toml"
-    bad.write_text((PROFILES / "paper-5x5.toml").read_text() + "\n[detector.varying_force]\nhorizons_s = []\n")
-    with pytest.raises(EskinError, match="horizons_s: expected at least one horizon"):
+    bad.write_text((PROFILES / "paper-5x5.toml").read_text() + f"\n[detector.{section}]\n{key} = []\n")
+    with pytest.raises(EskinError, match=f"{section}.{key}: expected at least one horizon"):
         load_profile(bad)

@@ -72,6 +72,10 @@ class CofTrackSettings:
     #: of the tuning events within 40 ms against 50 %: docs/evaluation.md.)
     ramp_support_z: float = field(default=4.0, metadata=non_negative())
 
+    def __post_init__(self) -> None:
+        if not self.ramp_horizons_s:
+            raise ValueError("ramp_horizons_s: expected at least one horizon, such as [0.05, 0.1, 0.2]")
+
 
 @dataclass(frozen=True)
 class VaryingForceSettings:
