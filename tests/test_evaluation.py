@@ -157,3 +157,152 @@ def test_evaluate_prints_the_share_of_events_found_within_a_delay():
     assert 0 < quick < score.events  # case2 is faster than 50 ms, creep slower
     assert line == (f"# cof-track: of {score.events} slip events, {100 * quick / score.events:.0f} % within 50 ms, "
                     f"{100 * score.found / score.events:.0f} % within 100000 ms")
+
+
+def stability_truth():
+    """60 s at 100 Hz: a grab, two varying-force episodes (10-12 s, 20-24 s), a slip
+    (30-31 s), stable elsewhere."""
+    t = np.arange(6000) / 100.0
+    labels = np.full(t.size, "stable", dtype=object)
+    labels[t < 1] = "no_contact"
+    labels[(t >= 1) & (t < 1.5)] = "transition"
+    labels[(t >= 10) & (t < 12)] = "variable_force"
+    labels[(t >= 20) & (t < 24)] = "variable_force"
+    labels[(t >= 30) & (t < 31)] = "slip"
+    return t, labels
+
+
+def test_stability_metrics_on_a_known_sequence():
+    t, labels = stability_truth()
+    times = np.round(np.arange(1, 600) / 10.0, 6)  # an update every 100 ms
+    states = np.full(times.size, int(S.STABLE))
+    states[times < 1.0] = S.NO_CONTACT
+    states[(times >= 10.3) & (times < 12.4)] = S.VARIABLE_FORCE  # one entry, one exit, 0.3 s late
+    flap = (times >= 20.0) & (times < 24.0) & (np.round(times * 10) % 4 < 2)  # 0.2 s on, 0.2 s off
+    states[flap] = S.VARIABLE_FORCE
+    states[(times >= 30.1) & (times < 30.5)] = S.SLIP
+    states[(times >= 45.0) & (times < 45.5)] = S.VARIABLE_FORCE  # a false entry in a still hold
+    s = score_scene(table(times, states), t, labels)
+    assert s.vf_episodes == 2 and s.vf_found == 2 and s.vf_recall == 1.0
+    # episode 1: counted from 10.15 to 12.0, covered from 10.3; episode 2: half of 3.85 s
+    first, second = s.vf_coverages
+    assert first == pytest.approx(1.7 / 1.85)
+    assert second == pytest.approx(0.5, abs=0.03)
+    assert s.vf_coverage == pytest.approx((1.7 + 3.85 * second) / (1.85 + 3.85))
+    assert s.vf_covered_share(0.9) == 0.5
+    # episode 1: entry (10.3) and exit (12.4, within the allowance); episode 2: a change
+    # every 0.2 s from 20.0 (the last, at 23.8, back to stable)
+    assert s.vf_episode_changes == [2, 20]
+    # inside the labels: 10.3 and the 20 changes 20.0 .. 23.8
+    assert s.vf_span_s == pytest.approx(6.0)
+    assert s.vf_span_changes == 1 + 20
+    assert s.vf_changes_per_min == pytest.approx(21 / 0.1)
+    # still time: stable at least 1 s after anything else: 2.5-10, 13-20, 25-30, 32-60 s;
+    # the false entry and its exit are its only changes (the slip's exit at 30.5 is not)
+    assert s.still_s == pytest.approx(7.5 + 7 + 5 + 28)
+    assert s.still_changes == 2
+    assert s.still_changes_per_min == pytest.approx(2 / (47.5 / 60))
+    # while holding: every change but the grab's (1.0, labelled transition) and the
+    # slip's two (30.1 and 30.5, labelled slip): episode 1's 2, the flapping 20, the
+    # false entry's 2
+    assert s.holding_changes == 2 + 20 + 2
+    assert s.holding_changes_per_min == pytest.approx(24 / (s.holding_s / 60))
+    # entered 0.3 s after onset and left 0.4 s after the end; the flapping one entered
+    # at its onset and reads stable at its end
+    assert s.vf_entry_s == pytest.approx([0.3, 0.0])
+    assert s.vf_exit_s == pytest.approx([0.4, 0.0])
+    # the slip, 30.0-31.0 s, found at 30.1 and left at 30.5, before its end: at its end
+    assert s.slip_exit_s == pytest.approx([0.0])
+
+
+def test_stability_of_a_steady_detector_and_of_one_that_never_sees_varying_force():
+    t, labels = stability_truth()
+    times = np.round(np.arange(1, 600) / 10.0, 6)
+    quiet = np.where(times < 1.0, int(S.NO_CONTACT), int(S.STABLE))
+    s = score_scene(table(times, quiet), t, labels)
+    assert (s.vf_found, s.vf_coverage, s.vf_episode_changes, s.still_changes) == (0, 0.0, [0, 0], 0)
+    assert s.vf_recall == 0.0
+    # an episode's exit that comes after the allowance is a change in the still hold
+    late = quiet.copy()
+    late[(times >= 10.0) & (times < 13.5)] = S.VARIABLE_FORCE
+    s = score_scene(table(times, late), t, labels)
+    assert s.vf_episode_changes == [1, 0] and s.vf_coverages[0] == 1.0
+    assert s.still_changes == 1
+
+
+def test_stability_figures_add_over_scenes():
+    t, labels = stability_truth()
+    times = np.round(np.arange(1, 600) / 10.0, 6)
+    states = np.where(times < 1.0, int(S.NO_CONTACT), int(S.STABLE))
+    states[(times >= 10.0) & (times < 12.5)] = S.VARIABLE_FORCE
+    one = score_scene(table(times, states), t, labels)
+    both = score_scene(table(times, states), t, labels)
+    both += one
+    assert both.vf_episodes == 4 and both.vf_episode_changes == one.vf_episode_changes * 2
+    assert both.vf_coverage == pytest.approx(one.vf_coverage)
+    assert both.still_changes_per_min == pytest.approx(one.still_changes_per_min)
+
+
+def test_evaluate_prints_how_steady_the_state_is():
+    from click.testing import CliRunner
+
+    from eskin_industrial.cli import main
+
+    res = CliRunner().invoke(main, ["evaluate", "-m", "cof-track", "-s", "case1", "--seeds", "1"])
+    assert res.exit_code == 0, res.output
+    header = next(ln for ln in res.output.splitlines() if ln.startswith("| method | varying-force episodes"))
+    row = [c.strip() for c in res.output.splitlines()[res.output.splitlines().index(header) + 2].split("|")[1:-1]]
+    s = evaluate(by_name("cof-track"), scenes=("case1",), seeds=(1,))["cof-track"].score
+    assert len(row) == len(header.split("|")) - 2
+    assert row[0] == "cof-track" and row[1] == str(s.vf_episodes) == "4"
+    assert row[2] == f"{s.vf_found} ({s.vf_recall:.2f})"
+    assert row[4] == f"{np.mean(s.vf_episode_changes):.1f} / {max(s.vf_episode_changes)}"
+    assert row[7] == f"{np.percentile(s.vf_entry_s, 50) * 1000:.0f} / {np.percentile(s.vf_entry_s, 90) * 1000:.0f}"
+
+
+def test_the_timing_diagrams_of_the_state_policy_are_drawn_by_one_command(tmp_path):
+    from click.testing import CliRunner
+
+    from eskin_industrial.cli import main
+
+    res = CliRunner().invoke(main, ["evaluate", "--charts", str(tmp_path), "--only", "timing"])
+    assert res.exit_code == 0, res.output
+    for name in ("state-timing.png", "state-timing-detail.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not (tmp_path / "failure-map.png").exists()  # only what was asked for
+    res = CliRunner().invoke(main, ["evaluate", "--only", "timing"])
+    assert res.exit_code == 2 and "--charts" in res.output
+
+
+def test_evaluate_pushes_a_failure_map_condition_on_every_scene():
+    from click.testing import CliRunner
+
+    from eskin_industrial.cli import main
+    from eskin_industrial.evaluation.conditions import noise
+
+    args = ["evaluate", "-m", "cof-track", "-s", "case1", "--seeds", "10"]
+    res = CliRunner().invoke(main, args + ["--condition", "noise=0.1"])
+    assert res.exit_code == 0, res.output
+    assert res.output.startswith("# eskin-bus evaluate --seeds 10 --rate 100 --condition noise=0.1 ")
+    row = next(ln for ln in res.output.splitlines() if ln.startswith("| cof-track | 4 |"))
+    s = evaluate(by_name("cof-track"), scenes=("case1",), seeds=(10,), spec_hook=noise(0.1))["cof-track"].score
+    plain = evaluate(by_name("cof-track"), scenes=("case1",), seeds=(10,))["cof-track"].score
+    assert s.vf_coverages != plain.vf_coverages  # the noise changed what the detector saw
+    assert f"{100 * s.vf_coverage:.0f} %" in row.split("|")[4]
+    for bad in ("rate=3", "noise=x", "loud=1"):
+        res = CliRunner().invoke(main, args + ["--condition", bad])
+        assert res.exit_code == 2 and "--condition" in res.output
+
+
+def test_the_delay_against_changes_chart_marks_the_front_of_lower_delay_and_fewer_changes(tmp_path):
+    from eskin_industrial.evaluation.charts import _delay_vs_changes, pareto
+
+    rows = [{"family": "cof-track", "delay_ms": 50.0, "still_min": 0.1, "vf_min": 38.0},
+            {"family": "paper", "delay_ms": float("nan"), "still_min": 0.0, "vf_min": 38.0},
+            {"family": "cof-velocity", "delay_ms": 90.0, "still_min": 12.0, "vf_min": 40.0}]
+    own = [{"family": "cof-track", "delay_ms": 50.0, "still_min": 0.0, "vf_min": 216.0}]
+    _delay_vs_changes(tmp_path, rows, own, (1000, 1002))
+    assert (tmp_path / "delay-vs-changes.png").read_bytes()[:4] == b"\x89PNG"
+    # lower delay and fewer changes are better: cof-velocity is dominated by cof-track
+    pts = [(50.0, -0.1), (3000.0, -0.0), (90.0, -12.0)]
+    assert sorted(pareto(pts)) == [0, 1]

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from eskin_industrial.detect import GraspState, StateMachine, get_method
-from eskin_industrial.detect.state import ContactRule, Decision
+from eskin_industrial.detect.state import ContactRule, Decision, VaryingLatch
 
 S = GraspState
 
@@ -17,8 +17,13 @@ def steps(machine, seq):
     return [S(machine.step(t, rc, rd, contact, valid)) for t, (rc, rd, contact, valid) in enumerate(seq)]
 
 
+def paper_reading(cfg, **latch):
+    """The paper's own varying-force evidence (R over ``variable_r_*``), latch settings given."""
+    return replace(cfg, varying_force=replace(cfg.varying_force, evidence="method", **latch))
+
+
 def test_paper_rule_needs_both_indicators(paper_profile):
-    m = StateMachine(replace(paper_profile.detector, hold_s=0.0))
+    m = StateMachine(paper_reading(replace(paper_profile.detector, hold_s=0.0), exit_s=0.0, min_dwell_s=0.0))
     got = steps(m, [(0, 0, True, True), (3, 1, True, True), (1, 3, True, True), (3, 3, True, True), (0, 0, True, True)])
     assert got == [S.STABLE, S.VARIABLE_FORCE, S.VARIABLE_FORCE, S.SLIP, S.STABLE]
 
@@ -57,6 +62,51 @@ def test_decision_rules():
     assert d.decide(0.4, True, False, False, False) == S.SLIP  # not valid: kept
     assert d.decide(1.2, True, True, False, True) == S.VARIABLE_FORCE  # down once the hold is over
     assert d.decide(1.3, False, True, True, True) == S.NO_CONTACT  # out of contact: at once, hold or not
+
+
+def test_varying_force_is_one_entry_and_one_exit():
+    """Entered at the first score of 1; kept while the score stays at or above the exit
+    level, and through dips below it shorter than exit_s; left once it has been below
+    for exit_s and the state has lasted min_dwell_s."""
+    d = Decision(hold_s=0.2, latch=VaryingLatch(exit_level=0.8, exit_s=0.15, min_dwell_s=0.5))
+    scores = {0.0: 0.5, 0.1: 1.2, 0.2: 0.9, 0.3: 0.3, 0.4: 0.6, 0.5: 1.5, 0.6: 0.7, 0.7: 0.85, 0.8: 0.7,
+              0.9: 0.5, 1.0: 0.4, 1.1: 0.2, 1.2: 0.95, 1.3: 0.5}
+    got = {t: S(d.decide(t, True, True, False, v)) for t, v in scores.items()}
+    changes = [t for t in sorted(got) if t > 0 and got[t] != got[round(t - 0.1, 1)]]
+    # in at 0.1; the dips at 0.3-0.4 and 0.6 are shorter than 0.15 s; below 0.8 from 0.8:
+    # out at 0.95 at the earliest, so at 1.0; 0.95 later is under the entry level: no re-entry
+    assert changes == [0.1, 1.0]
+    assert got[0.9] == S.VARIABLE_FORCE and got[1.0] == S.STABLE and got[1.2] == S.STABLE
+
+
+def test_varying_force_lasts_its_minimum_dwell():
+    d = Decision(hold_s=0.2, latch=VaryingLatch(exit_level=0.8, exit_s=0.0, min_dwell_s=0.5))
+    got = [S(d.decide(t / 10, True, True, False, 1.0 if t == 1 else 0.0)) for t in range(10)]
+    assert got == [S.STABLE] + [S.VARIABLE_FORCE] * 5 + [S.STABLE] * 4  # in at 0.1, out at 0.6
+
+
+def test_slip_pre_empts_varying_force_at_once_and_comes_back_to_it():
+    d = Decision(hold_s=0.2, latch=VaryingLatch(exit_level=0.8, exit_s=0.15, min_dwell_s=0.5))
+    seq = [(0.0, False, 2.0), (0.01, True, 2.0), (0.02, False, 2.0), (0.1, False, 2.0), (0.22, False, 2.0),
+           (0.3, False, 0.0), (0.4, False, 0.0), (0.5, False, 0.0)]
+    got = [S(d.decide(t, True, True, slip, v)) for t, slip, v in seq]
+    # slip at the first update with slip evidence, in the middle of a varying force;
+    # held for hold_s (0.2 s), then back to the varying force, which is still on; its
+    # exit waits exit_s after the score falls
+    assert got == [S.VARIABLE_FORCE, S.SLIP, S.SLIP, S.SLIP, S.VARIABLE_FORCE, S.VARIABLE_FORCE,
+                   S.VARIABLE_FORCE, S.STABLE]
+    # and from a still grip too, with no varying force before or after
+    d = Decision(hold_s=0.2)
+    assert [S(d.decide(t, True, True, slip, 0.0)) for t, slip in [(0.0, False), (0.01, True), (0.3, False)]] == [
+        S.STABLE, S.SLIP, S.STABLE]
+
+
+def test_losing_contact_clears_the_varying_force_latch():
+    d = Decision(hold_s=0.2, latch=VaryingLatch(exit_level=0.8, exit_s=0.15, min_dwell_s=5.0))
+    assert d.decide(0.0, True, True, False, 1.0) == S.VARIABLE_FORCE
+    assert d.decide(0.1, False, True, False, 0.0) == S.NO_CONTACT
+    assert d.decide(0.2, True, False, False, 0.0) == S.STABLE  # a new contact, not yet valid
+    assert d.decide(0.3, True, True, False, 0.0) == S.STABLE  # not the old episode's dwell
 
 
 def test_contact_rule_enters_at_the_threshold_and_stays_above_half_of_it():

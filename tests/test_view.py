@@ -6,7 +6,7 @@ import re
 import numpy as np
 import pytest
 
-from eskin_industrial.detect.settings import DetectorSettings
+from eskin_industrial.detect.settings import DetectorSettings, VaryingForceSettings
 from eskin_industrial.detect.updates import Update
 from eskin_industrial.plc.image import Health, PlcImage
 from eskin_industrial.profile import ModbusPlcSection
@@ -107,7 +107,9 @@ def test_gauges_of_a_method_with_its_own_scale():
     sc = indicator_scale("cof-track", DetectorSettings())
     assert sc.slip == (1.0, 1.0) and sc.variable == (None, None)
     paper = indicator_scale("paper", DetectorSettings(slip_r_coe=3.0, slip_r_dw=2.0))
-    assert paper.slip == (3.0, 2.0) and paper.variable == (0.5, 0.5)
+    assert paper.slip == (3.0, 2.0) and paper.variable == (None, None)  # varying force: the total force's test
+    own = DetectorSettings(slip_r_coe=3.0, slip_r_dw=2.0, varying_force=VaryingForceSettings(evidence="method"))
+    assert indicator_scale("paper", own).variable == (0.5, 0.5)  # the paper's own reading: its thresholds
     bar, rest = gauge(render(snap(r_coe=0.6, scale=sc), 80, 24, color=False), "R_coe")
     assert ":" not in bar and bar.index("|") == round(len(bar) / 2) and "/1" in rest
 

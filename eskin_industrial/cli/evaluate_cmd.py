@@ -8,8 +8,10 @@ from pathlib import Path
 from typing import Any
 
 import click
+import numpy as np
 
 from ..detect.methods import METHODS
+from ..evaluation.charts import CHARTS
 from ..evaluation.suite import (
     DEFAULT_SETTINGS,
     EVALUATION_SEEDS,
@@ -56,26 +58,36 @@ def _seeds(value: str) -> tuple[int, ...]:
 @click.option("--charts", "charts_dir", type=click.Path(file_okay=False), default=None,
               help="Regenerate the evaluation charts (PNG) into this directory instead (a few minutes).")
 @click.option("--quick", is_flag=True, help="With --charts: fewer seeds.")
+@click.option("--only", "only_charts", multiple=True, type=click.Choice(CHARTS),
+              help="With --charts: draw only these (repeatable); 'timing' is the state policy's timing diagrams "
+                   "of docs/plc.md (seconds).")
 @click.option("--long-holds", is_flag=True,
               help="False alarms over hours of still holding instead: the hold scenes over 100 held-out seeds "
                    "(2000-2099, 3.8 h; with --seeds tuning, the 300 tuning seeds 100-399, 11.3 h), "
                    "about 25 s per 100 seeds and method.")
 @click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None,
               help="Take the detector settings from this profile's [detector] (default: the built-in defaults).")
+@click.option("--condition", "conditions", multiple=True, metavar="NAME=VALUE",
+              help="Push one property of every scene as the failure map does (repeatable), e.g. noise=0.1, "
+                   "vibration=0.3, drops=0.2, dead=8, force=0.15, onset=1 (evaluation/conditions.py).")
 @click.option("--within", "within_ms", multiple=True, type=click.IntRange(min=0),
               help="Also print the share of slip events found within this many ms of onset (repeatable).")
 @click.option("--format", "fmt", type=click.Choice(["md", "json"]), default="md", show_default=True,
-              help="A Markdown table, or one JSON document (every figure, per scene too).")
-def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, long_holds,
-                 profile_path, within_ms, fmt) -> None:
+              help="Markdown tables, or one JSON document (every figure, per scene too).")
+def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, only_charts, long_holds,
+                 profile_path, conditions, within_ms, fmt) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
-    force read as slip, and cost per frame, for each method."""
+    force read as slip, and cost per frame, for each method; then how steady the
+    reported state is: varying-force episodes found, their time read as varying force,
+    state changes per episode, per minute in varying force and in still holds."""
     if charts_dir is not None:
         from ..evaluation.charts import all_charts
 
         all_charts(Path(charts_dir), (lambda line: None) if quiet() else (lambda line: click.echo(line, err=True)),
-                   quick=quick)
+                   quick=quick, only=only_charts)
         return
+    if only_charts:
+        raise click.UsageError("--only chooses among the charts: give --charts DIR too")
     if long_holds:
         if scenes:
             raise click.UsageError("--long-holds scores the hold scenes; leave out --scene")
@@ -94,17 +106,18 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
     ticker = Ticker(len(scene_set) * len(seed_set), f"{len(names)} methods")
     try:
         res = evaluate(by_name(*names), scenes=scene_set, seeds=seed_set, rate_hz=rate_hz,
-                       tolerance_s=tolerance_s, settings=settings,
+                       tolerance_s=tolerance_s, settings=settings, spec_hook=_conditions(conditions),
                        progress=lambda scene: ticker.step(label=f"{len(names)} methods, {scene:<10}"))
     finally:
         ticker.close()
     held = sum(r.score.holding_s for r in res.values()) / max(1, len(res)) / 3600
     if fmt == "json":
         echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz, "scenes": list(scene_set),
-                   "holding_h": held, "seconds": time.perf_counter() - start,
+                   "conditions": list(conditions), "holding_h": held, "seconds": time.perf_counter() - start,
                    "methods": [_json_row(r, res, within_ms) for r in res.values()]})
         return
-    click.echo(f"# eskin-bus evaluate --seeds {seeds} --rate {rate_hz:g}  "
+    click.echo(f"# eskin-bus evaluate --seeds {seeds} --rate {rate_hz:g}"
+               + "".join(f" --condition {c}" for c in conditions) + "  "
                f"({len(scenes) or len(SUITE)} scenes x {len(seed_set)} seeds, {held:.2f} h of holding, "
                f"{time.perf_counter() - start:.0f} s)")
     click.echo("| method | events | found | F1 | false alarms (per h holding) | varying force as slip | delay p50 / p90 (ms) | cost (us/frame) | cost / paper |")
@@ -118,6 +131,7 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
             for scene, ss in r.per_scene.items():
                 click.echo(f"|   {scene} | {ss.events} | {ss.found} | {ss.f1:.3f} | {ss.false_alarms} | {ss.vf_as_slip} | "
                            f"{_delays(ss)} | | |")
+    _stability_table(res, per_scene)
     for name, r in res.items():
         if within_ms:
             shares = ", ".join(f"{_within(r.score, ms):.0f} % within {ms} ms" for ms in within_ms)
@@ -128,7 +142,12 @@ def _figures(s: Any) -> dict[str, Any]:
     return {"events": s.events, "found": s.found, "f1": s.f1, "false_alarms": s.false_alarms,
             "false_alarms_per_hour": s.false_alarms_per_hour, "holding_s": s.holding_s,
             "varying_force_as_slip": s.vf_as_slip, "delay_p50_ms": s.delay_percentile(50) * 1000,
-            "delay_p90_ms": s.delay_percentile(90) * 1000}
+            "delay_p90_ms": s.delay_percentile(90) * 1000,
+            # how steady the state is (the second table)
+            "vf_episodes": s.vf_episodes, "vf_found": s.vf_found, "vf_recall": s.vf_recall,
+            "vf_coverage": s.vf_coverage if s.vf_coverages else None,
+            "vf_changes_per_episode_max": max(s.vf_episode_changes) if s.vf_episode_changes else None,
+            "vf_changes_per_min": s.vf_changes_per_min, "still_changes_per_min": s.still_changes_per_min}
 
 
 def _json_row(r: Any, res: dict[str, Any], within_ms: tuple[int, ...]) -> dict[str, Any]:
@@ -137,6 +156,64 @@ def _json_row(r: Any, res: dict[str, Any], within_ms: tuple[int, ...]) -> dict[s
             "cost_vs_paper": r.us_per_frame / paper_us,
             "within_ms": {str(ms): _within(r.score, ms) for ms in within_ms},
             "per_scene": {scene: _figures(ss) for scene, ss in r.per_scene.items()}}
+
+
+def _conditions(items: tuple[str, ...]) -> Any:
+    """One scene hook from NAME=VALUE items (the failure map's conditions, but the rate)."""
+    from ..evaluation.conditions import CONDITIONS
+
+    hooks = []
+    for item in items:
+        name, _, value = item.partition("=")
+        entry = CONDITIONS.get(name)
+        if entry is None or entry[2] is None:
+            known = ", ".join(n for n, c in CONDITIONS.items() if c[2] is not None)
+            raise click.BadParameter(f"{item!r}: expected NAME=VALUE with NAME one of {known} (the rate is --rate)",
+                                     param_hint="--condition")
+        try:
+            hooks.append(entry[2](float(value)))
+        except ValueError:
+            raise click.BadParameter(f"{item!r}: expected a number after '='", param_hint="--condition") from None
+    if not hooks:
+        return None
+
+    def hook(spec: Any) -> Any:
+        for h in hooks:
+            spec = h(spec)
+        return spec
+
+    return hook
+
+
+def _stability_table(res: dict[str, Any], per_scene: bool) -> None:
+    """The second table: how steady the reported state is (evaluation/metrics.py)."""
+    click.echo("")
+    click.echo("| method | varying-force episodes | found (recall) | coverage after 150 ms: pooled / worst / episodes >= 90 % "
+               "| state changes per episode: mean / max | changes per min in varying force | "
+               "changes per min in still holds (min held) | varying force entered after onset, p50 / p90 (ms) "
+               "| left after its end | slip left after its end |")
+    click.echo("|---|---|---|---|---|---|---|---|---|---|")
+    for name, r in res.items():
+        rows = [(name, r.score)] + ([(f"  {scene}", ss) for scene, ss in r.per_scene.items()] if per_scene else [])
+        for label, s in rows:
+            click.echo(f"| {label} | {_stability(s)} |")
+
+
+def _stability(s: Any) -> str:
+    ch = s.vf_episode_changes
+    cov = s.vf_coverages
+    coverage = (f"{_num(100 * s.vf_coverage, ' %', 0)} / {_num(100 * min(cov), ' %', 0)} / "
+                f"{_num(100 * s.vf_covered_share(0.9), ' %', 0)}") if cov else "- / - / -"
+    changes = f"{np.mean(ch):.1f} / {max(ch)}" if ch else "- / -"
+    return (f"{s.vf_episodes} | {s.vf_found} ({_num(s.vf_recall, '', 2)}) | {coverage} | {changes} | "
+            f"{_num(s.vf_changes_per_min)} | {_num(s.still_changes_per_min, '', 2)} ({s.still_s / 60:.1f}) | "
+            f"{_ms(s.vf_entry_s)} | {_ms(s.vf_exit_s)} | {_ms(s.slip_exit_s)}")
+
+
+def _ms(values: list[float]) -> str:
+    """p50 / p90 of some delays, in ms."""
+    p = [np.percentile(values, q) * 1000 for q in (50, 90)] if values else [math.nan, math.nan]
+    return f"{_num(p[0], digits=0)} / {_num(p[1], digits=0)}"
 
 
 def _num(value: float, unit: str = "", digits: int = 1) -> str:

@@ -8,14 +8,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..frames import Frame
+from ..frames import Frame, FrameFlag
 from .hygiene import feed
 from .indicators import segment_indicators
 from .regularize import regularize
 from .settings import DetectorSettings
-from .state import StateMachine
+from .state import ContactRule, StateMachine
 from .stream import IndicatorStream
 from .updates import COLUMNS, Update, UpdateTable
+from .vforce import force_variation_batch
 
 
 class PaperDetector:
@@ -42,8 +43,8 @@ class PaperDetector:
             return []
         step = self.machine.step
         return [
-            Update(te, rc, rd, step(te, rc, rd, contact, valid), valid, s, xc, yc, fl)
-            for te, rc, rd, valid, fl, s, xc, yc, contact in raw
+            Update(te, rc, rd, step(te, rc, rd, contact, valid, vf), valid, s, xc, yc, fl)
+            for te, rc, rd, valid, fl, s, xc, yc, contact, vf in raw
         ]
 
     def push_frame(self, frame: Frame) -> list[Update]:
@@ -63,6 +64,7 @@ def paper_batch(
     reg = regularize(t, forces, rate_hz, geo.max_fill, flags)
     mat = np.column_stack([np.ones(len(x_mm)), x_mm, y_mm]).astype(np.float64)
     parts: list[dict[str, np.ndarray]] = []
+    own = settings.varying_force.evidence == "method"
     for a, b in reg.segments:
         ind, sums, cof = segment_indicators(reg.forces[a:b], reg.flags[a:b], mat, settings, geo)
         end = ind.end
@@ -71,15 +73,25 @@ def paper_batch(
             "t": reg.t[a:b][end], "r_coe": ind.r_coe, "r_dw": ind.r_dw, "valid": ind.valid,
             "f_sum": s, "xc": cof[end, 0], "yc": cof[end, 1], "flags": ind.flags,
             "contact": ind.contact,
+            "vf": np.zeros(len(end)) if own else _hop_vf(sums[:, 0], reg.flags[a:b], end, settings, geo.hop, rate_hz),
         })
     if not parts:
         return UpdateTable(**{c: np.zeros(0, np.int64 if c in ("state", "flags") else bool if c == "valid" else float) for c in COLUMNS})
     cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     machine = StateMachine(settings)
     state = np.fromiter(
-        (machine.step(te, rc, rd, bool(c), bool(v)) for te, rc, rd, c, v in zip(
-            cols["t"].tolist(), cols["r_coe"].tolist(), cols["r_dw"].tolist(), cols["contact"].tolist(), cols["valid"].tolist())),
+        (machine.step(te, rc, rd, bool(c), bool(v), vf) for te, rc, rd, c, v, vf in zip(
+            cols["t"].tolist(), cols["r_coe"].tolist(), cols["r_dw"].tolist(), cols["contact"].tolist(),
+            cols["valid"].tolist(), cols["vf"].tolist())),
         dtype=np.int64, count=len(cols["t"]),
     )
-    del cols["contact"]
+    del cols["contact"], cols["vf"]
     return UpdateTable(state=state, **cols)
+
+
+def _hop_vf(s: np.ndarray, flags: np.ndarray, end: np.ndarray, settings: DetectorSettings, hop: int,
+            rate_hz: float) -> np.ndarray:
+    """Each update's largest varying-force score over its hop (the frames end - hop + 1 .. end)."""
+    contact = ContactRule.from_settings(settings).mask(s)
+    score = force_variation_batch(s, contact, (flags & int(FrameFlag.FILLED)) != 0, settings.varying_force, rate_hz)
+    return np.array([score[e - hop + 1:e + 1].max() for e in end.tolist()]) if len(end) else np.zeros(0)

@@ -5,8 +5,10 @@ and the bridge run them all the same way.
 
 Per frame k in contact the subclass returns ``(score_a, score_b, slip, varying)``;
 every hop the hop's votes go to the :class:`~.state.Decision`: slip evidence if any
-frame of the hop voted slip (for ``confirm`` consecutive frames), varying evidence
-if any voted varying.  The update carries the hop's largest scores; what the two
+frame of the hop voted slip (for ``confirm`` consecutive frames); varying-force
+evidence the hop's largest score of the total force's own test (``vforce.py``), or,
+with ``[detector.varying_force] evidence = "method"``, whether any frame voted
+varying.  The update carries the hop's largest scores; what the two
 score columns mean is each class's ``columns``; they are written where the paper
 detector writes R_coe and R_dw.
 
@@ -28,6 +30,7 @@ from .hygiene import FrameHygiene, feed
 from .settings import DetectorSettings
 from .state import ContactRule, Decision
 from .updates import Update
+from .vforce import ForceVariation
 
 _WARMUP = int(FrameFlag.WARMUP)
 _FILLED = int(FrameFlag.FILLED)
@@ -52,7 +55,9 @@ class ScoredDetector(FrameHygiene):
         self._mat = np.column_stack([np.ones(self.n), x_mm, y_mm]).astype(np.float64)
         self._touching = ContactRule.from_settings(settings).touching
         # (confirmation is per frame, above: the decision reports a hop's slip vote at once)
-        self.decision = Decision(settings.hold_s, confirm=1)
+        self.decision = Decision.from_settings(settings, confirm=1)
+        own = settings.varying_force.evidence == "method"
+        self._vf = None if own else ForceVariation(settings.varying_force, rate_hz)
         self._reset(0)
 
     @property
@@ -64,8 +69,11 @@ class ScoredDetector(FrameHygiene):
         self._contact_run = 0
         self._hop_a = self._hop_b = 0.0
         self._hop_slip = self._hop_var = False
+        self._hop_vf = 0.0
         self._slip_run = 0
         self._hop_flags = flags
+        if self._vf is not None:
+            self._vf.reset()
         self._warm = True
         self._cof = (float(self._mat[:, 1].mean()), float(self._mat[:, 2].mean()))
         self.reset_scores()
@@ -81,6 +89,10 @@ class ScoredDetector(FrameHygiene):
     def _step(self, t: float, f: np.ndarray, flags: int, out: list[Update]) -> None:
         s, sx, sy = (f @ self._mat).tolist()
         contact = self._touching(s, self._contact_run > 0)
+        if self._vf is not None:
+            vf = self._vf.push(s, contact, bool(flags & _FILLED))
+            if vf > self._hop_vf:
+                self._hop_vf = vf
         if contact:
             self._cof = (sx / s, sy / s)
             self._contact_run += 1
@@ -111,10 +123,11 @@ class ScoredDetector(FrameHygiene):
 
     def _decide(self, t: float, s: float, contact: bool) -> Update:
         valid = not self._warm
-        state = self.decision.decide(t, contact, valid, self._hop_slip, self._hop_var)
+        varying = self._hop_vf if self._vf is not None else float(self._hop_var)
+        state = self.decision.decide(t, contact, valid, self._hop_slip, varying)
         flags = self._hop_flags | (0 if valid else _WARMUP)
         upd = Update(t, self._hop_a, self._hop_b, state, valid, s, self._cof[0], self._cof[1], flags)
-        self._hop_a = self._hop_b = 0.0
+        self._hop_a = self._hop_b = self._hop_vf = 0.0
         self._hop_slip = self._hop_var = False
         self._hop_flags = 0
         return upd

@@ -72,6 +72,44 @@ class CofTrackSettings:
     #: of the tuning events within 40 ms against 50 %: docs/evaluation.md.)
     ramp_support_z: float = field(default=4.0, metadata=non_negative())
 
+    def __post_init__(self) -> None:
+        if not self.ramp_horizons_s:
+            raise ValueError("ramp_horizons_s: expected at least one horizon, such as [0.05, 0.1, 0.2]")
+
+
+@dataclass(frozen=True)
+class VaryingForceSettings:
+    """The ``variable_force`` state, for every method (``detect/vforce.py`` for the
+    evidence, ``detect/state.py`` for the policy; docs/method.md, docs/plc.md)."""
+
+    #: "force": the total force's own ramp test against its learnt noise (below);
+    #: "method": each method's own varying-force evidence (the paper's: R_coe or R_dw
+    #: above ``variable_r_*``), through the same entry, exit and dwell.
+    evidence: Literal["force", "method"] = "force"
+    #: Horizons of the ramp test: a change that began this long ago, ...
+    horizons_s: tuple[float, ...] = field(default=(0.1, 0.2, 0.4), metadata=positive())
+    #: ... against the mean of the total force over this long before it.
+    base_s: float = field(default=0.2, metadata=positive())
+    #: Entry: the ramp exceeds this many standard deviations of its noise ...
+    z: float = field(default=5.0, metadata=positive())
+    #: ... and the force changes faster than this share of itself per second (slower
+    #: is creep or drift, not a varying force).
+    min_rate_per_s: float = field(default=0.03, metadata=non_negative())
+    #: Time constant of the learnt noise of the total force.
+    noise_s: float = field(default=3.0, metadata=positive())
+    #: Exit: the evidence stays below this share of the entry threshold ...
+    exit_fraction: float = field(default=0.8, metadata=in_range(0.0, 1.0))
+    #: ... for this long, ...  (0.15 s let a swinging load under 0.3 N of machine
+    #: vibration, or 6x the default noise, out at its turning points: up to 10 changes
+    #: an episode on tuning seeds 10-19, 4 with 0.25 s; docs/evaluation.md)
+    exit_s: float = field(default=0.25, metadata=non_negative())
+    #: ... and the state has lasted at least this long.
+    min_dwell_s: float = field(default=0.5, metadata=non_negative())
+
+    def __post_init__(self) -> None:
+        if not self.horizons_s:
+            raise ValueError("horizons_s: expected at least one horizon, such as [0.1, 0.2, 0.4]")
+
 
 @dataclass(frozen=True)
 class ForceRateSettings:
@@ -147,7 +185,8 @@ class DetectorSettings:
     hysteresis: float = field(default=0.2, metadata=in_range(0.0, 0.95))
     #: Consecutive updates a slip candidate must persist before it is reported.
     slip_confirm_updates: int = field(default=1, metadata=positive("an integer >= 1"))
-    #: A reported slip or varying-force state is held at least this long.
+    #: A reported slip state is held at least this long (the varying-force state has
+    #: its own exit and dwell: ``[detector.varying_force]``).
     hold_s: float = field(default=0.2, metadata=non_negative())
     #: Noise floor added to each decorrelation window sum, per sample in the window.
     coe_floor: float = field(default=2e-3, metadata=non_negative())
@@ -160,6 +199,8 @@ class DetectorSettings:
     #: A timestamp gap longer than this restarts the detector (shorter gaps are
     #: filled by holding the last frame, so that lags stay in time, not in samples).
     max_gap_s: float = field(default=0.4, metadata=positive())
+    #: The varying-force state, for every method.
+    varying_force: VaryingForceSettings = field(default_factory=VaryingForceSettings)
     #: Settings of our own method (the paper's keys above do not apply to it).
     cof_track: CofTrackSettings = field(default_factory=CofTrackSettings)
     #: Settings of the rivals and of the learned ceiling, one section each.

@@ -2,17 +2,27 @@
 
 Every detector, the paper's and the per-frame scored ones alike, reduces a hop of
 frames to the same four facts: is the array in contact, is the verdict valid, is
-there slip evidence, is there varying-force evidence.  :class:`Decision` turns those
-into the reported state, with the same rules for all methods:
+there slip evidence, how strong is the varying-force evidence.  :class:`Decision`
+turns those into the reported state, with the same rules for all methods (the
+policy a PLC program relies on: docs/plc.md):
 
 - out of contact: ``no_contact`` at once;
 - in contact but not valid (warm-up after a start or a reset, a window too short for
   the wavelet): the previous state is kept, and ``no_contact`` becomes ``stable``;
   an update that does not know never reports anything confident (its ``valid`` is 0,
   which the PLC sees);
-- slip evidence for ``confirm`` consecutive updates: ``slip`` (``variable_force``
-  until then); varying-force evidence: ``variable_force``; else ``stable``;
-- a state is entered upwards at once, and left downwards only after ``hold_s``.
+- slip evidence for ``confirm`` consecutive updates: ``slip`` at once, whatever the
+  state; left at the first update without slip evidence once ``hold_s`` has passed
+  since it was entered;
+- otherwise ``variable_force`` while the :class:`VaryingLatch` holds, else ``stable``.
+  The latch is set at the first update whose varying-force score reaches 1 (or with
+  slip evidence not yet confirmed), and cleared once the score has stayed below
+  ``exit_fraction`` for ``exit_s`` and ``min_dwell_s`` have passed since it was set:
+  one varying-force episode is one entry and one exit.
+
+The score is, by default, the total force's own ramp test (``vforce.py``), the same
+for every method; ``[detector.varying_force] evidence = "method"`` takes each
+method's own evidence instead (a yes or no: 1 or 0), through the same latch.
 
 Contact has one rule too, :class:`ContactRule`, applied to each frame's total force
 by every method (the paper's indicators included, where it decides whether F_dis and
@@ -22,7 +32,7 @@ threshold would make a first touch that hovers at the threshold toggle the PLC
 between ``no_contact`` and ``stable`` every frame, and restart a detector's warm-up
 each time.
 
-What counts as evidence is each method's own: :class:`StateMachine` is the paper's
+What counts as slip evidence is each method's own: :class:`StateMachine` is the paper's
 (R_coe and R_dw against their thresholds, with hysteresis) in front of a
 :class:`Decision`; :class:`~eskin_industrial.detect.scored.ScoredDetector` votes per
 frame and hands the hop's votes to its own :class:`Decision`.
@@ -35,7 +45,7 @@ import math
 
 import numpy as np
 
-from .settings import DetectorSettings
+from .settings import DetectorSettings, VaryingForceSettings
 
 
 class GraspState(enum.IntEnum):
@@ -93,25 +103,72 @@ class ContactRule:
         return (last >= 0) & enter[np.maximum(last, 0)]
 
 
+class VaryingLatch:
+    """The ``variable_force`` state's hysteresis: set at a score of 1; cleared once the
+    score has stayed below ``exit_level`` for ``exit_s`` and the latch has been set for
+    ``min_dwell_s``.  ``update`` is called once per valid update in contact."""
+
+    __slots__ = ("exit_level", "exit_s", "min_dwell_s", "on", "set_t", "calm_t")
+
+    def __init__(self, exit_level: float, exit_s: float, min_dwell_s: float) -> None:
+        self.exit_level = exit_level
+        self.exit_s = exit_s
+        self.min_dwell_s = min_dwell_s
+        self.clear()
+
+    @classmethod
+    def from_settings(cls, c: VaryingForceSettings) -> "VaryingLatch":
+        return cls(c.exit_fraction, c.exit_s, c.min_dwell_s)
+
+    def clear(self) -> None:
+        self.on = False
+        self.set_t = -math.inf
+        self.calm_t: float | None = None  #: since when the score has been below the exit level
+
+    def update(self, t: float, score: float) -> bool:
+        if score >= 1.0:
+            if not self.on:
+                self.on, self.set_t = True, t
+            self.calm_t = None
+        elif self.on:
+            if score >= self.exit_level:
+                self.calm_t = None
+            else:
+                if self.calm_t is None:
+                    self.calm_t = t
+                if t - self.calm_t >= self.exit_s and t - self.set_t >= self.min_dwell_s:
+                    self.on = False
+                    self.calm_t = None
+        return self.on
+
+
 class Decision:
     """The grasp-state decision of every method (the rules are in the module's doc).
 
     ``decide`` is called once per update, not per frame; ``state`` and ``entered_t``
-    persist across a detector's restarts after long gaps, as the PLC's view does."""
+    persist across a detector's restarts after long gaps, as the PLC's view does.
+    ``varying`` is the update's varying-force score (1 = evidence; a bool is 0 or 1)."""
 
-    __slots__ = ("hold_s", "confirm", "state", "entered_t", "slip_run")
+    __slots__ = ("hold_s", "confirm", "state", "entered_t", "slip_run", "latch")
 
-    def __init__(self, hold_s: float, confirm: int = 1) -> None:
+    def __init__(self, hold_s: float, confirm: int = 1, latch: VaryingLatch | None = None) -> None:
         self.hold_s = hold_s
         self.confirm = confirm
+        self.latch = latch if latch is not None else VaryingLatch.from_settings(VaryingForceSettings())
         self.state = _NO_CONTACT
         self.entered_t = -math.inf
         self.slip_run = 0  #: consecutive valid updates with slip evidence
 
-    def decide(self, t: float, contact: bool, valid: bool, slip: bool, varying: bool) -> int:
+    @classmethod
+    def from_settings(cls, settings: DetectorSettings, confirm: int | None = None) -> "Decision":
+        return cls(settings.hold_s, settings.slip_confirm_updates if confirm is None else confirm,
+                   VaryingLatch.from_settings(settings.varying_force))
+
+    def decide(self, t: float, contact: bool, valid: bool, slip: bool, varying: float) -> int:
         cur = self.state
         if not contact:
             self.slip_run = 0
+            self.latch.clear()
             if cur != _NO_CONTACT:
                 self.state, self.entered_t = _NO_CONTACT, t
             return self.state
@@ -122,14 +179,23 @@ class Decision:
             if cur == _NO_CONTACT:
                 self.state, self.entered_t = _STABLE, t
             return self.state
+        confirmed = False
         if slip:
             self.slip_run += 1
-            candidate = _SLIP if (self.slip_run >= self.confirm or cur == _SLIP) else _VARIABLE
+            confirmed = self.slip_run >= self.confirm or cur == _SLIP
+            if not confirmed and varying < 1.0:
+                varying = 1.0  # slip evidence not yet confirmed: something is changing
         else:
             self.slip_run = 0
-            candidate = _VARIABLE if varying else _STABLE
-        if candidate > cur or (candidate < cur and t - self.entered_t >= self.hold_s):
-            self.state, self.entered_t = candidate, t
+        held = _VARIABLE if self.latch.update(t, varying) else _STABLE
+        if confirmed:
+            if cur != _SLIP:
+                self.state, self.entered_t = _SLIP, t  # slip pre-empts everything, at once
+        elif cur == _SLIP:
+            if t - self.entered_t >= self.hold_s:
+                self.state, self.entered_t = held, t
+        elif held != cur:
+            self.state, self.entered_t = held, t
         return self.state
 
 
@@ -138,34 +204,39 @@ class StateMachine:
 
     - slip evidence: both R_coe > ``slip_r_coe`` and R_dw > ``slip_r_dw`` (the paper's
       rule; or one alone, ``slip_rule``), reported after ``slip_confirm_updates``
-      consecutive valid updates;
-    - varying-force evidence: either indicator above its ``variable_*`` threshold;
-    - while a state holds, its thresholds are lowered to threshold x (1 - ``hysteresis``),
-      so that it is left only once the indicators have clearly fallen.
+      consecutive valid updates; while slip holds, its thresholds are lowered to
+      threshold x (1 - ``hysteresis``), so that it is left only once the indicators
+      have clearly fallen;
+    - varying-force evidence: the total force's score ``vf`` (``vforce.py``), or with
+      ``[detector.varying_force] evidence = "method"`` the paper's reading, either
+      indicator above its ``variable_*`` threshold (lowered the same way while the
+      state is ``variable_force`` or ``slip``).
 
     ``contact`` is the update's newest frame under :class:`ContactRule`.
     """
 
     def __init__(self, settings: DetectorSettings) -> None:
         self.settings = settings
-        self.decision = Decision(settings.hold_s, settings.slip_confirm_updates)
+        self.decision = Decision.from_settings(settings)
         self._rule = settings.slip_rule
         self._keep = 1.0 - settings.hysteresis
+        self._own = settings.varying_force.evidence == "method"
 
     @property
     def state(self) -> int:
         return self.decision.state
 
-    def step(self, t: float, r_coe: float, r_dw: float, contact: bool, valid: bool) -> int:
+    def step(self, t: float, r_coe: float, r_dw: float, contact: bool, valid: bool, vf: float = 0.0) -> int:
         decision = self.decision
         if not (contact and valid):
-            return decision.decide(t, contact, valid, False, False)
+            return decision.decide(t, contact, valid, False, 0.0)
         cfg = self.settings
         cur = decision.state
         slip_k = self._keep if cur == _SLIP else 1.0
-        var_k = self._keep if cur >= _VARIABLE else 1.0
         over_c, over_d = r_coe > cfg.slip_r_coe * slip_k, r_dw > cfg.slip_r_dw * slip_k
         rule = self._rule
         slip = (over_c and over_d) if rule == "both" else over_c if rule == "coe" else over_d
-        varying = r_coe > cfg.variable_r_coe * var_k or r_dw > cfg.variable_r_dw * var_k
-        return decision.decide(t, True, True, slip, varying)
+        if self._own:
+            var_k = self._keep if cur >= _VARIABLE else 1.0
+            vf = 1.0 if (r_coe > cfg.variable_r_coe * var_k or r_dw > cfg.variable_r_dw * var_k) else 0.0
+        return decision.decide(t, True, True, slip, vf)

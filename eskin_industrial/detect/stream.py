@@ -23,13 +23,16 @@ from .hygiene import FrameHygiene
 from .indicators import _EPS, _ZERO_VAR, odd_offsets
 from .settings import DetectorSettings, Geometry
 from .state import ContactRule
+from .vforce import ForceVariation
 
 _WARMUP = int(FrameFlag.WARMUP)
 _SHORT = int(FrameFlag.SHORT_WINDOW)
+_FILLED = int(FrameFlag.FILLED)
 
 #: What :meth:`IndicatorStream.push` returns for each completed hop.
-#: (end_time, r_coe, r_dw, valid, flags, f_sum, xc, yc, contact)
-RawUpdate = tuple[float, float, float, bool, int, float, float, float, bool]
+#: (end_time, r_coe, r_dw, valid, flags, f_sum, xc, yc, contact, vf): vf is the hop's
+#: largest varying-force score (``vforce.py``; 0 when the profile takes the paper's own)
+RawUpdate = tuple[float, float, float, bool, int, float, float, float, bool, float]
 
 
 class IndicatorStream(FrameHygiene):
@@ -49,6 +52,8 @@ class IndicatorStream(FrameHygiene):
         self._e_floor = settings.dw_floor_mm2 * odd_offsets(self.geo.window, len(self._h))
         self._symmetric = settings.ratio_mode == "symmetric"
         self._touching = ContactRule.from_settings(settings).touching
+        own = settings.varying_force.evidence == "method"
+        self._vf = None if own else ForceVariation(settings.varying_force, rate_hz)
         self._reset(0)
 
     def _reset(self, flags: int) -> None:
@@ -69,6 +74,9 @@ class IndicatorStream(FrameHygiene):
         self._carry_flags = 0
         self._blocks: deque[tuple[float, float, float]] = deque(maxlen=geo.blocks)
         self._prev_sums: tuple[float, float] | None = None
+        self._hop_vf = 0.0
+        if self._vf is not None:
+            self._vf.reset()
 
     # -- the per-frame core --------------------------------------------------------
     def _step(self, t: float, f: np.ndarray, flags: int, out: list[RawUpdate]) -> None:
@@ -80,6 +88,10 @@ class IndicatorStream(FrameHygiene):
         if contact:
             self._cof = (sx / s, sy / s)
         xc, yc = self._cof
+        if self._vf is not None:
+            vf = self._vf.push(s, contact, bool(flags & _FILLED))
+            if vf > self._hop_vf:
+                self._hop_vf = vf
 
         lag = geo.lag
         slot = k % lag
@@ -116,6 +128,7 @@ class IndicatorStream(FrameHygiene):
             return
         self._blocks.append((self._cur_c, self._cur_e[0], self._cur_e[1]))
         block_flags = self._cur_flags
+        hop_vf, self._hop_vf = self._hop_vf, 0.0
         self._cur_c = 0.0
         self._cur_e = [0.0, 0.0]
         self._cur_flags = 0
@@ -124,7 +137,7 @@ class IndicatorStream(FrameHygiene):
             return
         block_flags |= self._carry_flags
         self._carry_flags = 0
-        out.append(self._update(t, block_flags, s, xc, yc, contact))
+        out.append(self._update(t, block_flags, s, xc, yc, contact, hop_vf))
 
     def _decorrelation(self, s: float, ss: float, contact: bool, sab: float, slot: int) -> float:
         c_b = self._ring_c[slot]
@@ -141,7 +154,8 @@ class IndicatorStream(FrameHygiene):
         d = 1.0 - (n * sab - s * s_b) / math.sqrt(var_a * var_b)
         return 0.0 if d < 0.0 else 2.0 if d > 2.0 else d
 
-    def _update(self, t: float, block_flags: int, s: float, xc: float, yc: float, contact: bool) -> RawUpdate:
+    def _update(self, t: float, block_flags: int, s: float, xc: float, yc: float, contact: bool,
+                vf: float) -> RawUpdate:
         geo = self.geo
         c_win = e0 = e1 = 0.0
         for c, a, b in self._blocks:
@@ -170,7 +184,7 @@ class IndicatorStream(FrameHygiene):
         self._prev_sums = (c_win, dw)
         warm = start - geo.hop < geo.lag
         flags = block_flags | (_WARMUP if warm else 0) | (_SHORT if short else 0)
-        return (t, r_coe, r_dw, not warm and not short, flags, s, xc, yc, contact)
+        return (t, r_coe, r_dw, not warm and not short, flags, s, xc, yc, contact, vf)
 
     def _r(self, now: float, before: float) -> float:
         ratio = (now + _EPS) / (before + _EPS)

@@ -6,6 +6,7 @@ sweeps, to keep the command to a few minutes); nothing was tuned on them.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -15,13 +16,13 @@ from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
 from ..scenes import render
 from .conditions import CONDITIONS
-from .suite import EVALUATION_SEEDS, evaluate, run_one
+from .shading import shade_labels
+from .suite import DEFAULT_SETTINGS, EVALUATION_SEEDS, evaluate, run_one
 from .sweeps import defaults, sweep
 
 COLOURS = {"paper": "tab:blue", "paper-coe": "tab:cyan", "paper-dw": "tab:purple", "force-rate": "tab:orange",
            "hf-energy": "tab:brown", "cof-velocity": "tab:gray", "cof-track": "tab:red",
            "learned": "tab:green"}
-LABEL_COLOURS = {"slip": "tab:red", "variable_force": "tab:orange", "transition": "0.85", "stable": "white", "no_contact": "white"}
 
 
 def _plt():
@@ -54,8 +55,20 @@ def accuracy_charts(out: Path, seeds: tuple[int, ...], log: Any) -> list[dict[st
         s = res.score
         d50 = s.delay_percentile(50)
         rows.append({"family": family, "label": label, "f1": s.f1, "delay_ms": d50 * 1000 if np.isfinite(d50) else np.nan,
-                     "us": res.us_per_frame, "fa_h": s.false_alarms_per_hour, "vf": s.vf_as_slip})
-        log(f"  {family:12s} {label:24s} F1 {s.f1:.2f} delay {rows[-1]['delay_ms']:.0f} ms cost {res.us_per_frame:.1f} us")
+                     "us": res.us_per_frame, "fa_h": s.false_alarms_per_hour, "vf": s.vf_as_slip,
+                     "still_min": s.still_changes_per_min, "vf_min": s.vf_changes_per_min})
+        log(f"  {family:12s} {label:24s} F1 {s.f1:.2f} delay {rows[-1]['delay_ms']:.0f} ms cost {res.us_per_frame:.1f} us "
+            f"changes {s.still_changes_per_min:.2f}/min still, {s.vf_changes_per_min:.0f}/min varying")
+    # each method's default with its own varying-force evidence, as before the state had its own
+    own = []
+    for name, factory in defaults().items():
+        res = evaluate({name: factory}, seeds=seeds, settings=_own_evidence(DEFAULT_SETTINGS))[name]
+        d50 = res.score.delay_percentile(50)
+        own.append({"family": name, "delay_ms": d50 * 1000 if np.isfinite(d50) else np.nan,
+                    "still_min": res.score.still_changes_per_min, "vf_min": res.score.vf_changes_per_min})
+        log(f"  {name:12s} {'own varying force':24s} changes {res.score.still_changes_per_min:.2f}/min still, "
+            f"{res.score.vf_changes_per_min:.0f}/min varying")
+    _delay_vs_changes(out, rows, own, seeds)
     plt = _plt()
     for key, xlabel, name in (("delay_ms", "median detection delay (ms)", "accuracy-vs-delay.png"),
                               ("us", "cost per frame (us, streaming, one core)", "accuracy-vs-cost.png")):
@@ -80,6 +93,44 @@ def accuracy_charts(out: Path, seeds: tuple[int, ...], log: Any) -> list[dict[st
     return rows
 
 
+def _own_evidence(settings: DetectorSettings) -> DetectorSettings:
+    return replace(settings, varying_force=replace(settings.varying_force, evidence="method"))
+
+
+def _delay_vs_changes(out: Path, rows: list[dict[str, Any]], own: list[dict[str, Any]], seeds: tuple[int, ...]) -> None:
+    """Slip delay against state changes per minute, in still holds and inside varying
+    forces (one entry per episode is the least there), each with the Pareto front of
+    lower delay and fewer changes marked; hollow: each method's default with its own
+    varying-force evidence (the state before it had evidence of its own)."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5))
+    for ax, key, ylabel in ((axes[0], "still_min", "state changes per minute in still holds"),
+                            (axes[1], "vf_min", "state changes per minute inside varying forces")):
+        pts = [(r["delay_ms"] if np.isfinite(r["delay_ms"]) else 3000.0, r[key]) for r in rows]
+        front = set(pareto([(x, -y) for x, y in pts]))  # (pareto: lower x, higher y)
+        for fam in COLOURS:
+            idx = [i for i, r in enumerate(rows) if r["family"] == fam]
+            ax.scatter([pts[i][0] for i in idx], [pts[i][1] for i in idx], c=COLOURS[fam], label=fam, s=28, alpha=0.8)
+            for r in own:
+                if r["family"] == fam:
+                    x = r["delay_ms"] if np.isfinite(r["delay_ms"]) else 3000.0
+                    ax.scatter([x], [r[key]], facecolors="none", edgecolors=COLOURS[fam], s=70, lw=1.3)
+        ax.scatter([], [], facecolors="none", edgecolors="k", s=70, label="default, own varying-force evidence (before)")
+        fr = sorted(front, key=lambda i: pts[i][0])
+        ax.plot([pts[i][0] for i in fr], [pts[i][1] for i in fr], "k--", lw=1, label="Pareto front")
+        ax.set_xscale("log")
+        ax.set_yscale("symlog", linthresh=1.0)
+        ax.set_ylim(bottom=0.0)
+        ax.set_xlabel("median slip detection delay (ms); no detection at all plotted at 3000")
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7, loc="upper left")
+    fig.suptitle(f"Slip delay against how often the state changes; built-in suite, seeds {seeds[0]}..{seeds[-1]}")
+    fig.tight_layout()
+    fig.savefig(out / "delay-vs-changes.png", dpi=110)
+    plt.close(fig)
+
+
 def figure3(out: Path, seed: int) -> None:
     """The paper's Figure 3 redone: R_coe, R_dw over time, truth shaded, threshold drawn."""
     plt = _plt()
@@ -89,7 +140,7 @@ def figure3(out: Path, seed: int) -> None:
     for ax, scene in zip(axes, scenes):
         rec = render(scene, 100.0, seed)
         table, _ = run_one(get_method("paper").stream, settings, rec)
-        _shade(ax, rec.t, rec.labels)
+        shade_labels(ax, rec.t, rec.labels)
         ax.plot(table.t, table.r_coe, color="tab:blue", lw=1.2, label="R_coe")
         ax.plot(table.t, table.r_dw, color="tab:purple", lw=1.2, label="R_dw")
         ax.axhline(settings.slip_r_coe, color="k", ls="--", lw=0.8, label="threshold 2.5")
@@ -105,14 +156,8 @@ def figure3(out: Path, seed: int) -> None:
     plt.close(fig)
 
 
-def _shade(ax: Any, t: np.ndarray, labels: np.ndarray) -> None:
-    from .metrics import spans
-
-    for label, colour in LABEL_COLOURS.items():
-        if colour == "white":
-            continue
-        for a, b in spans(labels == label):
-            ax.axvspan(t[a], t[b - 1], color=colour, alpha=0.3, lw=0)
+#: the failure map's line for the varying-force state (the default method's; the evidence is every method's)
+_VF = "variable_force recall (cof-track)"
 
 
 def failure_map(out: Path, seeds: tuple[int, ...], log: Any) -> dict[str, dict[str, list[float]]]:
@@ -121,24 +166,29 @@ def failure_map(out: Path, seeds: tuple[int, ...], log: Any) -> dict[str, dict[s
     table: dict[str, dict[str, list[float]]] = {}
     for cond, (axis, values, factory) in CONDITIONS.items():
         table[cond] = {m: [] for m in methods}
+        table[cond][_VF] = []
         for v in values:
             rate = float(v) if factory is None else 100.0
             res = evaluate(methods, scenes=scenes, seeds=seeds, rate_hz=rate,
                            spec_hook=None if factory is None else factory(v))
             for m, r in res.items():
                 table[cond][m].append(r.score.f1)
+            table[cond][_VF].append(res["cof-track"].score.vf_recall)
             log(f"  {cond:9s} {v:>8g}: " + " ".join(f"{m} {r.score.f1:.2f}" for m, r in res.items()))
     plt = _plt()
     fig, axes = plt.subplots(3, 3, figsize=(13, 10.5))
     for ax, (cond, (axis, values, _f)) in zip(axes.flat, CONDITIONS.items()):
         for m, f1 in table[cond].items():
+            if m == _VF:
+                ax.plot(range(len(values)), f1, "s--", color="k", label=m, lw=1.0, ms=4)
+                continue
             ax.plot(range(len(values)), f1, "o-", color=COLOURS[m], label=m, lw=1.4 if m == "cof-track" else 1.0)
         ax.set_xticks(range(len(values)), [f"{v:g}" for v in values])
         ax.set_xlabel(axis)
         ax.set_ylim(-0.02, 1.02)
         ax.grid(alpha=0.3)
     for row in axes:
-        row[0].set_ylabel("slip F1")
+        row[0].set_ylabel("slip F1; varying-force recall")
     axes[0, 0].legend(fontsize=7)
     fig.suptitle(f"Failure map: one condition pushed at a time (scenes {', '.join(scenes)}; seeds {seeds[0]}..{seeds[-1]})")
     fig.tight_layout()
@@ -147,12 +197,25 @@ def failure_map(out: Path, seeds: tuple[int, ...], log: Any) -> dict[str, dict[s
     return table
 
 
-def all_charts(out: Path, log: Any, quick: bool = False) -> None:
+#: The chart groups ``evaluate --charts DIR --only NAME`` can draw alone.
+CHARTS: tuple[str, ...] = ("figure3", "accuracy", "failure-map", "timing")
+
+
+def all_charts(out: Path, log: Any, quick: bool = False, only: tuple[str, ...] = ()) -> None:
     out.mkdir(parents=True, exist_ok=True)
     seeds = EVALUATION_SEEDS[:1] if quick else EVALUATION_SEEDS[:3]
-    log("figure 3")
-    figure3(out, EVALUATION_SEEDS[0])
-    log("accuracy against delay and cost")
-    accuracy_charts(out, seeds, log)
-    log("failure map")
-    failure_map(out, seeds[:2], log)
+    want = set(only or CHARTS)
+    if "figure3" in want:
+        log("figure 3")
+        figure3(out, EVALUATION_SEEDS[0])
+    if "accuracy" in want:
+        log("accuracy against delay and cost")
+        accuracy_charts(out, seeds, log)
+    if "failure-map" in want:
+        log("failure map")
+        failure_map(out, seeds[:2], log)
+    if "timing" in want:
+        from .timing import state_timing
+
+        log("state timing diagrams")
+        state_timing(out, log=log)

@@ -40,9 +40,13 @@ def indicator_scale(method: str, settings: DetectorSettings, detector: object | 
     """
     if method.startswith("paper"):
         rule = {"paper-coe": "R_coe alone", "paper-dw": "R_dw alone"}.get(method, "both")
-        return IndicatorScale(("R_coe", "R_dw"), f"{method}: slip > | ({rule}), varying > :",
-                              (settings.slip_r_coe, settings.slip_r_dw),
-                              (settings.variable_r_coe, settings.variable_r_dw))
+        if settings.varying_force.evidence == "method":  # the paper's own varying-force thresholds
+            return IndicatorScale(("R_coe", "R_dw"), f"{method}: slip > | ({rule}), varying > :",
+                                  (settings.slip_r_coe, settings.slip_r_dw),
+                                  (settings.variable_r_coe, settings.variable_r_dw))
+        # (varying force: the total force's own test, not these indicators: detect/vforce.py)
+        return IndicatorScale(("R_coe", "R_dw"), f"{method}: slip > | ({rule})",
+                              (settings.slip_r_coe, settings.slip_r_dw))
     columns = tuple(getattr(detector, "columns", ("score", "unused")))
     if method == "cof-track":
         # Both scores are normalised by the method: 1 is its threshold (detect/cof_track.py).

@@ -1,0 +1,233 @@
+"""Varying-force evidence: is the grip force changing, beyond its noise and faster
+than creep?  One statistic for every method (the state it feeds is ``state.py``'s).
+
+A varying normal force (a squeeze, water poured into a held glass, a load swung back
+and forth) changes the total force S; a still grip leaves S at a constant plus
+noise, and a piezoresistive film's creep moves it by a few percent over many
+seconds.  The test is the ramp test of the centre of force (``ramp.py``) applied to
+S: for a change that began ``L`` samples ago, the least-squares ramp of the newest
+``L`` totals against the mean of the ``B`` before them,
+
+    num_L  = sum_{j=1..L} j (S_{k-L+j} - mean(S_{k-L-B+1} .. S_{k-L}))
+    T_L    = |num_L| / (sigma sd_L),     sd_L = sqrt(sum j^2 + (sum j)^2 / B)
+    rate_L = |sum_{j=1..L} (j - (L+1)/2) S_{k-L+j}| / (L (L^2 - 1) / 12) x f_s / S_k
+    score  = max over L of min(T_L / z, rate_L / min_rate)
+
+so the score is 1 at the entry threshold: the change is z standard deviations of
+its own noise, and the force's least-squares slope over the horizon is faster than
+``min_rate_per_s`` of the grip per second (creep is slower).  The slope is taken
+within the horizon, not against the base: a creep that has gone on for a while
+raises the newest samples above the base's mean as a change that began L samples
+ago would, but not their slope.  The horizons are times (0.1, 0.2, 0.4 s): the shortest answers a sharp
+change first, the longest sees a slow pour that the shorter ones cannot separate
+from noise.
+
+``sigma`` is the noise of S learnt while in contact from its second difference,
+sigma^2 = mean of (S_k - 2 S_{k-1} + S_{k-2})^2 / 6: a ramp or a slow swing has
+almost none, so the noise can be learnt while the force changes, and a varying
+force does not teach the test to ignore itself.  (A machine's vibration is learnt
+as noise: the test then needs a larger change.)  A held copy across a gap is no
+sample of the noise; it repeats one, which the ramp's sums then count twice, so the
+noise used is sigma^2 (1 + 2 f), f the share of held copies among the last max L + B
+frames (with a fifth of the frames lost, a still hold otherwise entered the state
+about once a minute).
+
+Contact lost: everything is forgotten; the score is 0 until ``max L + B`` frames of
+contact have come.  :class:`ForceVariation` is the streaming form (bounded state:
+the last ``max L + B`` totals, three running sums per horizon);
+:func:`force_variation_batch` the same over a recording, with no streaming state.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .ramp import ramp_weights
+from .settings import VaryingForceSettings
+
+
+def _centred_j2(length: int) -> float:
+    """sum over j = 1..L of (j - (L+1)/2)^2: the least-squares slope's denominator."""
+    return length * (length * length - 1) / 12.0
+
+
+def _geometry(c: VaryingForceSettings, rate_hz: float) -> tuple[tuple[int, ...], int]:
+    horizons = tuple(max(2, round(h * rate_hz)) for h in c.horizons_s)
+    return horizons, max(2, round(c.base_s * rate_hz))
+
+
+class ForceVariation:
+    """Streaming varying-force score: :meth:`push` each frame's total force, whether it
+    is in contact and whether it is a held copy; it returns the frame's score (1 = the
+    entry threshold, 0 out of contact and until the test has its history)."""
+
+    def __init__(self, settings: VaryingForceSettings, rate_hz: float) -> None:
+        horizons, base = _geometry(settings, rate_hz)
+        _, sd, _ = ramp_weights(horizons, base)
+        self.horizons, self.base = horizons, base
+        self.n = max(horizons) + base
+        self._kb = [length * (length + 1) / 2.0 / base for length in horizons]
+        # |num| x this / sigma = T / z;  |slope sum| x this / S = rate / min_rate
+        self._to_z = [1.0 / (float(v) * settings.z) for v in sd]
+        min_rate = settings.min_rate_per_s
+        self._mid = [(length + 1) / 2.0 for length in horizons]
+        self._to_rate = [rate_hz / _centred_j2(length) / min_rate if min_rate > 0 else 0.0 for length in horizons]
+        self._a_noise = 1.0 / max(1.0, settings.noise_s * rate_hz)
+        self._resync_every = self.n * max(1, round(500 / self.n))
+        self.reset()
+
+    def reset(self) -> None:
+        self._ring = [0.0] * self.n  # the last n totals (zeros before the first)
+        self._held = [False] * self.n  # which of them are held copies
+        self._held_count = 0
+        h = len(self.horizons)
+        self._w, self._p, self._b = [0.0] * h, [0.0] * h, [0.0] * h
+        self._i = 0
+        self.count = 0
+        self.noise = 0.0  #: learnt variance of S per frame (N^2)
+        self._learnt = 0
+        self._s1: float | None = None  # the last two totals (None: a held copy, or none)
+        self._s2: float | None = None
+
+    def push(self, s: float, contact: bool, filled: bool = False) -> float:
+        if not contact:
+            if self.count:
+                self.reset()
+            return 0.0
+        # (hot path: once per frame)
+        s1, s2 = self._s1, self._s2
+        if not filled and s1 is not None and s2 is not None:
+            d = s - 2.0 * s1 + s2
+            self._learnt = learnt = self._learnt + 1
+            gain = 1.0 / learnt
+            if gain < self._a_noise:
+                gain = self._a_noise
+            self.noise += gain * (d * d / 6.0 - self.noise)
+        self._s2, self._s1 = s1, (None if filled else s)
+        i, ring, base = self._i, self._ring, self.base
+        w, p, b = self._w, self._p, self._b
+        for h, length in enumerate(self.horizons):
+            leave = ring[i - length]  # leaves the newest L (joins the base)
+            w[h] += length * s - p[h]
+            p[h] += s - leave
+            b[h] += leave - ring[i - length - base]
+        ring[i] = s
+        held = self._held
+        if held[i] != filled:
+            self._held_count += 1 if filled else -1
+            held[i] = filled
+        self._i = i + 1 if i + 1 < self.n else 0
+        self.count = count = self.count + 1
+        if count % self._resync_every == 0:
+            self._resync()
+        noise = self.noise
+        if count < self.n or noise <= 0.0:
+            return 0.0
+        if self._held_count:
+            noise *= 1.0 + 2.0 * self._held_count / self.n
+        inv_sigma = 1.0 / math.sqrt(noise)
+        inv_s = 1.0 / s
+        best = 0.0
+        for wh, ph, bh, kb, mid, to_z, to_rate in zip(w, p, b, self._kb, self._mid, self._to_z, self._to_rate):
+            r = abs(wh - kb * bh) * to_z * inv_sigma
+            if to_rate:
+                rate = abs(wh - mid * ph) * to_rate * inv_s
+                if rate < r:
+                    r = rate
+            if r > best:
+                best = r
+        return best
+
+    def _resync(self) -> None:
+        """Recompute the running sums from the ring, against rounding drift (a whole
+        number of rounds has passed: the ring is oldest first)."""
+        c = np.asarray(self._ring)
+        for h, length in enumerate(self.horizons):
+            newest = c[self.n - length:]
+            self._w[h] = float(np.arange(1.0, length + 1.0) @ newest)
+            self._p[h] = float(newest.sum())
+            self._b[h] = float(c[self.n - length - self.base:self.n - length].sum())
+
+
+def force_variation_batch(s: np.ndarray, contact: np.ndarray, filled: np.ndarray,
+                          settings: VaryingForceSettings, rate_hz: float) -> np.ndarray:
+    """The score of every frame, with no streaming state: what :class:`ForceVariation`
+    must reproduce, frame for frame."""
+    s = np.asarray(s, dtype=np.float64)
+    contact = np.asarray(contact, dtype=bool)
+    filled = np.asarray(filled, dtype=bool)
+    horizons, base = _geometry(settings, rate_hz)
+    g, sd, _ = ramp_weights(horizons, base)
+    n = g.shape[1]
+    # the least-squares slope of the newest L, per horizon (rows like g's, oldest first)
+    slope = np.zeros_like(g)
+    for h, length in enumerate(horizons):
+        slope[h, n - length:] = (np.arange(1.0, length + 1.0) - (length + 1) / 2.0) / _centred_j2(length)
+    a_noise = 1.0 / max(1.0, settings.noise_s * rate_hz)
+    out = np.zeros(len(s))
+    m = np.concatenate(([False], contact, [False]))
+    edges = np.flatnonzero(m[1:] != m[:-1])
+    for a, b in zip(edges[::2], edges[1::2]):  # each run of contact starts afresh
+        run, held = s[a:b], filled[a:b]
+        # the noise: a running mean of the squared second difference over 6, from frames
+        # whose two predecessors (and themselves) are no held copies
+        usable = np.zeros(len(run), bool)
+        usable[2:] = ~held[2:] & ~held[1:-1] & ~held[:-2]
+        d2 = (run[2:] - 2.0 * run[1:-1] + run[:-2]) ** 2 / 6.0
+        learnt = running_mean(d2[usable[2:]], a_noise)
+        last = np.cumsum(usable) - 1  # how many usable frames so far, less one
+        noise = np.where(last >= 0, learnt[np.maximum(last, 0)] if learnt.size else 0.0, 0.0)
+        if len(run) < n:
+            continue
+        num = np.abs(_against_rows(run, g))
+        held_n = np.convolve(held.astype(float), np.ones(n), mode="valid")  # held copies among the last n
+        sigma = np.sqrt(noise[n - 1:] * (1.0 + 2.0 * held_n / n))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            score = num / (sd * settings.z) / sigma[:, None]
+            if settings.min_rate_per_s > 0:
+                rate = np.abs(_against_rows(run, slope))
+                score = np.minimum(score, rate * rate_hz / run[n - 1:, None] / settings.min_rate_per_s)
+        best = np.where(noise[n - 1:] > 0, score.max(axis=1), 0.0)
+        out[a + n - 1:b] = best
+    return out
+
+
+def _against_rows(x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(frames from n - 1 on, rows): each row (oldest first, n long) against the newest n
+    values, correlated over the row's nonzero tail only."""
+    n = rows.shape[1]
+    out = np.empty((len(x) - n + 1, len(rows)))
+    for h, row in enumerate(rows):
+        start = int(np.flatnonzero(row)[0]) if row.any() else n - 1
+        out[:, h] = np.correlate(x[start:], row[start:], mode="valid")
+    return out
+
+
+def running_mean(x: np.ndarray, a: float) -> np.ndarray:
+    """The stream's learner after each value of ``x``: q += max(1 / m, a) (x_m - q), from
+    q = 0: the plain mean while 1 / m >= a, then an exponential mean of gain ``a``.
+    Vectorized in blocks short enough that the powers of (1 - a) stay well scaled."""
+    x = np.asarray(x, dtype=np.float64)
+    out = np.empty(len(x))
+    if not len(x):
+        return out
+    head = min(len(x), int(math.floor(1.0 / a)) if a > 0 else len(x))  # 1 / m >= a up to here
+    out[:head] = np.cumsum(x[:head]) / np.arange(1, head + 1)
+    r = 1.0 - a
+    if head == len(x):
+        return out
+    if r <= 0.0:
+        out[head:] = x[head:]
+        return out
+    block = int(min(4096, max(1, 20.0 / -math.log(r))))  # r^-block <= e^20
+    q = out[head - 1] if head else 0.0
+    for i in range(head, len(x), block):
+        chunk = x[i:i + block]
+        k = np.arange(1, len(chunk) + 1)
+        rk = r ** k
+        # q_k = r^k q + a sum_{j<=k} r^(k-j) x_j
+        out[i:i + len(chunk)] = rk * (q + a * np.cumsum(chunk / rk))
+        q = out[i + len(chunk) - 1]
+    return out
