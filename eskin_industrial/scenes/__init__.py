@@ -69,7 +69,12 @@ def render(name_or_path: str | SceneSpec, rate_hz: float, seed: int) -> Rendered
     force = physics.force_profile(t, events) * physics.oscillation_factor(t, events)
     jitter, ripple = physics.stick_slip(t, events, rng)
     centre = np.asarray(spec.footprint.centre_mm)[None, :] + physics.slide_offset(t, events) + jitter
-    true = physics.footprint_forces(spec.array, spec.footprint, centre, force * ripple)
-    keep, measured = sensor.apply(true, t, spec.sensor, rng)
+    if physics.needs_sampling(spec.footprint, events):
+        angle = physics.rotation_deg(t, events, spec.footprint.angle_deg)
+        gradient = np.asarray(spec.footprint.gradient_per_mm)[None, :] + physics.lift_off_gradient(t, events)
+        true = physics.sampled_forces(spec.array, spec.footprint, centre, angle, gradient, force * ripple)
+    else:
+        true = physics.footprint_forces(spec.array, spec.footprint, centre, force * ripple)
+    keep, measured = sensor.apply(true, t, spec.sensor, rng, (spec.array.rows, spec.array.cols))
     return Rendered(spec.scene.name, spec.scene.profile, rate_hz, seed, t[keep], measured,
                     label_samples(t, spec)[keep], spec)
