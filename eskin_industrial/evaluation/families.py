@@ -90,13 +90,16 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("crosstalk", "each taxel reads 8 % of each row and column neighbour", (*PAPER, "hold"), _sensor(crosstalk=0.08)),
     Family("smooth-slide", "the paper's slides with no stick-slip: no ripple in force or CoF", SLIDES,
            _slides(stick_slip_mm=0.0, stick_slip_force=0.0)),
-    Family("torsion", "the paper's slides as turns about the normal (torsional slip): the CoF stays", SLIDES, torsion),
+    Family("torsion", "the paper's slides as turns about the normal (torsional slip), and the twist scene: "
+           "the CoF stays", (*SLIDES, "twist"), torsion),
     Family("soft", "the paper's cases with a soft object: its footprint grows as force^(1/3)", PAPER, soft),
     Family("lift-off", "the paper's slides tipping forward at onset (0.15 per mm: the trailing 3 mm unload)", SLIDES,
            _slides(lift_off_per_mm=0.15)),
-    Family("line-contact", "the paper's cases with a cylinder: a 4 mm line contact across the slide", PAPER,
+    Family("line-contact", "the paper's cases with a cylinder: a 4 mm line contact across the slide; and the cylinder scene",
+           (*PAPER, "cylinder"),
            _footprint(shape="cylinder", size_mm=(4.0, 20.0))),
-    Family("point-contact", "the paper's cases with a sphere: an 8 mm Hertzian point contact", PAPER,
+    Family("point-contact", "the paper's cases with a sphere: an 8 mm Hertzian point contact; and the sphere scene",
+           (*PAPER, "sphere"),
            _footprint(shape="sphere", size_mm=(8.0, 8.0))),
 )}
 
