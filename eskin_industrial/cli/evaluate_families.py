@@ -11,6 +11,7 @@ import click
 from ..detect.settings import DetectorSettings
 from ..evaluation.families import FAMILIES, evaluate_families
 from ..evaluation.holdout import CANDIDATES, FALSE_ALARMS_PER_HOUR, hold_out, tuning_scores
+from ..evaluation.metrics import SceneScore
 from ..evaluation.suite import TUNING_SEEDS, by_name
 from .console import Ticker, echo_json
 
@@ -84,12 +85,23 @@ def leave_one_out(method: str, families: tuple[str, ...], rate_hz: float, settin
     if fmt == "json":
         echo_json({"method": method, "rate_hz": rate_hz, "candidates": [c.label for c in CANDIDATES[method]],
                    "false_alarm_target_per_h": FALSE_ALARMS_PER_HOUR,
+                   "tuning": {f: {c: figures(s) for c, s in by.items()} for f, by in tuning.items()},
                    "hold_outs": [{"family": h.family, "chosen": h.chosen, "tuning": figures(h.tuning),
                                   "held_out": figures(h.held_out), "default": figures(h.default)} for h in results]})
         return
     click.echo(f"# leave-one-family-out, {method}: chosen among {len(CANDIDATES[method])} candidates "
                f"({'; '.join(c.label for c in CANDIDATES[method])}) on the tuning seeds of the other families, "
                f"reported on the held-out family's evaluation seeds ({time.perf_counter() - start:.0f} s)")
+    click.echo(f"# each candidate on the tuning seeds {','.join(map(str, TUNING_SEEDS))} of all families "
+               "(each hold-out pools all but its own)")
+    click.echo("| candidate | events | found | F1 | false alarms (per h holding) | varying force as slip | "
+               "delay p50 / p90 (ms) |")
+    click.echo("|---|---|---|---|---|---|---|")
+    for c in CANDIDATES[method]:
+        pooled = SceneScore()
+        for by in tuning.values():
+            pooled += by[c.label]
+        click.echo(f"| {c.label} | {_row(pooled, delays)} |")
     click.echo("| held-out family | chosen | tuning, other families: F1, false alarms per h, p50 (ms) | "
                "held out, chosen: events | found | F1 | false alarms (per h) | varying force as slip | "
                "delay p50 / p90 (ms) | held out, default: found, F1, p50 / p90 |")

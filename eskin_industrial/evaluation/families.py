@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Callable
+from typing import Any, Callable
 
 from ..detect.settings import DetectorSettings
 from ..scenes import SceneSpec
+from ..scenes.spec import Event
 from .conditions import Hook
 from .suite import DEFAULT_SETTINGS, Factory, Result, evaluate
 
@@ -35,15 +36,15 @@ class Family:
     in_suite: bool = False
 
 
-def _slides(**changes: object) -> Hook:
+def _slides(**changes: Any) -> Hook:
     return lambda s: replace(s, events=tuple(replace(e, **changes) if e.kind == "slide" else e for e in s.events))
 
 
-def _sensor(**changes: object) -> Hook:
+def _sensor(**changes: Any) -> Hook:
     return lambda s: replace(s, sensor=replace(s.sensor, **changes))
 
 
-def _footprint(**changes: object) -> Hook:
+def _footprint(**changes: Any) -> Hook:
     return lambda s: replace(s, footprint=replace(s.footprint, **changes))
 
 
@@ -56,7 +57,7 @@ def torsion(spec: SceneSpec) -> SceneSpec:
     """Every slide becomes a turn about the footprint's centre whose edge travels as far
     and as fast (a slide of 6 mm at 10 mm/s: 34 degrees at 57 degrees/s); the sign of
     the turn follows the slide's x direction, so case6 turns back and forth."""
-    def turn(e):  # type: ignore[no-untyped-def]
+    def turn(e: Event) -> Event:
         if e.kind != "slide":
             return e
         dist = math.hypot(*e.distance_mm)
@@ -115,10 +116,15 @@ def evaluate_families(methods: dict[str, Factory], families: tuple[str, ...], se
                       rate_hz: float = 100.0, settings: DetectorSettings = DEFAULT_SETTINGS, tolerance_s: float = 0.5,
                       progress: Callable[[str], None] | None = None) -> dict[str, dict[str, Result]]:
     """Every method on every family's scenes (with its effect on): family -> method -> result."""
+    def labelled(family: str) -> Callable[[str], None] | None:
+        if progress is None:
+            return None
+        report = progress
+        return lambda scene: report(f"{family}: {scene}")
+
     out = {}
     for name in families:
         fam = get_family(name)
         out[name] = evaluate(methods, scenes=fam.scenes, seeds=seeds, rate_hz=rate_hz, settings=settings,
-                             spec_hook=fam.hook, tolerance_s=tolerance_s,
-                             progress=None if progress is None else (lambda scene, n=name: progress(f"{n}: {scene}")))
+                             spec_hook=fam.hook, tolerance_s=tolerance_s, progress=labelled(name))
     return out
