@@ -94,6 +94,9 @@ def test_cli_lists_families_and_scores_per_family():
     assert res.returncode == 0, res.stderr
     doc = json.loads(res.stdout)
     assert set(doc["families"]) == {"torsion", "lift-off"} and doc["families"]["lift-off"]["cof-track"]["events"] == 8  # cases 2-5 one each, case6 four
+    md = _cli("--per-family", "--family", "lift-off", "-m", "cof-track", "--seeds", "0", "--per-scene", "--within", "100")
+    assert md.returncode == 0, md.stderr
+    assert "|   | case6 | 4 | 4 |" in md.stdout and "# lift-off, cof-track: 100 % within 100 ms" in md.stdout
     bad = _cli("--per-family", "--family", "torsoin", "--seeds", "0")
     assert bad.returncode == 2 and "unknown family 'torsoin'" in bad.stderr
     two = _cli("--hold-out-family", "torsion", "-m", "cof-track", "-m", "paper")

@@ -84,7 +84,7 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
         return
     if hold_out or per_family:
         _families(methods, scenes, seeds, rate_hz, tolerance_s, long_holds, profile_path, per_family, family_opt,
-                  hold_out, fmt)
+                  hold_out, fmt, per_scene, within_ms)
         return
     if charts_dir is not None:
         from ..evaluation.charts import all_charts
@@ -141,7 +141,7 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
 
 
 def _families(methods, scenes, seeds, rate_hz, tolerance_s, long_holds, profile_path, per_family_, family_opt,
-              hold_out, fmt) -> None:
+              hold_out, fmt, per_scene, within_ms) -> None:
     if scenes or long_holds:
         raise click.UsageError("--per-family and --hold-out-family take the families' scenes; leave out "
                                "--scene and --long-holds")
@@ -155,8 +155,9 @@ def _families(methods, scenes, seeds, rate_hz, tolerance_s, long_holds, profile_
     names = methods or tuple(METHODS)
     if "learned" in names:
         names = _prepare_learned(names, explicit=bool(methods))
+    shares = (lambda s: ", ".join(f"{_within(s, ms):.0f} % within {ms} ms" for ms in within_ms)) if within_ms else None
     per_family(names, family_names(family_opt or ("all",)), seeds, _seeds(seeds), rate_hz, settings, tolerance_s,
-               fmt, _figures, _delays)
+               fmt, _figures, _delays, per_scene, shares)
 
 
 def _figures(s: Any) -> dict[str, Any]:

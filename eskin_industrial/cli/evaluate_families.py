@@ -46,7 +46,8 @@ def _row(s: Any, delays: Callable[[Any], str]) -> str:
 
 def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, seed_set: tuple[int, ...],
                rate_hz: float, settings: DetectorSettings, tolerance_s: float, fmt: str,
-               figures: Callable[[Any], dict[str, Any]], delays: Callable[[Any], str]) -> None:
+               figures: Callable[[Any], dict[str, Any]], delays: Callable[[Any], str], per_scene: bool = False,
+               within: Callable[[Any], str] | None = None) -> None:
     start = time.perf_counter()
     ticker = Ticker(sum(len(FAMILIES[f].scenes) for f in families) * len(seed_set), f"{len(names)} methods")
     try:
@@ -56,7 +57,9 @@ def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, se
         ticker.close()
     if fmt == "json":
         echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz,
-                   "families": {f: {m: figures(r.score) for m, r in by.items()} for f, by in res.items()}})
+                   "families": {f: {m: {**figures(r.score),
+                                        "per_scene": {sc: figures(ss) for sc, ss in r.per_scene.items()}}
+                                    for m, r in by.items()} for f, by in res.items()}})
         return
     click.echo(f"# eskin-bus evaluate --per-family --seeds {seeds} --rate {rate_hz:g}  "
                f"({len(families)} families x {len(seed_set)} seeds, {time.perf_counter() - start:.0f} s)")
@@ -66,6 +69,13 @@ def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, se
     for fam, by in res.items():
         for m, r in by.items():
             click.echo(f"| {fam} | {m} | {_row(r.score, delays)} |")
+            if per_scene:
+                for scene, ss in r.per_scene.items():
+                    click.echo(f"|   | {scene} | {_row(ss, delays)} |")
+    if within is not None:
+        for fam, by in res.items():
+            for m, r in by.items():
+                click.echo(f"# {fam}, {m}: {within(r.score)}")
 
 
 def leave_one_out(method: str, families: tuple[str, ...], rate_hz: float, settings: DetectorSettings,
