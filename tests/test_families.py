@@ -101,6 +101,8 @@ def test_cli_lists_families_and_scores_per_family():
     assert bad.returncode == 2 and "unknown family 'torsoin'" in bad.stderr
     two = _cli("--hold-out-family", "torsion", "-m", "cof-track", "-m", "paper")
     assert two.returncode == 2 and "at most one -m" in two.stderr
+    seeds = _cli("--hold-out-family", "torsion", "--seeds", "0")  # the seeds are the discipline's, not a choice
+    assert seeds.returncode == 2 and "leave out --seeds" in seeds.stderr
 
 
 def test_new_families_draw_their_own_noise_at_the_same_seed():

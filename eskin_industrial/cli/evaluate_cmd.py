@@ -147,6 +147,9 @@ def _families(methods, scenes, seeds, rate_hz, tolerance_s, long_holds, profile_
                                "--scene and --long-holds")
     settings = open_profile(profile_path).detector if profile_path else DEFAULT_SETTINGS
     if hold_out:
+        if seeds != "evaluation":
+            raise click.UsageError("--hold-out-family chooses on the tuning seeds and reports on the held-out "
+                                   "ones (evaluation/corpus.py); leave out --seeds")
         if len(methods) > 1:
             raise click.UsageError("--hold-out-family chooses the setting of one method: give at most one -m")
         leave_one_out(methods[0] if methods else settings.method, family_names(hold_out), rate_hz, settings,
