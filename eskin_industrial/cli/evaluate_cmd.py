@@ -25,6 +25,7 @@ from ..evaluation.suite import (
 )
 from .common import open_profile
 from .console import Ticker, echo_json, quiet
+from .evaluate_families import family_names, leave_one_out, list_families, per_family
 
 
 def _seeds(value: str) -> tuple[int, ...]:
@@ -72,14 +73,29 @@ def _seeds(value: str) -> tuple[int, ...]:
                    "vibration=0.3, drops=0.2, dead=8, force=0.15, onset=1 (evaluation/conditions.py).")
 @click.option("--within", "within_ms", multiple=True, type=click.IntRange(min=0),
               help="Also print the share of slip events found within this many ms of onset (repeatable).")
+@click.option("--families", "show_families", is_flag=True, help="List the effect families and exit.")
+@click.option("--per-family", is_flag=True,
+              help="Each method per effect family instead of per suite (the families' scenes, their effect on).")
+@click.option("--family", "family_opt", multiple=True,
+              help="With --per-family: only this family (repeatable; 'new': the new physics; default: all).")
+@click.option("--hold-out-family", "hold_out", multiple=True,
+              help="Leave-one-family-out (repeatable; 'all', 'new'): choose the deciding method's setting on the "
+                   "tuning seeds of the other families, report it on this family's held-out seeds.")
 @click.option("--format", "fmt", type=click.Choice(["md", "json"]), default="md", show_default=True,
               help="Markdown tables, or one JSON document (every figure, per scene too).")
 def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, only_charts, long_holds,
-                 profile_path, conditions, within_ms, fmt) -> None:
+                 profile_path, conditions, within_ms, show_families, per_family, family_opt, hold_out, fmt) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
     force read as slip, and cost per frame, for each method; then how steady the
     reported state is: varying-force episodes found, their time read as varying force,
     state changes per episode, per minute in varying force and in still holds."""
+    if show_families:
+        list_families()
+        return
+    if hold_out or per_family:
+        _families(methods, scenes, seeds, rate_hz, tolerance_s, long_holds, profile_path, per_family, family_opt,
+                  hold_out, fmt, per_scene, within_ms)
+        return
     if charts_dir is not None:
         from ..evaluation.charts import all_charts
 
@@ -136,6 +152,29 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
         if within_ms:
             shares = ", ".join(f"{_within(r.score, ms):.0f} % within {ms} ms" for ms in within_ms)
             click.echo(f"# {name}: of {r.score.events} slip events, {shares}")
+
+
+def _families(methods, scenes, seeds, rate_hz, tolerance_s, long_holds, profile_path, per_family_, family_opt,
+              hold_out, fmt, per_scene, within_ms) -> None:
+    if scenes or long_holds:
+        raise click.UsageError("--per-family and --hold-out-family take the families' scenes; leave out "
+                               "--scene and --long-holds")
+    settings = open_profile(profile_path).detector if profile_path else DEFAULT_SETTINGS
+    if hold_out:
+        if seeds != "evaluation":
+            raise click.UsageError("--hold-out-family chooses on the tuning seeds and reports on the held-out "
+                                   "ones (evaluation/corpus.py); leave out --seeds")
+        if len(methods) > 1:
+            raise click.UsageError("--hold-out-family chooses the setting of one method: give at most one -m")
+        leave_one_out(methods[0] if methods else settings.method, family_names(hold_out), rate_hz, settings,
+                      tolerance_s, fmt, _figures, _delays)
+        return
+    names = methods or tuple(METHODS)
+    if "learned" in names:
+        names = _prepare_learned(names, explicit=bool(methods))
+    shares = (lambda s: ", ".join(f"{_within(s, ms):.0f} % within {ms} ms" for ms in within_ms)) if within_ms else None
+    per_family(names, family_names(family_opt or ("all",)), seeds, _seeds(seeds), rate_hz, settings, tolerance_s,
+               fmt, _figures, _delays, per_scene, shares)
 
 
 def _figures(s: Any) -> dict[str, Any]:

@@ -67,17 +67,18 @@ def run_one(factory: Factory, settings: DetectorSettings, rendered: Rendered) ->
 def evaluate(methods: dict[str, Factory], scenes: tuple[str, ...] = SUITE, seeds: tuple[int, ...] = EVALUATION_SEEDS,
              rate_hz: float = 100.0, settings: DetectorSettings = DEFAULT_SETTINGS,
              spec_hook: Callable[[SceneSpec], SceneSpec] | None = None, tolerance_s: float = 0.5,
-             progress: Callable[[str], None] | None = None) -> dict[str, Result]:
+             progress: Callable[[str], None] | None = None, stream: int | None = None) -> dict[str, Result]:
     """Score every method on every scene and seed (each scene rendered once per seed);
     ``spec_hook`` changes a scene before it is rendered (the failure map's conditions);
-    ``progress`` is called with the scene's name after each scene and seed."""
+    ``progress`` is called with the scene's name after each scene and seed; ``stream``
+    gives the seeds other draws (``scenes.render``)."""
     results = {name: Result(name) for name in methods}
     for scene in scenes:
         spec = load_scene(scene)
         if spec_hook is not None:
             spec = spec_hook(spec)
         for seed in seeds:
-            rendered = render(spec, rate_hz, seed)
+            rendered = render(spec, rate_hz, seed, stream)
             for name, factory in methods.items():
                 table, seconds = run_one(factory, settings, rendered)
                 s = score_scene(table, rendered.t, rendered.labels, tolerance_s)

@@ -59,17 +59,25 @@ def load_scene(name_or_path: str) -> SceneSpec:
     return parse_scene(entry.read_text(encoding="utf-8"), f"{name_or_path}.toml")
 
 
-def render(name_or_path: str | SceneSpec, rate_hz: float, seed: int) -> Rendered:
+def render(name_or_path: str | SceneSpec, rate_hz: float, seed: int, stream: int | None = None) -> Rendered:
+    """The scene at this rate, its random draws from ``seed`` (and, if given, ``stream``:
+    another set of draws for the same seed, so that variants of one scene do not share
+    their noise)."""
     spec = name_or_path if isinstance(name_or_path, SceneSpec) else load_scene(name_or_path)
     if not rate_hz > 0:
         raise ValueError(f"rate_hz: expected a positive rate, got {rate_hz}")
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(seed if stream is None else (seed, stream))
     t = np.arange(int(round(spec.scene.duration_s * rate_hz))) / rate_hz
     events = spec.events
     force = physics.force_profile(t, events) * physics.oscillation_factor(t, events)
     jitter, ripple = physics.stick_slip(t, events, rng)
     centre = np.asarray(spec.footprint.centre_mm)[None, :] + physics.slide_offset(t, events) + jitter
-    true = physics.footprint_forces(spec.array, spec.footprint, centre, force * ripple)
-    keep, measured = sensor.apply(true, t, spec.sensor, rng)
+    if physics.needs_sampling(spec.footprint, events):
+        angle = physics.rotation_deg(t, events, spec.footprint.angle_deg)
+        gradient = np.asarray(spec.footprint.gradient_per_mm)[None, :] + physics.lift_off_gradient(t, events)
+        true = physics.sampled_forces(spec.array, spec.footprint, centre, angle, gradient, force * ripple)
+    else:
+        true = physics.footprint_forces(spec.array, spec.footprint, centre, force * ripple)
+    keep, measured = sensor.apply(true, t, spec.sensor, rng, (spec.array.rows, spec.array.cols))
     return Rendered(spec.scene.name, spec.scene.profile, rate_hz, seed, t[keep], measured,
                     label_samples(t, spec)[keep], spec)

@@ -22,5 +22,5 @@ def label_samples(t: np.ndarray, spec: SceneSpec) -> np.ndarray:
             labels[t >= e.t_s] = "no_contact"
     for e in spec.events:
         span = (t >= e.t_s) & (t < e.end_s + (spec.settle_s if e.kind in ("press", "release") else spec.tail_s))
-        labels[span] = {"press": "transition", "release": "transition", "slide": "slip"}.get(e.kind, "variable_force")
+        labels[span] = {"press": "transition", "release": "transition", "slide": "slip", "rotate": "slip"}.get(e.kind, "variable_force")
     return labels

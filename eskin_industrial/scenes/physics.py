@@ -100,3 +100,93 @@ def footprint_forces(array: ArraySpec, foot: Footprint, centre: np.ndarray, forc
     tilt = 1.0 + gx * (xs[None, None, :] - cx[:, :, None]) + gy * (ys[None, :, None] - cy[:, :, None])
     pressure = force[:, None, None] / (sx * sy)[:, :, None]
     return (pressure * area * np.clip(tilt, 0.0, None)).reshape(force.size, -1)
+
+
+def rotation_deg(t: np.ndarray, events: tuple[Event, ...], start_deg: float = 0.0) -> np.ndarray:
+    """Footprint orientation about the normal (K,) in degrees: each ``rotate`` turns it
+    at constant angular speed about its own centre (torsional slip)."""
+    angle = np.full(t.size, float(start_deg))
+    for e in events:
+        if e.kind == "rotate":
+            duration = max(e.end_s - e.t_s, 1e-9)
+            angle += np.clip((t - e.t_s) / duration, 0.0, 1.0) * e.angle_deg
+    return angle
+
+
+def lift_off_gradient(t: np.ndarray, events: tuple[Event, ...]) -> np.ndarray:
+    """Extra pressure gradient (K, 2) per mm while slides with ``lift_off_per_mm`` run:
+    the object tips towards where it slides, ramped in over the slide's first
+    ``lift_off_s`` and out over as long after it ends."""
+    grad = np.zeros((t.size, 2))
+    for e in events:
+        if e.kind != "slide" or e.lift_off_per_mm == 0:
+            continue
+        span = e.lift_off_s
+        envelope = np.minimum(smooth_ramp((t - e.t_s) / span), smooth_ramp((e.end_s + span - t) / span))
+        direction = np.asarray(e.distance_mm) / max(np.hypot(e.distance_mm[0], e.distance_mm[1]), 1e-9)
+        grad += e.lift_off_per_mm * envelope[:, None] * direction[None, :]
+    return grad
+
+
+def needs_sampling(foot: Footprint, events: tuple[Event, ...]) -> bool:
+    """Whether the scene needs :func:`sampled_forces` (the exact rectangle model is
+    kept for every scene it can describe, so that their figures do not move)."""
+    return (foot.shape != "rectangle" or foot.angle_deg != 0.0
+            or any(e.kind == "rotate" or e.lift_off_per_mm > 0 for e in events))
+
+
+def shape_weights(shape: str, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Relative pressure at footprint points (u, v in [-0.5, 0.5] of its size), summing to 1."""
+    if shape == "cylinder":  # a line contact along v: Hertzian across u
+        w = np.sqrt(np.clip(1.0 - (2 * u) ** 2, 0.0, None))
+    elif shape == "sphere":  # a point contact: Hertzian over a disc (an ellipse if sizes differ)
+        w = np.sqrt(np.clip(1.0 - (2 * u) ** 2 - (2 * v) ** 2, 0.0, None))
+    else:
+        w = np.ones_like(u)
+    return w / w.sum()
+
+
+def _cells(pos: np.ndarray, h: np.ndarray, pitch: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample point is a little box of side ``h``: the first cell it overlaps
+    along one axis and the share of it in that cell (the rest is in the next one)."""
+    lo = pos - h / 2
+    first = np.floor((lo + pitch / 2) / pitch)
+    share = np.clip(((first + 0.5) * pitch - lo) / h, 0.0, 1.0)
+    return first.astype(np.int64), share
+
+
+def sampled_forces(array: ArraySpec, foot: Footprint, centre: np.ndarray, angle_deg: np.ndarray,
+                   gradient: np.ndarray, force: np.ndarray, n: int = 48) -> np.ndarray:
+    """Forces (K, rows*cols) of any footprint shape, turned by ``angle_deg`` about its
+    centre, with a per-frame pressure gradient (K, 2) in the array's frame: the
+    footprint is n x n small boxes, each spread over the cells it overlaps, so the
+    forces change continuously as it moves.  Where the gradient would make pressure
+    negative the footprint lifts off; the normal force stays ``force``."""
+    px, py = array.pitch_mm, array.row_pitch_mm or array.pitch_mm
+    u = (np.arange(n) + 0.5) / n - 0.5
+    uu, vv = (a.ravel() for a in np.meshgrid(u, u))
+    base = shape_weights(foot.shape, uu, vv)
+    on = base > 0
+    uu, vv, base = uu[on], vv[on], base[on]
+    grow = (np.maximum(force, 1e-9) / foot.reference_force_n) ** foot.size_exponent
+    taxels = array.rows * array.cols
+    out = np.zeros((force.size, taxels))
+    chunk = max(1, 2_000_000 // uu.size)
+    for a in range(0, force.size, chunk):
+        s = slice(a, a + chunk)
+        sx, sy = foot.size_mm[0] * grow[s, None], foot.size_mm[1] * grow[s, None]
+        th = np.radians(angle_deg[s])[:, None]
+        lx, ly = uu[None, :] * sx, vv[None, :] * sy
+        dx, dy = lx * np.cos(th) - ly * np.sin(th), lx * np.sin(th) + ly * np.cos(th)
+        w = base[None, :] * np.clip(1.0 + gradient[s, 0:1] * dx + gradient[s, 1:2] * dy, 0.0, None)
+        w *= force[s, None] / np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
+        ix, fx = _cells(centre[s, 0:1] + dx, sx / n, px)
+        iy, fy = _cells(centre[s, 1:2] + dy, sy / n, py)
+        frame = np.arange(w.shape[0])[:, None] * taxels
+        acc = np.zeros(w.shape[0] * taxels)
+        for cx, wx in ((ix, fx), (ix + 1, 1.0 - fx)):
+            for cy, wy in ((iy, fy), (iy + 1, 1.0 - fy)):
+                ok = (cx >= 0) & (cx < array.cols) & (cy >= 0) & (cy < array.rows)
+                acc += np.bincount((frame + cy * array.cols + cx)[ok], (w * wx * wy)[ok], minlength=acc.size)
+        out[s] = acc.reshape(-1, taxels)
+    return out

@@ -21,6 +21,40 @@ def machine_vibration(forces: np.ndarray, t: np.ndarray, amplitude_n: float, fre
     return forces + amplitude_n * shake[:, None] * share
 
 
+def film_creep(forces: np.ndarray, t: np.ndarray, fraction: float, tau_s: float, recovery_s: float) -> np.ndarray:
+    """Piezoresistive creep with hysteresis: each taxel reads its force plus ``fraction``
+    of a first-order lag of it, which follows a rising load with ``tau_s`` and a falling
+    one with ``recovery_s`` (a longer recovery: the film lags on unloading)."""
+    lag = np.zeros(forces.shape[1])
+    out = np.empty_like(forces)
+    dt = np.diff(t, prepend=t[0])
+    up, down = -np.expm1(-dt / tau_s), -np.expm1(-dt / recovery_s)
+    for k in range(forces.shape[0]):  # a per-sample recursion: only scenes that ask for it pay
+        f = forces[k]
+        lag += (f - lag) * np.where(f > lag, up[k], down[k])
+        out[k] = f + fraction * lag
+    return out
+
+
+def crosstalk(forces: np.ndarray, rows: int, cols: int, fraction: float) -> np.ndarray:
+    """Each taxel also reads ``fraction`` of each row and column neighbour's force."""
+    grid = forces.reshape(-1, rows, cols)
+    spill = np.zeros_like(grid)
+    spill[:, 1:, :] += grid[:, :-1, :]
+    spill[:, :-1, :] += grid[:, 1:, :]
+    spill[:, :, 1:] += grid[:, :, :-1]
+    spill[:, :, :-1] += grid[:, :, 1:]
+    return (grid + fraction * spill).reshape(forces.shape)
+
+
+def baseline_drift(forces: np.ndarray, t: np.ndarray, rate_n_per_s: float, spread: float,
+                   rng: np.random.Generator) -> np.ndarray:
+    """Temperature drift: every taxel's offset moves linearly in time, each at the
+    common rate times its own gain 1 + spread x N(0, 1)."""
+    gain = 1.0 + spread * rng.standard_normal(int(forces.shape[1]))
+    return forces + rate_n_per_s * (t - t[0])[:, None] * gain[None, :]
+
+
 def noise(forces: np.ndarray, sigma_n: float, rng: np.random.Generator) -> np.ndarray:
     return forces + sigma_n * rng.standard_normal(forces.shape)
 
@@ -45,11 +79,17 @@ def drop_frames(n: int, rate: float, rng: np.random.Generator) -> np.ndarray:
     return np.flatnonzero(rng.random(n) >= rate)
 
 
-def apply(forces: np.ndarray, t: np.ndarray, fx: SensorEffects, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """All effects in the order a real chain applies them; returns (kept indices, forces)."""
-    out = gain_mismatch(forces, fx.gain_mismatch, rng) if fx.gain_mismatch else forces
+def apply(forces: np.ndarray, t: np.ndarray, fx: SensorEffects, rng: np.random.Generator,
+          shape: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """All effects in the order a real chain applies them; returns (kept indices, forces).
+    ``shape`` (rows, cols) is the array's, for crosstalk."""
+    out = film_creep(forces, t, fx.creep_fraction, fx.creep_s, fx.creep_recovery_s) if fx.creep_fraction else forces
+    if fx.crosstalk and shape is not None:
+        out = crosstalk(out, shape[0], shape[1], fx.crosstalk)
+    out = gain_mismatch(out, fx.gain_mismatch, rng) if fx.gain_mismatch else out
     if fx.machine_vibration_n:
         out = machine_vibration(out, t, fx.machine_vibration_n, fx.machine_vibration_hz, fx.machine_vibration_start_s)
+    out = baseline_drift(out, t, fx.drift_n_per_s, fx.drift_spread, rng) if fx.drift_n_per_s else out
     out = noise(out, fx.noise_n, rng) if fx.noise_n else out
     out = np.maximum(out, 0.0)  # a piezoresistive taxel reads no tension
     out = dead_and_stuck(out, fx.dead_taxels, fx.stuck_taxels, fx.stuck_value_n)

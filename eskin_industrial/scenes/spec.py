@@ -30,8 +30,8 @@ class ArraySpec:
 
 @dataclass(frozen=True)
 class Footprint:
-    """A flat-bottomed object pressing on the array: a rectangle of uniform pressure,
-    tilted by a linear gradient (relative change per mm, from its centre)."""
+    """An object pressing on the array: by default a flat-bottomed rectangle of uniform
+    pressure, tilted by a linear gradient (relative change per mm, from its centre)."""
 
     size_mm: tuple[float, ...] = (20.0, 20.0)
     centre_mm: tuple[float, ...] = (10.0, 10.0)
@@ -40,6 +40,13 @@ class Footprint:
     #: (1/3 for a Hertzian pad, 0 for a rigid flat block).
     size_exponent: float = field(default=0.0, metadata=in_range(0.0, 1.0))
     reference_force_n: float = field(default=1.0, metadata=positive())
+    #: ``rectangle``: a flat face (uniform pressure); ``cylinder``: a line contact along
+    #: y, ``size_mm[0]`` wide, with a semi-elliptic (Hertzian) pressure across it;
+    #: ``sphere``: a point contact, a disc (an ellipse if the sizes differ) of diameter
+    #: ``size_mm`` with Hertzian pressure sqrt(1 - r^2 / a^2) (an edge: a narrow cylinder).
+    shape: Literal["rectangle", "cylinder", "sphere"] = "rectangle"
+    #: Orientation about the normal at the start (degrees; ``rotate`` events add to it).
+    angle_deg: float = 0.0
 
     def __post_init__(self) -> None:
         for key in ("size_mm", "centre_mm", "gradient_per_mm"):
@@ -47,7 +54,7 @@ class Footprint:
                 raise ValueError(f"{key}: expected [x, y], got {len(getattr(self, key))} values")
 
 
-EventKind = Literal["press", "force", "oscillate", "slide", "release"]
+EventKind = Literal["press", "force", "oscillate", "slide", "rotate", "release"]
 
 
 @dataclass(frozen=True)
@@ -58,7 +65,11 @@ class Event:
     - force: the force ramps to ``force_n`` over ``duration_s`` (variable_force)
     - oscillate: force x (1 + amplitude sin 2 pi f t) for ``duration_s`` (variable_force)
     - slide: the footprint moves by ``distance_mm`` at ``speed_mm_s`` (slip); the force
-      may change to ``force_n`` meanwhile (a glass slipping out of a grasp)
+      may change to ``force_n`` meanwhile (a glass slipping out of a grasp); with
+      ``stick_slip_mm = 0`` and ``stick_slip_force = 0`` it is smooth; ``lift_off_per_mm``
+      tips the object forward as it starts (partial lift-off)
+    - rotate: the footprint turns about its own centre by ``angle_deg`` at
+      ``angular_speed_deg_s`` (torsional slip: label slip, the centre stays)
     - release: the force ramps to 0 over ``duration_s`` (transition, then no_contact)
     """
 
@@ -75,6 +86,15 @@ class Event:
     stick_slip_mm: float = field(default=0.15, metadata=non_negative())
     stick_slip_force: float = field(default=0.04, metadata=non_negative())
     stick_slip_hz: float = field(default=25.0, metadata=positive())
+    #: Partial lift-off at slip onset: a pressure gradient (relative change per mm)
+    #: along the slide's direction, ramped in over the slide's first ``lift_off_s`` and
+    #: out as long after it ends; where 1 + gradient x distance falls below 0 the
+    #: trailing part of the footprint carries nothing (the normal force is unchanged).
+    lift_off_per_mm: float = field(default=0.0, metadata=non_negative())
+    lift_off_s: float = field(default=0.1, metadata=positive())
+    #: Rotation (``rotate``): angle (degrees, signed) and speed.
+    angle_deg: float = 0.0
+    angular_speed_deg_s: float = field(default=30.0, metadata=positive())
 
     def __post_init__(self) -> None:
         if self.kind in ("press", "force") and self.force_n is None:
@@ -87,6 +107,8 @@ class Event:
         if self.kind == "slide":
             dist = (self.distance_mm[0] ** 2 + self.distance_mm[1] ** 2) ** 0.5
             return self.t_s + dist / self.speed_mm_s
+        if self.kind == "rotate":
+            return self.t_s + abs(self.angle_deg) / self.angular_speed_deg_s
         return self.t_s + self.duration_s
 
 
@@ -106,6 +128,19 @@ class SensorEffects:
     machine_vibration_hz: float = field(default=50.0, metadata=positive())
     #: The machine starts shaking at this time (0: from the start).
     machine_vibration_start_s: float = field(default=0.0, metadata=non_negative())
+    #: Piezoresistive creep (the TPU/carbon-black film): under a constant load the
+    #: reading rises by ``creep_fraction`` of the load with time constant ``creep_s``;
+    #: unloading, the excess decays with ``creep_recovery_s`` (longer: hysteresis).
+    creep_fraction: float = field(default=0.0, metadata=in_range(0.0, 1.0))
+    creep_s: float = field(default=5.0, metadata=positive())
+    creep_recovery_s: float = field(default=15.0, metadata=positive())
+    #: Baseline drift with temperature: every taxel's offset drifts at this rate
+    #: (N/s), each with its own gain 1 + spread x N(0, 1) (and its own sign if large).
+    drift_n_per_s: float = 0.0
+    drift_spread: float = field(default=0.3, metadata=non_negative())
+    #: Crosstalk: each taxel also reads this fraction of each of its (up to four)
+    #: row and column neighbours' forces.
+    crosstalk: float = field(default=0.0, metadata=in_range(0.0, 0.25))
 
 
 @dataclass(frozen=True)
