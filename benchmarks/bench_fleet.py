@@ -25,14 +25,17 @@ one core carries is a lower bound of what a bridge fed by real buses carries.
 - bridge CPU: the bridge's own threads (readers, loops, paho's network thread, the
   store's), % of one core; per node = that / N.
 - drops: frames dropped from a reader's queue, lost and torn scans, Sparkplug
-  messages dropped; "scans" is what the loops took against what the nodes sent.
+  messages dropped; "scans" is what the loops took against what the nodes sent;
+  "stale": the times a node's ``Sensor Stale`` went true in the DDATA received (the
+  loop got to a node's scan later than ``stale_s``, 2.5 scan periods by default: the
+  PLC and the plant would see it).
 - broker: messages/s received by a ``mosquitto_sub`` on ``spBv1.0/#`` (the broker's
   fan-out to one subscriber: every message the bridge published), and the broker's
   own CPU (``/proc/PID/stat``).
 - memory: the process's resident set (VmRSS) at the end of the step, and its growth
   from before the bridge opened (the simulators' frames already made): the bridge's
   own memory, its queues and buffers.
-- A step is "carried" when it has no drop, the bridge took every scan sent, and the
+- A step is "carried" when it has no drop and no stale node, the bridge took every scan sent, and the
   bridge's CPU stays under 90 % of one core (the interpreter lock makes one core the
   bound of one bridge process).  When the simulators fall behind their deadlines by
   more than 0.5 s (the process's interpreter is saturated by bridge and simulators
@@ -76,7 +79,7 @@ from tests.helpers import sparkplug as spb  # noqa: E402
 from tests.helpers.modbus import need  # noqa: E402
 
 GROUP = "bench"
-STATE_CODE = 1  # alias offset of "State Code" in a device's block (DEVICE_METRICS order)
+STATE_CODE, STALE = 1, 5  # alias offsets of "State Code", "Sensor Stale" in a device's block (DEVICE_METRICS order)
 DROP_KEYS = ("rx_queue_drops", "lost_scans", "torn_scans", "sparkplug_dropped")
 
 
@@ -213,7 +216,7 @@ def run_step(n: int, rate: float, per_bus: int, port: int, broker_pid: int, scen
     tag = f"{int(rate)}-{n}-{time.monotonic_ns()}"
     cfg, nodes, buses = bridge_for(n, rate, per_bus, port, f"fleet{n}x{int(rate)}", tag)
     raw = raw_scans(nodes[0].profile, scene, rate)
-    sub = Subscriber(port, tmp / f"count-{tag}.txt", payloads=False)
+    sub = Subscriber(port, tmp / f"count-{tag}.txt")
     sims = make_nodes(nodes[0].profile, raw, rate, rate > 500, buses)  # their frames made before rss0
     rss0 = rss_kib()
     log = EventLog(open(os.devnull, "w"), "plain", "warning")
@@ -222,9 +225,9 @@ def run_step(n: int, rate: float, per_bus: int, port: int, broker_pid: int, scen
     time.sleep(0.5)  # connected, births out
     start(sims)
     time.sleep(1.0)  # the first scans: the loops and the buses warm
-    m0, cpu0, b0, t0 = sub.count(), thread_cpu_s(), proc_cpu_s(broker_pid), time.monotonic()
+    m0, cpu0, b0, t0, w0 = sub.count(), thread_cpu_s(), proc_cpu_s(broker_pid), time.monotonic(), time.time()
     time.sleep(duration_s)
-    m1, cpu1, b1, wall = sub.count(), thread_cpu_s(), proc_cpu_s(broker_pid), time.monotonic() - t0
+    m1, cpu1, b1, wall, w1 = sub.count(), thread_cpu_s(), proc_cpu_s(broker_pid), time.monotonic() - t0, time.time()
     rss1 = rss_kib()
     for t, _ in sims:
         t.join(timeout=duration_s + 30)
@@ -240,7 +243,12 @@ def run_step(n: int, rate: float, per_bus: int, port: int, broker_pid: int, scen
     scans = sum(c.get("scans", 0) for c in counters.values())
     sent = sum(node.stats.scans for _, node in sims)
     late = max(node.stats.late_s for _, node in sims)
-    return dict(n=n, rate=rate, cpu=bridge_cpu, sim_cpu=sim_cpu, drops=drops, scans=scans, sent=sent,
+    # a node the loop fell behind on by more than stale_s (2.5 scan periods) is
+    # "Sensor Stale" for a moment: the PLC and the plant would see it (counted in the
+    # measured span only: every node turns stale when its simulator ends)
+    stale = sum(1 for t, topic, data in sub.messages() if "/DDATA/" in topic and w0 <= t <= w1
+                for m in spb.parse(data).metrics if m.alias % 1000 == STALE and spb.value(m))
+    return dict(n=n, rate=rate, cpu=bridge_cpu, sim_cpu=sim_cpu, drops=drops, scans=scans, sent=sent, stale=stale,
                 msgs=(m1 - m0) / wall, broker_cpu=(b1 - b0) / wall, rss=rss1, rss_growth=rss1 - rss0, late=late)
 
 
@@ -443,16 +451,16 @@ def main() -> None:
             if args.only != "latency":
                 scene = tmp / "slip-train-fleet.toml"
                 scene.write_text(slip_train_toml(args.duration + 3))
-                print("| fleet | rate | nodes | bridge CPU (% of a core) | per node | drops | scans taken / sent "
+                print("| fleet | rate | nodes | bridge CPU (% of a core) | per node | drops | stale | scans taken / sent "
                       "| broker msgs/s | per node | broker CPU | RSS MiB (growth) | carried |")
-                print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+                print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
                 for rate, counts in ((100.0, args.nodes_100), (1000.0, args.nodes_1k)):
                     for n in (int(x) for x in counts.split(",")):
                         r = run_step(n, rate, args.per_bus, broker.port, broker.proc.pid, scene, args.duration, tmp)
                         behind = r["late"] > 0.5 or r["scans"] < r["sent"]
-                        ok = r["drops"] == 0 and r["cpu"] < 0.9 and not behind
+                        ok = r["drops"] == 0 and r["stale"] == 0 and r["cpu"] < 0.9 and not behind
                         print(f"| one bridge | {rate:g} Hz | {n} | {r['cpu'] * 100:.1f} % | {r['cpu'] * 100 / n:.2f} % "
-                              f"| {r['drops']} | {r['scans']} / {r['sent']} | {r['msgs']:.0f} | {r['msgs'] / n:.1f} "
+                              f"| {r['drops']} | {r['stale']} | {r['scans']} / {r['sent']} | {r['msgs']:.0f} | {r['msgs'] / n:.1f} "
                               f"| {r['broker_cpu'] * 100:.1f} % | {r['rss'] / 1024:.0f} ({r['rss_growth'] / 1024:+.0f}) "
                               f"| {'yes' if ok else 'no (simulators behind)' if behind else 'no'} |", flush=True)
                         print(f"#   simulators: {r['sim_cpu'] * 100:.0f} % of a core, latest scan "

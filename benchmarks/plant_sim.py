@@ -200,10 +200,12 @@ def main() -> None:
             sub.close()
             broker.kill()
         by_node: dict[str, list[tuple[str, Any]]] = defaultdict(list)
+        sizes: dict[str, list[int]] = defaultdict(list)
         for _t, topic, data in sub.messages():
             parts = topic.split("/")
             if len(parts) >= 4 and parts[1] == GROUP:
                 by_node[parts[3]].append((parts[2], spb.parse(data)))
+                sizes[parts[2]].append(len(data))
         print("| cell | exit | messages | births / deaths | seq gaps | slips: truth / decided / received "
               "| last Slip Events | problems |")
         print("|---|---|---|---|---|---|---|---|")
@@ -231,6 +233,8 @@ def main() -> None:
         print(f"# broker: {msgs_s:.0f} messages/s at the subscriber ({msgs_s / len(cells):.1f} per cell), "
               f"CPU {broker_cpu * 100:.1f} % of a core ({broker_cpu * 1e6 / max(msgs_s, 1e-9):.0f} us per message "
               f"in and out)")
+        print("# payload bytes, median (max): " + ", ".join(
+            f"{k} {int(np.median(v))} ({max(v)})" for k, v in sorted(sizes.items())))
         if failed:
             sys.exit(1)
 
