@@ -165,16 +165,11 @@ class Ticker:
         self.advance(n, label)
 
     def write(self, line: str) -> None:
-        """A line on stderr (unless quiet) above the bar, which is drawn again below it."""
+        """A line on stderr (unless quiet), in place of the bar, which comes back below
+        it at the next step."""
         if self._quiet:
             return
-        if self._bar is None:
-            click.echo(line, err=True)
-            return
-        click.echo("\r\033[K" + line, err=True)
-        if hasattr(self._bar, "_last_line"):  # click draws a line only when it changed: it did
-            self._bar._last_line = None
-        self._bar.render_progress()
+        click.echo(("\r\033[K" if self._bar is not None else "") + line, err=True)
 
     def close(self) -> None:
         self._end_bar()

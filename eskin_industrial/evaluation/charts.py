@@ -53,6 +53,7 @@ def accuracy_charts(out: Path, seeds: tuple[int, ...], log: Any, progress: Progr
     rows: list[dict[str, Any]] = []
     points, own_defaults = sweep(), defaults()
     progress.stage("accuracy", (len(points) + len(own_defaults)) * len(SUITE) * len(seeds))
+    progress = Prefixed(progress, "accuracy: ")
     for family, label, factory in points:
         res = evaluate({label: factory}, seeds=seeds, progress=progress)[label]
         s = res.score
@@ -156,7 +157,7 @@ def figure3(out: Path, seed: int, progress: Progress = NO_PROGRESS) -> None:
         ax.set_ylim(bottom=0.0)
         ax.set_ylabel(scene)
         ax.set_xlim(rec.t[0], rec.t[-1])
-        progress.advance(1, scene)
+        progress.advance(1, f"figure 3: {scene}")
     axes[0].legend(fontsize=8, ncol=3, loc="upper right")
     axes[-1].set_xlabel("time (s); shaded: slip (red), varying force (orange), transition (grey)")
     fig.suptitle(f"Paper indicators on the paper's scenes (100 Hz, seed {seed})")
@@ -175,6 +176,7 @@ def failure_map(out: Path, seeds: tuple[int, ...], log: Any,
     methods = defaults()
     progress.stage("failure map", sum(len(values) for _a, values, _f in CONDITIONS.values()) * len(scenes)
                    * len(seeds) * len(methods))
+    progress = Prefixed(progress, "failure map: ")
     table: dict[str, dict[str, list[float]]] = {}
     for cond, (axis, values, factory) in CONDITIONS.items():
         table[cond] = {m: [] for m in methods}
