@@ -13,6 +13,7 @@ import io
 import json
 import os
 import pty
+import re
 import select
 import sys
 import time
@@ -234,6 +235,16 @@ def test_a_line_goes_above_the_bar() -> None:
         before, _, after = terminal().partition("figure 3")
     assert "1/5" in before and "\x1b[K" in before[-8:]  # the bar's line cleared for it
     assert after.startswith("\r\n") and "2/5" in after
+
+
+def test_a_long_label_is_cut_so_that_the_line_never_wraps(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("COLUMNS", "70")  # (a line that wraps cannot be drawn over with a CR)
+    with stderr_on_a_terminal() as terminal, Ticker(5, "scoring") as ticker:
+        ticker.advance(1, "tuning point-contact: no stick-slip evidence (ripple_s 0), sphere, seed 1000")
+        ticker.advance(1, "short")
+        lines = re.split(r"[\r\n]+", re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", terminal()))
+    assert "2/5" in lines[-1] and "tuning point-contact" in lines[-2]
+    assert max(len(line) for line in lines) <= 70
 
 
 def test_no_bar_among_rows_on_the_same_terminal() -> None:

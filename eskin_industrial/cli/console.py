@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
+import shutil
 import sys
 import time
 from collections.abc import Iterable, Iterator
@@ -118,6 +119,12 @@ def progress(items: Iterable[T], label: str, length: int | None = None,
 PROGRESS_DELAY_S = 1.0
 
 
+#: Columns a line takes besides its label and the bar ("  [", "]  ", the count, "  ",
+#: the ETA), and the least bar worth drawing; the bar takes the rest of the terminal.
+_BAR_CLUTTER = 3 + 3 + 21 + 2 + 8
+_BAR_LEAST = 10
+
+
 class Ticker:
     """A bar on stderr for work that reports through :class:`~eskin_industrial.progress.Progress`
     (stages of known length, steps done), shown only when stderr is a terminal and
@@ -158,7 +165,7 @@ class Ticker:
         if self._bar is None:
             self._show()
             return
-        self._bar.label = self._label.ljust(self._width)  # a steady bar while labels differ in length
+        self._bar.label = self._fit()
         self._bar.update(n)
 
     def step(self, n: int = 1, label: str | None = None) -> None:
@@ -186,12 +193,19 @@ class Ticker:
             return
         if time.time() - self._since < self._delay_s:
             return
-        self._bar = click.progressbar(length=self._total, label=self._label.ljust(self._width), file=sys.stderr,
-                                      show_pos=not self._percent, show_eta=True)
+        self._bar = click.progressbar(length=self._total, label=self._fit(), file=sys.stderr, width=0,
+                                      show_pos=not self._percent, show_eta=True)  # (0: the terminal's width)
         self._bar.__enter__()
         self._bar.start = self._started  # the ETA counts from the stage's start, not from when the bar appeared
         if self._pos:
             self._bar.update(self._pos)
+
+    def _fit(self) -> str:
+        """The label, padded to the longest so far (a steady bar while labels differ in
+        length) and cut to leave the bar, the count and the ETA room on one line: a
+        line that wraps cannot be drawn over."""
+        room = max(10, shutil.get_terminal_size().columns - _BAR_CLUTTER - _BAR_LEAST)
+        return self._label.ljust(self._width)[:room]
 
     def _end_bar(self) -> None:
         if self._bar is not None:
