@@ -91,7 +91,7 @@ def read_can_log(path: str | Path, progress: Progress = NO_PROGRESS) -> Iterator
     except READ_ERRORS as exc:
         raise InputFormatError(f"{path}: cannot read CAN log: {_detail(exc)}") from None
     count = 0
-    where = _position(reader)
+    where = _position(reader) if progress is not NO_PROGRESS else None  # (a replay into the bridge: nobody watches)
     size = path.stat().st_size if where is not None else 0
     progress.stage(f"reading {path}", size, percent=True)
     done = 0
