@@ -349,3 +349,19 @@ def test_simulate_a_long_scene_to_stdout(tmp_path: Path) -> None:
     pipe = piped(args)  # (-q: the other commands' tests)
     assert pipe.returncode == 0 and pipe.stderr == b""
     assert tty.stdout == pipe.stdout and tty.stdout.count(b"\n") == rows + 1
+
+
+@pytest.mark.slow
+def test_a_live_log_on_stdin_counts_its_updates(tmp_path: Path) -> None:
+    """No length to show a share of: a count, once it has run a second; none with -q,
+    none with the rows on the same terminal."""
+    lines = _candump(tmp_path / "traffic.log", 300).read_bytes().splitlines(keepends=True)
+    live = [b"".join(lines[:1500]), b"".join(lines[1500:])]  # then a pause longer than the delay
+    args = ["detect", "-p", PAPER, "--can-log", "-"]
+    tty = on_a_terminal(args, tmp_path / "out", stdin=live, pause_s=1.3)
+    assert tty.code == 0 and "\r\x1b[Kupdates  300\r\n" in tty.shown, tty.shown[-300:]
+    assert tty.stdout.count(b"\n") == 301
+    quiet = on_a_terminal([*args, "-q"], tmp_path / "out", stdin=live, pause_s=1.3)
+    assert quiet.code == 0 and quiet.shown == "" and quiet.stdout == tty.stdout
+    rows_here = on_a_terminal(args, None, stdin=live, pause_s=1.3)
+    assert rows_here.code == 0 and "updates  " not in rows_here.shown and rows_here.shown.count("\n") == 302

@@ -139,7 +139,7 @@ class Ticker:
     def __init__(self, total: int = 0, label: str = "", own_quiet: bool = False, delay_s: float = 0.0,
                  stdout_data: bool = False) -> None:
         self._quiet = quiet(own_quiet)
-        self._on = not self._quiet and sys.stderr.isatty() and not (stdout_data and sys.stdout.isatty())
+        self._on = _watched(self._quiet, stdout_data)
         self._since = time.time()
         self._delay_s = delay_s
         self._bar: Any = None
@@ -211,6 +211,51 @@ class Ticker:
         if self._bar is not None:
             self._bar.__exit__(None, None, None)
             self._bar = None
+
+
+def _watched(quiet_: bool, stdout_data: bool) -> bool:
+    """Whether a bar or a count may be drawn: stderr is a terminal, not quiet, and the
+    command's rows do not go to that terminal too."""
+    return not quiet_ and sys.stderr.isatty() and not (stdout_data and sys.stdout.isatty())
+
+
+class Counter:
+    """A running count on stderr for work of no known length (a live log on stdin),
+    under the :class:`Ticker`'s rules; drawn at most five times a second, so that a
+    step costs a clock read."""
+
+    def __init__(self, label: str, own_quiet: bool = False, delay_s: float = 0.0, stdout_data: bool = False) -> None:
+        self._on = _watched(quiet(own_quiet), stdout_data)
+        self._label = label
+        self._n = 0
+        self._shown = False
+        self._next = time.monotonic() + delay_s
+
+    def add(self, n: int = 1) -> None:
+        self._n += n
+        if self._on:
+            now = time.monotonic()
+            if now >= self._next:
+                self._next = now + 0.2
+                self._draw()
+
+    def close(self) -> None:
+        if self._shown:
+            self._draw()
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+        self._on = self._shown = False
+
+    def __enter__(self) -> "Counter":
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+    def _draw(self) -> None:
+        sys.stderr.write(f"\r\033[K{self._label}  {self._n}")
+        sys.stderr.flush()
+        self._shown = True
 
 
 def echo_json(value: Any) -> None:

@@ -18,7 +18,7 @@ from ..frames import FrameFlag
 from ..recording import read_recording, write_updates
 from ..profile import Profile
 from .common import open_profile, profile_option
-from .console import PROGRESS_DELAY_S, Ticker
+from .console import PROGRESS_DELAY_S, Counter, Ticker
 
 
 @click.command()
@@ -53,7 +53,7 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
     prof = open_profile(profile_path)
     if (input_path is None) == (can_log is None):
         raise click.UsageError("give exactly one of INPUT.csv or --can-log LOG")
-    if can_log == "-":  # live: a row as soon as its scan is complete (no length: no bar)
+    if can_log == "-":  # live: a row as soon as its scan is complete
         _detect_live(prof, output, rate_hz, method, changes, as_json, quiet)
         return
     with Ticker(own_quiet=quiet, delay_s=PROGRESS_DELAY_S) as ticker:
@@ -168,12 +168,15 @@ def _detect_live(prof, output: str, rate_hz: float | None, method: str | None, c
     updates: list[Update] = []
     last: list[int] = []
 
-    with click.open_file(output, "w", encoding="utf-8") as out:
+    # no length to show a share of: a count of the updates, once it has run a second
+    with click.open_file(output, "w", encoding="utf-8") as out, \
+            Counter("updates", own_quiet=quiet, delay_s=PROGRESS_DELAY_S, stdout_data=output == "-") as counter:
         out.write(",".join(COLUMNS) + "\n")
         out.flush()
 
         def emit(u: Update) -> None:
             updates.append(u)
+            counter.add()
             if changes and last and last[0] == u.state:
                 return
             last[:] = [u.state]

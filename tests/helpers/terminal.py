@@ -24,13 +24,25 @@ class Run:
     stdout: bytes
 
 
-def on_a_terminal(args: list[str], stdout: Path, timeout_s: float = 60.0) -> Run:
-    """Run ``eskin-bus ARGS``, stderr on a pseudo-terminal, stdout into the file ``stdout``."""
+def on_a_terminal(args: list[str], stdout: Path | None, timeout_s: float = 60.0,
+                  stdin: list[bytes] | None = None, pause_s: float = 0.0) -> Run:
+    """Run ``eskin-bus ARGS``, stderr on a pseudo-terminal, stdout into the file
+    ``stdout`` (None: the same terminal).  ``stdin``: pieces written to its stdin, a
+    pipe, ``pause_s`` apart, as a live log comes."""
     leader, follower = pty.openpty()
-    with open(stdout, "wb") as out:
-        proc = subprocess.Popen([*ESKIN, *args], stdout=out, stderr=follower, stdin=subprocess.DEVNULL,
+    with open(stdout if stdout is not None else os.devnull, "wb") as out:
+        proc = subprocess.Popen([*ESKIN, *args], stdout=out if stdout is not None else follower, stderr=follower,
+                                stdin=subprocess.DEVNULL if stdin is None else subprocess.PIPE,
                                 env={**os.environ, "COLUMNS": "120"})
     os.close(follower)
+    if stdin is not None:
+        assert proc.stdin is not None
+        for i, piece in enumerate(stdin):
+            if i:
+                time.sleep(pause_s)
+            proc.stdin.write(piece)
+            proc.stdin.flush()
+        proc.stdin.close()
     shown = b""
     deadline = time.monotonic() + timeout_s
     try:
@@ -50,7 +62,7 @@ def on_a_terminal(args: list[str], stdout: Path, timeout_s: float = 60.0) -> Run
         os.close(leader)
         if proc.poll() is None:
             proc.kill()
-    return Run(proc.wait(timeout=10), shown.decode(errors="replace"), stdout.read_bytes())
+    return Run(proc.wait(timeout=10), shown.decode(errors="replace"), stdout.read_bytes() if stdout else b"")
 
 
 def piped(args: list[str], timeout_s: float = 60.0) -> subprocess.CompletedProcess[bytes]:
