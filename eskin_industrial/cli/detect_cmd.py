@@ -15,8 +15,8 @@ from ..detect.state import GraspState
 from ..detect.updates import COLUMNS, UpdateTable
 from ..errors import InputFormatError
 from ..frames import FrameFlag
-from ..recording import read_recording, write_updates
 from ..profile import Profile
+from ..recording import read_recording, write_updates
 from .common import open_profile, profile_option
 from .console import PROGRESS_DELAY_S, Counter, Ticker
 

@@ -135,14 +135,10 @@ def _delay_vs_changes(out: Path, rows: list[dict[str, Any]], own: list[dict[str,
     plt.close(fig)
 
 
-#: The scenes of :func:`figure3`, one panel each.
-FIGURE3_SCENES = ("case1", "case2", "case3", "case4", "case5", "case6", "hand")
-
-
 def figure3(out: Path, seed: int, progress: Progress = NO_PROGRESS) -> None:
     """The paper's Figure 3 redone: R_coe, R_dw over time, truth shaded, threshold drawn."""
     plt = _plt()
-    scenes = FIGURE3_SCENES
+    scenes = ("case1", "case2", "case3", "case4", "case5", "case6", "hand")
     progress.stage("figure 3", len(scenes))
     fig, axes = plt.subplots(len(scenes), 1, figsize=(10, 2.0 * len(scenes)), sharex=False)
     settings = DetectorSettings(method="paper")

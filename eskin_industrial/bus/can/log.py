@@ -16,8 +16,8 @@ from ...detect.updates import Update, UpdateTable
 from ...errors import EskinError, InputFormatError
 from ...frames import RawScan
 from ...pipeline import Pipeline
-from ...progress import NO_PROGRESS, Progress
 from ...preflight import check_readable
+from ...progress import NO_PROGRESS, Progress
 from ...schema import in_range
 from ..source import DEFAULT_QUEUE_FRAMES, NodeLike, OpenContext
 from .layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
