@@ -22,6 +22,7 @@ import numpy as np
 from .detect.state import LABELS
 from .detect.updates import COLUMNS, Update, UpdateTable
 from .errors import InputFormatError
+from .progress import NO_PROGRESS, Progress
 
 Unit = Literal["newton", "raw"]
 
@@ -70,8 +71,9 @@ def parse_header(header: str, name: str) -> tuple[Unit, int]:
     return ("raw" if prefix == "raw" else "newton"), len(rest)
 
 
-def read_recording(source: str | Path, taxels: int | None = None) -> Recording:
-    """Read a recording CSV; ``taxels`` (from the profile) is checked against the header."""
+def read_recording(source: str | Path, taxels: int | None = None, progress: Progress = NO_PROGRESS) -> Recording:
+    """Read a recording CSV; ``taxels`` (from the profile) is checked against the header;
+    ``progress``: a stage over the file's characters."""
     text, name = _read_text(source)
     if not text.strip():
         raise InputFormatError(f"{name}: empty file (expected a header 't,f0,...' and data rows)")
@@ -81,13 +83,48 @@ def read_recording(source: str | Path, taxels: int | None = None) -> Recording:
         raise InputFormatError(f"{name}: line 1: {n} taxel columns, but the profile has {taxels} taxels")
     if not body.strip():
         raise InputFormatError(f"{name}: no data rows after the header")
-    try:
-        data = np.loadtxt(io.StringIO(body), delimiter=",", dtype=np.float64, ndmin=2, comments=None)
-    except ValueError:
-        raise _diagnose(body, n + 1, name) from None
-    if data.shape[1] != n + 1:
-        raise _diagnose(body, n + 1, name)
+    data = _parse_rows(body, n + 1, name, progress)
     return Recording(data[:, 0].copy(), data[:, 1:].copy(), unit, name)
+
+
+#: Rows are parsed and written in pieces of about this many characters and rows, so
+#: that a large file can show its progress; each row is read and written alone, so the
+#: pieces give what the whole does, byte for byte.
+_PIECE_CHARS = 4 << 20
+_PIECE_ROWS = 20_000
+
+
+def _parse_rows(body: str, columns: int, name: str, progress: Progress) -> np.ndarray:
+    progress.stage(f"reading {name}", len(body), percent=True)
+    parts = []
+    for piece in _pieces(body):
+        try:
+            data = np.loadtxt(io.StringIO(piece), delimiter=",", dtype=np.float64, ndmin=2, comments=None)
+        except ValueError:
+            raise _diagnose(body, columns, name) from None
+        if data.shape[1] != columns:
+            raise _diagnose(body, columns, name)
+        parts.append(data)
+        progress.advance(len(piece))
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
+def _pieces(body: str) -> list[str]:
+    """``body`` cut after a newline every ``_PIECE_CHARS`` or so.  A piece of nothing but
+    blank lines goes with its neighbour: alone, np.loadtxt would find no rows in it
+    (and warn), where in the whole it skips them."""
+    pieces: list[str] = []
+    start = 0
+    while start < len(body):
+        cut = body.find("\n", start + _PIECE_CHARS)
+        end = len(body) if cut < 0 else cut + 1
+        piece = body[start:end]
+        if pieces and (not piece.strip() or not pieces[-1].strip()):
+            pieces[-1] += piece
+        else:
+            pieces.append(piece)
+        start = end
+    return pieces
 
 
 def _diagnose(body: str, columns: int, name: str) -> InputFormatError:
@@ -105,10 +142,12 @@ def _diagnose(body: str, columns: int, name: str) -> InputFormatError:
     return InputFormatError(f"{name}: cannot parse as CSV numbers")
 
 
-def write_recording(dest: str | Path | IO[str], t: np.ndarray, values: np.ndarray, unit: Unit = "newton") -> None:
+def write_recording(dest: str | Path | IO[str], t: np.ndarray, values: np.ndarray, unit: Unit = "newton",
+                    progress: Progress = NO_PROGRESS) -> None:
+    """``progress``: a stage over the rows."""
     prefix = "f" if unit == "newton" else "raw"
     header = "t," + ",".join(f"{prefix}{i}" for i in range(values.shape[1]))
-    _write(dest, header, np.column_stack([t, values]), ["%.6f"] + ["%.9g"] * values.shape[1])
+    _write(dest, header, np.column_stack([t, values]), ["%.6f"] + ["%.9g"] * values.shape[1], progress)
 
 
 def write_updates(dest: str | Path | IO[str], table: UpdateTable) -> None:
@@ -153,6 +192,12 @@ def _opened(dest: str | Path | IO[str]) -> Iterator[IO[str]]:
             yield f
 
 
-def _write(dest: str | Path | IO[str], header: str, data: np.ndarray, fmt: list[str]) -> None:
+def _write(dest: str | Path | IO[str], header: str, data: np.ndarray, fmt: list[str],
+           progress: Progress = NO_PROGRESS) -> None:
+    progress.stage(f"writing {'<stdout>' if str(dest) == '-' else getattr(dest, 'name', dest)}", len(data))
     with _opened(dest) as out:
-        np.savetxt(out, data, delimiter=",", header=header, comments="", fmt=fmt)
+        out.write(header + "\n")
+        for a in range(0, len(data), _PIECE_ROWS):
+            piece = data[a:a + _PIECE_ROWS]
+            np.savetxt(out, piece, delimiter=",", fmt=fmt)
+            progress.advance(len(piece))

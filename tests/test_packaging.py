@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import email
 import os
+import re
 import subprocess
 import sys
+import tarfile
 import zipfile
 from pathlib import Path
 
@@ -61,9 +63,31 @@ def test_wheel_carries_profiles_examples_license_and_metadata(installed: tuple[P
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
     assert any(n.startswith("eskin_industrial/scenes/builtin/") for n in names)
     assert meta["License-Expression"] == "MIT"
+    # the index's description: README.md with its links into the checkout made plain (tests/test_index_readme.py)
+    assert meta["Description-Content-Type"] == "text/markdown"
+    assert meta.get_payload().strip() == (ROOT / "README.index.md").read_text().strip()
     classifiers = meta.get_all("Classifier") or []
     for version in ("3.11", "3.12", "3.13"):
         assert f"Programming Language :: Python :: {version}" in classifiers
+
+
+def test_sdist_carries_every_file_the_description_names(tmp_path: Path) -> None:
+    """The index description names files by path "in the source distribution": they
+    must be there (MANIFEST.in).  Built by setuptools' own backend in a virtualenv of
+    its own (the build requirement, setuptools>=77)."""
+    _run([sys.executable, "-m", "venv", str(tmp_path / "venv")], tmp_path)
+    python = str(tmp_path / "venv" / "bin" / "python")
+    _run([python, "-m", "pip", "install", "-q", "--disable-pip-version-check", "setuptools>=77"], tmp_path)
+    _run([python, "-c", f"from setuptools import build_meta; build_meta.build_sdist({str(tmp_path / 'dist')!r})"], ROOT)
+    (sdist,) = (tmp_path / "dist").glob("eskin_industrial-*.tar.gz")
+    with tarfile.open(sdist) as tf:
+        names = {n.split("/", 1)[1] for n in tf.getnames() if "/" in n}
+    description = (ROOT / "README.index.md").read_text()
+    named = set(re.findall(r"`(docs/[^`\s]+)`", description))
+    assert "docs/plc.md" in named and named <= names, named - names
+    # and what its commands use: the pins, the example recordings, the scripts
+    assert {"constraints.txt", "examples/case2.csv", "scripts/demo", "README.index.md", "README.md", "LICENSE",
+            "tests/helpers/paths.py"} <= names
 
 
 def test_constraints_pin_every_installed_distribution(installed: tuple[Path, Path], tmp_path: Path) -> None:

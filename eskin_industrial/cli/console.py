@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import json
 import logging
+import shutil
 import sys
+import time
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from typing import Any, TypeVar
@@ -112,25 +114,148 @@ def progress(items: Iterable[T], label: str, length: int | None = None,
         yield bar
 
 
-class Ticker:
-    """Progress by steps of known count, for work that reports through a callback."""
+#: Work that is usually short (a recording read, a scene written) shows a bar only
+#: once it has taken this long.
+PROGRESS_DELAY_S = 1.0
 
-    def __init__(self, total: int, label: str, own_quiet: bool = False) -> None:
+
+#: Columns a line takes besides its label and the bar ("  [", "]  ", the count, "  ",
+#: the ETA), and the least bar worth drawing; the bar takes the rest of the terminal.
+_BAR_CLUTTER = 3 + 3 + 21 + 2 + 8
+_BAR_LEAST = 10
+
+
+class Ticker:
+    """A bar on stderr for work that reports through :class:`~eskin_industrial.progress.Progress`
+    (stages of known length, steps done), shown only when stderr is a terminal and
+    not quiet.
+
+    ``delay_s``: nothing is shown before the work has run that long, so that a short
+    job (a small file, a short scene) draws no bar at all.  ``stdout_data``: the
+    command writes its data to stdout while it works; when that is the terminal too,
+    no bar, so that the bar never lands among the rows (curl's rule for its meter).
+    """
+
+    def __init__(self, total: int = 0, label: str = "", own_quiet: bool = False, delay_s: float = 0.0,
+                 stdout_data: bool = False) -> None:
+        self._quiet = quiet(own_quiet)
+        self._on = _watched(self._quiet, stdout_data)
+        self._since = time.time()
+        self._delay_s = delay_s
         self._bar: Any = None
-        if total > 0 and not quiet(own_quiet) and sys.stderr.isatty():
-            self._bar = click.progressbar(length=total, label=label, file=sys.stderr, show_pos=True, show_eta=True)
-            self._bar.__enter__()
+        self._label, self._total, self._pos, self._percent = label, total, 0, False
+        self._started = self._since
+        self._width = len(label)
+        self._show()
+
+    def stage(self, label: str, total: int, percent: bool = False) -> None:
+        self._end_bar()
+        self._label, self._total, self._pos, self._percent = label, total, 0, percent
+        self._started = time.time()
+        self._width = len(label)
+        self._show()
+
+    def advance(self, n: int = 1, label: str | None = None) -> None:
+        self._pos += n
+        if label is not None:
+            self._width = max(self._width, len(label))
+            self._label = label
+        if not self._on:
+            return
+        if self._bar is None:
+            self._show()
+            return
+        self._bar.label = self._fit()
+        self._bar.update(n)
 
     def step(self, n: int = 1, label: str | None = None) -> None:
-        if self._bar is not None:
-            if label is not None:
-                self._bar.label = label
-            self._bar.update(n)
+        self.advance(n, label)
+
+    def write(self, line: str) -> None:
+        """A line on stderr (unless quiet), in place of the bar, which comes back below
+        it at the next step."""
+        if self._quiet:
+            return
+        click.echo(("\r\033[K" if self._bar is not None else "") + line, err=True)
 
     def close(self) -> None:
+        self._end_bar()
+        self._on = False
+
+    def __enter__(self) -> "Ticker":
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+    def _show(self) -> None:
+        if not self._on or self._bar is not None or self._total <= 0:
+            return
+        if time.time() - self._since < self._delay_s:
+            return
+        self._bar = click.progressbar(length=self._total, label=self._fit(), file=sys.stderr, width=0,
+                                      show_pos=not self._percent, show_eta=True)  # (0: the terminal's width)
+        self._bar.__enter__()
+        self._bar.start = self._started  # the ETA counts from the stage's start, not from when the bar appeared
+        if self._pos:
+            self._bar.update(self._pos)
+
+    def _fit(self) -> str:
+        """The label, padded to the longest so far (a steady bar while labels differ in
+        length) and cut to leave the bar, the count and the ETA room on one line: a
+        line that wraps cannot be drawn over."""
+        room = max(10, shutil.get_terminal_size().columns - _BAR_CLUTTER - _BAR_LEAST)
+        return self._label.ljust(self._width)[:room]
+
+    def _end_bar(self) -> None:
         if self._bar is not None:
             self._bar.__exit__(None, None, None)
             self._bar = None
+
+
+def _watched(quiet_: bool, stdout_data: bool) -> bool:
+    """Whether a bar or a count may be drawn: stderr is a terminal, not quiet, and the
+    command's rows do not go to that terminal too."""
+    return not quiet_ and sys.stderr.isatty() and not (stdout_data and sys.stdout.isatty())
+
+
+class Counter:
+    """A running count on stderr for work of no known length (a live log on stdin),
+    under the :class:`Ticker`'s rules; drawn at most five times a second, so that a
+    step costs a clock read."""
+
+    def __init__(self, label: str, own_quiet: bool = False, delay_s: float = 0.0, stdout_data: bool = False) -> None:
+        self._on = _watched(quiet(own_quiet), stdout_data)
+        self._label = label
+        self._n = 0
+        self._shown = False
+        self._next = time.monotonic() + delay_s
+
+    def add(self, n: int = 1) -> None:
+        self._n += n
+        if self._on:
+            now = time.monotonic()
+            if now >= self._next:
+                self._next = now + 0.2
+                self._draw()
+
+    def close(self) -> None:
+        if self._shown:
+            self._draw()
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+        self._on = self._shown = False
+
+    def __enter__(self) -> "Counter":
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+    def _draw(self) -> None:
+        sys.stderr.write(f"\r\033[K{self._label}  {self._n}")
+        sys.stderr.flush()
+        self._shown = True
 
 
 def echo_json(value: Any) -> None:

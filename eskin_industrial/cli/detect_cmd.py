@@ -15,8 +15,10 @@ from ..detect.state import GraspState
 from ..detect.updates import COLUMNS, UpdateTable
 from ..errors import InputFormatError
 from ..frames import FrameFlag
+from ..profile import Profile
 from ..recording import read_recording, write_updates
 from .common import open_profile, profile_option
+from .console import PROGRESS_DELAY_S, Counter, Ticker
 
 
 @click.command()
@@ -51,21 +53,41 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
     prof = open_profile(profile_path)
     if (input_path is None) == (can_log is None):
         raise click.UsageError("give exactly one of INPUT.csv or --can-log LOG")
-    time_faults: dict[str, int] = {}
-    name = ""
     if can_log == "-":  # live: a row as soon as its scan is complete
         _detect_live(prof, output, rate_hz, method, changes, as_json, quiet)
         return
+    with Ticker(own_quiet=quiet, delay_s=PROGRESS_DELAY_S) as ticker:
+        table, name, time_faults = _detect_file(prof, input_path, can_log, rate_hz, method, engine, as_json, quiet,
+                                                ticker)
+    if changes:
+        keep = np.ones(len(table), bool)
+        keep[1:] = table.state[1:] != table.state[:-1]
+        table = UpdateTable(**{c: getattr(table, c)[keep] for c in COLUMNS})
+    write_updates(output, table)
+    refused = sum(time_faults.values())
+    if fail_on_time_faults and refused:
+        raise InputFormatError(f"{name}: {refused} frames refused for their time ({_faults(time_faults)}); "
+                               "--fail-on-time-faults")
+
+
+def _detect_file(prof: Profile, input_path: str | None, can_log: str | None, rate_hz: float | None,
+                 method: str | None, engine: str, as_json: bool, quiet: bool,
+                 ticker: Ticker) -> tuple[UpdateTable, str, dict[str, int]]:
+    """The updates of a recording or a CAN log file, its name and its refused times;
+    the summary on stderr (after the bar) unless quiet."""
+    time_faults: dict[str, int] = {}
+    name = ""
     if can_log is not None:  # the live receiver's path, on recorded traffic: same output
         from ..bus.can.log import detect_log
 
-        table, counters = detect_log(prof, can_log, rate_hz, method)
+        table, counters = detect_log(prof, can_log, rate_hz, method, progress=ticker)
+        ticker.close()
         if not quiet:
             _summary(can_log, counters["scans"], rate_hz or prof.sensor.rate_hz, method or prof.detector.method,
                      table, {k: counters[k] for k in TIME_FAULTS.values()}, as_json, counters)
     else:
         assert input_path is not None  # exactly one of the two, checked above
-        rec = read_recording(input_path, prof.taxels)
+        rec = read_recording(input_path, prof.taxels, progress=ticker)
         name = rec.name
         if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
             raise InputFormatError(f"--rate: expected a positive sample rate, got {rate_hz}")
@@ -88,21 +110,25 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
 
             chosen = ready(chosen)
         x, y = prof.coordinates_mm
-        if engine == "batch":
+        if engine == "batch" and chosen.vectorized:
             table = chosen.batch(settings, x, y, rate, rec.t, values, flags)
-        else:
-            table = UpdateTable.from_updates(chosen.stream(settings, x, y, rate).feed(rec.t, values, flags))
+        else:  # the stream detector, fed in pieces to show progress: the same updates as all at once
+            det = chosen.stream(settings, x, y, rate)
+            ticker.stage("detecting", len(rec.t))
+            updates = []
+            for a in range(0, len(rec.t), _PIECE_FRAMES):
+                b = a + _PIECE_FRAMES
+                updates += det.feed(rec.t[a:b], values[a:b], flags[a:b])
+                ticker.advance(len(rec.t[a:b]))
+            table = UpdateTable.from_updates(updates)
+        ticker.close()
         if not quiet:
             _summary(rec.name, len(rec.t), rate, chosen.name, table, time_faults, as_json)
-    if changes:
-        keep = np.ones(len(table), bool)
-        keep[1:] = table.state[1:] != table.state[:-1]
-        table = UpdateTable(**{c: getattr(table, c)[keep] for c in COLUMNS})
-    write_updates(output, table)
-    refused = sum(time_faults.values())
-    if fail_on_time_faults and refused:
-        raise InputFormatError(f"{name}: {refused} frames refused for their time ({_faults(time_faults)}); "
-                               "--fail-on-time-faults")
+    return table, name, time_faults
+
+
+#: Frames fed to a stream detector at a time (progress between pieces).
+_PIECE_FRAMES = 10_000
 
 
 def _faults(time_faults: dict[str, int]) -> str:
@@ -142,12 +168,15 @@ def _detect_live(prof, output: str, rate_hz: float | None, method: str | None, c
     updates: list[Update] = []
     last: list[int] = []
 
-    with click.open_file(output, "w", encoding="utf-8") as out:
+    # no length to show a share of: a count of the updates, once it has run a second
+    with click.open_file(output, "w", encoding="utf-8") as out, \
+            Counter("updates", own_quiet=quiet, delay_s=PROGRESS_DELAY_S, stdout_data=output == "-") as counter:
         out.write(",".join(COLUMNS) + "\n")
         out.flush()
 
         def emit(u: Update) -> None:
             updates.append(u)
+            counter.add()
             if changes and last and last[0] == u.state:
                 return
             last[:] = [u.state]

@@ -24,7 +24,7 @@ from ..evaluation.suite import (
     evaluate,
 )
 from .common import open_profile
-from .console import Ticker, echo_json, quiet
+from .console import Ticker, echo_json
 from .evaluate_families import family_names, leave_one_out, list_families, per_family
 
 
@@ -99,8 +99,8 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
     if charts_dir is not None:
         from ..evaluation.charts import all_charts
 
-        all_charts(Path(charts_dir), (lambda line: None) if quiet() else (lambda line: click.echo(line, err=True)),
-                   quick=quick, only=only_charts)
+        with Ticker() as ticker:  # the lines of the log above a bar per chart
+            all_charts(Path(charts_dir), ticker.write, quick=quick, only=only_charts, progress=ticker)
         return
     if only_charts:
         raise click.UsageError("--only chooses among the charts: give --charts DIR too")
@@ -119,13 +119,10 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
         names = _prepare_learned(names, explicit=bool(methods))
     settings = open_profile(profile_path).detector if profile_path else DEFAULT_SETTINGS
     scene_set = tuple(scenes) or SUITE
-    ticker = Ticker(len(scene_set) * len(seed_set), f"{len(names)} methods")
-    try:
+    with Ticker(len(scene_set) * len(seed_set) * len(names), "scoring") as ticker:
         res = evaluate(by_name(*names), scenes=scene_set, seeds=seed_set, rate_hz=rate_hz,
                        tolerance_s=tolerance_s, settings=settings, spec_hook=_conditions(conditions),
-                       progress=lambda scene: ticker.step(label=f"{len(names)} methods, {scene:<10}"))
-    finally:
-        ticker.close()
+                       progress=ticker)
     held = sum(r.score.holding_s for r in res.values()) / max(1, len(res)) / 3600
     if fmt == "json":
         echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz, "scenes": list(scene_set),

@@ -13,6 +13,7 @@ from ..evaluation.families import FAMILIES, evaluate_families
 from ..evaluation.holdout import CANDIDATES, FALSE_ALARMS_PER_HOUR, hold_out, tuning_scores
 from ..evaluation.metrics import SceneScore
 from ..evaluation.suite import TUNING_SEEDS, by_name
+from ..progress import Prefixed
 from .console import Ticker, echo_json
 
 
@@ -49,12 +50,9 @@ def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, se
                figures: Callable[[Any], dict[str, Any]], delays: Callable[[Any], str], per_scene: bool = False,
                within: Callable[[Any], str] | None = None) -> None:
     start = time.perf_counter()
-    ticker = Ticker(sum(len(FAMILIES[f].scenes) for f in families) * len(seed_set), f"{len(names)} methods")
-    try:
+    with Ticker(sum(len(FAMILIES[f].scenes) for f in families) * len(seed_set) * len(names), "scoring") as ticker:
         res = evaluate_families(by_name(*names), families, seed_set, rate_hz, settings, tolerance_s,
-                                progress=lambda label: ticker.step(label=label))
-    finally:
-        ticker.close()
+                                progress=ticker)
     if fmt == "json":
         echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz,
                    "families": {f: {m: {**figures(r.score),
@@ -85,13 +83,11 @@ def leave_one_out(method: str, families: tuple[str, ...], rate_hz: float, settin
         raise click.UsageError(f"--hold-out-family chooses among candidate settings of the deciding method; "
                                f"{method!r} has none (methods with some: {', '.join(CANDIDATES)})")
     start = time.perf_counter()
-    ticker = Ticker(sum(len(f.scenes) for f in FAMILIES.values()) * len(TUNING_SEEDS), f"choosing {method}")
-    try:
-        tuning = tuning_scores(method, settings, rate_hz, tolerance_s=tolerance_s,
-                               progress=lambda label: ticker.step(label=label))
-    finally:
-        ticker.close()
-    results = [hold_out(method, fam, tuning, settings, rate_hz, tolerance_s=tolerance_s) for fam in families]
+    with Ticker(sum(len(f.scenes) for f in FAMILIES.values()) * len(TUNING_SEEDS) * len(CANDIDATES[method]),
+                f"choosing {method}") as ticker:
+        tuning = tuning_scores(method, settings, rate_hz, tolerance_s=tolerance_s, progress=Prefixed(ticker, "tuning "))
+        results = [hold_out(method, fam, tuning, settings, rate_hz, tolerance_s=tolerance_s,
+                            progress=Prefixed(ticker, "held out ")) for fam in families]
     if fmt == "json":
         echo_json({"method": method, "rate_hz": rate_hz, "candidates": [c.label for c in CANDIDATES[method]],
                    "false_alarm_target_per_h": FALSE_ALARMS_PER_HOUR,

@@ -7,6 +7,7 @@ import click
 from ..recording import write_recording
 from ..scenes import list_scenes, render
 from .common import open_profile
+from .console import PROGRESS_DELAY_S, Ticker
 
 
 @click.command()
@@ -29,6 +30,12 @@ def simulate(scene: str | None, output: str, labels_path: str | None, rate_hz: f
         return
     if scene is None:
         raise click.UsageError("give a SCENE (see --list)")
+    with Ticker(delay_s=PROGRESS_DELAY_S, stdout_data=output == "-") as ticker:
+        _simulate(scene, output, labels_path, rate_hz, seed, raw_profile, ticker)
+
+
+def _simulate(scene: str, output: str, labels_path: str | None, rate_hz: float, seed: int, raw_profile: str | None,
+              ticker: Ticker) -> None:
     rec = render(scene, rate_hz, seed)
     if raw_profile is not None:
         from ..calibration import Calibrator
@@ -37,9 +44,9 @@ def simulate(scene: str | None, output: str, labels_path: str | None, rate_hz: f
         if prof.taxels != rec.forces.shape[1]:
             raise click.UsageError(f"scene {rec.name} has {rec.forces.shape[1]} taxels, profile {prof.name} has {prof.taxels}")
         raw = Calibrator.from_section(prof.calibration, prof.taxels).to_raw(rec.forces)
-        write_recording(output, rec.t, raw.round(), unit="raw")
+        write_recording(output, rec.t, raw.round(), unit="raw", progress=ticker)
     else:
-        write_recording(output, rec.t, rec.forces)
+        write_recording(output, rec.t, rec.forces, progress=ticker)
     if labels_path is not None:
         with open(labels_path, "w", encoding="utf-8") as f:
             f.write("t,label\n")

@@ -34,6 +34,9 @@ class Method:
     batch: Callable[..., Any]
     #: The factories also need ``model=`` (see :meth:`with_model`).
     needs_model: bool = False
+    #: ``batch`` is a computation of its own over the whole recording; otherwise it
+    #: feeds the stream detector, and feeding it in pieces gives the same updates.
+    vectorized: bool = False
 
     def with_model(self, model: Model) -> "Method":
         """This method with ``model`` bound into both factories."""
@@ -63,7 +66,8 @@ def _method(name: str, summary: str, stream: Callable[..., Any], needs_model: bo
 
 
 METHODS: dict[str, Method] = {
-    "paper": Method("paper", "R_coe and R_dw both above their slip thresholds (the reference paper)", PaperDetector, paper_batch),
+    "paper": Method("paper", "R_coe and R_dw both above their slip thresholds (the reference paper)", PaperDetector,
+                    paper_batch, vectorized=True),
     "paper-coe": _method("paper-coe", "the paper's R_coe alone above its slip threshold", _paper_rule("coe")),
     "paper-dw": _method("paper-dw", "the paper's R_dw alone above its slip threshold", _paper_rule("dw")),
     "force-rate": _method("force-rate", "rival: total-force derivative above a threshold", ForceRate),

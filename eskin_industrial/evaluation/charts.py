@@ -14,10 +14,11 @@ import numpy as np
 
 from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
+from ..progress import NO_PROGRESS, Prefixed, Progress
 from ..scenes import render
 from .conditions import CONDITIONS
 from .shading import shade_labels
-from .suite import DEFAULT_SETTINGS, EVALUATION_SEEDS, evaluate, run_one
+from .suite import DEFAULT_SETTINGS, EVALUATION_SEEDS, SUITE, evaluate, run_one
 from .sweeps import defaults, sweep
 
 COLOURS = {"paper": "tab:blue", "paper-coe": "tab:cyan", "paper-dw": "tab:purple", "force-rate": "tab:orange",
@@ -48,10 +49,13 @@ def pareto(points: list[tuple[float, float]]) -> list[int]:
     return keep
 
 
-def accuracy_charts(out: Path, seeds: tuple[int, ...], log: Any) -> list[dict[str, Any]]:
+def accuracy_charts(out: Path, seeds: tuple[int, ...], log: Any, progress: Progress = NO_PROGRESS) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
-    for family, label, factory in sweep():
-        res = evaluate({label: factory}, seeds=seeds)[label]
+    points, own_defaults = sweep(), defaults()
+    progress.stage("accuracy", (len(points) + len(own_defaults)) * len(SUITE) * len(seeds))
+    progress = Prefixed(progress, "accuracy: ")
+    for family, label, factory in points:
+        res = evaluate({label: factory}, seeds=seeds, progress=progress)[label]
         s = res.score
         d50 = s.delay_percentile(50)
         rows.append({"family": family, "label": label, "f1": s.f1, "delay_ms": d50 * 1000 if np.isfinite(d50) else np.nan,
@@ -61,8 +65,8 @@ def accuracy_charts(out: Path, seeds: tuple[int, ...], log: Any) -> list[dict[st
             f"changes {s.still_changes_per_min:.2f}/min still, {s.vf_changes_per_min:.0f}/min varying")
     # each method's default with its own varying-force evidence, as before the state had its own
     own = []
-    for name, factory in defaults().items():
-        res = evaluate({name: factory}, seeds=seeds, settings=_own_evidence(DEFAULT_SETTINGS))[name]
+    for name, factory in own_defaults.items():
+        res = evaluate({name: factory}, seeds=seeds, settings=_own_evidence(DEFAULT_SETTINGS), progress=progress)[name]
         d50 = res.score.delay_percentile(50)
         own.append({"family": name, "delay_ms": d50 * 1000 if np.isfinite(d50) else np.nan,
                     "still_min": res.score.still_changes_per_min, "vf_min": res.score.vf_changes_per_min})
@@ -131,10 +135,11 @@ def _delay_vs_changes(out: Path, rows: list[dict[str, Any]], own: list[dict[str,
     plt.close(fig)
 
 
-def figure3(out: Path, seed: int) -> None:
+def figure3(out: Path, seed: int, progress: Progress = NO_PROGRESS) -> None:
     """The paper's Figure 3 redone: R_coe, R_dw over time, truth shaded, threshold drawn."""
     plt = _plt()
     scenes = ("case1", "case2", "case3", "case4", "case5", "case6", "hand")
+    progress.stage("figure 3", len(scenes))
     fig, axes = plt.subplots(len(scenes), 1, figsize=(10, 2.0 * len(scenes)), sharex=False)
     settings = DetectorSettings(method="paper")
     for ax, scene in zip(axes, scenes):
@@ -148,6 +153,7 @@ def figure3(out: Path, seed: int) -> None:
         ax.set_ylim(bottom=0.0)
         ax.set_ylabel(scene)
         ax.set_xlim(rec.t[0], rec.t[-1])
+        progress.advance(1, f"figure 3: {scene}")
     axes[0].legend(fontsize=8, ncol=3, loc="upper right")
     axes[-1].set_xlabel("time (s); shaded: slip (red), varying force (orange), transition (grey)")
     fig.suptitle(f"Paper indicators on the paper's scenes (100 Hz, seed {seed})")
@@ -160,9 +166,13 @@ def figure3(out: Path, seed: int) -> None:
 _VF = "variable_force recall (cof-track)"
 
 
-def failure_map(out: Path, seeds: tuple[int, ...], log: Any) -> dict[str, dict[str, list[float]]]:
+def failure_map(out: Path, seeds: tuple[int, ...], log: Any,
+                progress: Progress = NO_PROGRESS) -> dict[str, dict[str, list[float]]]:
     scenes = ("case1", "case2", "case5", "case6", "hand", "hold")
     methods = defaults()
+    progress.stage("failure map", sum(len(values) for _a, values, _f in CONDITIONS.values()) * len(scenes)
+                   * len(seeds) * len(methods))
+    progress = Prefixed(progress, "failure map: ")
     table: dict[str, dict[str, list[float]]] = {}
     for cond, (axis, values, factory) in CONDITIONS.items():
         table[cond] = {m: [] for m in methods}
@@ -170,7 +180,7 @@ def failure_map(out: Path, seeds: tuple[int, ...], log: Any) -> dict[str, dict[s
         for v in values:
             rate = float(v) if factory is None else 100.0
             res = evaluate(methods, scenes=scenes, seeds=seeds, rate_hz=rate,
-                           spec_hook=None if factory is None else factory(v))
+                           spec_hook=None if factory is None else factory(v), progress=Prefixed(progress, f"{cond} {v:g}: "))
             for m, r in res.items():
                 table[cond][m].append(r.score.f1)
             table[cond][_VF].append(res["cof-track"].score.vf_recall)
@@ -201,19 +211,22 @@ def failure_map(out: Path, seeds: tuple[int, ...], log: Any) -> dict[str, dict[s
 CHARTS: tuple[str, ...] = ("figure3", "accuracy", "failure-map", "timing")
 
 
-def all_charts(out: Path, log: Any, quick: bool = False, only: tuple[str, ...] = ()) -> None:
+def all_charts(out: Path, log: Any, quick: bool = False, only: tuple[str, ...] = (),
+               progress: Progress = NO_PROGRESS) -> None:
+    """The charts named in ``only`` (default: all) into ``out``; ``log`` gets a line per
+    chart and sweep point, ``progress`` a stage per chart."""
     out.mkdir(parents=True, exist_ok=True)
     seeds = EVALUATION_SEEDS[:1] if quick else EVALUATION_SEEDS[:3]
     want = set(only or CHARTS)
     if "figure3" in want:
         log("figure 3")
-        figure3(out, EVALUATION_SEEDS[0])
+        figure3(out, EVALUATION_SEEDS[0], progress)
     if "accuracy" in want:
         log("accuracy against delay and cost")
-        accuracy_charts(out, seeds, log)
+        accuracy_charts(out, seeds, log, progress)
     if "failure-map" in want:
         log("failure map")
-        failure_map(out, seeds[:2], log)
+        failure_map(out, seeds[:2], log, progress)
     if "timing" in want:
         from .timing import state_timing
 

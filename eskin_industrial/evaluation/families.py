@@ -13,9 +13,10 @@ from __future__ import annotations
 import math
 import zlib
 from dataclasses import dataclass, replace
-from typing import Any, Callable
+from typing import Any
 
 from ..detect.settings import DetectorSettings
+from ..progress import NO_PROGRESS, Prefixed, Progress
 from ..scenes import SceneSpec
 from ..scenes.spec import Event
 from .conditions import Hook
@@ -123,17 +124,12 @@ def get_family(name: str) -> Family:
 
 def evaluate_families(methods: dict[str, Factory], families: tuple[str, ...], seeds: tuple[int, ...],
                       rate_hz: float = 100.0, settings: DetectorSettings = DEFAULT_SETTINGS, tolerance_s: float = 0.5,
-                      progress: Callable[[str], None] | None = None) -> dict[str, dict[str, Result]]:
-    """Every method on every family's scenes (with its effect on): family -> method -> result."""
-    def labelled(family: str) -> Callable[[str], None] | None:
-        if progress is None:
-            return None
-        report = progress
-        return lambda scene: report(f"{family}: {scene}")
-
+                      progress: Progress = NO_PROGRESS) -> dict[str, dict[str, Result]]:
+    """Every method on every family's scenes (with its effect on): family -> method -> result;
+    ``progress`` advances by one per method, scene and seed, labelled with the family too."""
     out = {}
     for name in families:
         fam = get_family(name)
         out[name] = evaluate(methods, scenes=fam.scenes, seeds=seeds, rate_hz=rate_hz, settings=settings,
-                             spec_hook=fam.hook, tolerance_s=tolerance_s, progress=labelled(name), stream=fam.stream)
+                             spec_hook=fam.hook, tolerance_s=tolerance_s, progress=Prefixed(progress, f"{name}: "), stream=fam.stream)
     return out

@@ -10,10 +10,11 @@ seeds (``EVALUATION_SEEDS``), which no choice ever sees.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable
+from typing import Any
 
 from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
+from ..progress import NO_PROGRESS, Progress
 from .families import FAMILIES, evaluate_families
 from .metrics import SceneScore
 from .suite import DEFAULT_SETTINGS, EVALUATION_SEEDS, TUNING_SEEDS, Factory
@@ -90,7 +91,7 @@ class HoldOut:
 
 def tuning_scores(method: str, base: DetectorSettings = DEFAULT_SETTINGS, rate_hz: float = 100.0,
                   seeds: tuple[int, ...] = TUNING_SEEDS, tolerance_s: float = 0.5,
-                  progress: Callable[[str], None] | None = None) -> dict[str, dict[str, SceneScore]]:
+                  progress: Progress = NO_PROGRESS) -> dict[str, dict[str, SceneScore]]:
     """Every candidate on every family's tuning seeds: family -> candidate -> score."""
     if method not in CANDIDATES:
         raise KeyError(f"no candidate settings to choose among for {method!r}; methods with some: "
@@ -103,8 +104,10 @@ def tuning_scores(method: str, base: DetectorSettings = DEFAULT_SETTINGS, rate_h
 def hold_out(method: str, family: str, tuning: dict[str, dict[str, SceneScore]],
              base: DetectorSettings = DEFAULT_SETTINGS, rate_hz: float = 100.0,
              seeds: tuple[int, ...] = EVALUATION_SEEDS, tolerance_s: float = 0.5,
-             progress: Callable[[str], None] | None = None) -> HoldOut:
-    """Choose on every family but ``family`` (from ``tuning_scores``), report on it."""
+             progress: Progress = NO_PROGRESS) -> HoldOut:
+    """Choose on every family but ``family`` (from ``tuning_scores``), report on it;
+    ``progress`` gets a stage of its own (the chosen candidate and the default, or one
+    run when they are the same)."""
     pooled: dict[str, SceneScore] = {c.label: SceneScore() for c in CANDIDATES[method]}
     for fam, by in tuning.items():
         if fam != family:
@@ -113,6 +116,7 @@ def hold_out(method: str, family: str, tuning: dict[str, dict[str, SceneScore]],
     chosen = choose(pooled)
     wanted = {c.label: c for c in CANDIDATES[method] if c.label in (chosen, CANDIDATES[method][0].label)}
     methods = {label: _factory(method, c, base) for label, c in wanted.items()}
+    progress.stage(family, len(FAMILIES[family].scenes) * len(seeds) * len(methods))
     res = evaluate_families(methods, (family,), seeds, rate_hz, base, tolerance_s, progress)[family]
     default = CANDIDATES[method][0].label
     return HoldOut(family, chosen, pooled[chosen], res[chosen].score, res[default].score)

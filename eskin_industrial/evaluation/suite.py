@@ -13,6 +13,7 @@ import numpy as np
 from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
 from ..detect.updates import UpdateTable
+from ..progress import NO_PROGRESS, Progress
 from ..scenes import Rendered, SceneSpec, load_scene, render
 from .corpus import (
     EVALUATION_SEEDS,
@@ -67,11 +68,12 @@ def run_one(factory: Factory, settings: DetectorSettings, rendered: Rendered) ->
 def evaluate(methods: dict[str, Factory], scenes: tuple[str, ...] = SUITE, seeds: tuple[int, ...] = EVALUATION_SEEDS,
              rate_hz: float = 100.0, settings: DetectorSettings = DEFAULT_SETTINGS,
              spec_hook: Callable[[SceneSpec], SceneSpec] | None = None, tolerance_s: float = 0.5,
-             progress: Callable[[str], None] | None = None, stream: int | None = None) -> dict[str, Result]:
+             progress: Progress = NO_PROGRESS, stream: int | None = None) -> dict[str, Result]:
     """Score every method on every scene and seed (each scene rendered once per seed);
     ``spec_hook`` changes a scene before it is rendered (the failure map's conditions);
-    ``progress`` is called with the scene's name after each scene and seed; ``stream``
-    gives the seeds other draws (``scenes.render``)."""
+    ``progress`` advances by one for each method on each scene and seed (scenes x seeds
+    x methods in all), labelled with the method and the scene; ``stream`` gives the
+    seeds other draws (``scenes.render``)."""
     results = {name: Result(name) for name in methods}
     for scene in scenes:
         spec = load_scene(scene)
@@ -88,8 +90,7 @@ def evaluate(methods: dict[str, Factory], scenes: tuple[str, ...] = SUITE, seeds
                 res.per_scene[scene] += s
                 res.frames += len(rendered.t)
                 res.seconds += seconds
-            if progress is not None:
-                progress(scene)
+                progress.advance(1, f"{name}, {scene}")
     return results
 
 

@@ -3,6 +3,7 @@ and decode a node's scans from one through the live path's assembler and pipelin
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -16,6 +17,7 @@ from ...errors import EskinError, InputFormatError
 from ...frames import RawScan
 from ...pipeline import Pipeline
 from ...preflight import check_readable
+from ...progress import NO_PROGRESS, Progress
 from ...schema import in_range
 from ..source import DEFAULT_QUEUE_FRAMES, NodeLike, OpenContext
 from .layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
@@ -73,11 +75,11 @@ class LogPlayer(FrameThread):
             self.arrived.set()
 
 
-def read_can_log(path: str | Path) -> Iterator[can.Message]:
+def read_can_log(path: str | Path, progress: Progress = NO_PROGRESS) -> Iterator[can.Message]:
     """Messages of a CAN log in any format python-can reads (``.log``, ``.blf``,
     ``.asc``, ``.trc``, ``.csv``, ...); a file that does not parse, or was cut short,
     is one :class:`InputFormatError` line naming the message and, where the format
-    has one, the byte."""
+    has one, the byte.  ``progress``: a stage over the file's bytes."""
     path = Path(path)
     if not path.is_file():
         raise InputFormatError(f"{path}: cannot read CAN log: no such file")
@@ -89,14 +91,39 @@ def read_can_log(path: str | Path) -> Iterator[can.Message]:
     except READ_ERRORS as exc:
         raise InputFormatError(f"{path}: cannot read CAN log: {_detail(exc)}") from None
     count = 0
+    where = _position(reader) if progress is not NO_PROGRESS else None  # (a replay into the bridge: nobody watches)
+    size = path.stat().st_size if where is not None else 0
+    progress.stage(f"reading {path}", size, percent=True)
+    done = 0
     with reader:
         try:
             for msg in reader:
                 count += 1
+                if where is not None and count % _PROGRESS_EVERY == 0:
+                    at = where()
+                    progress.advance(at - done)
+                    done = at
                 yield msg
+            progress.advance(size - done)  # (read to the end; the reader has closed the file)
         except READ_ERRORS as exc:  # (the position is read while the file is still open)
             raise InputFormatError(f"{path}: message {count + 1}{_at_byte(reader)}: not a valid log entry: "
                                    f"{_detail(exc)}") from None
+
+
+#: Messages between two looks at how far a log has been read.
+_PROGRESS_EVERY = 4096
+
+
+def _position(reader: object) -> Callable[[], int] | None:
+    """How many bytes of the file a reader has read so far, if it reads a file: the
+    descriptor's offset, which counts what was read from disk whatever the format,
+    buffering or compression above it (asked only while the reader is still reading)."""
+    try:
+        fd = getattr(reader, "file").fileno()
+        os.lseek(fd, 0, os.SEEK_CUR)
+    except (AttributeError, OSError, ValueError):  # (io.UnsupportedOperation is both)
+        return None
+    return lambda: os.lseek(fd, 0, os.SEEK_CUR)
 
 
 def _detail(exc: BaseException) -> str:
@@ -116,34 +143,40 @@ def _at_byte(reader: object) -> str:
         return ""
 
 
-def replay(scans: list[RawScan], pipeline: Pipeline) -> list[Update]:
+def replay(scans: list[RawScan], pipeline: Pipeline, progress: Progress = NO_PROGRESS) -> list[Update]:
     updates: list[Update] = []
-    for scan in scans:
+    progress.stage("detecting", len(scans))
+    for i, scan in enumerate(scans, start=1):
         updates += pipeline.push(scan)
+        if i % _PROGRESS_EVERY == 0:
+            progress.advance(_PROGRESS_EVERY)
+    progress.advance(len(scans) % _PROGRESS_EVERY)
     return updates
 
 
-def log_scans(profile, path: str | Path, rate_hz: float | None = None) -> tuple[list[RawScan], ScanAssembler]:
+def log_scans(profile, path: str | Path, rate_hz: float | None = None,
+              progress: Progress = NO_PROGRESS) -> tuple[list[RawScan], ScanAssembler]:
     """The node's scans in a CAN log, through the live path's assembler (the FD layout
     when the node's frames are FD frames)."""
-    messages = list(read_can_log(path))
+    messages = list(read_can_log(path, progress))
     lo = profile.can.base_id
     fd = any(m.is_fd for m in messages[:10_000] if lo <= m.arbitration_id < lo + ID_RANGE)
     layout = CanLayout.from_profile(profile, fd=fd or profile.can.fd)
     return decode_messages(layout, messages, rate_hz or profile.sensor.rate_hz)
 
 
-def detect_log(profile, path: str | Path, rate_hz: float | None = None,
-               method: str | None = None) -> tuple[UpdateTable, dict[str, int]]:
+def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: str | None = None,
+               progress: Progress = NO_PROGRESS) -> tuple[UpdateTable, dict[str, int]]:
     """A CAN log through the live path's assembler and pipeline: the updates as a
-    table, and the counters (the pipeline's, the refused times, the assembler's)."""
+    table, and the counters (the pipeline's, the refused times, the assembler's);
+    ``progress``: a stage reading the file, one detecting."""
     rate = rate_hz or profile.sensor.rate_hz
-    scans, asm = log_scans(profile, path, rate)
+    scans, asm = log_scans(profile, path, rate, progress)
     mismatch = layout_mismatch(asm.counters, _ids(profile))
     if mismatch is not None:  # never "valid" verdicts from frames read with the wrong layout
         raise InputFormatError(f"{path}: {mismatch}")
     pipeline = Pipeline(profile, rate_hz=rate, method=method)
-    table = UpdateTable.from_updates(replay(scans, pipeline))
+    table = UpdateTable.from_updates(replay(scans, pipeline, progress))
     counters = _log_counters(pipeline, asm)
     require_scans(profile, counters, str(path))
     return table, counters
