@@ -16,6 +16,8 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, load_bridge_config
 from eskin_industrial.bridge.loop import NodeLoop
@@ -288,3 +290,40 @@ def test_the_codec_packs_float_arrays_as_protobuf_and_tahu_read_them():
     bad.metrics.add(alias=3, datatype=FLOAT_ARRAY, bytes_value=b"\x00" * 7)
     with pytest.raises(pb.PayloadError, match="7 bytes"):
         pb.decode(bad.SerializeToString())
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.floats(width=32), max_size=64))
+def test_float_arrays_round_trip_through_protobuf(values):
+    data = pb.encode(pb.Payload(1, (pb.Metric(None, 9, None, pb.FLOAT_ARRAY, pb.pack_floats(values)),)))
+    (m,) = spb.parse(data).metrics
+    assert _floats(m.bytes_value).view(np.uint32).tolist() == np.array(values, dtype=np.float32).view(np.uint32).tolist()
+    assert pb.decode(spb.parse(data).SerializeToString()).metrics[0].value == m.bytes_value
+
+
+# -- eskin-bus plant ----------------------------------------------------------------------
+def test_the_plant_view_shows_the_newest_frames_peak_and_total_and_survives_a_bad_one():
+    from eskin_industrial.plant.watch import PlantModel
+    from eskin_industrial.view.plant_table import plant_lines
+
+    def payload(seq: int, **metric) -> bytes:
+        p = spb.Payload(timestamp=1000, seq=seq)
+        p.metrics.add(**metric)
+        return p.SerializeToString()
+
+    forces = np.array([0.5, float("nan"), 2.25, 0.0], dtype="<f4")
+    m = PlantModel()
+    m.take("spBv1.0/g/NBIRTH/e", payload(0, name="bdSeq", datatype=4, long_value=0), 0.0)
+    m.take("spBv1.0/g/DBIRTH/e/grip", payload(1, name=FRAME, alias=ALIAS, datatype=FLOAT_ARRAY, is_null=True), 0.0)
+    assert m.take("spBv1.0/g/DDATA/e/grip", payload(2, alias=ALIAS, datatype=FLOAT_ARRAY,
+                                                     bytes_value=forces.tobytes()), 1.0) == []
+    (dev,) = [r for r in m.rows(1.0) if "device" in r]
+    assert (dev["frame_max"], dev["frame_sum"]) == (2.25, 2.75), "the NaN of a refused reading left out"
+    assert "2.25 / 2.8" in "\n".join(plant_lines(m.rows(1.0), "t", 200, 10))
+    # another publisher's: no datatype and not whole floats: the last values stay, nothing breaks
+    assert m.take("spBv1.0/g/DDATA/e/grip", payload(3, alias=ALIAS, bytes_value=b"\x00" * 5), 2.0) == []
+    # declared FloatArray but not whole floats: a malformed message, counted
+    assert m.take("spBv1.0/g/DDATA/e/grip", payload(4, alias=ALIAS, datatype=FLOAT_ARRAY, bytes_value=b"\x00" * 6),
+                  2.0)[0]["event"] == "malformed"
+    (dev,) = [r for r in m.rows(2.0) if "device" in r]
+    assert (dev["frame_max"], dev["frame_sum"]) == (2.25, 2.75) and m.malformed == 1
