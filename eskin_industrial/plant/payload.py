@@ -24,7 +24,8 @@ INT8, INT16, INT32, INT64 = 1, 2, 3, 4
 UINT8, UINT16, UINT32, UINT64 = 5, 6, 7, 8
 FLOAT, DOUBLE, BOOLEAN, STRING, DATETIME, TEXT, UUID, BYTES = 9, 10, 11, 12, 13, 14, 15, 17
 #: Sparkplug 3.0's FloatArray: 32-bit IEEE floats packed little-endian in bytes_value
-#: (the specification's "Sparkplug Array Types"; Eclipse Tahu's sparkplug_b.proto).
+#: (the specification's text on array types, 6.4.17, and Eclipse Tahu's encoders; the
+#: specification's worked FloatArray example prints big-endian bytes, a known erratum).
 FLOAT_ARRAY = 30
 #: The fixed-size arrays (Int8Array = 22 .. DoubleArray = 31) -> the size of one element.
 ARRAY_ITEM_SIZE = {22: 1, 23: 2, 24: 4, 25: 8, 26: 1, 27: 2, 28: 4, 29: 8, FLOAT_ARRAY: 4, 31: 8}
