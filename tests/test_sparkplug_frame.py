@@ -327,3 +327,11 @@ def test_the_plant_view_shows_the_newest_frames_peak_and_total_and_survives_a_ba
                   2.0)[0]["event"] == "malformed"
     (dev,) = [r for r in m.rows(2.0) if "device" in r]
     assert (dev["frame_max"], dev["frame_sum"]) == (2.25, 2.75) and m.malformed == 1
+
+
+def test_the_frame_alias_is_its_own_in_the_device_block():
+    from eskin_industrial.plant.commands import COMMAND_ALIAS, COMMANDS
+    from eskin_industrial.plant.sparkplug import DEVICE_METRICS
+
+    aliases = [*range(len(DEVICE_METRICS)), FRAME_ALIAS, *range(COMMAND_ALIAS, COMMAND_ALIAS + len(COMMANDS))]
+    assert len(set(aliases)) == len(aliases) and max(aliases) < 1000, "a device's block is 1000 aliases"
