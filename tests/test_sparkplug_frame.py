@@ -94,16 +94,18 @@ def test_the_loop_hands_each_sink_the_newest_frame_at_its_own_interval():
     every, never, fast = _FrameSink(0.1), _FrameSink(None), _FrameSink(0.05)
     loop = NodeLoop(prof, ReplaySource(prof, rec.t[:300], raw, 200.0), [every, never, fast], rate_hz=200.0)
     seen: list[Frame] = []
-    for _ in range(300):  # 1.5 s of scans at 200 Hz, played in real time
+    start = time.perf_counter()
+    for _ in range(300):  # 1.5 s of scans at 200 Hz, played in real time (longer on a loaded machine)
         loop.step(0.05)
         seen.append(loop.pipeline.last_frame)
+    elapsed = time.perf_counter() - start
     assert loop.pipeline.counters.scans == 300
     assert never.frames == [] and len(loop._frame_sinks) == 2, "a sink that wants no frame is not asked"
     for sink, interval in ((every, 0.1), (fast, 0.05)):
         times = np.array([t for t, _ in sink.frames])
         # (timed here, a little after the loop's own clock read at the scan's arrival)
         assert np.diff(times).min() >= interval - 0.002, "never two closer than the interval"
-        assert 1.5 / interval * 0.6 <= len(times) <= 1.5 / interval + 1, len(times)
+        assert 0.5 * elapsed / interval <= len(times) <= elapsed / interval + 1, (len(times), elapsed)
         # the very frame the detector saw (not a copy), handed with the scan that made it
         ids = {id(f) for f in seen}
         assert all(id(f) in ids for _, f in sink.frames)
@@ -205,13 +207,16 @@ def test_dbirth_declares_the_frame_and_ddata_carry_the_calibrated_frames_at_the_
     frames = _frames_of(msgs)
     assert all(len(f) == lay.rows * lay.cols and not hist for _, f, hist in frames)
     # each the calibrated frame of a scan, in order, about 20 scans (0.2 s at 100 Hz) apart
-    idx = _matches([f for _, f, _ in frames], expected)
-    gaps = np.diff(idx)
-    gaps = gaps[gaps > 0]  # (a loop of the scene restarts the count)
-    assert gaps.min() >= 18 and np.median(gaps) <= 24, idx
-    assert any(f.sum() > 1.0 for _, f, _ in frames), "frames with contact, not only zeros"
+    idx = np.array(_matches([f for _, f, _ in frames], expected))
     stamps = np.array([ts for ts, _, _ in frames])
     assert np.diff(stamps).min() >= 190, "never two frames closer than frame_interval_s (ms stamps)"
+    assert len(frames) <= (stamps[-1] - stamps[0]) / 200 + 1
+    # decimated: about 20 scans apart at 100 Hz (fewer when a loaded machine plays the
+    # scene behind time), and never more scans than the time between the two allows
+    gaps, waits = np.diff(idx), np.diff(stamps) / 1000
+    kept = gaps > 0  # (a loop of the scene restarts the count)
+    assert np.median(gaps[kept]) >= 10 and (gaps[kept] <= waits[kept] * 100 + 2).all(), (idx, stamps)
+    assert any(f.sum() > 1.0 for _, f, _ in frames), "frames with contact, not only zeros"
     assert counters["sparkplug_frames"] >= len(frames)
     if m.HasField("bytes_value"):  # a frame due before the connection: not sent, the birth's value
         assert counters["sparkplug_frames_not_sent"] >= 1
