@@ -6,6 +6,7 @@ to a ``mosquitto_sub`` subscriber receiving its DDATA, against a bare paho-mqtt 
     .venv/bin/python benchmarks/bench_fleet.py                      # fleet and latency (~8 min)
     .venv/bin/python benchmarks/bench_fleet.py --nodes-100 8,16,32 --nodes-1k 1,2,4 --duration 10
     .venv/bin/python benchmarks/bench_fleet.py --only latency --latency-duration 60
+    .venv/bin/python benchmarks/bench_fleet.py --only fleet --nodes-100 8 --nodes-1k 2 --frame-interval 1
 
 The nodes: the project's CAN node simulator (``sim/can_node.py``) on python-can's
 virtual buses, playing the slip train of ``bench_bridge.py`` (a still grasp with a
@@ -35,6 +36,9 @@ one core carries is a lower bound of what a bridge fed by real buses carries.
 - memory: the process's resident set (VmRSS) at the end of the step, and its growth
   from before the bridge opened (the simulators' frames already made): the bridge's
   own memory, its queues and buffers.
+- frames (``--frame-interval S``: ``[sparkplug] frame_interval_s`` of the fleet's
+  bridge): the taxel frames received per second and the size of one frame's DDATA
+  (median, bytes: the payload as the broker carries it).
 - A step is "carried" when it has no drop and no stale node, the bridge took every scan sent, and the
   bridge's CPU stays under 90 % of one core (the interpreter lock makes one core the
   bound of one bridge process).  When the simulators fall behind their deadlines by
@@ -80,6 +84,7 @@ from tests.helpers.modbus import need  # noqa: E402
 
 GROUP = "bench"
 STATE_CODE, STALE = 1, 5  # alias offsets of "State Code", "Sensor Stale" in a device's block (DEVICE_METRICS order)
+FRAME = 50  # the alias offset of "Taxels/Frame" (FRAME_ALIAS)
 DROP_KEYS = ("rx_queue_drops", "lost_scans", "torn_scans", "sparkplug_dropped")
 
 
@@ -188,7 +193,7 @@ def raw_scans(profile: Any, scene: Path, rate: float) -> np.ndarray:
     return np.rint(Calibrator.from_section(profile.calibration, profile.taxels).to_raw(rec.forces))
 
 
-def bridge_for(n: int, rate: float, per_bus: int, port: int, edge: str, tag: str):
+def bridge_for(n: int, rate: float, per_bus: int, port: int, edge: str, tag: str, frame_interval_s: float = 0.0):
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
     from eskin_industrial.plant.sparkplug import SparkplugOptions
 
@@ -202,19 +207,19 @@ def bridge_for(n: int, rate: float, per_bus: int, port: int, edge: str, tag: str
                                    base_id=base + 0x10 * k))
         buses.append((channel, k))
     cfg = BridgeConfig(node=tuple(nodes), outputs={"sparkplug": SparkplugOptions(
-        f"mqtt://127.0.0.1:{port}", GROUP, edge)}, log=LogSettings(status_every_s=0))
+        f"mqtt://127.0.0.1:{port}", GROUP, edge, frame_interval_s=frame_interval_s)}, log=LogSettings(status_every_s=0))
     return cfg, resolve(cfg), buses
 
 
 # -- the fleet ------------------------------------------------------------------------
 
 def run_step(n: int, rate: float, per_bus: int, port: int, broker_pid: int, scene: Path, duration_s: float,
-             tmp: Path) -> dict[str, Any]:
+             tmp: Path, frame_interval_s: float = 0.0) -> dict[str, Any]:
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
 
     tag = f"{int(rate)}-{n}-{time.monotonic_ns()}"
-    cfg, nodes, buses = bridge_for(n, rate, per_bus, port, f"fleet{n}x{int(rate)}", tag)
+    cfg, nodes, buses = bridge_for(n, rate, per_bus, port, f"fleet{n}x{int(rate)}", tag, frame_interval_s)
     raw = raw_scans(nodes[0].profile, scene, rate)
     sub = Subscriber(port, tmp / f"count-{tag}.txt")
     sims = make_nodes(nodes[0].profile, raw, rate, rate > 500, buses)  # their frames made before rss0
@@ -246,10 +251,12 @@ def run_step(n: int, rate: float, per_bus: int, port: int, broker_pid: int, scen
     # a node the loop fell behind on by more than stale_s (2.5 scan periods) is
     # "Sensor Stale" for a moment: the PLC and the plant would see it (counted in the
     # measured span only: every node turns stale when its simulator ends)
-    stale = sum(1 for t, topic, data in sub.messages() if "/DDATA/" in topic and w0 <= t <= w1
-                for m in spb.parse(data).metrics if m.alias % 1000 == STALE and spb.value(m))
+    measured = [(topic, data) for t, topic, data in sub.messages() if "/DDATA/" in topic and w0 <= t <= w1]
+    stale = sum(1 for topic, data in measured for m in spb.parse(data).metrics if m.alias % 1000 == STALE and spb.value(m))
+    frames = [len(data) for topic, data in measured if any(m.alias % 1000 == FRAME for m in spb.parse(data).metrics)]
     return dict(n=n, rate=rate, cpu=bridge_cpu, sim_cpu=sim_cpu, drops=drops, scans=scans, sent=sent, stale=stale,
-                msgs=(m1 - m0) / wall, broker_cpu=(b1 - b0) / wall, rss=rss1, rss_growth=rss1 - rss0, late=late)
+                msgs=(m1 - m0) / wall, broker_cpu=(b1 - b0) / wall, rss=rss1, rss_growth=rss1 - rss0, late=late,
+                frames=len(frames) / (w1 - w0), frame_bytes=int(np.median(frames)) if frames else 0)
 
 
 # -- latency --------------------------------------------------------------------------
@@ -419,6 +426,8 @@ def main() -> None:
     ap.add_argument("--per-bus", type=int, default=4, help="nodes sharing one CAN bus (default 4)")
     ap.add_argument("--duration", type=float, default=20.0, help="seconds measured per fleet step (default 20)")
     ap.add_argument("--latency-duration", type=float, default=60.0, help="seconds per latency rate (default 60)")
+    ap.add_argument("--frame-interval", type=float, default=0.0, help="the fleet's [sparkplug] frame_interval_s "
+                    "(default 0: no taxel frames)")
     ap.add_argument("--go-on", action="store_true", help="every step, even past a drop, the simulators behind "
                     "or the bridge at 90 %% of a core")
     args = ap.parse_args()
@@ -427,6 +436,7 @@ def main() -> None:
            + (f" --nodes-100 {args.nodes_100} --nodes-1k {args.nodes_1k} --per-bus {args.per_bus} "
               f"--duration {args.duration:g}" if args.only != "latency" else "")
            + (f" --latency-duration {args.latency_duration:g}" if args.only != "fleet" else "")
+           + (f" --frame-interval {args.frame_interval:g}" if args.frame_interval else "")
            + (" --go-on" if args.go_on else ""))
     print(f"# {cmd}")
     print(f"# {time.strftime('%Y-%m-%d', time.gmtime())} on {describe()}")
@@ -457,7 +467,8 @@ def main() -> None:
                 print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
                 for rate, counts in ((100.0, args.nodes_100), (1000.0, args.nodes_1k)):
                     for n in (int(x) for x in counts.split(",")):
-                        r = run_step(n, rate, args.per_bus, broker.port, broker.proc.pid, scene, args.duration, tmp)
+                        r = run_step(n, rate, args.per_bus, broker.port, broker.proc.pid, scene, args.duration, tmp,
+                                     args.frame_interval)
                         behind = r["late"] > 0.5 or r["scans"] < r["sent"]
                         ok = r["drops"] == 0 and r["stale"] == 0 and r["cpu"] < 0.9 and not behind
                         print(f"| one bridge | {rate:g} Hz | {n} | {r['cpu'] * 100:.1f} % | {r['cpu'] * 100 / n:.2f} % "
@@ -466,6 +477,9 @@ def main() -> None:
                               f"| {'yes' if ok else 'no (simulators behind)' if behind else 'no (stale)' if r['stale'] else 'no'} |", flush=True)
                         print(f"#   simulators: {r['sim_cpu'] * 100:.0f} % of a core, latest scan "
                               f"{r['late'] * 1000:.1f} ms behind its deadline", flush=True)
+                        if args.frame_interval:
+                            print(f"#   taxel frames: {r['frames']:.1f}/s received ({r['frames'] / n:.2f} per node), "
+                                  f"a frame's DDATA {r['frame_bytes']} bytes", flush=True)
                         if (behind or r["drops"] or r["cpu"] >= 0.9) and not args.go_on:
                             break  # (a stale node alone does not end the steps: it may be the machine's hiccup)
         finally:

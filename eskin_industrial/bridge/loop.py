@@ -5,7 +5,9 @@ One loop per sensor node, the same in every command (``bridge``, ``modbus-bridge
 runs each scan through the pipeline (calibration, detector), hands every update to
 every sink, applies the commands the sinks took (acknowledge, tare, enable), and
 publishes the image when due: a state change at once, a status bit change (stale, bus
-fault) as soon as it happens, otherwise every ``refresh_s``.
+fault) as soon as it happens, otherwise every ``refresh_s``.  A sink that asks for
+taxel frames (``Sink.frame_every_s``) gets the newest calibrated frame once its
+interval has passed: the loop decides which frames are due, after the publication.
 :meth:`NodeLoop.shutdown` publishes the last image, BRIDGE_OFFLINE with no state
 claimed.  Nothing here knows which kind of source or sink it drives.
 """
@@ -16,6 +18,7 @@ import collections
 import threading
 import time
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -61,6 +64,8 @@ class NodeLoop:
         # the per-scan path stays a few attribute reads.
         self._update_sinks: list[Callable[[Update], None]] = []
         self._command_sinks: list[Sink] = []
+        #: [on_frame, interval (s), next due (perf_counter)] of each sink that wants frames.
+        self._frame_sinks: list[list[Any]] = []
         self.sinks: list[Sink] = []
         for sink in sinks:
             self.add_sink(sink)
@@ -71,6 +76,8 @@ class NodeLoop:
             self._update_sinks.append(sink.on_update)
         if type(sink).take_commands is not Sink.take_commands:
             self._command_sinks.append(sink)
+        if sink.frame_every_s is not None:
+            self._frame_sinks.append([sink.on_frame, sink.frame_every_s, float("-inf")])
 
     def health(self, now: float | None = None) -> Health:
         src = self.source
@@ -114,7 +121,21 @@ class NodeLoop:
                 on_update(u)
             if hook is not None:
                 hook(u)
+        if self._frame_sinks and scan is not None:
+            self._hand_frame(t_event)
         return published
+
+    def _hand_frame(self, now: float) -> None:
+        """The newest frame to each sink whose interval has passed (the next one due a
+        whole interval later: never two closer than that); decided before the sink
+        copies anything."""
+        frame = self.pipeline.last_frame
+        if frame is None:
+            return
+        for due in self._frame_sinks:
+            if now >= due[2]:
+                due[2] = now + due[1]
+                due[0](frame)
 
     def _apply_commands(self) -> bool:
         acted = False

@@ -5,12 +5,16 @@ nothing is generated and no ``protoc`` runs at build time; the tests decode what
 encodes with the ``protobuf`` package and a schema of their own.  Covered: the
 payload's timestamp, metrics, seq, uuid and body; a metric's name, alias, timestamp,
 datatype, is_historical, is_transient, is_null, properties (a PropertySet of scalar
-values) and scalar value.  Unknown fields are skipped, as protobuf does.
+values) and scalar value, and the fixed-size numeric arrays of Sparkplug 3.0
+(``Int8Array`` .. ``DoubleArray``, datatypes 22 to 31): their values packed
+little-endian in ``bytes_value``, kept as those bytes here (:func:`pack_floats`,
+:func:`unpack_floats` for ``FloatArray``).  Unknown fields are skipped, as protobuf does.
 """
 
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ..errors import DecodeError
@@ -19,6 +23,13 @@ from ..errors import DecodeError
 INT8, INT16, INT32, INT64 = 1, 2, 3, 4
 UINT8, UINT16, UINT32, UINT64 = 5, 6, 7, 8
 FLOAT, DOUBLE, BOOLEAN, STRING, DATETIME, TEXT, UUID, BYTES = 9, 10, 11, 12, 13, 14, 15, 17
+#: Sparkplug 3.0's FloatArray: 32-bit IEEE floats packed little-endian in bytes_value
+#: (the specification's text on array types, 6.4.17, and Eclipse Tahu's encoders; the
+#: specification's worked FloatArray example prints big-endian bytes, a known erratum).
+FLOAT_ARRAY = 30
+#: The fixed-size arrays (Int8Array = 22 .. DoubleArray = 31) -> the size of one element.
+ARRAY_ITEM_SIZE = {22: 1, 23: 2, 24: 4, 25: 8, 26: 1, 27: 2, 28: 4, 29: 8, FLOAT_ARRAY: 4, 31: 8}
+_BYTES_FIELD = {BYTES, *ARRAY_ITEM_SIZE}  #: carried in bytes_value
 _INT_FIELD = {INT8, INT16, INT32, UINT8, UINT16, UINT32}  #: carried in int_value (uint32)
 _LONG_FIELD = {INT64, UINT64, DATETIME}  #: carried in long_value (uint64)
 _SIGNED_BITS = {INT8: 32, INT16: 32, INT32: 32, INT64: 64}  #: two's complement in the carrier
@@ -94,7 +105,7 @@ def _value(datatype: int, value: Value, fields: dict[str, int]) -> bytes:
         return _uint(fields["bool"], 1 if value else 0)
     if datatype in _STRING_FIELD:
         return _bytes(fields["string"], str(value).encode("utf-8"))
-    if datatype == BYTES and "bytes" in fields:
+    if datatype in _BYTES_FIELD and "bytes" in fields:
         return _bytes(fields["bytes"], bytes(value))  # type: ignore[arg-type]
     raise ValueError(f"datatype {datatype}: not supported here")
 
@@ -142,6 +153,18 @@ def encode(payload: Payload) -> bytes:
     if payload.body is not None:
         out += _bytes(5, payload.body)
     return bytes(out)
+
+
+def pack_floats(values: Sequence[float]) -> bytes:
+    """A FloatArray's bytes_value: each value as a little-endian 32-bit float."""
+    return struct.pack(f"<{len(values)}f", *values)
+
+
+def unpack_floats(data: bytes) -> tuple[float, ...]:
+    """The values of a FloatArray's bytes_value; PayloadError if it is not whole floats."""
+    if len(data) % 4:
+        raise PayloadError(f"a FloatArray of {len(data)} bytes (not a multiple of 4)")
+    return struct.unpack(f"<{len(data) // 4}f", data)
 
 
 # -- decoding ------------------------------------------------------------------------
@@ -274,6 +297,10 @@ def _decode_metric(data: bytes) -> Metric:
     datatype = kw.get("datatype")
     for field, wire, v in raw:
         kw["value"] = _scalar(datatype if isinstance(datatype, int) else None, wire, v, _METRIC_KIND[field])
+    size = ARRAY_ITEM_SIZE.get(datatype) if isinstance(datatype, int) else None
+    value = kw.get("value")
+    if size is not None and isinstance(value, bytes) and len(value) % size:
+        raise PayloadError(f"an array of datatype {datatype} with {len(value)} bytes, not whole {size}-byte items")
     return Metric(**kw)  # type: ignore[arg-type]
 
 

@@ -38,6 +38,13 @@ def layout_properties(profile: Profile) -> tuple[Property, ...]:
     return (("rows", (pb.INT64, lay.rows)), ("cols", (pb.INT64, lay.cols)), ("pitch_mm", (pb.DOUBLE, lay.pitch_mm)))
 
 
+def frame_properties(profile: Profile, interval_s: float) -> tuple[Property, ...]:
+    """The taxel frame's: its shape (``rows``, ``cols``, row-major), the taxel pitch, and
+    the interval it is sent at, at most."""
+    return (*layout_properties(profile), ("order", (pb.STRING, "row-major")),
+            ("frame_interval_s", (pb.DOUBLE, float(interval_s))))
+
+
 def method_properties(profile: Profile) -> tuple[Property, ...]:
     """``method`` and the keys that set its decision, by their profile name
     (``detector.slip_r_coe``, ``detector.cof_track.z``); ``detector.contact_threshold_n``

@@ -13,6 +13,12 @@ primary host's STATE.  While the node cannot publish (no broker, no primary host
 data messages go to the store (:mod:`.store`), whose own thread writes them to SQLite
 and sends them, historical, after the next births.  One lock orders the ``seq``
 numbers with the messages.  The connection's security: :mod:`.transport`.
+
+With ``frame_interval_s`` the device also publishes the calibrated taxel frame as a
+``FloatArray`` metric (``Taxels/Frame``): the node's loop hands it the newest frame
+once that interval has passed (:attr:`~eskin_industrial.sinks.base.Sink.frame_every_s`),
+and it goes out as a DDATA of its own, QoS 0, or not at all while the node cannot
+publish (a frame is a sample of now: the store keeps the states, not stale frames).
 """
 
 from __future__ import annotations
@@ -35,14 +41,16 @@ from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Publication, Sink, SinkHealth
 from . import payload as pb
 from .commands import COMMAND_ALIAS, COMMANDS, BadCommand, birth_metrics, parse_device_command
-from .properties import Property, layout_properties, method_properties
+from .properties import Property, frame_properties, layout_properties, method_properties
 from .store import Forwarder, Held, store_path
 from .transport import check_files, check_security, configure, parse_broker
 
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
+    from ..frames import Frame
 
 NAMESPACE = "spBv1.0"
+FRAME_INTERVAL_MIN_S = 0.05
 REBIRTH = "Node Control/Rebirth"
 _FORBIDDEN = set("+#/")
 
@@ -65,6 +73,12 @@ class SparkplugOptions:
     deadband: float = field(default=0.01, metadata=in_range(0, 1e9))
     #: An analog value is published at most this often (a state change goes at once).
     min_interval_s: float = field(default=0.5, metadata=in_range(0, 3600))
+    #: The taxel frame (``Taxels/Frame``) is published at most this often; 0: never
+    #: (the metric is not declared).  Faster than 20 a second is a stream, not a plant
+    #: metric: a CAN log of the node keeps every scan.
+    frame_interval_s: float = field(default=0.0, metadata={"check": (
+        lambda v: v == 0 or FRAME_INTERVAL_MIN_S <= v <= 3600,
+        f"0 (off) or a value in [{FRAME_INTERVAL_MIN_S:g}, 3600]")})
     #: Back-off between connection attempts: from this, doubling up to ``reconnect_max_s``.
     reconnect_min_s: float = field(default=0.2, metadata=in_range(0.05, 60))
     reconnect_max_s: float = field(default=5.0, metadata=in_range(0.05, 600))
@@ -132,6 +146,11 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Counters/Bus Errors", pb.UINT32, "count", True, "timeouts, CRC and exception responses"),
     MetricDef("Counters/Scans", pb.UINT64, "count", True, "scans the node's loop has taken since start"),
 )
+#: The taxel frame: declared (and sent) only with ``frame_interval_s``; its alias is
+#: the device's base + :data:`FRAME_ALIAS`.
+FRAME_METRIC = MetricDef("Taxels/Frame", pb.FLOAT_ARRAY, "N", False,
+                         "the calibrated taxel frame, row-major (rows x cols), NaN for a refused reading")
+FRAME_ALIAS = 50
 #: The metric whose DBIRTH properties describe the method (``method_properties``) and
 #: the one with the layout (``layout_properties``).
 METHOD_METRIC, LAYOUT_METRIC = "State", "CoF X"
@@ -235,6 +254,26 @@ class EdgeNode:
             return
         payload = pb.Payload(ms, metrics, self._next_seq())
         self._publish_tracked(device.topic["DDATA"], pb.encode(payload), held)
+
+    def send_frame(self, device: SparkplugDevice, data: bytes) -> None:
+        """A taxel frame as a DDATA of its own, QoS 0, when connected; else only kept
+        for the next DBIRTH and counted: never held (the loop's thread)."""
+        with self.lock:
+            device.frame = data
+            if device.dead:
+                return
+            if not self.connected:
+                device.frames_not_sent += 1
+                return
+            metric = pb.Metric(None, device.base + FRAME_ALIAS, None, pb.FLOAT_ARRAY, data)
+            info = self.client.publish(device.topic["DDATA"],
+                                       pb.encode(pb.Payload(_now_ms(), (metric,), self._next_seq())), qos=0)
+            if info.rc == 0:
+                self.published += 1
+                device.frames += 1
+            else:
+                self.dropped += 1
+                device.frames_not_sent += 1
 
     def _publish_tracked(self, topic: str, data: bytes, held: Held) -> None:
         info = self.client.publish(topic, data, qos=self.options.qos)
@@ -491,6 +530,9 @@ class SparkplugDevice(Sink):
                   "to a broker that dies, with the store).", type=int, metavar="N"),
         CliOption("--sparkplug-keepalive", "sparkplug_keepalive_s", "MQTT keepalive, seconds.", type=int,
                   metavar="S"),
+        CliOption("--sparkplug-frame-interval", "sparkplug_frame_interval_s", "Publish each node's calibrated "
+                  "taxel frame (metric Taxels/Frame, a FloatArray) at most this often, seconds (default 0: off).",
+                  type=float, metavar="S"),
         CliOption("--sparkplug-store-dir", "sparkplug_store_dir", "Folder of the on-disk queue of the data "
                   "messages of a broker outage (default: in memory).", metavar="DIR"),
         CliOption("--sparkplug-store-max", "sparkplug_store_max", "Data messages held at most during an "
@@ -511,6 +553,7 @@ class SparkplugDevice(Sink):
     )
     #: ``--sparkplug-*`` option -> the ``[sparkplug]`` key it sets.
     _CLI_KEYS = {"sparkplug_qos": "qos", "sparkplug_keepalive_s": "keepalive_s",
+                 "sparkplug_frame_interval_s": "frame_interval_s",
                  "sparkplug_store_dir": "store_dir", "sparkplug_store_max": "store_max",
                  "sparkplug_ca_file": "ca_file", "sparkplug_cert_file": "cert_file", "sparkplug_key_file": "key_file",
                  "sparkplug_username": "username", "sparkplug_primary_host_id": "primary_host_id", "sparkplug_password_file": "password_file",
@@ -534,6 +577,9 @@ class SparkplugDevice(Sink):
         self.dead = False
         self.image: PlcImage | None = None  #: of the newest publication (for a command's refusal)
         self._commands: collections.deque[Command] = collections.deque()
+        self.frame_every_s = node.options.frame_interval_s or None
+        self.frame: bytes | None = None  #: the newest frame handed, packed (births declare it)
+        self.frames = self.frames_not_sent = 0
 
     def command(self, payload: pb.Payload, topic: str) -> None:
         """A DCMD for this device (paho's thread): queued for the loop, or refused as a
@@ -578,6 +624,12 @@ class SparkplugDevice(Sink):
             value = None if values is None else values[i]
             metrics.append(pb.Metric(m.name, self.base + i, now, m.datatype, value, is_null=True if value is None
                                      else None, properties=props))
+        if self.frame_every_s is not None:
+            m = FRAME_METRIC
+            frame = self.frame
+            metrics.append(pb.Metric(m.name, self.base + FRAME_ALIAS, now, m.datatype, frame,
+                                     is_null=True if frame is None else None,
+                                     properties=(("engUnit", (pb.STRING, m.unit)), *self.properties.get(m.name, ()))))
         metrics += birth_metrics(self.base, now)
         self.sent = list(values) if values is not None else [None] * len(DEVICE_METRICS)
         self.sent_at = [time.monotonic()] * len(DEVICE_METRICS)
@@ -621,11 +673,20 @@ class SparkplugDevice(Sink):
                 metrics.append(pb.Metric(None, self.base + i, None, DEVICE_METRICS[i].datatype, values[i]))
             node.send_data(self, ms, tuple(metrics))
 
+    def on_frame(self, frame: Frame) -> None:
+        """A frame the loop found due: packed (little-endian float32, the one copy) and
+        sent by alias, not subject to the deadband."""
+        self.node.send_frame(self, frame.forces.astype("<f4").tobytes())
+
     def health(self) -> SinkHealth:
         return SinkHealth(self.node.connected, self.node.failures, self.node.last_error)
 
     def counters(self) -> dict[str, int]:
-        return self.node.counters()
+        out = self.node.counters()
+        if self.frame_every_s is not None:
+            out["sparkplug_frames"] = self.frames
+            out["sparkplug_frames_not_sent"] = self.frames_not_sent
+        return out
 
     def _close(self) -> None:
         self.death()
@@ -655,7 +716,10 @@ class SparkplugDevice(Sink):
     @classmethod
     def describe(cls, options: SparkplugOptions, node: NodeLike) -> str:
         host, port, _ = parse_broker(options.broker)
-        return f"Sparkplug B {NAMESPACE}/{options.group_id}/DDATA/{options.edge_node_id}/{node.name} at {host}:{port}"
+        frames = (f", {FRAME_METRIC.name} every {options.frame_interval_s:g} s ({node.profile.layout.rows} x "
+                  f"{node.profile.layout.cols})" if options.frame_interval_s else "")
+        return (f"Sparkplug B {NAMESPACE}/{options.group_id}/DDATA/{options.edge_node_id}/{node.name} at "
+                f"{host}:{port}{frames}")
 
     @classmethod
     def check(cls, options: SparkplugOptions, nodes: Sequence[NodeLike]) -> None:
@@ -673,7 +737,9 @@ class SparkplugDevice(Sink):
     def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
         edge = open_edge(options, [(n.name, n.profile.modbus.plc.r_scale, n.profile.modbus.plc.word_order,
                                     {METHOD_METRIC: method_properties(n.profile),
-                                     LAYOUT_METRIC: layout_properties(n.profile)}) for n in nodes])
+                                     LAYOUT_METRIC: layout_properties(n.profile),
+                                     FRAME_METRIC.name: frame_properties(n.profile, options.frame_interval_s)})
+                                   for n in nodes])
         context.closers.append(edge.close)  # closers run last first: the devices' DDEATH, then NDEATH
         for dev in edge.devices:
             context.closers.append(dev.close)
@@ -706,7 +772,7 @@ def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, float, str
 
 _TYPE_NAMES = {pb.INT8: "Int8", pb.INT16: "Int16", pb.INT32: "Int32", pb.INT64: "Int64", pb.UINT8: "UInt8",
                pb.UINT16: "UInt16", pb.UINT32: "UInt32", pb.UINT64: "UInt64", pb.FLOAT: "Float",
-               pb.DOUBLE: "Double", pb.BOOLEAN: "Boolean", pb.STRING: "String"}
+               pb.DOUBLE: "Double", pb.BOOLEAN: "Boolean", pb.STRING: "String", pb.FLOAT_ARRAY: "FloatArray"}
 
 
 def metric_table() -> list[str]:
@@ -715,6 +781,9 @@ def metric_table() -> list[str]:
     for i, m in enumerate(DEVICE_METRICS):
         sent = "deadband, min interval" if m.analog else "at once"
         rows.append(f"| base+{i} | `{m.name}` | {_TYPE_NAMES[m.datatype]} | {m.unit or '-'} | {sent} | {m.doc} |")
+    m = FRAME_METRIC
+    rows.append(f"| base+{FRAME_ALIAS} | `{m.name}` | {_TYPE_NAMES[m.datatype]} | {m.unit} | "
+                f"every `frame_interval_s` (0: not declared) | {m.doc} |")
     for i, c in enumerate(COMMANDS):
         rows.append(f"| base+{COMMAND_ALIAS + i} | `{c.name}` | Boolean | - | DBIRTH (false); DCMD | {c.doc} |")
     return rows

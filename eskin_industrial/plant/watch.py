@@ -4,13 +4,15 @@ is handed in).
 
 Online and offline come from the births and deaths (an NDEATH closes the session
 whose ``bdSeq`` it names, and no other); a device's state, data valid, slip count and
-last slip from its metrics, named by its DBIRTH's aliases; the message rate over the
-last :data:`RATE_WINDOW_S`; and gaps in each edge node's ``seq``.
+last slip from its metrics, named by its DBIRTH's aliases; the largest taxel force and
+the total of its newest taxel frame (``Taxels/Frame``, when the node sends it); the
+message rate over the last :data:`RATE_WINDOW_S`; and gaps in each edge node's ``seq``.
 """
 
 from __future__ import annotations
 
 import collections
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -20,6 +22,7 @@ from . import payload as pb
 
 RATE_WINDOW_S = 10.0
 _WANTED = {"State": "state", "Data Valid": "valid", "Slip": "slip", "Counters/Slip Events": "slips"}
+FRAME = "Taxels/Frame"
 
 
 @dataclass
@@ -31,6 +34,8 @@ class DeviceView:
     slip: bool | None = None
     slips: int | None = None
     last_slip_ms: int | None = None  #: the timestamp of the message that set Slip
+    frame_max: float | None = None  #: of the newest taxel frame (N; NaN taxels left out)
+    frame_sum: float | None = None
     aliases: dict[int, str] = field(default_factory=dict)
     arrivals: collections.deque[float] = field(default_factory=lambda: collections.deque(maxlen=10000))
 
@@ -121,6 +126,9 @@ class PlantModel:
         slip_before = dev.slip
         for m in p.metrics:
             name = m.name if m.name is not None else dev.aliases.get(m.alias or -1)
+            if name == FRAME:
+                _frame(dev, m.value)
+                continue
             key = _WANTED.get(name or "")
             if key is None or m.value is None:
                 continue
@@ -142,8 +150,21 @@ class PlantModel:
             for name, d in sorted(e.devices.items()):
                 out.append({"group": group, "edge": edge_id, "device": name, "online": d.online, "state": d.state,
                             "valid": d.valid, "last_slip_ms": d.last_slip_ms, "slips": d.slips,
-                            "rate": round(d.rate(now), 2)})
+                            "rate": round(d.rate(now), 2), "frame_max": d.frame_max, "frame_sum": d.frame_sum})
         return out
+
+
+def _frame(dev: DeviceView, value: Any) -> None:
+    """The newest frame's largest force and total; a value that is not whole 32-bit
+    floats (another publisher's) leaves the last ones."""
+    if not isinstance(value, bytes):
+        return
+    try:
+        forces = [f for f in pb.unpack_floats(value) if not math.isnan(f)]
+    except pb.PayloadError:
+        return
+    dev.frame_max = max(forces) if forces else None
+    dev.frame_sum = math.fsum(forces) if forces else None
 
 
 def _named(p: pb.Payload, name: str) -> Any:

@@ -1,7 +1,9 @@
 """The output seam: what every sink does, and the registry of output kinds.
 
 A node's loop hands each of its sinks every detector update (:meth:`Sink.on_update`,
-cheap, for a recorder) and every publication of the register image
+cheap, for a recorder), the calibrated taxel frame at the interval the sink asks for
+(:attr:`Sink.frame_every_s`, :meth:`Sink.on_frame`; most sinks ask for none), and every
+publication of the register image
 (:meth:`Sink.publish`: the registers as rendered, the image they came from, whether
 it is urgent, and when the deciding scan arrived).  A sink that can be commanded (the
 PLC: acknowledge, tare, enable) hands the commands back through
@@ -38,6 +40,7 @@ from ..registry import load_kind
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
     from ..detect.updates import Update
+    from ..frames import Frame
     from ..plc.image import Command, PlcImage
 
 #: section name -> "module:Class", imported on first use.  The order is the order of
@@ -111,6 +114,10 @@ class Sink(abc.ABC):
         self._closed = False
         #: Where the results go, for logs (``tcp 10.0.0.5:502 (client)``, a file path).
         self.where = self.kind
+        #: The sink wants a calibrated frame (:meth:`on_frame`) at most this often, in
+        #: seconds; None: no frames.  Read once when the sink joins a loop: the loop
+        #: decides which frames are due, so a sink that wants none costs the scan nothing.
+        self.frame_every_s: float | None = None
         self._events_lock = threading.Lock()
         self._events_held: collections.deque[tuple[str, str, dict[str, Any]]] = collections.deque(maxlen=EVENTS_HELD)
         self._event_handler: EventHandler | None = None
@@ -118,6 +125,12 @@ class Sink(abc.ABC):
     # -- the data path --------------------------------------------------------------
     def on_update(self, update: Update) -> None:
         """Every detector update, in order, on the loop's thread: keep it short."""
+
+    def on_frame(self, frame: Frame) -> None:
+        """A calibrated frame (newtons, row-major: the layout's rows x cols; NaN for a
+        reading the calibration refused), when :attr:`frame_every_s` has passed since
+        the last one handed, on the loop's thread: never block.  The frame is the one
+        the detector saw, not a copy: never change its arrays."""
 
     def publish(self, publication: Publication) -> None:
         """A publication of the register image, on the loop's thread: never block."""

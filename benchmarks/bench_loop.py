@@ -1,0 +1,127 @@
+"""The node loop's cost per scan (``NodeLoop.step``: poll, calibrate, detect, image,
+sinks), counted in instructions under valgrind's callgrind, which no load on the
+machine changes; and what a sink that takes taxel frames adds.
+
+    .venv/bin/python benchmarks/bench_loop.py               # every case (~2 min)
+    .venv/bin/python benchmarks/bench_loop.py --cases none  # one case
+
+Cases (the paper-5x5 profile, its detector, scans from memory with no wait):
+- ``none``: no sink at all: the loop as every command runs it.
+- ``off``: one sink that asks for no frames (``frame_every_s`` None, what the
+  Sparkplug output is with ``frame_interval_s = 0``).
+- ``every``: one sink that takes every scan's frame (``frame_every_s = 0``) and does
+  what the Sparkplug output does with it on the loop's thread: pack the forces as
+  little-endian float32 and encode the DDATA (paho's publish left out): the cost of
+  one frame, paid once per ``frame_interval_s`` in a real run.
+
+Instructions per scan: the difference of two runs' totals (2,000 and 6,000 scans)
+over their difference in scans, so that the interpreter's start-up and the imports
+cancel out.  Run it from another checkout (``python OTHER/benchmarks/bench_loop.py``
+imports OTHER's package) to compare two versions of the loop case by case.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from machine import describe  # noqa: E402
+
+CASES = ("none", "off", "every")
+
+
+def run_scans(case: str, scans: int) -> None:
+    """``scans`` scans through one node's loop, for callgrind to count."""
+    import numpy as np
+
+    from eskin_industrial.bridge.loop import NodeLoop
+    from eskin_industrial.bus.source import Source
+    from eskin_industrial.calibration import Calibrator
+    from eskin_industrial.frames import Frame, RawScan
+    from eskin_industrial.plant import payload as pb
+    from eskin_industrial.profile import load_profile
+    from eskin_industrial.scenes import render
+    from eskin_industrial.sinks.base import Sink
+
+    prof = load_profile(str(ROOT / "profiles" / "paper-5x5.toml"))
+    rec = render("case2", prof.sensor.rate_hz, 0)
+    raw = np.rint(Calibrator.from_section(prof.calibration, prof.taxels).to_raw(rec.forces))
+
+    class Memory(Source):
+        """The scene's scans, one per poll, at once."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.k = 0
+
+        def _poll(self, timeout_s: float | None) -> RawScan | None:
+            k = self.k
+            self.k += 1
+            i = k % len(raw)
+            return RawScan(k, k / prof.sensor.rate_hz, raw[i], 0, 0.0)
+
+    class Frames(Sink):
+        kind = "bench"
+
+        def __init__(self, every_s: float | None) -> None:
+            super().__init__()
+            self.frame_every_s = every_s
+            self.bytes = 0
+
+        def on_frame(self, frame: Frame) -> None:
+            data = frame.forces.astype("<f4").tobytes()
+            metric = pb.Metric(None, 1050, None, pb.FLOAT_ARRAY, data)
+            self.bytes += len(pb.encode(pb.Payload(1_700_000_000_000, (metric,), 7)))
+
+    sinks = [] if case == "none" else [Frames(None if case == "off" else 0.0)]
+    loop = NodeLoop(prof, Memory(), sinks)
+    step = loop.step
+    for _ in range(scans):
+        step(0.0)
+
+
+def instructions_per_scan(case: str) -> float:
+    # a fixed hash seed and no address randomisation, as bench_detector.py
+    env = {**os.environ, "PYTHONHASHSEED": "0"}
+    fixed = ["setarch", "-R"] if shutil.which("setarch") else []
+    totals = []
+    for scans in (2_000, 6_000):
+        res = subprocess.run([*fixed, "valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
+                              sys.executable, __file__, "--count", case, str(scans)],
+                             capture_output=True, text=True, check=True, env=env)
+        totals.append(int(next(ln for ln in res.stderr.splitlines() if "Collected" in ln).split()[-1]))
+    return (totals[1] - totals[0]) / 4_000
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cases", default=",".join(CASES), help=f"comma-separated, of {', '.join(CASES)}")
+    ap.add_argument("--count", nargs=2, metavar=("CASE", "SCANS"), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.count:
+        run_scans(args.count[0], int(args.count[1]))
+        return
+    if shutil.which("valgrind") is None:
+        ap.error("needs valgrind (Debian: apt-get install valgrind)")
+    cases = args.cases.split(",")
+    for c in cases:
+        if c not in CASES:
+            ap.error(f"--cases: {c!r} is not one of {', '.join(CASES)}")
+    print(f"# .venv/bin/python benchmarks/bench_loop.py --cases {','.join(cases)}")
+    print(f"# on {describe()}")
+    print("| case | instructions per scan |")
+    print("|---|---|")
+    for c in cases:
+        print(f"| {c} | {instructions_per_scan(c):,.0f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
