@@ -67,9 +67,11 @@ class CofTrack(ScoredDetector):
         horizons = tuple(max(2, round(h * rate_hz)) for h in c.ramp_horizons_s)
         base = max(2, round(c.ramp_base_s * rate_hz))
         self._ramp = RampBank(horizons, base, c.ramp_z)
-        groups = profile_groups(x_mm, y_mm)
-        self._profile = ProfileShift(groups, horizons, base, c.profile_z, every=max(1, round(c.hop_s * rate_hz)),
-                                     noise_n=round(c.noise_s * rate_hz)) if c.profile_shift and groups.size else None
+        groups = profile_groups(x_mm, y_mm)  # (its test runs on hop means: horizons in hops)
+        self._profile = ProfileShift(
+            groups, tuple(max(2, round(h / c.hop_s)) for h in c.ramp_horizons_s), max(2, round(c.ramp_base_s / c.hop_s)),
+            c.profile_z, every=max(1, round(c.hop_s * rate_hz)), noise_n=round(c.noise_s / c.hop_s),
+        ) if c.profile_shift and groups.size else None
         # the ripple's lag and window are times, so that it sees the same band at any rate
         lag = max(1, round(c.ripple_lag_s * rate_hz))
         window = max(1, round(c.ripple_s * rate_hz))

@@ -28,11 +28,9 @@ quantile with the tail of the ramp channel's Rayleigh test at ``z``, exp(-z^2/2)
 both channels raise about as many false alarms per test.  The score is
 ``sqrt(T_L^2 / threshold)`` (1 = threshold), the largest over the bank.
 
-The cost per frame is one matrix product (the profile of the frame) and a store in a
-ring; the test itself runs once per ``every`` frames (the detector's hop) as one
-product over the ring, and the noise is learnt once per calm hop, so its cost per frame
-is the same at 100 Hz and at 1 kHz.  :func:`profile_batch` is the same test over a
-whole series, with a given noise, for the tests.
+The test runs on the means of blocks of frames (the detector's hop, 10 ms), so that
+its cost per frame falls with the rate (:class:`ProfileShift`); :func:`profile_batch`
+is the same test over a whole series, with a given noise, for the tests.
 """
 
 from __future__ import annotations
@@ -91,28 +89,21 @@ def chi2_threshold(z: float, dof: int) -> float:
     return 0.5 * (lo + hi)
 
 
-def whitening(cov: np.ndarray) -> tuple[np.ndarray, int]:
-    """The pseudo-inverse of a noise covariance and its rank (eigenvalues below 1e-9 of
-    the largest count as none: the total is shared by both axes' sums)."""
-    vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
-    top = float(vals[-1]) if len(vals) else 0.0
+def sum_whitening(groups: np.ndarray, var: np.ndarray) -> tuple[np.ndarray | None, int]:
+    """``groups`` times a whitening of the sums' noise (C+ = L L'), and the rank of that
+    noise, from each taxel's noise variance ``var`` (taxels independent: far steadier
+    than a covariance learnt entry by entry, whose small eigenvalues came out low
+    after a few hundred changes and made the test fire on a still grip)."""
+    top = float(var.max()) if len(var) else 0.0
     if not top > 0.0:
-        return np.zeros_like(cov), 0
-    keep = vals > 1e-9 * top
-    v = vecs[:, keep]
-    return (v / vals[keep]) @ v.T, int(keep.sum())
-
-
-def _scores(num: np.ndarray, ref: np.ndarray, cinv: np.ndarray, sd2: np.ndarray) -> np.ndarray:
-    """T_L^2 for each row of num (H, m) against its reference row."""
-    a = num @ cinv
-    b = ref @ cinv
-    rr = np.einsum("hm,hm->h", ref, b)
-    rn = np.einsum("hm,hm->h", ref, num)
-    nn = np.einsum("hm,hm->h", num, a)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t2 = nn - np.where(rr > 0.0, rn * rn / rr, 0.0)
-    return np.maximum(t2, 0.0) / sd2
+        return None, 0
+    # a taxel that hardly changes (quantized, stuck) gets a floor: with none, its sums'
+    # noise learnt as zero would weigh any change of it without bound
+    cov = groups.T @ (np.maximum(var, 0.0025 * top)[:, None] * groups)
+    vals, vecs = np.linalg.eigh(cov)
+    keep = vals > 1e-9 * float(vals[-1])  # the total is in both axes' sums: rank m - 1
+    rank = int(keep.sum())
+    return groups @ (vecs[:, keep] / np.sqrt(vals[keep])), rank
 
 
 def _weights(horizons: tuple[int, ...], base: int) -> tuple[np.ndarray, np.ndarray]:
@@ -126,18 +117,35 @@ def _weights(horizons: tuple[int, ...], base: int) -> tuple[np.ndarray, np.ndarr
     return np.vstack([g, means]), sd * sd
 
 
-def profile_batch(p: np.ndarray, cov: np.ndarray, horizons: tuple[int, ...], base: int, z: float) -> np.ndarray:
-    """The score (1 = threshold) at every sample of a (K, m) profile series under a
-    fixed noise covariance, with no streaming state: what :class:`ProfileShift` must
-    reproduce (NaN until N = max L + B profiles)."""
+def _score(gram: list[list[float]], nh: int, sd2: list[float], thr: float) -> float:
+    """The largest T_L^2 / threshold's root, from the Gram matrix of the whitened
+    ramps (rows 0..H-1) and references (rows H..2H-1)."""
+    best = 0.0
+    for h in range(nh):
+        row, rr = gram[h], gram[nh + h][nh + h]
+        t2 = (row[h] - (row[nh + h] ** 2 / rr if rr > 0.0 else 0.0)) / (sd2[h] * thr)
+        if t2 > best:
+            best = t2
+    return math.sqrt(best)
+
+
+def profile_batch(frames: np.ndarray, groups: np.ndarray, var: np.ndarray, horizons: tuple[int, ...],
+                  base: int, z: float, every: int = 1) -> np.ndarray:
+    """The score (1 = threshold) after every block of ``every`` frames of a (K, n)
+    series, under a fixed taxel noise variance ``var`` (of the frames), with no
+    streaming state: what :class:`ProfileShift` must reproduce (NaN until N = max L + B
+    blocks).  The test runs on the blocks' means, horizons and base in blocks."""
+    blocks = frames[:len(frames) // every * every].reshape(-1, every, frames.shape[1]).mean(axis=1)
     w, sd2 = _weights(horizons, base)
     nh, n = len(horizons), w.shape[1]
-    cinv, rank = whitening(cov)
+    white, rank = sum_whitening(groups, np.asarray(var, dtype=float) / every)
     thr = chi2_threshold(z, max(1, rank - 1))
-    out = np.full(len(p), np.nan)
-    for k in range(n - 1, len(p)):
-        both = w @ p[k - n + 1:k + 1]
-        out[k] = math.sqrt(float(np.max(_scores(both[:nh], both[nh:], cinv, sd2))) / thr)
+    out = np.full(len(blocks), np.nan)
+    if white is None:
+        return out
+    for k in range(n - 1, len(blocks)):
+        y = (w @ blocks[k - n + 1:k + 1]) @ white
+        out[k] = _score((y @ y.T).tolist(), nh, sd2.tolist(), thr)
     return out
 
 
@@ -145,37 +153,43 @@ class ProfileShift:
     """Streaming :func:`profile_batch`, with the noise learnt as it goes.
 
     ``push(frame)`` once a frame (not for held copies); ``calm()`` after a frame the
-    detector judged calm (runs of calm changes teach the noise); ``score()`` returns
-    the test's score, computed on every ``every``-th push (0 until the ring is full
-    and a ring's worth of changes has been learnt).
+    detector judged calm; ``score()`` the test's score, computed once a block of
+    ``every`` frames (the detector's hop) is complete: 0 until the ring is full and a
+    ring's worth of block changes has been learnt.
 
-    The ring holds the raw frames: a push is one store, and an evaluation is two
-    products over the ring's two halves (no copy), then one with the groups and the
-    whitening folded into one matrix, and the 2H x 2H Gram matrix of the result, whose
-    diagonals hold every inner product the test needs."""
+    The test runs on the means of the blocks, so its cost per frame falls with the
+    rate: at 1 kHz a frame is one store, and a block one mean; an evaluation is one
+    product over the ring of block means (stored twice, so that the newest N are one
+    contiguous view), one with the groups and the whitening folded into one matrix,
+    and the 2H x 2H Gram matrix of the result, which holds every inner product the
+    test needs.  The noise is each taxel's variance over the changes of its block
+    means, learnt from runs of blocks whose every frame was calm."""
 
     def __init__(self, groups: np.ndarray, horizons: tuple[int, ...], base: int, z: float,
                  every: int, noise_n: int) -> None:
         self.groups = groups
-        self.m = groups.shape[1]
         self._w, sd2 = _weights(horizons, base)
         self._sd2 = sd2.tolist()
         self.nh = len(horizons)
         self.n = self._w.shape[1]
         self.z = z
         self.every = max(1, every)
-        self.learn_every = max(self.every, self.n // 4)  # changes per learning step
+        self.learn_every = max(1, self.n // 4)  # block changes per learning step
         self._a_noise = 1.0 / max(1.0, noise_n)  # the learning's smallest gain per change
         self.min_learnt = self.n
         self.reset()
 
     def reset(self) -> None:
-        self._ring = np.zeros((self.n, self.groups.shape[0]))
+        taxels = self.groups.shape[0]
+        self._buf = np.zeros((self.every, taxels))  # the current block's frames
+        self._j = 0
+        self._ring = np.zeros((2 * self.n, taxels))  # block means, at i and at i + n
         self._i = 0
-        self.count = 0
-        self._calm_from = -1  # push count at which the current run of calm frames began
-        self._calm_last = -1  # push count at the last calm frame
-        self._var = np.zeros(self.groups.shape[0])  # each taxel's noise variance
+        self.blocks = 0
+        self._calm_frames = 0  # calm frames in the current block
+        self._calm_from = -1  # block count at which the current run of calm blocks began
+        self._calm_last = -1  # block count at the last calm block
+        self._var = np.zeros(taxels)  # each taxel's noise variance (of a block mean)
         self._learnt = 0
         self._white: np.ndarray | None = None  # groups times the whitening (taxels x rank)
         self._thr = 0.0
@@ -184,29 +198,39 @@ class ProfileShift:
         self._last_at = -1
 
     def push(self, frame: np.ndarray) -> None:
-        i = self._i
-        self._ring[i] = frame
-        self._i = i + 1 if i + 1 < self.n else 0
-        self.count += 1
-
-    def _ordered(self, k: int) -> np.ndarray:
-        """The newest ``k`` frames (k <= n), oldest first."""
-        i, ring = self._i, self._ring
-        if k <= i:
-            return ring[i - k:i]
-        return np.concatenate((ring[self.n - (k - i):], ring[:i]))
+        j = self._j
+        if j == 0:
+            self._calm_frames = 0
+        if self.every == 1:
+            block = frame
+        else:
+            self._buf[j] = frame
+            j += 1
+            if j < self.every:
+                self._j = j
+                return
+            block = self._buf.mean(axis=0)
+        self._j = 0
+        i, n, ring = self._i, self.n, self._ring
+        ring[i] = ring[i + n] = block
+        self._i = i + 1 if i + 1 < n else 0
+        self.blocks += 1
 
     def calm(self) -> None:
-        """The frame just pushed was calm: once ``learn_every`` changes in a row are (a
-        frame not followed by ``calm()`` breaks the run), learn the noise from them."""
-        count = self.count
+        """The frame just pushed was calm.  Once ``learn_every`` block changes in a row
+        are (a block with a frame that was not breaks the run), learn from them."""
+        self._calm_frames += 1
+        if self._j or self._calm_frames < self.every:
+            return
+        count = self.blocks
         if self._calm_last != count - 1 or self._calm_from < 0:
             self._calm_from = count
         self._calm_last = count
         run = count - self._calm_from
         if run < self.learn_every:
             return
-        d = np.diff(self._ordered(run + 1), axis=0)
+        i = self._i + self.n
+        d = np.diff(self._ring[i - run - 1:i], axis=0)
         self._calm_from = count
         self._learnt += run
         gain = max(run / self._learnt, run * self._a_noise)
@@ -216,49 +240,26 @@ class ProfileShift:
             self._whiten()
 
     def _whiten(self) -> None:
-        # taxels' noise independent: the sums' covariance follows from the taxels'
-        # variances, far steadier than a covariance learnt entry by entry (with a few
-        # hundred changes that one's small eigenvalues came out low, and the
-        # test's tail fired on a still grip)
-        cov = self.groups.T @ (self._var[:, None] * self.groups)
-        vals, vecs = np.linalg.eigh(cov)
-        top = float(vals[-1]) if len(vals) else 0.0
-        keep = vals > 1e-9 * top if top > 0.0 else np.zeros(len(vals), dtype=bool)
-        rank = int(keep.sum())
-        # C+ = L L' with L = V / sqrt(lambda): whitened profiles are frames @ (groups L)
-        self._white = self.groups @ (vecs[:, keep] / np.sqrt(vals[keep])) if rank else None
+        self._white, rank = sum_whitening(self.groups, self._var)
         self._thr = chi2_threshold(self.z, max(1, rank - 1))
         self._stale = 0
 
     def set_noise(self, var: np.ndarray) -> None:
-        """Use these taxel noise variances (as if learnt) from now on."""
-        self._var = np.array(var, dtype=float)
+        """Use these taxel noise variances (of single frames, as if learnt) from now on."""
+        self._var = np.array(var, dtype=float) / self.every
         self._learnt = max(self._learnt, self.min_learnt)
         self._whiten()
 
     def score(self) -> float:
-        count = self.count
-        if count == self._last_at:
-            return self._last
-        if count % self.every:  # between evaluations: the last one, if it is this hop's
-            return self._last if count - self._last_at < self.every else 0.0
+        count = self.blocks
+        if self._j or count == self._last_at:  # mid-block: the last block's, if recent
+            return self._last if count - self._last_at <= 1 else 0.0
         self._last_at = count
         white = self._white
         if count < self.n or white is None or self._learnt < self.min_learnt:
             self._last = 0.0
             return 0.0
-        i, w, ring = self._i, self._w, self._ring
-        # the ring's oldest frame sits at i: weights' first n - i columns go with ring[i:]
-        y = (w[:, :self.n - i] @ ring[i:] + w[:, self.n - i:] @ ring[:i]) @ white
-        gram = (y @ y.T).tolist()
-        nh, thr = self.nh, self._thr
-        best = 0.0
-        for h in range(nh):
-            row, ref = gram[h], gram[nh + h]
-            rr = ref[nh + h]
-            t2 = row[h] - (row[nh + h] ** 2 / rr if rr > 0.0 else 0.0)
-            t2 /= self._sd2[h] * thr
-            if t2 > best:
-                best = t2
-        self._last = math.sqrt(best)
+        i = self._i
+        y = (self._w @ self._ring[i:i + self.n]) @ white
+        self._last = _score((y @ y.T).tolist(), self.nh, self._sd2, self._thr)
         return self._last
