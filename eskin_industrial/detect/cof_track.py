@@ -215,7 +215,9 @@ class CofTrack(ScoredDetector):
             evidence = min(variance_evidence(energy / self._rnoise, self._ripple_dof), self._evidence_cap) if (
                 energy is not None and self._rnoise > 0.0) else 0.0
             r = self._ramp.score(qx if qx > floor else floor, qy if qy > floor else floor, self.ramp_min, evidence)
-            if profile is not None:  # the column and row sums' own test, OR'd
+            if profile is not None and not self.decision.latch.on:  # the sums' own test, OR'd
+                # (silent in the variable_force state: a soft pad's outline changes
+                # with its force, which no scaling of the sums describes)
                 rp = profile.score()
                 if rp > r:
                     r = rp
