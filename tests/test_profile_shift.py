@@ -174,3 +174,31 @@ def test_the_learnt_noise_is_the_taxels_and_a_still_map_stays_quiet() -> None:
         ps.calm()
     np.testing.assert_allclose(ps._var, SIGMA ** 2 / every, rtol=0.35)
     assert 0.0 <= top < 1.0
+
+
+def _slip_times(profile_shift: bool, name: str, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    from eskin_industrial.detect.cof_track import CofTrack
+    from eskin_industrial.detect.settings import CofTrackSettings, DetectorSettings
+    from eskin_industrial.detect.state import GraspState
+    from eskin_industrial.evaluation.corpus import coordinates
+    from eskin_industrial.scenes import render
+
+    rec = render(name, 100.0, seed)
+    x, y = coordinates(rec)
+    settings = DetectorSettings(cof_track=CofTrackSettings(profile_shift=profile_shift, profile_z=6.0))
+    ups = CofTrack(settings, x, y, 100.0).feed(rec.t, rec.forces)
+    t = np.array([u.t for u in ups])
+    slip = np.array([u.state == GraspState.SLIP for u in ups])
+    return t, slip, rec.t[rec.labels == "slip"]
+
+
+def test_a_turn_the_centre_of_force_does_not_see_is_found_by_the_sums() -> None:
+    """The twist scene turns an 8 N block 30 degrees about its own centre: the CoF stays,
+    so cof-track without the channel reads no slip at all; the sums' outline turns, and
+    with it the turn is found, and nothing before it."""
+    t, slip, truth = _slip_times(False, "twist", 0)
+    assert not slip.any()
+    t, slip, truth = _slip_times(True, "twist", 0)
+    onset = float(truth.min())
+    assert slip[(t >= onset) & (t <= truth.max() + 0.5)].any()
+    assert not slip[t < onset].any()

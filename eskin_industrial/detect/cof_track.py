@@ -20,6 +20,9 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     e    = stick-slip evidence (detect/ripple.py): a rise in the energy of the total
            force's 10 ms change, as a log-likelihood ratio added to the ramp's; capped so
            that the ramp still needs ramp_support_z of its own
+    p    = the profile channel (detect/profile_shift.py; off unless profile_shift): the
+           ramp test on the column and row sums, a change of force projected out; taken
+           into r (r = max(r, p)) while the force is steady and not in variable_force
     slip when a > 1, b > 1 or r > 1, or the stick-slip channel fires (below) while the
     force is steady
 
