@@ -74,9 +74,12 @@ class CofTrackSettings:
     #: Profile channel (detect/profile_shift.py): the same ramp test on the column and
     #: row sums of the map, any change but a change of force, against their learnt
     #: noise; over the ramp's horizons, threshold the chi-square value with the
-    #: tail of ``profile_z`` standard deviations of the ramp's test.
+    #: tail of ``profile_z`` standard deviations of the ramp's test.  Off: on the
+    #: held-out holds it raised 0.53 false alarms per hour at 6.0 (0.4 on the tuning
+    #: holds, where 5.5 raised 1.0), and it costs 2.6x the paper method at 100 Hz; it
+    #: finds torsional slip, which nothing else does (docs/evaluation.md).
     profile_shift: bool = False
-    profile_z: float = field(default=5.5, metadata=positive())
+    profile_z: float = field(default=6.0, metadata=positive())
 
     def __post_init__(self) -> None:
         if not self.ramp_horizons_s:
