@@ -4,6 +4,7 @@ reference that recomputes every window from scratch (np.corrcoef + pywt.dwt).
     .venv/bin/python benchmarks/bench_detector.py                 # full run (about a minute)
     .venv/bin/python benchmarks/bench_detector.py --quick         # smoke run
     .venv/bin/python benchmarks/bench_detector.py --instructions  # + instruction counts (valgrind, ~1 min)
+    .venv/bin/python benchmarks/bench_detector.py --quick --profile-shift  # cof-track with its profile channel
 
 The machine is shared and noisy: every figure is the median of several repeats, and
 cof-track's cost against the paper detector's is the median of paired runs.  With
@@ -137,6 +138,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer frames and repeats")
     ap.add_argument("--instructions", action="store_true", help="also count instructions per frame (valgrind)")
+    ap.add_argument("--profile-shift", action="store_true",
+                    help="cof-track with its profile channel on ([detector.cof_track] profile_shift)")
     ap.add_argument("--count", nargs=2, metavar=("METHOD", "FRAMES"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.count:
@@ -144,7 +147,11 @@ def main() -> None:
         return
     if args.instructions and shutil.which("valgrind") is None:
         ap.error("--instructions needs valgrind (Debian: apt-get install valgrind)")
+    if args.instructions and args.profile_shift:
+        ap.error("--profile-shift: the instruction counts run the default settings; leave out --instructions")
     cfg = replace(DetectorSettings(), window_s=0.4, hop_s=0.1, lag_s=0.1)
+    if args.profile_shift:
+        cfg = replace(cfg, cof_track=replace(cfg.cof_track, profile_shift=True))
     frames, repeats = (5_000, 3) if args.quick else (30_000, 5)
     batch_frames = 60_000 if args.quick else 600_000  # 10 minutes at 1 kHz
     ref_frames = 1_000 if args.quick else 3_000

@@ -20,6 +20,9 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     e    = stick-slip evidence (detect/ripple.py): a rise in the energy of the total
            force's 10 ms change, as a log-likelihood ratio added to the ramp's; capped so
            that the ramp still needs ramp_support_z of its own
+    p    = the profile channel (detect/profile_shift.py; off unless profile_shift): the
+           ramp test on the column and row sums, a change of force projected out; taken
+           into r (r = max(r, p)) while the force is steady and not in variable_force
     slip when a > 1, b > 1 or r > 1, or the stick-slip channel fires (below) while the
     force is steady
 
@@ -33,6 +36,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+from .profile_shift import ProfileShift, profile_groups
 from .ramp import RampBank
 from .ripple import ForceRipple, ripple_dof, variance_evidence
 from .scored import ScoredDetector
@@ -66,6 +70,11 @@ class CofTrack(ScoredDetector):
         horizons = tuple(max(2, round(h * rate_hz)) for h in c.ramp_horizons_s)
         base = max(2, round(c.ramp_base_s * rate_hz))
         self._ramp = RampBank(horizons, base, c.ramp_z)
+        groups = profile_groups(x_mm, y_mm)  # (its test runs on hop means: horizons in hops)
+        self._profile = ProfileShift(
+            groups, tuple(max(2, round(h / c.hop_s)) for h in c.ramp_horizons_s), max(2, round(c.ramp_base_s / c.hop_s)),
+            c.profile_z, every=max(1, round(c.hop_s * rate_hz)), noise_n=round(c.noise_s / c.hop_s),
+        ) if c.profile_shift and groups.size else None
         # the ripple's lag and window are times, so that it sees the same band at any rate
         lag = max(1, round(c.ripple_lag_s * rate_hz))
         window = max(1, round(c.ripple_s * rate_hz))
@@ -93,6 +102,8 @@ class CofTrack(ScoredDetector):
         self._vib_sum = 0.0
         self._calm_force = 0
         self._ramp.reset()
+        if self._profile is not None:
+            self._profile.reset()
         if self._ripple is not None:
             self._ripple.reset()
 
@@ -159,8 +170,11 @@ class CofTrack(ScoredDetector):
             self._noise_x = 0.5 * step2
         # the ramp's base must not hold the grab: its centres start once it has settled;
         # a held copy is no sample (repeats would count one noise draw twice)
+        profile = self._profile
         if not filled:
             self._ramp.push(xc, yc, 1.0 / (s * s))
+            if profile is not None:
+                profile.push(f)
         noise_d = z * math.sqrt(2.0 * noise / m) / s
         if fast is not None:
             lim = self.min_fast
@@ -204,6 +218,12 @@ class CofTrack(ScoredDetector):
             evidence = min(variance_evidence(energy / self._rnoise, self._ripple_dof), self._evidence_cap) if (
                 energy is not None and self._rnoise > 0.0) else 0.0
             r = self._ramp.score(qx if qx > floor else floor, qy if qy > floor else floor, self.ramp_min, evidence)
+            if profile is not None and not self.decision.latch.on:  # the sums' own test, OR'd
+                # (silent in the variable_force state: a soft pad's outline changes
+                # with its force, which no scaling of the sums describes)
+                rp = profile.score()
+                if rp > r:
+                    r = rp
         self.fast_score, self.ramp_score = a, r
         slip = a > 1.0 or b > 1.0 or r > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
         if not slip and a < 0.5 and not filled:  # learn the noise only while calm
@@ -216,4 +236,6 @@ class CofTrack(ScoredDetector):
             self._fnoise += gain * ((s - prev[2]) ** 2 * 0.5 - self._fnoise)
             if rip_d2 is not None:
                 self._rnoise += gain * (rip_d2 - self._rnoise)
+            if profile is not None:
+                profile.calm()
         return (a if a > r else r), b, slip, varying

@@ -71,6 +71,15 @@ class CofTrackSettings:
     #: shake) is no slip.  (0 flagged 19-22 of 30 such still grips, 4 one of 30, at 44 %
     #: of the tuning events within 40 ms against 50 %: docs/evaluation.md.)
     ramp_support_z: float = field(default=4.0, metadata=non_negative())
+    #: Profile channel (detect/profile_shift.py): the same ramp test on the column and
+    #: row sums of the map, any change but a change of force, against their learnt
+    #: noise; over the ramp's horizons, threshold the chi-square value with the
+    #: tail of ``profile_z`` standard deviations of the ramp's test.  Off: on the
+    #: held-out holds it raised 0.53 false alarms per hour at 6.0 (0.4 on the tuning
+    #: holds, where 5.5 raised 1.0), and it costs 2.6x the paper method at 100 Hz; it
+    #: finds torsional slip, which nothing else does (docs/evaluation.md).
+    profile_shift: bool = False
+    profile_z: float = field(default=6.0, metadata=positive())
 
     def __post_init__(self) -> None:
         if not self.ramp_horizons_s:
