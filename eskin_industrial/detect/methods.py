@@ -48,7 +48,7 @@ class Method:
     batch: Callable[..., Any]
     #: The factories also need ``model=`` (see :meth:`with_model`).
     needs_model: bool = False
-    #: The method's number in the METHOD register and the Sparkplug ``Method`` metric
+    #: The method's number in the METHOD_ID register and the Sparkplug ``Method`` metric
     #: (fixed: a PLC program compares it; 0 is no method, a bridge that has stopped).
     code: int = 0
     #: What ``score_a`` and ``score_b`` hold.
@@ -113,7 +113,7 @@ def get_method(name: str) -> Method:
 
 
 def method_of_code(code: int) -> Method | None:
-    """The method with this METHOD register value (None: 0 or unknown)."""
+    """The method with this METHOD_ID register value (None: 0 or unknown)."""
     return next((m for m in METHODS.values() if m.code == code), None)
 
 
