@@ -8,11 +8,19 @@ import numpy as np
 import pytest
 
 from eskin_industrial.detect import METHODS, PaperDetector, get_method, paper_batch
+from eskin_industrial.detect.alongside import PaperAlongside
 from eskin_industrial.detect.methods import method_of_code
 from eskin_industrial.scenes import render
 from tests.test_stream_equals_batch import faulty_recording
 
 SCORED = ("cof-track", "force-rate", "hf-energy", "cof-velocity")
+
+
+@pytest.fixture(params=["scalars", "arrays"])
+def hop_path(request, monkeypatch):
+    """Each test on both ways of doing a hop's work, whatever the hop's length."""
+    monkeypatch.setattr(PaperAlongside, "ARRAYS_FROM", 1 if request.param == "arrays" else 10**9)
+    return request.param
 
 
 def paper_alone(settings, x, y, rate, t, f):
@@ -34,7 +42,7 @@ def assert_paper_indicators(settings, x, y, rate, t, f, method: str) -> list:
 
 @pytest.mark.parametrize("method", SCORED)
 @pytest.mark.parametrize("seed", [1, 2])
-def test_a_faulty_recording_gives_every_method_the_papers_indicators(paper_profile, method, seed):
+def test_a_faulty_recording_gives_every_method_the_papers_indicators(paper_profile, method, seed, hop_path):
     # NaN, negatives, repeated and backward times, a filled gap and a reset
     x, y = paper_profile.coordinates_mm
     t, f = faulty_recording(seed)
@@ -42,7 +50,7 @@ def test_a_faulty_recording_gives_every_method_the_papers_indicators(paper_profi
 
 
 @pytest.mark.parametrize("rate", [100.0, 1000.0])
-def test_cof_track_on_a_scene_carries_the_papers_indicators_held_between_its_hops(paper_profile, rate):
+def test_cof_track_on_a_scene_carries_the_papers_indicators_held_between_its_hops(paper_profile, rate, hop_path):
     x, y = paper_profile.coordinates_mm
     scene = render("case2", rate, 0)
     cfg = replace(paper_profile.detector, method="cof-track")
@@ -61,7 +69,7 @@ def test_cof_track_on_a_scene_carries_the_papers_indicators_held_between_its_hop
 
 @pytest.mark.parametrize("geometry", [dict(hop_s=0.05, lag_s=0.1), dict(hop_s=0.2, lag_s=0.05),
                                       dict(hop_s=0.02, window_s=0.02), dict(wavelet="db4")])
-def test_the_papers_geometry_is_followed(paper_profile, geometry):
+def test_the_papers_geometry_is_followed(paper_profile, geometry, hop_path):
     # hops shorter and longer than the lag, a window shorter than the wavelet, a longer filter
     x, y = paper_profile.coordinates_mm
     t, f = faulty_recording(3)
@@ -101,3 +109,15 @@ def test_each_method_names_its_scores_and_has_a_code():
         else:
             assert tuple(s.name for s in m.scores) == ("r_coe", "r_dw")
     assert method_of_code(0) is None
+
+
+def test_the_hop_path_follows_the_hop_length(paper_profile, hop_path):
+    x, y = paper_profile.coordinates_mm
+    det = get_method("cof-track").stream(paper_profile.detector, x, y, 100.0)
+    assert det.paper._arrays == (hop_path == "arrays")
+
+
+def test_by_default_short_hops_take_scalars_and_long_ones_arrays(paper_profile):
+    x, y = paper_profile.coordinates_mm
+    at = {rate: get_method("cof-track").stream(paper_profile.detector, x, y, rate).paper._arrays for rate in (100.0, 1000.0)}
+    assert at == {100.0: False, 1000.0: True}  # 10 and 100 frames a hop
