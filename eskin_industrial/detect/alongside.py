@@ -57,10 +57,9 @@ class PaperAlongside:
         lag, hop = self.lag, self.hop
         self.r_coe = self.r_dw = 0.0
         self._k = 0  #: frames since the reset, to the current hop's first
-        # the current hop's frames, and (total, contact, centre of force) of each: the
-        # frames are the hygiene's own, which it keeps unchanged too (to fill a gap)
-        self._frames: list[np.ndarray] = []
-        self._rows: list[tuple[float, bool, tuple[float, float]]] = []
+        # the current hop's (frame, total, contact, centre of force): the frames are the
+        # hygiene's own, which it keeps unchanged too (to fill a gap)
+        self._rows: list[tuple[np.ndarray, float, bool, tuple[float, float]]] = []
         # the lag frames before the hop, their squared norms, totals and contact (as
         # arrays for the numpy path, lists for the scalar one)
         self._lag_f = np.zeros((lag, self.n))
@@ -82,10 +81,9 @@ class PaperAlongside:
 
     def push(self, f: np.ndarray, s: float, contact: bool, cof: tuple[float, float]) -> None:
         """One clean frame (the hot path: two appends; the hop's work at its last frame)."""
-        frames = self._frames
-        frames.append(f)
-        self._rows.append((s, contact, cof))
-        if len(frames) == self.hop:
+        rows = self._rows
+        rows.append((f, s, contact, cof))
+        if len(rows) == self.hop:
             self._hop()
 
     def _hop_scalars(self) -> None:
@@ -93,7 +91,8 @@ class PaperAlongside:
         floats, from the hop's squared norms and lagged products (two numpy calls)."""
         lag, hop, n = self.lag, self.hop, self.n
         k0 = self._k
-        cur = np.array(self._frames)
+        frames, s_t, c_t, cof_t = zip(*self._rows)
+        cur = np.array(frames)
         if hop == lag:
             f_b = self._lag_f
             self._lag_f = cur
@@ -103,13 +102,13 @@ class PaperAlongside:
         ss_t = np.einsum("ij,ij->i", cur, cur).tolist()
         sab_t = np.einsum("ij,ij->i", cur, f_b).tolist()
         ps, pss, pc = self._prev
-        ps, pss, pc = ps + [r[0] for r in self._rows], pss + ss_t, pc + [r[1] for r in self._rows]
+        ps, pss, pc = ps + list(s_t), pss + ss_t, pc + list(c_t)
         h, flen = self._h, self._flen
         xs, ys = self._xs, self._ys
         energies = [0.0] * hop
         c_blk = 0.0
         e = [0.0, 0.0]
-        for i, (s, contact, (xc, yc)) in enumerate(self._rows):
+        for i, (s, contact, (xc, yc)) in enumerate(zip(s_t, c_t, cof_t)):
             k = k0 + i
             d = 0.0
             if k >= lag:  # (as IndicatorStream._decorrelation)
@@ -143,7 +142,7 @@ class PaperAlongside:
         at = (k0 // hop) % self.blocks * hop
         self._energy[at: at + hop] = energies
         self._prev = (ps[hop:], pss[hop:], pc[hop:])
-        self._frames, self._rows = [], []
+        self._rows = []
         self._k = k0 + hop
         self._blocks.append((c_blk, e[0], e[1]))
         if len(self._blocks) == self.blocks:
@@ -152,8 +151,8 @@ class PaperAlongside:
     def _hop_arrays(self) -> None:
         lag, hop = self.lag, self.hop
         k0 = self._k
-        cur = np.array(self._frames)
-        s_t, c_t, cof_t = zip(*self._rows)
+        frames, s_t, c_t, cof_t = zip(*self._rows)
+        cur = np.array(frames)
         s = np.array(s_t)
         c = np.array(c_t, bool)
         xy_hop = np.fromiter(chain.from_iterable(cof_t), float, 2 * hop).reshape(hop, 2)
@@ -193,7 +192,7 @@ class PaperAlongside:
         # cumulative sums add left to right, as the stream's running sums do:
         # the decorrelations, the even frames' energies and the odd ones'
         sums = np.cumsum(np.where(self._parity[k0 & 1], (d, energy, energy), 0.0), axis=1)[:, -1].tolist()
-        self._frames, self._rows = [], []
+        self._rows = []
         self._k = k0 + hop
         self._blocks.append((sums[0], sums[1], sums[2]))
         if len(self._blocks) == self.blocks:
