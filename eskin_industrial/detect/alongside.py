@@ -69,8 +69,10 @@ class PaperAlongside:
         self._prev: tuple[list[float], list[float], list[bool]] = ([0.0] * lag, [0.0] * lag, [False] * lag)
         # the last flen - 1 centres before the hop (fewer just after a reset), (m, 2)
         self._cof_tail = np.zeros((0, 2))
-        self._xs: list[float] = []
-        self._ys: list[float] = []
+        # the last flen centres as complex numbers x + iy: one filter pass for both axes
+        # (a real tap times x + iy is (h x) + i (h y) exactly, and complex sums add each
+        # part on its own)
+        self._zs: deque[complex] = deque(maxlen=self._flen)
         self._energy = np.zeros(max(self.window, 1))
         self._blocks: deque[tuple[float, float, float]] = deque(maxlen=self.blocks)
         self._prev_sums: tuple[float, float] | None = None
@@ -104,7 +106,7 @@ class PaperAlongside:
         ps, pss, pc = self._prev
         ps, pss, pc = ps + list(s_t), pss + ss_t, pc + list(c_t)
         h, flen = self._h, self._flen
-        xs, ys = self._xs, self._ys
+        zs = self._zs
         energies = [0.0] * hop
         c_blk = 0.0
         e = [0.0, 0.0]
@@ -126,15 +128,12 @@ class PaperAlongside:
                     else:
                         d = 1.0 - (n * sab_t[i] - s * s_b) / math.sqrt(var_a * var_b)
                         d = 0.0 if d < 0.0 else 2.0 if d > 2.0 else d
-            xs.append(xc)
-            ys.append(yc)
+            zs.append(complex(xc, yc))
             energy = 0.0
-            if len(xs) > flen:
-                del xs[0], ys[0]
-            if len(xs) == flen:
+            if len(zs) == flen:
                 # sum_j h[j] x[k - j], added from j = 0 as the stream adds it
-                dx = sum(map(mul, h, reversed(xs)))
-                dy = sum(map(mul, h, reversed(ys)))
+                dz = sum(map(mul, h, reversed(zs)))
+                dx, dy = dz.real, dz.imag
                 energy = dx * dx + dy * dy
             energies[i] = energy
             c_blk += d
