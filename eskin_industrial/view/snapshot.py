@@ -20,7 +20,7 @@ from ..plc.image import Status
 
 @dataclass(frozen=True, slots=True)
 class IndicatorScale:
-    """How to read the two score columns (R_coe and R_dw in the paper's method)."""
+    """How to read the deciding method's two scores (R_coe and R_dw for the paper's methods)."""
 
     names: tuple[str, str] = ("R_coe", "R_dw")
     #: What the columns hold for this method (shown as a note).
