@@ -5,6 +5,7 @@ reference that recomputes every window from scratch (np.corrcoef + pywt.dwt).
     .venv/bin/python benchmarks/bench_detector.py --quick         # smoke run
     .venv/bin/python benchmarks/bench_detector.py --instructions  # + instruction counts (valgrind, ~1 min)
     .venv/bin/python benchmarks/bench_detector.py --quick --profile-shift  # cof-track with its profile channel
+    .venv/bin/python benchmarks/bench_detector.py --rate 100      # at 100 Hz (cof-track decides every frame)
 
 The machine is shared and noisy: every figure is the median of several repeats, and
 cof-track's cost against the paper detector's is the median of paired runs.  With
@@ -122,7 +123,7 @@ def instructions_per_frame(method: str) -> float:
         totals = []
         for frames in (2_000, 6_000):
             res = subprocess.run([*fixed, "valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
-                                  sys.executable, __file__, "--count", name, str(frames)],
+                                  sys.executable, __file__, "--rate", str(RATE), "--count", name, str(frames)],
                                  capture_output=True, text=True, check=True, env=env)
             totals.append(int(next(ln for ln in res.stderr.splitlines() if "Collected" in ln).split()[-1]))
         return totals[1] - totals[0]
@@ -135,13 +136,16 @@ def machine() -> str:
 
 
 def main() -> None:
+    global RATE
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer frames and repeats")
     ap.add_argument("--instructions", action="store_true", help="also count instructions per frame (valgrind)")
     ap.add_argument("--profile-shift", action="store_true",
                     help="cof-track with its profile channel on ([detector.cof_track] profile_shift)")
+    ap.add_argument("--rate", type=float, default=RATE, help="frame rate in Hz (default %(default)g)")
     ap.add_argument("--count", nargs=2, metavar=("METHOD", "FRAMES"), help=argparse.SUPPRESS)
     args = ap.parse_args()
+    RATE = args.rate
     if args.count:
         run_frames(args.count[0], int(args.count[1]))
         return
@@ -167,7 +171,7 @@ def main() -> None:
         ref_cell, ratio = (f"{ref:.1f} us/frame", f"{ref / us:.0f}x faster") if name == "5x5" else ("", "")
         print(f"| stream {name} | median cost per frame | {us:.1f} us ({1e6 / us:,.0f} frames/s) | {ref_cell} | {ratio} |")
     fps = batch_frames_per_s(cfg, batch_frames, max(1, repeats // 2))
-    print(f"| batch 5x5, {batch_frames / RATE / 60:g} min at 1 kHz | frames per second | {fps:,.0f} | "
+    print(f"| batch 5x5, {batch_frames / RATE / 60:g} min at {RATE:g} Hz | frames per second | {fps:,.0f} | "
           f"{1e6 / ref:,.0f} | {fps / (1e6 / ref):,.0f}x faster |")
     paper_us, ours_us, ratio = paired_ratio(cfg, frames, 3 * repeats)
     print(f"| stream 5x5, cof-track (ours) against paper, same run | median cost per frame | {ours_us:.1f} us | "

@@ -50,6 +50,7 @@ class Pipeline:
 
                 model = default_model()
             chosen = chosen.with_model(model)
+        self.method = chosen  #: the deciding method (its code and score names)
         self.detector = chosen.stream(profile.detector, x, y, self.rate_hz)
         self.counters = Counters()
         self.last_frame: Frame | None = None

@@ -163,7 +163,7 @@ def write_updates(dest: str | Path | IO[str], table: UpdateTable) -> None:
 def update_row(u: Update, label: str) -> str:
     """One update as a row of the updates CSV (``detect``'s output, the recorder's)."""
     return (f"{u.t:.6f},{u.r_coe:.9g},{u.r_dw:.9g},{label},{int(u.valid)},{u.f_sum:.9g},"
-            f"{u.xc:.9g},{u.yc:.9g},{u.flags}\n")
+            f"{u.xc:.9g},{u.yc:.9g},{u.flags},{u.score_a:.9g},{u.score_b:.9g}\n")
 
 
 def read_updates(source: str | Path) -> dict[str, np.ndarray]:

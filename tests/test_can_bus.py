@@ -77,6 +77,7 @@ def test_node_to_receiver_gives_the_offline_answer(paper_profile, fd):
     live = UpdateTable.from_updates(source.updates)
     np.testing.assert_array_equal(live.state, offline.state)
     np.testing.assert_allclose(live.r_coe, offline.r_coe, atol=1e-9)
+    np.testing.assert_allclose(live.score_a, offline.score_a, atol=1e-9)
     np.testing.assert_allclose(live.t, offline.t, atol=1e-9)
 
 

@@ -24,7 +24,7 @@ S = GraspState
 def table(times, states) -> UpdateTable:
     n = len(times)
     z = np.zeros(n)
-    return UpdateTable(np.asarray(times, float), z, z, np.asarray(states), np.ones(n, bool), z + 5, z, z, np.zeros(n, np.int64))
+    return UpdateTable(np.asarray(times, float), z, z, np.asarray(states), np.ones(n, bool), z + 5, z, z, np.zeros(n, np.int64), z, z)
 
 
 def truth():

@@ -146,4 +146,4 @@ def test_the_register_handler_answers_values_or_an_exception_code(base, data):
             assert handler.tares_refused == tares_before + (result == 4)
             assert handler.refused == before + (result in (2, 3) and table in ("holding", "coils"))
             holding = handler.read("holding", base, IMAGE_COUNT)
-            assert isinstance(holding, list) and holding[-1] == int(handler.enabled)
+            assert isinstance(holding, list) and holding[REG["ENABLE"].offset] == int(handler.enabled)

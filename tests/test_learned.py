@@ -129,7 +129,7 @@ def test_every_path_that_builds_by_name_hands_the_default_model(paper_profile, m
     raw = cal.to_raw(f)
     live = [u for k in range(600) for u in pipe.push(RawScan(seq=k, t=k / RATE, raw=raw[k]))]
     assert [u.state for u in live] == [u.state for u in direct]
-    np.testing.assert_allclose([u.r_coe for u in live], [u.r_coe for u in direct], atol=1e-6)
+    np.testing.assert_allclose([u.score_a for u in live], [u.score_a for u in direct], atol=1e-6)
     # the CLI's detect command
     path, out = tmp_path / "rec.csv", tmp_path / "out.csv"
     write_recording(path, np.arange(600) / RATE, f)
@@ -152,4 +152,4 @@ def test_the_features_ignore_the_rivals_profile_sections(paper_profile, model):
     retuned = replace(paper_profile, detector=replace(
         paper_profile.detector, force_rate=ForceRateSettings(lag_s=0.03), hf_energy=HfEnergySettings(smooth_s=0.2)))
     a, b = run(paper_profile, model, f), run(retuned, model, f)
-    assert [u.r_coe for u in a] == [u.r_coe for u in b] and [u.state for u in a] == [u.state for u in b]
+    assert [u.score_a for u in a] == [u.score_a for u in b] and [u.state for u in a] == [u.state for u in b]

@@ -13,7 +13,7 @@ from dataclasses import replace
 import pytest
 
 from eskin_industrial.plc.client import JITTER, PlcWriter
-from eskin_industrial.plc.image import STATUS_COUNT, Status
+from eskin_industrial.plc.image import REG, STATUS_COUNT, TAIL_AT, TAIL_COUNT, Status
 from tests.helpers.modbus import free_port
 from tests.helpers.plc_standin import PlcStandIn
 
@@ -48,8 +48,9 @@ class Offering:
     """The bridge's loop, as the writer sees it: an image every ``period_s``, every
     ``urgent_every``-th one urgent (a state change), until stopped."""
 
-    def __init__(self, writer: PlcWriter, period_s: float = 0.01, urgent_every: int = 3) -> None:
-        self.writer, self.period_s, self.urgent_every = writer, period_s, urgent_every
+    def __init__(self, writer: PlcWriter, period_s: float = 0.01, urgent_every: int = 3,
+                 tail: tuple[int, ...] = ()) -> None:
+        self.writer, self.period_s, self.urgent_every, self.tail = writer, period_s, urgent_every, tail
         self.n = 0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -65,7 +66,8 @@ class Offering:
     def _run(self) -> None:
         while not self._stop.is_set():
             self.n += 1
-            self.writer.offer(image(self.n), urgent=self.n % self.urgent_every == 0, t_event=time.perf_counter())
+            self.writer.offer(image(self.n), urgent=self.n % self.urgent_every == 0, t_event=time.perf_counter(),
+                              tail=self.tail)
             time.sleep(self.period_s)
 
 
@@ -312,3 +314,41 @@ def test_a_plc_that_takes_writes_but_refuses_command_reads_is_no_outage(paper_pr
     assert c["plc_writes"] >= 50 and c["plc_write_failures"] == 0 and c["plc_outages"] == 0
     assert sorted(events.names()) == ["plc_commands_refused", "plc_connected"]
     assert events.named("plc_commands_refused")[0]["exception"] == 2
+
+
+def test_the_scores_are_written_after_the_command_registers_at_each_refresh(paper_profile):
+    settings = paper_profile.modbus.plc
+    with PlcStandIn("ok") as plc:
+        writer = PlcWriter(settings, "127.0.0.1", plc.port).start()
+        try:
+            writer.offer(image(1), tail=(1234, 56))
+            wait_for(lambda: plc.regs[TAIL_AT:TAIL_AT + TAIL_COUNT] == [1234, 56], what="the scores in the PLC")
+            assert plc.regs[:STATUS_COUNT] == image(1)
+            writer.offer(image(2), urgent=True, tail=(7, 8))  # an urgent image: the scores follow at the refresh
+            wait_for(lambda: plc.regs[TAIL_AT:TAIL_AT + TAIL_COUNT] == [7, 8], what="the newer scores")
+        finally:
+            writer.stop(flush_s=0.0)
+    assert {a for _, a, _ in plc.seen.writes} <= {0, TAIL_AT, REG["COMMAND"].offset}
+    assert writer.counters()["plc_score_writes"] >= 2
+
+
+def test_a_plc_whose_map_ends_at_enable_takes_the_image_and_refuses_the_scores_without_an_outage(paper_profile):
+    """A PLC program written for the 22-register image: the scores' write is refused
+    (exception 02), counted, logged once and backed off; the image and the commands
+    go on."""
+    settings = paper_profile.modbus.plc
+    with PlcStandIn("ok", map_size=TAIL_AT) as plc:
+        writer = PlcWriter(settings, "127.0.0.1", plc.port).start()
+        events = Events(writer)
+        try:
+            with Offering(writer, tail=(3, 4)):
+                time.sleep(2.0)
+        finally:
+            writer.stop(flush_s=0.0)
+    c = writer.counters()
+    tried = [v for _, a, v in plc.seen.writes if a == TAIL_AT]
+    assert 2 <= len(tried) <= most_attempts(2.0, settings.backoff_s, settings.backoff_max_s)
+    assert c["plc_score_writes_refused"] == len(tried) and c["plc_score_writes"] == 0
+    assert c["plc_writes"] >= 50 and c["plc_write_failures"] == 0 and c["plc_outages"] == 0
+    assert plc.seen.reads >= 10  # the commands are still read every refresh
+    assert sorted(events.names()) == ["plc_connected", "plc_scores_refused"]

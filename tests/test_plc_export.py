@@ -18,7 +18,7 @@ from click.testing import CliRunner
 from eskin_industrial import load_profile
 from eskin_industrial.cli import main
 from eskin_industrial.plc.export import TIA_COLUMNS, codesys_st, flat_csv, slip_guard_st, tia_xlsx
-from eskin_industrial.plc.image import BITS, COILS, REGISTERS, STATUS_COUNT, Status, encode_registers
+from eskin_industrial.plc.image import BITS, COILS, IMAGE_COUNT, REGISTERS, STATUS_COUNT, Status, encode_registers, encode_tail
 from tests.helpers.paths import PROFILES, ROOT
 
 PROFILE = load_profile(PROFILES / "paper-5x5.toml")
@@ -27,7 +27,7 @@ VALUES = {"STATUS": int(Status.CONTACT | Status.SLIP | Status.SLIP_LATCHED | Sta
                         | Status.BRIDGE_OFFLINE), "STATE": 3, "R_COE": 1234, "R_DW": 65535, "F_SUM": 0x12345678,
           "XC": -1234, "YC": 321, "HEARTBEAT": 0xBEEF, "FRAME_AGE": 17, "SLIP_EVENTS": 0x00010002,
           "STATE_CHANGES": 0xFFFF0001, "LOST_SCANS": 70000, "BUS_ERRORS": 0x80000000, "FLAGS": 0x8001,
-          "RESERVED": 0}
+          "METHOD_ID": 7, "SCORE_A": 0x1234, "SCORE_B": 0xFEDC}
 WRITTEN = {"COMMAND": 2, "ENABLE": 1}
 
 
@@ -37,7 +37,7 @@ def settings(word_order="big", base_address=0, r_scale=100.0):
 
 def holding(word_order, base_address):
     """The PLC-side holding registers, keyed by protocol address: the bridge's words."""
-    words = encode_registers(VALUES, word_order) + [WRITTEN["COMMAND"], WRITTEN["ENABLE"]]
+    words = encode_registers(VALUES, word_order) + [WRITTEN["COMMAND"], WRITTEN["ENABLE"]] + encode_tail(VALUES)
     return {base_address + i: w for i, w in enumerate(words)}
 
 
@@ -184,17 +184,19 @@ def test_codesys_source_parses_and_its_types_overlay_the_channels(word_order):
     assert set(types) == {"ST_Eskin_paper_5x5_In", "ST_Eskin_paper_5x5_Out"}
     text = codesys_st(settings(word_order, base_address=100), "paper-5x5", input_word=32, output_word=8)
     assert "stIn  AT %IW32 : ST_Eskin_paper_5x5_In;" in text and "stOut AT %QW8 : ST_Eskin_paper_5x5_Out;" in text
-    assert "offset 100, length 20" in text and "offset 120, length 2" in text
+    # the read channel spans the scores appended after COMMAND and ENABLE
+    assert "offset 100, length 24" in text and "offset 120, length 2" in text
     # pack_mode 1: members one after the other; a little-endian runtime stores each
     # channel word as it came, low byte first
     regs = holding(word_order, 100)
-    memory = b"".join(regs[100 + i].to_bytes(2, "little") for i in range(STATUS_COUNT))
+    memory = b"".join(regs[100 + i].to_bytes(2, "little") for i in range(IMAGE_COUNT))
     at, read = 0, {}
     for name, iec in types["ST_Eskin_paper_5x5_In"]:
         raw = int.from_bytes(memory[at: at + SIZE[iec]], "little")
         read[name] = signed(raw, 16) if iec == "INT" else raw
         at += SIZE[iec]
     assert at == len(memory)
+    assert (read["RESERVED_20"], read["RESERVED_21"]) == (WRITTEN["COMMAND"], WRITTEN["ENABLE"])  # the gap
     for r in REGISTERS:
         if r.access != "R":
             continue
@@ -295,7 +297,7 @@ def test_export_of_a_bridge_gives_each_node_its_block_and_names(tmp_path):
     assert (csv_right[0]["name"], csv_right[0]["address"], csv_right[0]["reference"]) == \
         ("gripper_right_STATUS", "100", "40101")
     st = (tmp_path / "eskin_gripper_right.st").read_text()
-    assert "offset 100, length 20" in st and "GVL_Eskin_gripper_right" in st
+    assert "offset 100, length 24" in st and "GVL_Eskin_gripper_right" in st
     assert set(structs(parsed(st))) == {"ST_Eskin_gripper_right_In", "ST_Eskin_gripper_right_Out"}
 
 

@@ -112,7 +112,7 @@ def test_slip_latch_ack_and_enable(paper_profile):
 def test_writes_outside_the_command_registers_are_refused(paper_profile):
     assert parse_register_write(REG["COMMAND"].offset, [3]) == [Command("ack"), Command("tare")]
     assert parse_register_write(REG["COMMAND"].offset, [0, 1]) == [Command("enable")]
-    for offset in (0, REG["STATE"].offset, REG["RESERVED"].offset, IMAGE_COUNT):
+    for offset in (0, REG["STATE"].offset, REG["METHOD_ID"].offset, REG["SCORE_A"].offset, IMAGE_COUNT):
         with pytest.raises(Refused) as info:
             parse_register_write(offset, [1])
         assert info.value.code == 2

@@ -12,7 +12,7 @@ from eskin_industrial.bus.modbus.io import SerialSettings
 from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
-from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
+from eskin_industrial.plc.image import IMAGE_COUNT, REG, STATUS_COUNT, Status
 from eskin_industrial.plc.server import PlcServer
 from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
 
@@ -61,7 +61,7 @@ def test_mbpoll_reads_the_served_registers_over_tcp(paper_profile):
         bits = mbpoll_values(out.stdout)
         assert [bits[i + 1] for i in range(10)] == [int(bool(got[1] & (1 << i))) for i in range(10)]
         # Reading past the image is refused.
-        out = mbpoll("-m", "tcp", "-p", str(port), "-a", "1", "-r", "20", "-c", "5", "-1", "127.0.0.1")
+        out = mbpoll("-m", "tcp", "-p", str(port), "-a", "1", "-r", str(IMAGE_COUNT - 2), "-c", "5", "-1", "127.0.0.1")
         assert out.returncode != 0 and "Illegal data address" in out.stderr
     finally:
         server.stop()

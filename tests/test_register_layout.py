@@ -14,17 +14,24 @@ from eskin_industrial.plc.image import (
     COIL,
     COIL_COUNT,
     COILS,
+    IMAGE_COUNT,
     KIND_RANGE,
+    MAIN,
     PUBLISHED,
     REG,
     REGISTERS,
     STATUS_COUNT,
+    TAIL,
+    TAIL_AT,
+    TAIL_COUNT,
     Command,
     PlcImage,
     Status,
     coil_values,
     decode_registers,
+    decode_tail,
     encode_registers,
+    encode_tail,
     parse_coil_write,
 )
 from eskin_industrial.plc.server import PlcRegisterHandler
@@ -35,7 +42,7 @@ from tests.test_fuzz_plc import commands, healths, updates
 PLC = load_profile(PROFILES / "paper-5x5.toml").modbus.plc
 ORDERS = ["big", "little"]
 OFFLINE = {"STATUS": int(Status.BRIDGE_OFFLINE), "STATE": 0, "R_COE": 0, "R_DW": 0, "F_SUM": 0, "FLAGS": 0,
-           "FRAME_AGE": 0xFFFF}
+           "FRAME_AGE": 0xFFFF, "SCORE_A": 0, "SCORE_B": 0}
 
 
 @fuzz(200)
@@ -55,8 +62,9 @@ def test_decoding_a_rendered_image_gives_back_its_named_values(steps, word_order
         for r in PUBLISHED:
             lo, hi = KIND_RANGE[r.kind]
             assert lo <= values[r.name] <= hi, r.name
-        assert decode_registers(regs, word_order) == values
-        assert encode_registers(values, word_order) == regs
+        assert len(image.tail) == TAIL_COUNT and all(0 <= w <= 0xFFFF for w in image.tail)
+        assert {**decode_registers(regs, word_order), **decode_tail(image.tail)} == values
+        assert encode_registers(values, word_order) == regs and encode_tail(values) == image.tail
 
 
 @fuzz(200)
@@ -64,7 +72,7 @@ def test_decoding_a_rendered_image_gives_back_its_named_values(steps, word_order
        word_order=st.sampled_from(ORDERS))
 def test_any_published_words_decode_and_encode_back(words, word_order):
     values = decode_registers(words, word_order)
-    assert set(values) == {r.name for r in PUBLISHED}
+    assert set(values) == {r.name for r in MAIN}
     assert encode_registers(values, word_order) == words
 
 
@@ -77,8 +85,8 @@ def test_the_offline_image_is_the_image_with_the_offline_values(steps, word_orde
     for event, health in steps:
         for image in (online, offline):
             image.apply(event) if isinstance(event, Command) else image.observe(event)
-        want = decode_registers(online.render(health), word_order)
-        got = decode_registers(offline.render_offline(health), word_order)
+        want = {**decode_registers(online.render(health), word_order), **decode_tail(online.tail)}
+        got = {**decode_registers(offline.render_offline(health), word_order), **decode_tail(offline.tail)}
         assert got == {**want, **OFFLINE}  # heartbeat, counters and XC/YC kept
         assert got["HEARTBEAT"] == offline.heartbeat
 
@@ -93,14 +101,26 @@ def test_words_follow_the_table_and_the_word_order():
         assert regs[REG["XC"].offset] == 0xFFFE and regs[REG["YC"].offset] == 0x8000  # two's complement
         assert regs[REG["F_SUM"].offset: REG["F_SUM"].offset + 2] == f_sum
         assert regs[REG["BUS_ERRORS"].offset: REG["BUS_ERRORS"].offset + 2] == bus_errors
-        assert decode_registers(regs, order) == values
+        assert decode_registers(regs, order) == {r.name: values[r.name] for r in MAIN}
+        assert decode_tail(encode_tail(values)) == {r.name: values[r.name] for r in TAIL}
     with pytest.raises(KeyError):
         encode_registers({"STATUS": 0}, "big")  # a publication names every register
 
 
 def test_the_read_only_registers_are_the_publication():
-    assert [r.name for r in REGISTERS if r.offset < STATUS_COUNT] == [r.name for r in PUBLISHED]
-    assert all(r.access == "RW" for r in REGISTERS if r.offset >= STATUS_COUNT)
+    # two runs: STATUS..METHOD_ID from the base, the PLC's COMMAND and ENABLE, then the
+    # scores appended (so that no older address moved)
+    assert [r.name for r in REGISTERS if r.offset < STATUS_COUNT] == [r.name for r in MAIN]
+    assert [r.name for r in REGISTERS if STATUS_COUNT <= r.offset < TAIL_AT] == ["COMMAND", "ENABLE"]
+    assert all(r.access == "RW" for r in REGISTERS if STATUS_COUNT <= r.offset < TAIL_AT)
+    assert [r.name for r in REGISTERS if r.offset >= TAIL_AT] == [r.name for r in TAIL] == ["SCORE_A", "SCORE_B"]
+    assert [r.name for r in PUBLISHED] == [r.name for r in MAIN + TAIL]
+    assert IMAGE_COUNT == TAIL_AT + TAIL_COUNT
+    # the addresses of the image before the scores were added
+    assert [(r.name, r.offset) for r in REGISTERS][:19] == [
+        ("STATUS", 0), ("STATE", 1), ("R_COE", 2), ("R_DW", 3), ("F_SUM", 4), ("XC", 6), ("YC", 7), ("HEARTBEAT", 8),
+        ("FRAME_AGE", 9), ("SLIP_EVENTS", 10), ("STATE_CHANGES", 12), ("LOST_SCANS", 14), ("BUS_ERRORS", 16),
+        ("FLAGS", 18), ("METHOD_ID", 19), ("COMMAND", 20), ("ENABLE", 21), ("SCORE_A", 22), ("SCORE_B", 23)]
 
 
 def test_coil_offsets_come_from_the_table():

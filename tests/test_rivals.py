@@ -31,9 +31,9 @@ def peak_ratio(total: bool, shake: float, seed: int = 0) -> tuple[float, float]:
     for k in range(600):
         for u in det.push(float(t[k]), f[k]):
             if 3.0 <= u.t < 5.0:
-                before = max(before, u.r_coe)
+                before = max(before, u.score_a)
             elif u.t >= 5.0:
-                after = max(after, u.r_coe)
+                after = max(after, u.score_a)
     return before, after
 
 
@@ -83,4 +83,4 @@ def test_keyword_overrides_equal_the_profile_settings():
     a = run_one(get_method("force-rate").stream, via_profile, render("case1", 100.0, 0))[0]
     b = run_one(partial(ForceRate, threshold_per_s=0.5, lag_s=0.05), DetectorSettings(), render("case1", 100.0, 0))[0]
     np.testing.assert_array_equal(a.state, b.state)
-    np.testing.assert_array_equal(a.r_coe, b.r_coe)
+    np.testing.assert_array_equal(a.score_a, b.score_a)

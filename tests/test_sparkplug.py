@@ -127,6 +127,9 @@ def _check_sequence(decoded, device="grip"):
     units = {m.name: dict(zip(m.properties.keys, [v.string_value for v in m.properties.values]))
              for m in births[0].metrics}
     assert units["Total Force"] == {"engUnit": "N"}
+    # the deciding method's scores, declared with whose and which they are
+    assert (units["Score A"]["method"], units["Score A"]["score"]) == ("cof-track", "onset_score")
+    assert (units["Score B"]["method"], units["Score B"]["score"]) == ("cof-track", "slow_score")
     states = []
     for k, t, p in decoded:
         if k == "DDATA":
@@ -135,6 +138,8 @@ def _check_sequence(decoded, device="grip"):
                 assert not m.HasField("name") and m.alias in declared
                 if declared[m.alias][0] == "State":
                     states.append(spb.value(m))
+                elif declared[m.alias][0] == "Score A":
+                    states.append(("Score A", spb.value(m)))
     return states, bd_seq
 
 
@@ -163,6 +168,10 @@ def test_a_bridge_publishes_births_the_slip_and_deaths(paper_profile, tmp_path, 
             cap.close()
     decoded = _decoded(msgs)
     states, _ = _check_sequence(decoded)
+    # cof-track's onset score passes its threshold (1) in the slide
+    scores = [v for s in states if isinstance(s, tuple) for v in s[1:]]
+    assert scores and max(scores) > 1.0
+    states = [s for s in states if not isinstance(s, tuple)]
     assert "slip" in states and states[states.index("slip") - 1] != "slip"
     topics = {t for _, t, _ in decoded}
     # NDATA: the store's metrics, when what came before the connection was forwarded

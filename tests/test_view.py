@@ -110,7 +110,8 @@ def test_gauges_of_a_method_with_its_own_scale():
     assert paper.slip == (3.0, 2.0) and paper.variable == (None, None)  # varying force: the total force's test
     own = DetectorSettings(slip_r_coe=3.0, slip_r_dw=2.0, varying_force=VaryingForceSettings(evidence="method"))
     assert indicator_scale("paper", own).variable == (0.5, 0.5)  # the paper's own reading: its thresholds
-    bar, rest = gauge(render(snap(r_coe=0.6, scale=sc), 80, 24, color=False), "R_coe")
+    assert sc.names == ("onset_score", "slow_score")  # the gauges show the method's own scores
+    bar, rest = gauge(render(snap(r_coe=0.6, scale=sc), 80, 24, color=False), "onset_score")
     assert ":" not in bar and bar.index("|") == round(len(bar) / 2) and "/1" in rest
 
 

@@ -47,7 +47,7 @@ class NodeLoop:
         self.profile = profile
         self.source = source
         self.pipeline = Pipeline(profile, rate_hz=rate_hz, method=method)
-        self.image = PlcImage(profile.modbus.plc)
+        self.image = PlcImage(profile.modbus.plc, method=self.pipeline.method.code)
         self.recent_raw: collections.deque[np.ndarray] = collections.deque(maxlen=self.TARE_SCANS)
         self.tares = 0
         self.tares_refused = 0
@@ -172,8 +172,10 @@ class NodeLoop:
         status = self.image.status(health) & _QUIET
         if not urgent and status == self._last_status and now - self._last_pub < self._refresh_s:
             return False
-        pub = Publication(self.image.render(health), self.image, urgent or status != self._last_status,
-                          time.perf_counter() if t_event is None else t_event, False, self.pipeline.counters.scans)
+        image = self.image
+        pub = Publication(image.render(health), image, urgent or status != self._last_status,
+                          time.perf_counter() if t_event is None else t_event, False, self.pipeline.counters.scans,
+                          tuple(image.tail))
         for sink in self.sinks:
             sink.publish(pub)
         self._last_status = status
@@ -200,7 +202,8 @@ class NodeLoop:
         if self.offline:
             return
         self.offline = True
-        pub = Publication(self.image.render_offline(self.health()), self.image, True, time.perf_counter(), True)
+        regs = self.image.render_offline(self.health())
+        pub = Publication(regs, self.image, True, time.perf_counter(), True, tail=tuple(self.image.tail))
         failed: Exception | None = None
         for sink in self.sinks:
             try:

@@ -199,7 +199,8 @@ class Bridge:
             if key != run.last_state:
                 run.last_state = key
                 log.event("state", node=run.name, state=GraspState(u.state).label, valid=int(u.valid),
-                          t=round(u.t, 4), f_sum=round(u.f_sum, 3), r_coe=round(u.r_coe, 3), r_dw=round(u.r_dw, 3))
+                          t=round(u.t, 4), f_sum=round(u.f_sum, 3), r_coe=round(u.r_coe, 3), r_dw=round(u.r_dw, 3),
+                          score_a=round(u.score_a, 3), score_b=round(u.score_b, 3))
             if outer is not None:
                 outer(run.name, u)
 

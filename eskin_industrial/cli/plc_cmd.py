@@ -27,9 +27,11 @@ def plc() -> None:
 def map_cmd(profile_path: str, fmt: str) -> None:
     """Print the register map (holding registers, coils, discrete inputs) with the
     profile's base address: 0-based protocol addresses and 1-based references
-    (4xxxx holding, 0xxxx coils, 1xxxx discrete inputs)."""
+    (4xxxx holding, 0xxxx coils, 1xxxx discrete inputs).  R_COE and R_DW are the
+    paper's indicators; METHOD_ID, SCORE_A and SCORE_B are described for the profile's
+    ``[detector] method``."""
     prof = open_profile(profile_path)
-    rows = map_rows(prof.modbus.plc)
+    rows = map_rows(prof.modbus.plc, prof.detector.method)
     if fmt == "json":
         echo_json([{c: r[c] for c in _COLUMNS} for r in rows])
         return

@@ -67,7 +67,7 @@ def plot(profile_path: str, input_path: str | None, can_log: str | None, output:
         chosen = base
     x, y = prof.coordinates_mm
     table = chosen.batch(prof.detector, x, y, rate, t, values, None)
-    col_a, col_b = getattr(base.stream, "columns", ("R_coe", "R_dw"))
+    col_a, col_b = (s.name for s in base.scores)  # the deciding method's own scores
 
     fig, (ax_f, ax_r) = plt.subplots(2, 1, figsize=(11, 6), sharex=True, gridspec_kw={"height_ratios": [1, 2]})
     ax_f.plot(t, np.nansum(values, axis=1), color="k", lw=0.8)
@@ -78,8 +78,8 @@ def plot(profile_path: str, input_path: str | None, can_log: str | None, output:
         on = table.state == state
         ax_r.fill_between(table.t, 0, 1, where=on, transform=ax_r.get_xaxis_transform(), color=colour,
                           alpha=0.35, step="post", lw=0, label=f"detected {state.label}")
-    ax_r.plot(table.t, table.r_coe, lw=1.0, label=col_a)
-    ax_r.plot(table.t, table.r_dw, lw=1.0, label=col_b)
+    ax_r.plot(table.t, table.score_a, lw=1.0, label=col_a)
+    ax_r.plot(table.t, table.score_b, lw=1.0, label=col_b)
     if chosen.name.startswith("paper"):
         ax_r.axhline(prof.detector.slip_r_coe, color="k", ls="--", lw=0.8, label="slip threshold")
     else:

@@ -28,7 +28,7 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
 
 The cost per frame is one 3-column matrix product, three running sums per ramp horizon,
 a ring of squared changes for the evidence and a few scalar operations: the same at
-100 Hz and at 1 kHz.  The score columns hold max(a, r) and b (1 = threshold).
+100 Hz and at 1 kHz.  The scores (score_a, score_b) are max(a, r) and b (1 = threshold).
 """
 
 from __future__ import annotations

@@ -93,7 +93,7 @@ class Learned(CofTrack):
     """Slip when the model's slip probability exceeds ``slip_p`` in ``confirm_hops``
     consecutive hops (``[detector.learned]``; keyword arguments override them, for
     sweeps); varying force when ``variable_force`` is more likely than ``stable``.
-    The score columns hold P(slip) and P(variable_force).
+    The scores (score_a, score_b) are P(slip) and P(variable_force).
 
     The defaults (0.5, three hops) were chosen on the tuning seeds by two-fold
     cross-validation (seeds 0-2 against 3, 4, 7): the lightest rule with no false

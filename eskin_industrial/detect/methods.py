@@ -27,6 +27,20 @@ from .updates import UpdateTable
 
 
 @dataclass(frozen=True)
+class Score:
+    """One of a method's own two scores (an update's ``score_a`` or ``score_b``)."""
+
+    name: str  #: as the detector's ``columns`` name it (CSV, Sparkplug, ``plc map``)
+    doc: str  #: what it is, and where its threshold lies
+
+
+#: The paper's own scores: its indicators again (the same floats, computed once).
+PAPER_SCORES = (Score("r_coe", "the paper's R_coe again (slip above slip_r_coe)"),
+                Score("r_dw", "the paper's R_dw again (slip above slip_r_dw)"))
+UNUSED = Score("unused", "reads 0 (the method has one score)")
+
+
+@dataclass(frozen=True)
 class Method:
     name: str
     summary: str
@@ -37,11 +51,16 @@ class Method:
     #: ``batch`` is a computation of its own over the whole recording; otherwise it
     #: feeds the stream detector, and feeding it in pieces gives the same updates.
     vectorized: bool = False
+    #: The method's number in the METHOD_ID register and the Sparkplug ``Method`` metric
+    #: (fixed: a PLC program compares it; 0 is no method, a bridge that has stopped).
+    code: int = 0
+    #: What ``score_a`` and ``score_b`` hold.
+    scores: tuple[Score, Score] = PAPER_SCORES
 
     def with_model(self, model: Model) -> "Method":
         """This method with ``model`` bound into both factories."""
         stream = partial(self.stream, model=model)
-        return Method(self.name, self.summary, stream, batch_via_stream(stream))
+        return replace(self, stream=stream, batch=batch_via_stream(stream))
 
 
 def batch_via_stream(factory: Callable[..., Any]) -> Callable[..., UpdateTable]:
@@ -61,21 +80,31 @@ def _paper_rule(rule: str) -> Callable[..., Any]:
     return make
 
 
-def _method(name: str, summary: str, stream: Callable[..., Any], needs_model: bool = False) -> Method:
-    return Method(name, summary, stream, batch_via_stream(stream), needs_model)
+def _method(name: str, summary: str, stream: Callable[..., Any], code: int, scores: tuple[Score, Score],
+            needs_model: bool = False) -> Method:
+    return Method(name, summary, stream, batch_via_stream(stream), needs_model, code=code, scores=scores)
 
 
 METHODS: dict[str, Method] = {
     "paper": Method("paper", "R_coe and R_dw both above their slip thresholds (the reference paper)", PaperDetector,
-                    paper_batch, vectorized=True),
-    "paper-coe": _method("paper-coe", "the paper's R_coe alone above its slip threshold", _paper_rule("coe")),
-    "paper-dw": _method("paper-dw", "the paper's R_dw alone above its slip threshold", _paper_rule("dw")),
-    "force-rate": _method("force-rate", "rival: total-force derivative above a threshold", ForceRate),
-    "hf-energy": _method("hf-energy", "rival: high-frequency energy of the taxel signals over its baseline", HfEnergy),
-    "cof-velocity": _method("cof-velocity", "rival: centre-of-force speed above a threshold", CofVelocity),
-    "cof-track": _method("cof-track", "ours: centre-of-force displacement against its learnt noise", CofTrack),
+                    paper_batch, vectorized=True, code=1),
+    "paper-coe": _method("paper-coe", "the paper's R_coe alone above its slip threshold", _paper_rule("coe"), 2,
+                         PAPER_SCORES),
+    "paper-dw": _method("paper-dw", "the paper's R_dw alone above its slip threshold", _paper_rule("dw"), 3,
+                        PAPER_SCORES),
+    "force-rate": _method("force-rate", "rival: total-force derivative above a threshold", ForceRate, 4, (
+        Score("force_rate_per_s", "|dS/dt| / S over lag_s, 1/s (slip above threshold_per_s)"), UNUSED)),
+    "hf-energy": _method("hf-energy", "rival: high-frequency energy of the taxel signals over its baseline", HfEnergy, 5, (
+        Score("hf_energy_ratio", "high-frequency energy over its baseline (slip above threshold)"), UNUSED)),
+    "cof-velocity": _method("cof-velocity", "rival: centre-of-force speed above a threshold", CofVelocity, 6, (
+        Score("cof_speed_mm_s", "centre-of-force speed, mm/s (slip above threshold_mm_s)"), UNUSED)),
+    "cof-track": _method("cof-track", "ours: centre-of-force displacement against its learnt noise", CofTrack, 7, (
+        Score("onset_score", "onset: the larger of the fast displacement and the ramp, over their noise "
+                             "thresholds (slip above 1)"),
+        Score("slow_score", "the slow displacement still moving onward, over its threshold (slip above 1)"))),
     "learned": _method("learned", "accuracy ceiling: a small classifier on the other methods' features (extra: learn)", Learned,
-                       needs_model=True),
+                       8, (Score("p_slip", "the model's slip probability (slip above slip_p, confirm_hops in a row)"),
+                           Score("p_variable_force", "the model's varying-force probability")), needs_model=True),
 }
 
 
@@ -84,6 +113,11 @@ def get_method(name: str) -> Method:
         return METHODS[name]
     except KeyError:
         raise KeyError(f"unknown detection method {name!r}; known: {', '.join(sorted(METHODS))}") from None
+
+
+def method_of_code(code: int) -> Method | None:
+    """The method with this METHOD_ID register value (None: 0 or unknown)."""
+    return next((m for m in METHODS.values() if m.code == code), None)
 
 
 def needs_model(factory: Callable[..., Any]) -> bool:

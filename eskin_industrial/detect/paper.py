@@ -43,7 +43,8 @@ class PaperDetector:
             return []
         step = self.machine.step
         return [
-            Update(te, rc, rd, step(te, rc, rd, contact, valid, vf), valid, s, xc, yc, fl)
+            # the paper's own scores are its indicators: the same floats, computed once
+            Update(te, rc, rd, step(te, rc, rd, contact, valid, vf), valid, s, xc, yc, fl, rc, rd)
             for te, rc, rd, valid, fl, s, xc, yc, contact, vf in raw
         ]
 
@@ -86,7 +87,7 @@ def paper_batch(
         dtype=np.int64, count=len(cols["t"]),
     )
     del cols["contact"], cols["vf"]
-    return UpdateTable(state=state, **cols)
+    return UpdateTable(state=state, score_a=cols["r_coe"], score_b=cols["r_dw"], **cols)
 
 
 def _hop_vf(s: np.ndarray, flags: np.ndarray, end: np.ndarray, settings: DetectorSettings, hop: int,

@@ -8,9 +8,10 @@ every hop the hop's votes go to the :class:`~.state.Decision`: slip evidence if 
 frame of the hop voted slip (for ``confirm`` consecutive frames); varying-force
 evidence the hop's largest score of the total force's own test (``vforce.py``), or,
 with ``[detector.varying_force] evidence = "method"``, whether any frame voted
-varying.  The update carries the hop's largest scores; what the two
-score columns mean is each class's ``columns``; they are written where the paper
-detector writes R_coe and R_dw.
+varying.  The update carries the hop's largest scores in ``score_a`` and ``score_b``
+(what each means: the class's ``columns``), and in ``r_coe`` and ``r_dw`` the paper's
+indicators on the same frames (:mod:`.alongside`, fed the frames, totals, centres and
+contact computed here: the decision never reads them).
 
 The rivals' thresholds are profile settings (``[detector.force_rate]``,
 ``[detector.cof_velocity]``, ``[detector.hf_energy]``); keyword arguments override
@@ -26,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..frames import FrameFlag
+from .alongside import PaperAlongside
 from .hygiene import FrameHygiene, feed
 from .settings import DetectorSettings
 from .state import ContactRule, Decision
@@ -58,6 +60,7 @@ class ScoredDetector(FrameHygiene):
         self.decision = Decision.from_settings(settings, confirm=1)
         own = settings.varying_force.evidence == "method"
         self._vf = None if own else ForceVariation(settings.varying_force, rate_hz)
+        self.paper = PaperAlongside(settings, self.n, rate_hz)
         self._reset(0)
 
     @property
@@ -76,6 +79,7 @@ class ScoredDetector(FrameHygiene):
             self._vf.reset()
         self._warm = True
         self._cof = (float(self._mat[:, 1].mean()), float(self._mat[:, 2].mean()))
+        self.paper.reset()
         self.reset_scores()
 
     # -- for subclasses ---------------------------------------------------------
@@ -115,6 +119,7 @@ class ScoredDetector(FrameHygiene):
             self._contact_run = 0
             self._slip_run = 0
             self._warm = False
+        self.paper.push(f, s, contact, self._cof)
         self._hop_flags |= flags
         self._k += 1
         if self._k % self.hop:
@@ -126,7 +131,9 @@ class ScoredDetector(FrameHygiene):
         varying = self._hop_vf if self._vf is not None else float(self._hop_var)
         state = self.decision.decide(t, contact, valid, self._hop_slip, varying)
         flags = self._hop_flags | (0 if valid else _WARMUP)
-        upd = Update(t, self._hop_a, self._hop_b, state, valid, s, self._cof[0], self._cof[1], flags)
+        paper = self.paper
+        upd = Update(t, paper.r_coe, paper.r_dw, state, valid, s, self._cof[0], self._cof[1], flags,
+                     self._hop_a, self._hop_b)
         self._hop_a = self._hop_b = self._hop_vf = 0.0
         self._hop_slip = self._hop_var = False
         self._hop_flags = 0

@@ -8,8 +8,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-#: Output columns, in file order; the first four are fixed by the CSV contract.
-COLUMNS: tuple[str, ...] = ("t", "r_coe", "r_dw", "state", "valid", "f_sum", "xc", "yc", "flags")
+#: Output columns, in file order; the first four are fixed by the CSV contract, and new
+#: columns are appended (``score_a`` and ``score_b``: the deciding method's own scores).
+COLUMNS: tuple[str, ...] = ("t", "r_coe", "r_dw", "state", "valid", "f_sum", "xc", "yc", "flags",
+                            "score_a", "score_b")
 
 
 class Update(NamedTuple):
@@ -18,14 +20,21 @@ class Update(NamedTuple):
     ``__init__`` calls ``object.__setattr__`` once per field (docs/benchmarks.md)."""
 
     t: float  #: time of the newest frame the update used (s)
-    r_coe: float  #: correlation indicator (0 when stable)
-    r_dw: float  #: wavelet indicator (0 when stable)
+    #: The paper's decorrelation indicator R_coe (0 when stable), whatever method
+    #: decides: computed with the paper's settings on the same frames, and held between
+    #: the paper's hops when the deciding method's hop is shorter.
+    r_coe: float
+    r_dw: float  #: the paper's wavelet indicator R_dw, likewise
     state: int  #: :class:`~eskin_industrial.detect.state.GraspState` code
     valid: bool  #: False while the indicators are not defined (warm-up, short window)
     f_sum: float  #: total force of the newest frame (N)
     xc: float  #: centre of force of the newest frame (mm; held while out of contact)
     yc: float
     flags: int  #: OR of the hop's frame flags plus WARMUP / SHORT_WINDOW / RESET
+    #: The deciding method's own two scores (what each means: the method's
+    #: ``SCORES`` in ``detect/methods.py``); the paper's are its R_coe and R_dw again.
+    score_a: float = 0.0
+    score_b: float = 0.0
 
 
 def state_changed(before: Update | None, update: Update) -> bool:
@@ -49,6 +58,8 @@ class UpdateTable:
     xc: np.ndarray
     yc: np.ndarray
     flags: np.ndarray
+    score_a: np.ndarray
+    score_b: np.ndarray
 
     def __len__(self) -> int:
         return len(self.t)

@@ -45,6 +45,17 @@ def frame_properties(profile: Profile, interval_s: float) -> tuple[Property, ...
             ("frame_interval_s", (pb.DOUBLE, float(interval_s))))
 
 
+def score_properties(profile: Profile) -> dict[str, tuple[Property, ...]]:
+    """The DBIRTH properties of ``Score A`` and ``Score B``: the deciding method, the
+    score's name (as in the updates CSV and ``eskin-bus plc map``) and what it is."""
+    from ..detect.methods import get_method
+
+    method = get_method(profile.detector.method)
+    return {metric: (("method", (pb.STRING, method.name)), ("score", (pb.STRING, s.name)),
+                     ("description", (pb.STRING, s.doc)))
+            for metric, s in zip(("Score A", "Score B"), method.scores)}
+
+
 def method_properties(profile: Profile) -> tuple[Property, ...]:
     """``method`` and the keys that set its decision, by their profile name
     (``detector.slip_r_coe``, ``detector.cof_track.z``); ``detector.contact_threshold_n``

@@ -41,7 +41,7 @@ from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Publication, Sink, SinkHealth
 from . import payload as pb
 from .commands import COMMAND_ALIAS, COMMANDS, BadCommand, birth_metrics, parse_device_command
-from .properties import Property, frame_properties, layout_properties, method_properties
+from .properties import Property, frame_properties, layout_properties, method_properties, score_properties
 from .store import Forwarder, Held, store_path
 from .transport import check_files, check_security, configure, parse_broker
 
@@ -133,9 +133,8 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Bus Fault", pb.BOOLEAN, "", False, "the sensor bus fails"),
     MetricDef("Contact", pb.BOOLEAN, "", False, "total force at or above the contact threshold"),
     MetricDef("Enabled", pb.BOOLEAN, "", False, "detection enabled"),
-    MetricDef("R_coe", pb.FLOAT, "", True,
-              "R_coe (paper methods), else the method's first score, 1 = its threshold (R_COE / r_scale)"),
-    MetricDef("R_dw", pb.FLOAT, "", True, "R_dw (paper methods), else the method's second score (R_DW / r_scale)"),
+    MetricDef("R_coe", pb.FLOAT, "", True, "the paper's R_coe, whatever method decides (R_COE / r_scale)"),
+    MetricDef("R_dw", pb.FLOAT, "", True, "the paper's R_dw, whatever method decides (R_DW / r_scale)"),
     MetricDef("Total Force", pb.FLOAT, "N", True, "total force of the newest frame"),
     MetricDef("CoF X", pb.FLOAT, "mm", True, "centre of force, x"),
     MetricDef("CoF Y", pb.FLOAT, "mm", True, "centre of force, y"),
@@ -145,6 +144,9 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Counters/Lost Scans", pb.UINT32, "count", True, "failed polls and sequence gaps"),
     MetricDef("Counters/Bus Errors", pb.UINT32, "count", True, "timeouts, CRC and exception responses"),
     MetricDef("Counters/Scans", pb.UINT64, "count", True, "scans the node's loop has taken since start"),
+    MetricDef("Score A", pb.FLOAT, "", True, "the deciding method's first score (SCORE_A / r_scale); DBIRTH "
+              "properties: method, score (its name), description"),
+    MetricDef("Score B", pb.FLOAT, "", True, "the deciding method's second score (SCORE_B / r_scale), likewise"),
 )
 #: The taxel frame: declared (and sent) only with ``frame_interval_s``; its alias is
 #: the device's base + :data:`FRAME_ALIAS`.
@@ -169,7 +171,12 @@ def metric_values(pub: Publication, r_scale: float, word_order: str) -> tuple[An
             bool(st & Status.SENSOR_STALE), bool(st & Status.BUS_FAULT), bool(st & Status.CONTACT),
             bool(st & Status.ENABLED), v["R_COE"] / r_scale, v["R_DW"] / r_scale, v["F_SUM"] / 1000.0,
             v["XC"] / 100.0, v["YC"] / 100.0, v["FRAME_AGE"], v["SLIP_EVENTS"], v["STATE_CHANGES"],
-            v["LOST_SCANS"], v["BUS_ERRORS"], pub.scans)
+            v["LOST_SCANS"], v["BUS_ERRORS"], pub.scans, *_scores(pub.tail, r_scale))
+
+
+def _scores(tail: tuple[int, ...], r_scale: float) -> tuple[float, float]:
+    """Score A and Score B from the publication's SCORE_A..SCORE_B (0 when it has none)."""
+    return (tail[0] / r_scale, tail[1] / r_scale) if tail else (0.0, 0.0)
 
 
 def _now_ms() -> int:
@@ -738,7 +745,8 @@ class SparkplugDevice(Sink):
         edge = open_edge(options, [(n.name, n.profile.modbus.plc.r_scale, n.profile.modbus.plc.word_order,
                                     {METHOD_METRIC: method_properties(n.profile),
                                      LAYOUT_METRIC: layout_properties(n.profile),
-                                     FRAME_METRIC.name: frame_properties(n.profile, options.frame_interval_s)})
+                                     FRAME_METRIC.name: frame_properties(n.profile, options.frame_interval_s),
+                                     **score_properties(n.profile)})
                                    for n in nodes])
         context.closers.append(edge.close)  # closers run last first: the devices' DDEATH, then NDEATH
         for dev in edge.devices:

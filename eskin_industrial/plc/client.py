@@ -7,7 +7,10 @@ on.  The image is written at once when it is urgent (a state change), otherwise
 every ``refresh_s``; an older image not yet written is replaced by the newer one
 (the PLC wants the present; events survive in the latch and the counters).  After
 each refresh the writer reads COMMAND and ENABLE from the PLC, hands their commands
-to the bridge, and writes COMMAND back to 0 (the handshake).
+to the bridge, and writes COMMAND back to 0 (the handshake).  The method's scores
+(SCORE_A..SCORE_B, after COMMAND and ENABLE) are written at each refresh too, in a
+request of their own; a PLC whose map ends before them answers with an exception,
+which is no outage (counted, logged once, retried with the back-off).
 
 One request at a time, and a PLC that fails is not hammered.  A request has
 ``timeout_s`` to be answered; an answer up to as long again still counts as written,
@@ -44,7 +47,7 @@ from ..bus.modbus.tcp import PipelinedTcpMaster
 from ..errors import ModbusFault, Refused
 from ..profile import ModbusPlcSection
 from ..sinks.base import Publication, Sink, SinkHealth
-from .image import REG, Command, parse_register_write
+from .image import REG, TAIL_AT, Command, parse_register_write
 
 
 #: Each back-off wait is the current delay less up to this share of it, at random.
@@ -65,6 +68,8 @@ class WriterStats:
     superseded: int = 0  #: images replaced by a newer one before they were written
     sent_inline: int = 0  #: urgent images sent by the offering thread (no hand-off)
     command_reads_refused: int = 0  #: reads of COMMAND/ENABLE answered with an exception
+    score_writes: int = 0  #: writes of SCORE_A..SCORE_B the PLC acknowledged
+    score_writes_refused: int = 0  #: writes of SCORE_A..SCORE_B answered with an exception
     last_error: str = ""
     #: offer -> acknowledged write (urgent only); the newest ones, so months of
     #: running do not grow it
@@ -131,6 +136,9 @@ class PlcWriter(Sink):
         self._ever_written = False
         self._commands_after = 0.0  #: monotonic: no command read before (a back-off)
         self._commands_delay: float | None = None  #: while the PLC refuses command reads
+        self._tail: tuple[int, ...] = ()  #: the newest image's SCORE_A..SCORE_B
+        self._tail_after = 0.0  #: monotonic: no score write before (a back-off)
+        self._tail_delay: float | None = None  #: while the PLC refuses the score writes
 
         if serial is not None:
             self.where = f"rtu {serial.port} at {serial.baudrate} baud, unit {settings.unit_id} (client)"
@@ -143,11 +151,15 @@ class PlcWriter(Sink):
         return self
 
     def _publish(self, publication: Publication) -> None:
-        self.offer(publication.registers, publication.urgent, publication.t_event)
+        self.offer(publication.registers, publication.urgent, publication.t_event, publication.tail)
 
-    def offer(self, registers: list[int], urgent: bool = False, t_event: float | None = None) -> None:
-        """Hand over the newest image; ``t_event`` (perf_counter) dates an urgent one."""
+    def offer(self, registers: list[int], urgent: bool = False, t_event: float | None = None,
+              tail: tuple[int, ...] = ()) -> None:
+        """Hand over the newest image; ``t_event`` (perf_counter) dates an urgent one;
+        ``tail``: its SCORE_A..SCORE_B, written at the next refresh."""
         with self._cond:
+            if tail:
+                self._tail = tail
             pending = self._pending
             if (urgent and self._inline and self.connected and not self._busy and self._outstanding is None
                     and (pending is None or not pending[1]) and not self._stop):
@@ -226,6 +238,9 @@ class PlcWriter(Sink):
                 item = None  # written: a failure of the read below does not bring it back
             if time.monotonic() >= next_refresh:
                 next_refresh = time.monotonic() + s.refresh_s
+                # (after an image: never scores in a PLC that has no image yet)
+                if self._tail and self._last is not None and time.monotonic() >= self._tail_after:
+                    self._write_tail()
                 if self.poll_commands and time.monotonic() >= self._commands_after:
                     self._poll_commands()
         except ModbusFault as exc:
@@ -358,6 +373,31 @@ class PlcWriter(Sink):
             self._commands_delay = None
             self._event("plc_commands_read", plc=self.where, refused=st.command_reads_refused)
 
+    def _write_tail(self) -> None:
+        """Write the newest SCORE_A..SCORE_B.  A PLC that takes the image but answers
+        this write with an exception (a map that ends at ENABLE) is no outage: as for
+        the command reads, the refusal is counted, logged once, and retried with back-off."""
+        st = self.stats
+        with self._cond:
+            tail = self._tail
+        try:
+            self.master.write_registers(self.settings.base_address + TAIL_AT, list(tail))
+        except ModbusFault as exc:
+            if exc.kind != "exception":
+                raise
+            st.exceptions[exc.code] += 1
+            st.score_writes_refused += 1
+            if self._tail_delay is None:
+                self._tail_delay = self.settings.backoff_s
+                self._event("plc_scores_refused", "warning", plc=self.where, exception=exc.code, error=str(exc))
+            self._tail_after = time.monotonic() + self._tail_delay
+            self._tail_delay = min(2 * self._tail_delay, self.settings.backoff_max_s)
+            return
+        st.score_writes += 1
+        if self._tail_delay is not None:
+            self._tail_delay = None
+            self._event("plc_scores_written", plc=self.where, refused=st.score_writes_refused)
+
     def _read_commands(self) -> None:
         s = self.settings
         at = s.base_address + REG["COMMAND"].offset
@@ -413,6 +453,7 @@ class PlcWriter(Sink):
                "plc_write_timeouts": st.timeouts, "plc_exceptions": sum(n for _, n in exceptions),
                "plc_connects": st.connects, "plc_connect_attempts": st.connect_attempts, "plc_outages": st.outages,
                "plc_superseded": st.superseded, "plc_sent_inline": st.sent_inline,
-               "plc_command_reads_refused": st.command_reads_refused}
+               "plc_command_reads_refused": st.command_reads_refused, "plc_score_writes": st.score_writes,
+               "plc_score_writes_refused": st.score_writes_refused}
         out.update((f"plc_exception_{code:02d}", n) for code, n in exceptions)
         return out

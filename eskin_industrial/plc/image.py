@@ -9,10 +9,18 @@ generated from :data:`REGISTERS`, :data:`COILS` and :data:`BITS` (``eskin-bus pl
 :data:`REGISTERS` is the one description of the image: a publication is a dict of
 named values (:meth:`PlcImage.values`), laid out into words by the table
 (:func:`encode_registers`) and read back by :func:`decode_registers`, its inverse.
+
+R_COE and R_DW are the paper's indicators whatever method decides; the deciding
+method's own scores are SCORE_A and SCORE_B, appended after the PLC's command
+registers (so that no address of an older image moved), and METHOD_ID says which method
+that is.  The published registers are thus two runs of the block: STATUS..METHOD_ID
+(``STATUS_COUNT`` words from the base) and SCORE_A..SCORE_B (``TAIL_COUNT`` words from
+``TAIL_AT``); COMMAND and ENABLE lie between them.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 from collections.abc import Mapping, Sequence
@@ -26,6 +34,7 @@ from ..bus.modbus.codec import (
     join32,
     split32,
 )
+from ..detect.methods import METHODS
 from ..detect.state import GraspState
 from ..detect.updates import Update, state_changed
 from ..errors import Refused
@@ -75,6 +84,10 @@ BIT_DOC: dict[Status, str] = {
 
 Kind = Literal["bits", "u16", "i16", "u32"]
 
+#: METHOD_ID's values, for the register table.
+METHOD_CODES = ", ".join(f"{m.code} {m.name}" for m in sorted(METHODS.values(), key=lambda m: m.code)) + \
+    "; 0 none"
+
 
 @dataclass(frozen=True)
 class Register:
@@ -93,8 +106,10 @@ class Register:
 REGISTERS: tuple[Register, ...] = (
     Register("STATUS", 0, "bits", "-", "status bits, see the bit table"),
     Register("STATE", 1, "u16", "code", "0 no_contact, 1 stable, 2 variable_force, 3 slip"),
-    Register("R_COE", 2, "u16", "x r_scale", "decorrelation indicator x r_scale, saturated at 65535"),
-    Register("R_DW", 3, "u16", "x r_scale", "wavelet indicator x r_scale, saturated at 65535"),
+    Register("R_COE", 2, "u16", "x r_scale",
+             "the paper's decorrelation indicator R_coe x r_scale, saturated at 65535, whatever METHOD_ID decides"),
+    Register("R_DW", 3, "u16", "x r_scale",
+             "the paper's wavelet indicator R_dw x r_scale, saturated at 65535, whatever METHOD_ID decides"),
     Register("F_SUM", 4, "u32", "mN", "total force of the newest frame"),
     Register("XC", 6, "i16", "0.01 mm", "centre of force, x (held while out of contact)"),
     Register("YC", 7, "i16", "0.01 mm", "centre of force, y"),
@@ -106,17 +121,29 @@ REGISTERS: tuple[Register, ...] = (
     Register("BUS_ERRORS", 16, "u32", "count",
              "RTU: timeouts + CRC/framing errors + exception responses; CAN: failed reads + error frames"),
     Register("FLAGS", 18, "u16", "bits", "frame/update flags of the newest update (FrameFlag, low 16 bits)"),
-    Register("RESERVED", 19, "u16", "-", "reads 0 (room for a later value)"),
+    Register("METHOD_ID", 19, "u16", "code", "the deciding method: " + METHOD_CODES),
     Register("COMMAND", 20, "bits", "-", "write: bit 0 acknowledge slip latch, bit 1 tare; reads 0 once done",
              "RW"),
     Register("ENABLE", 21, "u16", "0/1", "write 1 to enable detection, 0 to disable; reads the current value",
              "RW"),
+    Register("SCORE_A", 22, "u16", "x r_scale",
+             "the deciding method's first score x r_scale, saturated at 65535 (`eskin-bus plc map` names it)"),
+    Register("SCORE_B", 23, "u16", "x r_scale", "the deciding method's second score x r_scale, likewise"),
 )
 REG = {r.name: r for r in REGISTERS}
 #: The registers the bridge publishes: the read-only ones (the PLC writes the rest).
 PUBLISHED: tuple[Register, ...] = tuple(r for r in REGISTERS if r.access == "R")
-#: Registers the bridge publishes (client mode writes these in one request).
-STATUS_COUNT = max(r.offset + r.words for r in PUBLISHED)
+_FIRST_RW = min(r.offset for r in REGISTERS if r.access == "RW")
+_LAST_RW = max(r.offset + r.words for r in REGISTERS if r.access == "RW")
+#: The first run of published registers, from the base: STATUS..METHOD_ID (client mode
+#: writes these in one request).
+MAIN: tuple[Register, ...] = tuple(r for r in PUBLISHED if r.offset < _FIRST_RW)
+STATUS_COUNT = max(r.offset + r.words for r in MAIN)
+#: The second run, after the command registers: the method's scores (client mode
+#: writes them in a request of their own, at each refresh: see ``plc/client.py``).
+TAIL: tuple[Register, ...] = tuple(r for r in PUBLISHED if r.offset >= _LAST_RW)
+TAIL_AT = min(r.offset for r in TAIL)
+TAIL_COUNT = max(r.offset + r.words for r in TAIL) - TAIL_AT
 #: All registers, including the command registers.
 IMAGE_COUNT = max(r.offset + r.words for r in REGISTERS)
 
@@ -225,13 +252,26 @@ class Layout:
         return regs
 
 
-_LAYOUTS: dict[WordOrder, Layout] = {wo: Layout.of(PUBLISHED, wo) for wo in ("big", "little")}
+_LAYOUTS: dict[WordOrder, Layout] = {wo: Layout.of(MAIN, wo) for wo in ("big", "little")}
+#: The tail's layout, from TAIL_AT (one-word values only: no word order).
+_TAIL = Layout.of([dataclasses.replace(r, offset=r.offset - TAIL_AT) for r in TAIL], "big")
 
 
 def encode_registers(values: Mapping[str, int], word_order: WordOrder) -> list[int]:
-    """The ``STATUS_COUNT`` published registers for named values (the inverse of
-    :func:`decode_registers`)."""
+    """The ``STATUS_COUNT`` registers of the first published run for named values (the
+    inverse of :func:`decode_registers`)."""
     return _LAYOUTS[word_order].encode(values)
+
+
+def encode_tail(values: Mapping[str, int]) -> list[int]:
+    """The ``TAIL_COUNT`` registers of the second published run (from ``TAIL_AT``)."""
+    return _TAIL.encode(values)
+
+
+def decode_tail(tail: Sequence[int]) -> dict[str, int]:
+    """Named values of the second published run (``TAIL_COUNT`` words from
+    ``TAIL_AT``, :attr:`PlcImage.tail`); none for an empty one."""
+    return {r.name: tail[r.offset - TAIL_AT] for r in TAIL} if len(tail) >= TAIL_COUNT else {}
 
 
 def decode_registers(registers: Sequence[int], word_order: WordOrder) -> dict[str, int]:
@@ -263,6 +303,10 @@ class PlcImage:
     slip_events: int = 0
     state_changes: int = 0
     update: Update | None = None
+    #: The deciding method's code (METHOD_ID; ``detect.methods``): 0 for none.
+    method: int = 0
+    #: The second published run of the newest :meth:`render` (SCORE_A, SCORE_B).
+    tail: list[int] = dataclasses.field(default_factory=lambda: [0] * TAIL_COUNT)
 
     # -- input side -------------------------------------------------------------
     def observe(self, update: Update) -> bool:
@@ -360,7 +404,9 @@ class PlcImage:
             "LOST_SCANS": health.lost_scans & 0xFFFFFFFF,
             "BUS_ERRORS": health.bus_errors & 0xFFFFFFFF,
             "FLAGS": u.flags & 0xFFFF if u is not None else 0,
-            "RESERVED": 0,
+            "METHOD_ID": self.method,
+            "SCORE_A": saturate_u16(u.score_a * cfg.r_scale) if u is not None and shown else 0,
+            "SCORE_B": saturate_u16(u.score_b * cfg.r_scale) if u is not None and shown else 0,
         }
 
     def offline_values(self, health: Health) -> dict[str, int]:
@@ -370,17 +416,21 @@ class PlcImage:
         return {**self.values(health), **_OFFLINE}
 
     def render(self, health: Health) -> list[int]:
-        """The STATUS..RESERVED registers (``STATUS_COUNT`` values); one publication:
-        the heartbeat advances."""
+        """The STATUS..METHOD_ID registers (``STATUS_COUNT`` values), and the scores in
+        :attr:`tail`; one publication: the heartbeat advances."""
         self.heartbeat = (self.heartbeat + 1) & 0xFFFF
-        return _LAYOUTS[self.settings.word_order].encode(self.values(health))
+        values = self.values(health)
+        self.tail = _TAIL.encode(values)
+        return _LAYOUTS[self.settings.word_order].encode(values)
 
     def render_offline(self, health: Health) -> list[int]:
         """The last image of a bridge that stops (:meth:`offline_values`); a
         publication too: the heartbeat advances.  A client-mode PLC keeps what was
         written last, so this is what it must read, never the last "stable"."""
         self.heartbeat = (self.heartbeat + 1) & 0xFFFF
-        return _LAYOUTS[self.settings.word_order].encode(self.offline_values(health))
+        values = self.offline_values(health)
+        self.tail = _TAIL.encode(values)
+        return _LAYOUTS[self.settings.word_order].encode(values)
 
     def coils(self) -> list[bool]:
         """What the coils read, from the base address."""
@@ -388,7 +438,7 @@ class PlcImage:
 
 
 _OFFLINE: dict[str, int] = {"STATUS": int(Status.BRIDGE_OFFLINE), "STATE": 0, "R_COE": 0, "R_DW": 0,
-                            "F_SUM": 0, "FLAGS": 0, "FRAME_AGE": 0xFFFF}
+                            "F_SUM": 0, "FLAGS": 0, "FRAME_AGE": 0xFFFF, "SCORE_A": 0, "SCORE_B": 0}
 
 
 def coil_values(enabled: bool) -> list[bool]:
@@ -444,16 +494,30 @@ def bits_of(status: int) -> list[bool]:
 
 # -- the documented table ---------------------------------------------------------
 
-def map_rows(settings: ModbusPlcSection) -> list[dict[str, str]]:
-    """One row per register, coil and discrete input, with both numberings."""
+def register_docs(method: str | None) -> dict[str, str]:
+    """The descriptions of METHOD_ID, SCORE_A and SCORE_B when ``method`` decides: its
+    code and what its two scores are (the table's generic words with None)."""
+    if method is None:
+        return {}
+    m = METHODS[method]
+    a, b = m.scores
+    return {"METHOD_ID": f"the deciding method: {m.code} = {m.name} here ({METHOD_CODES})",
+            "SCORE_A": f"{m.name}'s {a.name} x r_scale, saturated at 65535: {a.doc}",
+            "SCORE_B": f"{m.name}'s {b.name} x r_scale, saturated at 65535: {b.doc}"}
+
+
+def map_rows(settings: ModbusPlcSection, method: str | None = None) -> list[dict[str, str]]:
+    """One row per register, coil and discrete input, with both numberings; with
+    ``method``, what METHOD_ID reads and what SCORE_A and SCORE_B hold when it decides."""
     base = settings.base_address
+    docs = register_docs(method)
     rows = []
     for r in REGISTERS:
         addr = base + r.offset
         span = f"{addr}" if r.words == 1 else f"{addr}-{addr + 1}"
         ref = _ref(4, addr) if r.words == 1 else f"{_ref(4, addr)}-{_ref(4, addr + 1)}"
         kind = r.kind if r.kind != "u32" else f"u32 ({settings.word_order} word order)"
-        doc = r.doc.replace("x r_scale", f"x {settings.r_scale:g}")
+        doc = docs.get(r.name, r.doc).replace("x r_scale", f"x {settings.r_scale:g}")
         unit = r.unit.replace("x r_scale", f"x {settings.r_scale:g}")
         rows.append({"table": "holding register", "name": r.name, "address": span, "ref": ref, "type": kind,
                      "unit": unit, "access": r.access, "description": doc})

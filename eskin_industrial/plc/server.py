@@ -38,6 +38,7 @@ from .image import (
     IMAGE_COUNT,
     REG,
     STATUS_COUNT,
+    TAIL_COUNT,
     Command,
     PlcImage,
     bits_of,
@@ -54,6 +55,7 @@ class PlcRegisterHandler:
         self.settings = settings
         self.base = settings.base_address
         self.registers: list[int] = [0] * STATUS_COUNT
+        self.tail: list[int] = [0] * TAIL_COUNT  #: SCORE_A..SCORE_B, after COMMAND and ENABLE
         self.enabled = True
         self.command_pending = 0  #: COMMAND reads this until the bridge has acted
         self.commands: queue.SimpleQueue[Command] = queue.SimpleQueue()
@@ -64,8 +66,11 @@ class PlcRegisterHandler:
         self.log = RateLimitedLog(logging.getLogger(__name__))
         self._lock = threading.Lock()
 
-    def publish(self, registers: list[int], enabled: bool, image: PlcImage | None = None) -> None:
+    def publish(self, registers: list[int], enabled: bool, image: PlcImage | None = None,
+                tail: Sequence[int] = ()) -> None:
         self.registers = list(registers)
+        if tail:
+            self.tail = list(tail)
         self.enabled = enabled
         if image is not None:
             self.image = image
@@ -77,7 +82,7 @@ class PlcRegisterHandler:
                 self.command_pending = 0
 
     def _holding(self) -> list[int]:
-        return [*self.registers, self.command_pending, int(self.enabled)]
+        return [*self.registers, self.command_pending, int(self.enabled), *self.tail]
 
     def read(self, table, address, count):
         off = address - self.base
@@ -213,7 +218,7 @@ class PlcServer:
     # One block: the server answers for its block's sink.
     def publish(self, registers: list[int], image: PlcImage, urgent: bool = False,
                 t_event: float | None = None) -> None:
-        self._blocks[0].publish(Publication(registers, image, urgent, t_event or 0.0))
+        self._blocks[0].publish(Publication(registers, image, urgent, t_event or 0.0, tail=tuple(image.tail)))
 
     def take_commands(self) -> list[Command]:
         return self._blocks[0].take_commands()
@@ -275,7 +280,7 @@ class PlcBlockSink(Sink):
         self.where = f"{server.where}, base address {handler.base}"
 
     def _publish(self, publication: Publication) -> None:
-        self.handler.publish(publication.registers, publication.image.enabled, publication.image)
+        self.handler.publish(publication.registers, publication.image.enabled, publication.image, publication.tail)
 
     def take_commands(self) -> list[Command]:
         out = []

@@ -18,7 +18,17 @@ from dataclasses import dataclass, field
 from ..bus.modbus.codec import ILLEGAL_ADDRESS
 from ..bus.modbus.io import RegisterServer, SerialSettings
 from ..detect.state import GraspState
-from ..plc.image import CMD_ACK, IMAGE_COUNT, REG, STATUS_COUNT, Status, decode_registers
+from ..plc.image import (
+    CMD_ACK,
+    IMAGE_COUNT,
+    REG,
+    STATUS_COUNT,
+    TAIL_AT,
+    TAIL_COUNT,
+    Status,
+    decode_registers,
+    decode_tail,
+)
 from ..profile import ModbusPlcSection
 
 
@@ -150,12 +160,14 @@ class PlcSimulator:
         while not self._stop.wait(self.scan_s):
             regs = list(self.memory.regs[:STATUS_COUNT]) + [0, 0]
             v = decode_registers(regs, wo)
+            tail = decode_tail(self.memory.regs[TAIL_AT: TAIL_AT + TAIL_COUNT])
             if prev is not None:
                 quiet = ~int(Status.BRIDGE_ALIVE)  # the life bit toggles at every write
                 changes = [f"{k}={_show(k, v[k])}" for k in ("STATUS", "STATE")
                            if v[k] & quiet != prev[k] & quiet]
                 if changes:
-                    self._say(" ".join(changes) + f"  (R_COE={v['R_COE']} R_DW={v['R_DW']} F_SUM={v['F_SUM']} mN)")
+                    self._say(" ".join(changes) + f"  (R_COE={v['R_COE']} R_DW={v['R_DW']} SCORE_A={tail['SCORE_A']} "
+                                                  f"SCORE_B={tail['SCORE_B']} F_SUM={v['F_SUM']} mN)")
             prev = v
             msgs, ack = self.gripper.cycle(v, time.monotonic())
             for m in msgs:

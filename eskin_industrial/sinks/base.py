@@ -65,12 +65,14 @@ class Publication(NamedTuple):
     """One publication of a node's register image (a named tuple: built at every
     publication, up to once a scan)."""
 
-    registers: list[int]  #: STATUS..FLAGS as rendered (``plc.image.STATUS_COUNT`` values)
+    registers: list[int]  #: STATUS..METHOD_ID as rendered (``plc.image.STATUS_COUNT`` values)
     image: PlcImage  #: the image they were rendered from (enable, latch, newest update)
     urgent: bool  #: a state or status change: to be written at once
     t_event: float  #: ``time.perf_counter()`` when the deciding scan arrived
     offline: bool = False  #: the bridge's last image (BRIDGE_OFFLINE)
     scans: int = 0  #: scans the node's loop has taken since start (0 in the offline image)
+    #: SCORE_A..SCORE_B as rendered (``plc.image.TAIL_COUNT`` values from ``TAIL_AT``)
+    tail: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -76,7 +76,8 @@ class Recorder(Sink):
             u = update
             line = json.dumps({"node": self._node, "t": _num(u.t), "r_coe": _num(u.r_coe), "r_dw": _num(u.r_dw),
                                "state": LABELS[u.state], "valid": int(u.valid), "f_sum": _num(u.f_sum),
-                               "xc": _num(u.xc), "yc": _num(u.yc), "flags": int(u.flags)}) + "\n"
+                               "xc": _num(u.xc), "yc": _num(u.yc), "flags": int(u.flags),
+                               "score_a": _num(u.score_a), "score_b": _num(u.score_b)}) + "\n"
         else:
             line = update_row(update, LABELS[update.state])
         if self._write(line):

@@ -42,7 +42,7 @@ def short_counters(counters: Mapping[str, int]) -> dict[str, int]:
 def change_line(u: Update) -> str:
     """One state change, as ``monitor --plain`` prints it."""
     return (f"{u.t:8.2f} s  {GraspState(u.state).label:15s} valid={int(u.valid)}  "
-            f"F={u.f_sum:6.2f} N  scores {u.r_coe:6.2f} {u.r_dw:6.2f}")
+            f"F={u.f_sum:6.2f} N  scores {u.score_a:6.2f} {u.score_b:6.2f}  R_coe {u.r_coe:6.2f} R_dw {u.r_dw:6.2f}")
 
 
 class KeptImage(Sink):
@@ -107,8 +107,9 @@ class Watch:
         return Snapshot(
             forces=forces,
             row_names=lay.row_names,
-            r_coe=None if u is None else u.r_coe,
-            r_dw=None if u is None else u.r_dw,
+            # the gauges show the deciding method's scores against its thresholds
+            r_coe=None if u is None else u.score_a,
+            r_dw=None if u is None else u.score_b,
             scale=self.scale,
             state=None if u is None else GraspState(u.state).label,
             valid=False if u is None else bool(u.valid),

@@ -257,7 +257,7 @@ def register_block(s: Snapshot, width: int) -> list[Line]:
         head.append([("(no DATA_VALID)", "2")])
     tokens: list[Line] = []
     for name, value in regs.items():
-        if name in ("STATUS", "RESERVED"):
+        if name == "STATUS":
             continue
         if name == "STATE":
             label = GraspState(value).label if value in GraspState._value2member_map_ else "?"

@@ -20,7 +20,7 @@ from ..plc.image import Status
 
 @dataclass(frozen=True, slots=True)
 class IndicatorScale:
-    """How to read the two score columns (R_coe and R_dw in the paper's method)."""
+    """How to read the deciding method's two scores (R_coe and R_dw for the paper's methods)."""
 
     names: tuple[str, str] = ("R_coe", "R_dw")
     #: What the columns hold for this method (shown as a note).
@@ -35,8 +35,9 @@ def indicator_scale(method: str, settings: DetectorSettings, detector: object | 
     """The thresholds of ``method`` as the profile's detector settings give them.
 
     The paper's rules compare R_coe and R_dw with ``slip_r_*`` and ``variable_r_*``;
-    other methods write their own scores in the same two columns (``columns`` on the
-    detector), so their thresholds come from the method, not from ``slip_r_*``.
+    the gauges show the deciding method's own two scores (``score_a``, ``score_b``;
+    ``columns`` on the detector names them), so other methods' thresholds come from
+    the method, not from ``slip_r_*``.
     """
     if method.startswith("paper"):
         rule = {"paper-coe": "R_coe alone", "paper-dw": "R_dw alone"}.get(method, "both")
@@ -47,14 +48,18 @@ def indicator_scale(method: str, settings: DetectorSettings, detector: object | 
         # (varying force: the total force's own test, not these indicators: detect/vforce.py)
         return IndicatorScale(("R_coe", "R_dw"), f"{method}: slip > | ({rule})",
                               (settings.slip_r_coe, settings.slip_r_dw))
-    columns = tuple(getattr(detector, "columns", ("score", "unused")))
+    from ..detect.methods import METHODS
+
+    known = METHODS.get(method)
+    columns = tuple(s.name for s in known.scores) if known is not None else tuple(
+        getattr(detector, "columns", ("score", "unused")))
     if method == "cof-track":
         # Both scores are normalised by the method: 1 is its threshold (detect/cof_track.py).
-        return IndicatorScale(("R_coe", "R_dw"), f"{method} scores ({columns[0].removesuffix('_score')}, {columns[1].removesuffix('_score')}): slip > 1", (1.0, 1.0))
+        return IndicatorScale((columns[0], columns[1]), f"{method} scores: slip > 1", (1.0, 1.0))
     threshold = getattr(detector, "threshold", None)
     slip_a = float(threshold) if isinstance(threshold, (int, float)) else None
     slip_b = None
-    return IndicatorScale(("R_coe", "R_dw"), f"{method}: {' | '.join(columns)}", (slip_a, slip_b))
+    return IndicatorScale((columns[0], columns[1]), f"{method} scores", (slip_a, slip_b))
 
 
 def status_names(status: int) -> tuple[str, ...]:

@@ -10,6 +10,9 @@ PLC can misbehave.  Its ``mode`` can be changed while it runs:
 - ``no-reads``: takes writes, answers reads (FC3) with exception ``code``;
 - ``down``: not listening at all (connections refused), see :meth:`go_down`.
 
+With ``map_size``, a request that reaches past that many registers is answered with
+exception ``code`` whatever the mode: a PLC program whose map is shorter.
+
 Everything it sees is counted: connections accepted, requests, and every FC16
 write decoded here (time, address, values).
 """
@@ -35,8 +38,9 @@ class Seen:
 
 
 class PlcStandIn:
-    def __init__(self, mode: str = "ok", *, delay_s: float = 0.6, code: int = 2, port: int = 0) -> None:
-        self.mode, self.delay_s, self.code = mode, delay_s, code
+    def __init__(self, mode: str = "ok", *, delay_s: float = 0.6, code: int = 2, port: int = 0,
+                 map_size: int | None = None) -> None:
+        self.mode, self.delay_s, self.code, self.map_size = mode, delay_s, code, map_size
         self.seen = Seen()
         self.regs = [0] * 2048
         self.regs[REG["ENABLE"].offset] = 1  # the PLC program enables detection (base address 0)
@@ -141,7 +145,8 @@ class PlcStandIn:
             return None
         elif fc == 3:
             self.seen.reads += 1
-        if self.mode == "exception" or (self.mode == "no-reads" and fc == 3):
+        past = fc in (3, 16) and self.map_size is not None and sum(struct.unpack(">HH", pdu[1:5])) > self.map_size
+        if self.mode == "exception" or (self.mode == "no-reads" and fc == 3) or past:
             body = bytes([fc | 0x80, self.code])
         elif fc == 16:
             self.regs[address:address + count] = values
