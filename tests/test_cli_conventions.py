@@ -146,4 +146,8 @@ def test_bridge_quiet_and_verbose_set_its_log_level() -> None:
     normal, quiet_ = run(), run("-q")
     assert " info " in normal and " start " in normal
     assert " info " not in quiet_ and " start " not in quiet_
-    assert run("-q", "--log-level", "info").count(" info ") == normal.count(" info ")  # an explicit level wins
+    # an explicit level wins: the same info events (state lines depend on how far the
+    # scene got in its half second, so they are left out of the comparison)
+    def events(log: str) -> list[str]:
+        return [line.split()[2] for line in log.splitlines() if " info " in line and line.split()[2] != "state"]
+    assert events(run("-q", "--log-level", "info")) == events(normal)
