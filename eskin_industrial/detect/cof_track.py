@@ -20,12 +20,16 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     e    = stick-slip evidence (detect/ripple.py): a rise in the energy of the total
            force's 10 ms change, as a log-likelihood ratio added to the ramp's; capped so
            that the ramp still needs ramp_support_z of its own
-    slip when a > 1, b > 1 or r > 1, or the stick-slip channel fires (below) while the
-    force is steady
+    t    = the torsion channel (detect/torsion.py): the same ramp test on the angle of
+           the distribution's rotational flow about the CoF (a turn about the normal
+           keeps the CoF and the total); only while the force is steady
+    slip when a > 1, b > 1, r > 1 or t > 1, or the stick-slip channel fires (below)
+    while the force is steady
 
 The cost per frame is one 3-column matrix product, three running sums per ramp horizon,
-a ring of squared changes for the evidence and a few scalar operations: the same at
-100 Hz and at 1 kHz.  The score columns hold max(a, r) and b (1 = threshold).
+a ring of squared changes for the evidence and a few scalar operations, and for the
+torsion channel one dot product and one vector sum (its template once per 0.1 s): the
+same at 100 Hz and at 1 kHz.  The score columns hold max(a, r, t) and b (1 = threshold).
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from .ramp import RampBank
 from .ripple import ForceRipple, ripple_dof, variance_evidence
 from .scored import ScoredDetector
 from .settings import DetectorSettings
+from .torsion import TurnFlow, grid_of
 
 
 class CofTrack(ScoredDetector):
@@ -72,6 +77,13 @@ class CofTrack(ScoredDetector):
         self._ripple = ForceRipple(lag, window) if c.ripple_s > 0 else None
         self._ripple_dof = ripple_dof(lag, window)
         self._evidence_cap = 0.5 * max(0.0, c.ramp_z ** 2 - c.ramp_support_z ** 2)
+        # the torsion channel (detect/torsion.py): a turn keeps the CoF and the total
+        grid = grid_of(x_mm, y_mm) if c.torsion else None
+        self._turn = None if grid is None else TurnFlow(
+            *grid, max(1, round(c.torsion_ref_s * rate_hz / c.torsion_blocks)), c.torsion_blocks, horizons, base,
+            c.torsion_z, round(c.noise_s * rate_hz))
+        self._turn_min = math.radians(c.torsion_min_deg)
+        self.turn_score = 0.0
         self.fast_score = self.ramp_score = 0.0  # the two parts of the first column
         self._noise: float | None = None  # learnt CoF noise, in force units (N^2 mm^2)
         self._noise_x = 0.0  # the part of it along x (sigma_x^2 S^2)
@@ -93,6 +105,8 @@ class CofTrack(ScoredDetector):
         self._vib_sum = 0.0
         self._calm_force = 0
         self._ramp.reset()
+        if self._turn is not None:
+            self._turn.reset()
         if self._ripple is not None:
             self._ripple.reset()
 
@@ -161,6 +175,9 @@ class CofTrack(ScoredDetector):
         # a held copy is no sample (repeats would count one noise draw twice)
         if not filled:
             self._ramp.push(xc, yc, 1.0 / (s * s))
+        turn = self._turn
+        if turn is not None:
+            turn.push(f, s, filled)
         noise_d = z * math.sqrt(2.0 * noise / m) / s
         if fast is not None:
             lim = self.min_fast
@@ -204,8 +221,11 @@ class CofTrack(ScoredDetector):
             evidence = min(variance_evidence(energy / self._rnoise, self._ripple_dof), self._evidence_cap) if (
                 energy is not None and self._rnoise > 0.0) else 0.0
             r = self._ramp.score(qx if qx > floor else floor, qy if qy > floor else floor, self.ramp_min, evidence)
-        self.fast_score, self.ramp_score = a, r
-        slip = a > 1.0 or b > 1.0 or r > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
+        tr = turn.score(self._turn_min) if steady and turn is not None else 0.0
+        self.fast_score, self.ramp_score, self.turn_score = a, r, tr
+        slip = a > 1.0 or b > 1.0 or r > 1.0 or tr > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
+        if turn is not None and not slip and tr < 0.5 and not filled:
+            turn.learn()
         if not slip and a < 0.5 and not filled:  # learn the noise only while calm
             self._learnt += 1
             gain = 1.0 / self._learnt
@@ -216,4 +236,4 @@ class CofTrack(ScoredDetector):
             self._fnoise += gain * ((s - prev[2]) ** 2 * 0.5 - self._fnoise)
             if rip_d2 is not None:
                 self._rnoise += gain * (rip_d2 - self._rnoise)
-        return (a if a > r else r), b, slip, varying
+        return max(a, r, tr), b, slip, varying

@@ -71,6 +71,18 @@ class CofTrackSettings:
     #: shake) is no slip.  (0 flagged 19-22 of 30 such still grips, 4 one of 30, at 44 %
     #: of the tuning events within 40 ms against 50 %: docs/evaluation.md.)
     ramp_support_z: float = field(default=4.0, metadata=non_negative())
+    #: Torsion channel (detect/torsion.py): the distribution's turn about the normal,
+    #: from its rotational derivative, as a ramp over the ramp channel's horizons and
+    #: base; ``false`` turns it off (a turn then reads as no slip).
+    torsion: bool = True
+    #: The turn's ramp must exceed this many standard deviations of its learnt noise ...
+    torsion_z: float = field(default=5.5, metadata=positive())
+    #: ... and the turn it implies this many degrees (in the flow's own units).
+    torsion_min_deg: float = field(default=1.0, metadata=non_negative())
+    #: The rotational derivative is taken from the mean distribution over this long,
+    #: renewed ``torsion_blocks`` times as often.
+    torsion_ref_s: float = field(default=0.5, metadata=positive())
+    torsion_blocks: int = field(default=5, metadata=positive("an integer >= 1"))
 
     def __post_init__(self) -> None:
         if not self.ramp_horizons_s:
