@@ -57,11 +57,11 @@ def test_a_turning_square_moves_the_angle_a_still_one_does_not() -> None:
     30 degrees/s moves ``theta`` by more than 10 of its noise's standard deviations in
     0.2 s; the same square held still stays within 5 over 4 s."""
     block, blocks = 10, 5
-    still = turn_batch(_square(np.zeros(600), seed=1), XS, YS, block, blocks)[200:]
+    still = turn_batch(_square(np.zeros(600), seed=1), XS, YS, 1, block, blocks)[200:]
     sd = np.std(np.diff(still)) / np.sqrt(2.0)  # the per-frame noise of theta
     assert np.max(np.abs(still - still.mean())) < 5.0 * sd
     angle = np.concatenate([np.zeros(300), 30.0 * np.arange(1, 21) / 100.0])
-    turning = turn_batch(_square(angle, seed=1), XS, YS, block, blocks)
+    turning = turn_batch(_square(angle, seed=1), XS, YS, 1, block, blocks)
     assert abs(turning[-1] - turning[:300].mean()) > 10.0 * sd
 
 
@@ -73,19 +73,23 @@ def test_renewing_the_template_adds_no_drift() -> None:
     template, times the frame's noise, is a step of the walk)."""
     f = _square(np.zeros(800), seed=2, noise_n=0.02)
     for block, blocks in ((10, 5), (5, 4)):
-        theta = turn_batch(f, XS, YS, block, blocks)
+        theta = turn_batch(f, XS, YS, 1, block, blocks)
         sd = np.std(np.diff(theta)) / np.sqrt(2.0)
         assert np.std(theta) < 1.25 * sd, (block, blocks)
 
 
-def test_streaming_angle_equals_batch() -> None:
+@pytest.mark.parametrize("hop", [1, 4])
+def test_streaming_angle_equals_batch(hop: int) -> None:
+    """After every whole hop the streaming angle is the batch one (hop means, the
+    template renewed every 7 hops from the last 3 blocks)."""
     f = _square(np.concatenate([np.zeros(150), 20.0 * np.arange(1, 101) / 100.0]), seed=3)
-    flow = TurnFlow(XS, YS, 7, 3, (5, 10, 20), 20, 5.5, 300)
+    flow = TurnFlow(XS, YS, hop, 7, 3, (5, 10, 20), 20, 5.5, 300)
     got = []
-    for frame in f:
+    for k, frame in enumerate(f):
         flow.push(frame, float(frame.sum()))
-        got.append(flow.theta)
-    np.testing.assert_allclose(got, turn_batch(f, XS, YS, 7, 3), rtol=0, atol=1e-9)
+        if (k + 1) % hop == 0:
+            got.append(flow.theta)
+    np.testing.assert_allclose(got, turn_batch(f, XS, YS, hop, 7, 3), rtol=0, atol=1e-9)
 
 
 def test_the_channel_needs_a_grid_of_two_rows_and_columns() -> None:

@@ -28,7 +28,7 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
 
 The cost per frame is one 3-column matrix product, three running sums per ramp horizon,
 a ring of squared changes for the evidence and a few scalar operations, and for the
-torsion channel one dot product and one vector sum (its template once per 0.1 s): the
+torsion channel one vector sum (the rest once a hop, its template once per 0.1 s): the
 same at 100 Hz and at 1 kHz.  The score columns hold max(a, r, t) and b (1 = threshold).
 """
 
@@ -78,10 +78,14 @@ class CofTrack(ScoredDetector):
         self._ripple_dof = ripple_dof(lag, window)
         self._evidence_cap = 0.5 * max(0.0, c.ramp_z ** 2 - c.ramp_support_z ** 2)
         # the torsion channel (detect/torsion.py): a turn keeps the CoF and the total
+        # (it works on each hop's mean: its times count hops)
         grid = grid_of(x_mm, y_mm) if c.torsion else None
+        hop = max(1, round(c.hop_s * rate_hz))
+        hops = rate_hz / hop  # per second
         self._turn = None if grid is None else TurnFlow(
-            *grid, max(1, round(c.torsion_ref_s * rate_hz / c.torsion_blocks)), c.torsion_blocks, horizons, base,
-            c.torsion_z, round(c.noise_s * rate_hz))
+            *grid, hop, round(c.torsion_ref_s / c.torsion_blocks * hops), c.torsion_blocks,
+            tuple(max(2, round(h * hops)) for h in c.ramp_horizons_s), max(2, round(c.ramp_base_s * hops)),
+            c.torsion_z, round(c.noise_s * hops))
         self._turn_min = math.radians(c.torsion_min_deg)
         self.turn_score = 0.0
         self.fast_score = self.ramp_score = 0.0  # the two parts of the first column

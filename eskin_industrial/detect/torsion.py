@@ -8,24 +8,29 @@ centre of force ``c`` changes the normalised distribution ``p = f / S`` by
     dp = -d theta g,    g = (x - c_x) dp/dy - (y - c_y) dp/dx
 
 (the rotational derivative of ``p``; its gradients from the array's grid), so the
-least-squares angle of a frame's change is ``dp . g / (g . g)``: a rotational optical
-flow.  The second moments would see a long footprint turn but not a square one (they
-are isotropic); the flow sees the corners of either.
+least-squares angle of a change is ``dp . g / (g . g)``: a rotational optical flow.
+The second moments would see a long footprint turn but not a square one (they are
+isotropic); the flow sees the corners of either.
 
-Per frame the channel adds ``d_k = (p_k - p_{k-1}) . g_hat`` (``g_hat = g / g.g``) to
-an angle ``theta_k``.  ``g`` comes from the mean distribution of the last block of
-``ref_s`` and is renewed once a block; ``d_k`` is taken with one ``g`` for both frames,
-so within a block the sum telescopes and ``theta`` carries the frame's noise once, not
-a random walk.  The frame at which ``g`` is renewed is left out of it (its noise would
-otherwise bias every renewal the same way: a ramp in ``theta`` that no part makes).  The angle is in the flow's own units (a coarse grid's gradients make
-it read a square's turn several times too large, a long block's too small): what
-counts is the ratio to its noise.
+The channel works on the mean distribution of each hop (``p_h``: the hop's summed
+forces over its summed totals; one vector sum per frame, the rest once a hop, so at
+1 kHz it costs a tenth of what it costs at 100 Hz, and a hop's mean is as good as
+its frames).  Each hop adds ``d_h = (p_h - p_{h-1}) . g_hat`` (``g_hat = g / g.g``)
+to an angle ``theta_h``.  ``g`` comes from the mean distribution of the last
+``blocks`` blocks of hops and is renewed once a block; ``d_h`` is taken with one ``g``
+for both hops, so between renewals the sum telescopes and ``theta`` carries a hop's
+noise once, not a random walk.  The hop at which ``g`` is renewed is left out of it
+(its noise would otherwise bias every renewal the same way: a ramp in ``theta`` that
+no part makes), and a template over several blocks changes little at each renewal
+(the noise of the hop it changes at, times that change, is a step of a random walk).
+The angle is in the flow's own units (a coarse grid's gradients make it read a
+square's turn several times too large, a long block's too small): what counts is
+the ratio to its noise.
 
-The test is the ramp channel's (detect/ramp.py, :class:`RampBank`) on ``theta``: a
-turn that starts is a ramp; its noise is learnt while calm as ``S^2 d^2 / 2`` (the
-distribution's noise is the taxels' over ``S``), so a grip that loosens keeps the
-right threshold.  Per frame: one dot product and one vector sum; per block one
-gradient of the grid.
+The test is the ramp channel's (detect/ramp.py, :class:`RampBank`) on ``theta``, over
+horizons counted in hops: a turn that starts is a ramp; its noise is learnt while
+calm as ``S^2 d^2 / 2`` (the distribution's noise is the taxels' over ``S``), so a grip
+that loosens keeps the right threshold.
 """
 
 from __future__ import annotations
@@ -52,6 +57,31 @@ def _padded(c: np.ndarray) -> np.ndarray:
     return np.concatenate(([2.0 * c[0] - c[1]], c, [2.0 * c[-1] - c[-2]]))
 
 
+class _Grid:
+    """What the template needs of the grid, worked out once."""
+
+    def __init__(self, xs: np.ndarray, ys: np.ndarray) -> None:
+        self.shape = (len(ys), len(xs))
+        self.x, self.y = np.tile(xs, len(ys)), np.repeat(ys, len(xs))
+        px, py = _padded(xs), _padded(ys)
+        self.inv_dx = 1.0 / (px[2:] - px[:-2])[None, :]
+        self.inv_dy = 1.0 / (py[2:] - py[:-2])[:, None]
+        self.pad = np.zeros((len(ys) + 2, len(xs) + 2))  # the grid with nothing around it
+
+    def template(self, p: np.ndarray) -> np.ndarray | None:
+        pad = self.pad
+        pad[1:-1, 1:-1] = p.reshape(self.shape)
+        dx = (pad[1:-1, 2:] - pad[1:-1, :-2]) * self.inv_dx
+        dy = (pad[2:, 1:-1] - pad[:-2, 1:-1]) * self.inv_dy
+        x, y = self.x, self.y
+        cx, cy = float(p @ x), float(p @ y)
+        g = (x - cx) * dy.ravel() - (y - cy) * dx.ravel()
+        gg = float(g @ g)
+        if not gg > 1e-18:
+            return None
+        return g / gg
+
+
 def turn_template(p: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray | None:
     """``g / (g . g)`` for the distribution ``p`` (row-major, summing to 1) about its
     centre; ``None`` if ``g`` vanishes (a flat distribution shows no turn).
@@ -60,36 +90,31 @@ def turn_template(p: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray |
     footprint that ends in an edge taxel's cell has its edge there, and the one-sided
     difference at the edge read a 20 x 12 mm block's turn at a third of the
     correlation (0.34 against 0.58 for the change over 0.1 s)."""
-    grid = np.pad(p.reshape(len(ys), len(xs)), 1)
-    px, py = _padded(xs), _padded(ys)
-    dx = (grid[1:-1, 2:] - grid[1:-1, :-2]) / (px[2:] - px[:-2])[None, :]
-    dy = (grid[2:, 1:-1] - grid[:-2, 1:-1]) / (py[2:] - py[:-2])[:, None]
-    x = np.tile(xs, len(ys))
-    y = np.repeat(ys, len(xs))
-    cx, cy = float(p @ x), float(p @ y)
-    g = (x - cx) * dy.ravel() - (y - cy) * dx.ravel()
-    gg = float(g @ g)
-    if not gg > 1e-18:
-        return None
-    return g / gg
+    return _Grid(xs, ys).template(p)
 
 
-def turn_batch(forces: np.ndarray, xs: np.ndarray, ys: np.ndarray, block: int, blocks: int = 1) -> np.ndarray:
-    """The angle ``theta`` (K,) of a series of frames in contact, with no streaming
-    state: what :class:`TurnFlow` must reproduce."""
-    s = forces.sum(axis=1)
-    p = forces / s[:, None]
-    theta = np.zeros(len(forces))
+def hop_means(forces: np.ndarray, hop: int) -> np.ndarray:
+    """Each whole hop's mean distribution (H, n): its summed forces over its summed totals."""
+    h = len(forces) // hop
+    f = forces[:h * hop].reshape(h, hop, -1).sum(axis=1)
+    return f / f.sum(axis=1, keepdims=True)
+
+
+def turn_batch(forces: np.ndarray, xs: np.ndarray, ys: np.ndarray, hop: int, block: int,
+               blocks: int = 1) -> np.ndarray:
+    """The angle ``theta`` after each whole hop (H,) of a series of frames in contact,
+    with no streaming state: what :class:`TurnFlow` must reproduce."""
+    p = hop_means(forces, hop)
+    theta = np.zeros(len(p))
     g: np.ndarray | None = None
-    ends: list[int] = []  # the frames at which g was renewed
-    for k in range(len(forces)):
+    ends: list[int] = []  # the hops at which g was renewed
+    for k in range(len(p)):
         if k:
             theta[k] = theta[k - 1] + (float((p[k] - p[k - 1]) @ g) if g is not None else 0.0)
-        if (k + 1) % block == 0:  # renew g from the last blocks, less the frames g was renewed at
+        if (k + 1) % block == 0:  # renew g from the last blocks, less the hops g was renewed at
             ends.append(k)
-            first = max(0, k + 1 - blocks * block)
-            use = [j for j in range(first, k + 1) if j not in ends]
-            g_new = turn_template(forces[use].sum(axis=0) / s[use].sum(), xs, ys)
+            use = [j for j in range(max(0, k + 1 - blocks * block), k + 1) if j not in ends]
+            g_new = turn_template(p[use].mean(axis=0), xs, ys)
             g = g_new if g_new is not None else g
     return theta
 
@@ -98,80 +123,87 @@ class TurnFlow:
     """Streaming :func:`turn_batch`, and the ramp test on its angle.
 
     ``push(f, s)`` each frame in contact (``held``: a held copy across a gap, which
-    adds no change); ``score(min_rad)`` the ramp's score (1 = threshold) against the
-    learnt noise; ``learn()`` after a calm frame."""
+    is no sample of its own); ``score(min_rad)`` the ramp's score (1 = threshold)
+    against the learnt noise, as of the last whole hop; ``learn()`` after a calm frame
+    (it counts each hop's change once)."""
 
-    def __init__(self, xs: np.ndarray, ys: np.ndarray, block: int, blocks: int, horizons: tuple[int, ...],
-                 base: int, z: float, noise_n: int) -> None:
+    def __init__(self, xs: np.ndarray, ys: np.ndarray, hop: int, block: int, blocks: int,
+                 horizons: tuple[int, ...], base: int, z: float, noise_n: int) -> None:
+        """``block``, ``horizons``, ``base`` and ``noise_n`` count hops of ``hop`` frames."""
         self.xs, self.ys = xs, ys
-        self.block, self.blocks = max(1, block), max(1, blocks)
+        self._grid = _Grid(xs, ys)
+        self.hop, self.block, self.blocks = max(1, hop), max(2, block), max(1, blocks)
         self._ramp = RampBank(horizons, base, z)
         self._a_noise = 1.0 / max(1.0, noise_n)
         self.reset()
 
     def reset(self) -> None:
         n = len(self.xs) * len(self.ys)
-        self._acc = np.zeros(n)  # this block's sum of forces (and of totals)
-        self._acc_s = 0.0
-        # the last ``blocks`` block sums, and their sum: the template's distribution
-        self._ring = [(np.zeros(n), 0.0) for _ in range(self.blocks)]
-        self._ring_i = 0
-        self._sum = np.zeros(n)
-        self._sum_s = 0.0
-        self._n = 0
+        self._f = np.zeros(n)  # this hop's sum of forces, frames and totals
+        self._s = 0.0
+        self._frames = 0
+        self._held = 0
+        self._blocks: list[np.ndarray] = []  # the template's last hop means, up to blocks x block
+        self._since = 0  # hops since the template was renewed
         self._g: np.ndarray | None = None
-        self._u = 0.0  # the last frame's p . g_hat
+        self._p: np.ndarray | None = None  # the last hop's mean distribution
+        self._u = 0.0  # ... its projection on g_hat
         self.theta = 0.0
-        self._d2 = 0.0  # the last change, squared, in force units (S^2 d^2 / 2)
+        self._d2: float | None = None  # the last hop's change, squared, in force units (S^2 d^2 / 2)
         self._noise = 0.0  # its learnt calm level
         self._learnt = 0
+        self._score: float | None = 0.0  # (None: to be computed for the newest hop)
         self._ramp.reset()
 
     def push(self, f: np.ndarray, s: float, held: bool = False) -> None:
+        if held:
+            self._held += 1
+        else:
+            self._f += f
+            self._s += s
+        self._frames += 1
+        if self._frames < self.hop:
+            return
+        if self._s > 0.0:
+            self._hop(self._f / self._s, self._s / (self._frames - self._held))
+        self._f[:] = 0.0
+        self._s = 0.0
+        self._frames = self._held = 0
+
+    def _hop(self, p: np.ndarray, s: float) -> None:
         g = self._g
         if g is not None:
-            u = float(f @ g) / s
-            d = 0.0 if held else u - self._u
+            u = float(p @ g)
+            d = u - self._u
             self.theta += d
             self._d2 = 0.5 * s * s * d * d
             self._u = u
-            if not held:
-                self._ramp.push(self.theta, 0.0, 1.0 / (s * s))
-        self._n += 1
-        if self._n < self.block:
-            self._acc += f
-            self._acc_s += s
+            self._ramp.push(self.theta, 0.0, 1.0 / (s * s))
+            self._score = None
+        self._since += 1
+        if self._since < self.block:
+            self._blocks.append(p)
+            del self._blocks[:-(self.blocks * self.block - self.blocks)]
             return
-        # a new template from the last blocks' frames but this one, and this frame's
-        # projection on it (had the frame's own noise entered its template, the two
-        # would correlate, and every renewal would add the same bias: a drift in theta).
-        # A template over several blocks changes little at each renewal: the noise of
-        # the frame it changes at, times that change, is a random walk in theta
-        old, old_s = self._ring[self._ring_i]
-        self._sum += self._acc - old
-        self._sum_s += self._acc_s - old_s
-        self._ring[self._ring_i] = (self._acc, self._acc_s)
-        self._ring_i = (self._ring_i + 1) % self.blocks
-        if self._ring_i == 0:  # once a round, against the running sum's rounding drift
-            self._sum = np.sum([a for a, _ in self._ring], axis=0)
-            self._sum_s = sum(b for _, b in self._ring)
-        g_new = turn_template(self._sum / self._sum_s, self.xs, self.ys) if self._sum_s > 0.0 else None
+        # renew the template from the last blocks' hops but this one, and take this
+        # hop's projection on it (so that the next change is taken with one template)
+        self._since = 0
+        g_new = self._grid.template(sum(self._blocks) / len(self._blocks)) if self._blocks else None
         if g_new is not None:
             self._g = g_new
-            self._u = float(f @ g_new) / s
-        self._acc = old  # (recycled: it left the ring)
-        self._acc[:] = 0.0
-        self._acc_s = 0.0
-        self._n = 0
+            self._u = float(p @ g_new)
 
     def score(self, min_rad: float) -> float:
-        q = self._noise
-        return self._ramp.score(q, q, min_rad) if q > 0.0 else 0.0
+        if self._score is None:
+            q = self._noise
+            self._score = self._ramp.score(q, q, min_rad) if q > 0.0 else 0.0
+        return self._score
 
     def learn(self) -> None:
-        """Count the last change as calm noise (the caller knows the frame was calm)."""
-        if self._g is None:
+        """Count the last hop's change as calm noise (the caller knows it was calm)."""
+        if self._d2 is None:
             return
         self._learnt += 1
         gain = max(1.0 / self._learnt, self._a_noise)
         self._noise += gain * (self._d2 - self._noise)
+        self._d2 = None
