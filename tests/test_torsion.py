@@ -12,6 +12,7 @@ import pytest
 from eskin_industrial import load_profile
 from eskin_industrial.detect.cof_track import CofTrack
 from eskin_industrial.detect.torsion import TurnFlow, grid_of, turn_batch, turn_template
+from eskin_industrial.evaluation import conditions
 from eskin_industrial.evaluation.families import evaluate_families
 from eskin_industrial.evaluation.suite import DEFAULT_SETTINGS
 from eskin_industrial.scenes import load_scene, render
@@ -103,6 +104,22 @@ def _cof_track(**overrides) -> CofTrack:
     return CofTrack(settings, X, Y, 100.0)
 
 
+def _top_turn_score(det: CofTrack, t: np.ndarray, f: np.ndarray) -> float:
+    """The channel's largest score over a recording."""
+    top = 0.0
+    score = det.score
+
+    def watched(t, f, s, xc, yc):
+        nonlocal top
+        out = score(t, f, s, xc, yc)
+        top = max(top, det.turn_score)
+        return out
+
+    det.score = watched  # type: ignore[method-assign]
+    det.feed(t, f)
+    return top
+
+
 def _states(det: CofTrack, t: np.ndarray, f: np.ndarray) -> list[tuple[float, int, bool]]:
     return [(u.t, u.state, u.valid) for u in det.feed(t, f)]
 
@@ -132,18 +149,7 @@ def test_a_still_hold_and_a_varying_force_do_not_turn(scene: str) -> None:
     spec = load_scene(scene)
     for seed in (1000, 1001):
         r = render(spec, 100.0, seed)
-        det = _cof_track()
-        top = 0.0
-        score = det.score
-
-        def watched(t, f, s, xc, yc):
-            nonlocal top
-            out = score(t, f, s, xc, yc)
-            top = max(top, det.turn_score)
-            return out
-
-        det.score = watched  # type: ignore[method-assign]
-        det.feed(r.t, r.forces)
+        top = _top_turn_score(_cof_track(), r.t, r.forces)
         assert 0.0 < top < 1.0, (scene, seed)
 
 
@@ -167,3 +173,13 @@ def test_a_profile_turns_the_channel_off(tmp_path) -> None:
     settings = load_profile(path).detector
     assert settings.cof_track.torsion is False
     assert CofTrack(settings, X, Y, 100.0)._turn is None
+
+
+def test_a_contact_on_one_taxel_shows_no_turn_and_the_channel_stays_silent() -> None:
+    """A 5 mm contact centred on one taxel (the failure map's tiny contact, 70 s of
+    holding): the rotational derivative is the noise of its own template, which turns
+    at random at every renewal.  The channel sees that it stands out of nothing and
+    stays silent; without that check it voted slip for seconds at a time."""
+    r = render(conditions.contact_size(5.0)(load_scene("hold")), 100.0, 1002)
+    assert _top_turn_score(_cof_track(), r.t, r.forces) == 0.0
+    assert _top_turn_score(_cof_track(torsion_min_visibility=0.0), r.t, r.forces) > 1.0

@@ -83,6 +83,11 @@ class CofTrackSettings:
     #: renewed ``torsion_blocks`` times as often.
     torsion_ref_s: float = field(default=0.5, metadata=positive())
     torsion_blocks: int = field(default=5, metadata=positive("an integer >= 1"))
+    #: The channel looks only while the rotational derivative stands out of its own
+    #: noise: its square at least this many times what the noise of the template's
+    #: mean alone would give (noise alone gave 0.4-30 on a one-taxel contact, a 0.4 N
+    #: grip and 0.1 N of taxel noise; real footprints 70 and more on the tuning seeds)
+    torsion_min_visibility: float = field(default=40.0, metadata=non_negative())
 
     def __post_init__(self) -> None:
         if not self.ramp_horizons_s:

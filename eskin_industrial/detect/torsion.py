@@ -35,6 +35,8 @@ that loosens keeps the right threshold.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .ramp import RampBank
@@ -67,19 +69,23 @@ class _Grid:
         self.inv_dx = 1.0 / (px[2:] - px[:-2])[None, :]
         self.inv_dy = 1.0 / (py[2:] - py[:-2])[:, None]
         self.pad = np.zeros((len(ys) + 2, len(xs) + 2))  # the grid with nothing around it
+        # the variance of each taxel's difference per unit variance of p's noise
+        self.noise_dx = 2.0 * np.tile(self.inv_dx.ravel() ** 2, len(ys))
+        self.noise_dy = 2.0 * np.repeat(self.inv_dy.ravel() ** 2, len(xs))
 
-    def template(self, p: np.ndarray) -> np.ndarray | None:
+    def template(self, p: np.ndarray) -> tuple[np.ndarray, float, float] | None:
+        """``g_hat``, ``g . g`` and ``g . g`` per unit of white noise in ``p`` (the
+        central differences' noise, weighed by the distance from the centre)."""
         pad = self.pad
         pad[1:-1, 1:-1] = p.reshape(self.shape)
         dx = (pad[1:-1, 2:] - pad[1:-1, :-2]) * self.inv_dx
         dy = (pad[2:, 1:-1] - pad[:-2, 1:-1]) * self.inv_dy
-        x, y = self.x, self.y
-        cx, cy = float(p @ x), float(p @ y)
-        g = (x - cx) * dy.ravel() - (y - cy) * dx.ravel()
+        x, y = self.x - float(p @ self.x), self.y - float(p @ self.y)
+        g = x * dy.ravel() - y * dx.ravel()
         gg = float(g @ g)
         if not gg > 1e-18:
             return None
-        return g / gg
+        return g / gg, gg, float(x * x @ self.noise_dy + y * y @ self.noise_dx)
 
 
 def turn_template(p: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray | None:
@@ -90,7 +96,8 @@ def turn_template(p: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray |
     footprint that ends in an edge taxel's cell has its edge there, and the one-sided
     difference at the edge read a 20 x 12 mm block's turn at a third of the
     correlation (0.34 against 0.58 for the change over 0.1 s)."""
-    return _Grid(xs, ys).template(p)
+    out = _Grid(xs, ys).template(p)
+    return None if out is None else out[0]
 
 
 def hop_means(forces: np.ndarray, hop: int) -> np.ndarray:
@@ -128,8 +135,11 @@ class TurnFlow:
     (it counts each hop's change once)."""
 
     def __init__(self, xs: np.ndarray, ys: np.ndarray, hop: int, block: int, blocks: int,
-                 horizons: tuple[int, ...], base: int, z: float, noise_n: int) -> None:
-        """``block``, ``horizons``, ``base`` and ``noise_n`` count hops of ``hop`` frames."""
+                 horizons: tuple[int, ...], base: int, z: float, noise_n: int, min_visibility: float = 0.0) -> None:
+        """``block``, ``horizons``, ``base`` and ``noise_n`` count hops of ``hop`` frames;
+        ``min_visibility``: the least ``g . g`` over what its template's noise alone
+        would give (:attr:`visibility`) at which the channel looks."""
+        self.min_visibility = min_visibility
         self.xs, self.ys = xs, ys
         self._grid = _Grid(xs, ys)
         self.hop, self.block, self.blocks = max(1, hop), max(2, block), max(1, blocks)
@@ -146,12 +156,14 @@ class TurnFlow:
         self._blocks: list[np.ndarray] = []  # the template's last hop means, up to blocks x block
         self._since = 0  # hops since the template was renewed
         self._g: np.ndarray | None = None
+        self._gn2 = 1.0  # g_hat . g_hat: the angle's noise per unit noise of the distribution
         self._p: np.ndarray | None = None  # the last hop's mean distribution
         self._u = 0.0  # ... its projection on g_hat
         self.theta = 0.0
         self._d2: float | None = None  # the last hop's change, squared, in force units (S^2 d^2 / 2)
         self._noise = 0.0  # its learnt calm level
         self._learnt = 0
+        self.visibility = 0.0
         self._score: float | None = 0.0  # (None: to be computed for the newest hop)
         self._ramp.reset()
 
@@ -176,9 +188,9 @@ class TurnFlow:
             u = float(p @ g)
             d = u - self._u
             self.theta += d
-            self._d2 = 0.5 * s * s * d * d
+            self._d2 = 0.5 * s * s * d * d / self._gn2
             self._u = u
-            self._ramp.push(self.theta, 0.0, 1.0 / (s * s))
+            self._ramp.push(self.theta, 0.0, self._gn2 / (s * s))
             self._score = None
         self._since += 1
         if self._since < self.block:
@@ -188,9 +200,22 @@ class TurnFlow:
         # renew the template from the last blocks' hops but this one, and take this
         # hop's projection on it (so that the next change is taken with one template)
         self._since = 0
-        g_new = self._grid.template(sum(self._blocks) / len(self._blocks)) if self._blocks else None
-        if g_new is not None:
+        made = self._grid.template(sum(self._blocks) / len(self._blocks)) if self._blocks else None
+        if made is not None:
+            g_new, gg, spread = made
+            q = self._noise
+            self.visibility = gg * s * s * len(self._blocks) / (q * spread) if q > 0 else math.inf
+            if self.visibility < self.min_visibility:
+                # no turn to see: the template is mostly the noise of its own mean (a
+                # contact on one taxel, a light or very noisy grip), and each renewal
+                # would turn it at random; silent until one stands out again
+                self._g = None
+                self._d2 = None
+                self._score = 0.0
+                self._ramp.reset()
+                return
             self._g = g_new
+            self._gn2 = float(g_new @ g_new)
             self._u = float(p @ g_new)
 
     def score(self, min_rad: float) -> float:
