@@ -110,7 +110,8 @@ def hop_means(forces: np.ndarray, hop: int) -> np.ndarray:
 def turn_batch(forces: np.ndarray, xs: np.ndarray, ys: np.ndarray, hop: int, block: int,
                blocks: int = 1) -> np.ndarray:
     """The angle ``theta`` after each whole hop (H,) of a series of frames in contact,
-    with no streaming state: what :class:`TurnFlow` must reproduce."""
+    with no streaming state: what :class:`TurnFlow` must reproduce (with no
+    ``min_visibility``)."""
     p = hop_means(forces, hop)
     theta = np.zeros(len(p))
     g: np.ndarray | None = None
@@ -157,7 +158,6 @@ class TurnFlow:
         self._since = 0  # hops since the template was renewed
         self._g: np.ndarray | None = None
         self._gn2 = 1.0  # g_hat . g_hat: the angle's noise per unit noise of the distribution
-        self._p: np.ndarray | None = None  # the last hop's mean distribution
         self._u = 0.0  # ... its projection on g_hat
         self.theta = 0.0
         self._d2: float | None = None  # the last hop's change, squared, in force units (S^2 d^2 / 2)
