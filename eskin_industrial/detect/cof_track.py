@@ -225,9 +225,12 @@ class CofTrack(ScoredDetector):
             evidence = min(variance_evidence(energy / self._rnoise, self._ripple_dof), self._evidence_cap) if (
                 energy is not None and self._rnoise > 0.0) else 0.0
             r = self._ramp.score(qx if qx > floor else floor, qy if qy > floor else floor, self.ramp_min, evidence)
+        slip = a > 1.0 or b > 1.0 or r > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
+        if slip and turn is not None:  # a slide: the turn's template would smear it
+            turn.restart()
         tr = turn.score(self._turn_min) if steady and turn is not None else 0.0
         self.fast_score, self.ramp_score, self.turn_score = a, r, tr
-        slip = a > 1.0 or b > 1.0 or r > 1.0 or tr > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
+        slip = slip or tr > 1.0
         if turn is not None and not slip and tr < 0.5 and not filled:
             turn.learn()
         if not slip and a < 0.5 and not filled:  # learn the noise only while calm

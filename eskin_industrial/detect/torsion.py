@@ -28,9 +28,11 @@ square's turn several times too large, a long block's too small): what counts is
 the ratio to its noise.
 
 The test is the ramp channel's (detect/ramp.py, :class:`RampBank`) on ``theta``, over
-horizons counted in hops: a turn that starts is a ramp; its noise is learnt while
-calm as ``S^2 d^2 / 2`` (the distribution's noise is the taxels' over ``S``), so a grip
-that loosens keeps the right threshold.
+horizons counted in hops: a turn that starts is a ramp.  Its noise is each taxel's
+(learnt while calm, as half the squared change of its hop mean) weighed by
+``g_hat^2`` and over ``S^2``: a taxel with no load reads a clipped, quieter noise, so a
+template that moves to loaded taxels (after a slide) is noisier, and a grip that
+loosens keeps the right threshold.
 """
 
 from __future__ import annotations
@@ -69,13 +71,13 @@ class _Grid:
         self.inv_dx = 1.0 / (px[2:] - px[:-2])[None, :]
         self.inv_dy = 1.0 / (py[2:] - py[:-2])[:, None]
         self.pad = np.zeros((len(ys) + 2, len(xs) + 2))  # the grid with nothing around it
-        # the variance of each taxel's difference per unit variance of p's noise
-        self.noise_dx = 2.0 * np.tile(self.inv_dx.ravel() ** 2, len(ys))
-        self.noise_dy = 2.0 * np.repeat(self.inv_dy.ravel() ** 2, len(xs))
+        self.inv_dx2 = np.tile(self.inv_dx.ravel() ** 2, len(ys))
+        self.inv_dy2 = np.repeat(self.inv_dy.ravel() ** 2, len(xs))
 
-    def template(self, p: np.ndarray) -> tuple[np.ndarray, float, float] | None:
-        """``g_hat``, ``g . g`` and ``g . g`` per unit of white noise in ``p`` (the
-        central differences' noise, weighed by the distance from the centre)."""
+    def template(self, p: np.ndarray, var: np.ndarray | None = None) -> tuple[np.ndarray, float, float] | None:
+        """``g_hat``, ``g . g``, and what ``g . g`` would be from the noise of ``p``
+        alone if each taxel's variance were ``var`` (1 by default): the central
+        differences' noise, weighed by the distance from the centre."""
         pad = self.pad
         pad[1:-1, 1:-1] = p.reshape(self.shape)
         dx = (pad[1:-1, 2:] - pad[1:-1, :-2]) * self.inv_dx
@@ -85,7 +87,10 @@ class _Grid:
         gg = float(g @ g)
         if not gg > 1e-18:
             return None
-        return g / gg, gg, float(x * x @ self.noise_dy + y * y @ self.noise_dx)
+        pad[1:-1, 1:-1] = 1.0 if var is None else var.reshape(self.shape)
+        across = (pad[1:-1, 2:] + pad[1:-1, :-2]).ravel()  # the two neighbours a difference takes
+        along = (pad[2:, 1:-1] + pad[:-2, 1:-1]).ravel()
+        return g / gg, gg, float((x * x * self.inv_dy2) @ along + (y * y * self.inv_dx2) @ across)
 
 
 def turn_template(p: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray | None:
@@ -157,11 +162,15 @@ class TurnFlow:
         self._blocks: list[np.ndarray] = []  # the template's last hop means, up to blocks x block
         self._since = 0  # hops since the template was renewed
         self._g: np.ndarray | None = None
-        self._gn2 = 1.0  # g_hat . g_hat: the angle's noise per unit noise of the distribution
+        self._g2 = np.zeros(n)  # g_hat^2: each taxel's weight in the angle's noise
         self._u = 0.0  # ... its projection on g_hat
         self.theta = 0.0
-        self._d2: float | None = None  # the last hop's change, squared, in force units (S^2 d^2 / 2)
-        self._noise = 0.0  # its learnt calm level
+        self._last: np.ndarray | None = None  # the last hop's mean forces ...
+        self._change: np.ndarray | None = None  # ... and their change from the hop before
+        #: each taxel's noise variance (of a hop's mean force, N^2), learnt while calm:
+        #: a taxel with no load reads a clipped, quieter noise, so the angle's noise
+        #: depends on which taxels its template weighs
+        self._var = np.zeros(n)
         self._learnt = 0
         self.visibility = 0.0
         self._score: float | None = 0.0  # (None: to be computed for the newest hop)
@@ -177,20 +186,22 @@ class TurnFlow:
         if self._frames < self.hop:
             return
         if self._s > 0.0:
-            self._hop(self._f / self._s, self._s / (self._frames - self._held))
+            n = self._frames - self._held
+            self._hop(self._f / self._s, self._s / n, self._f / n)
         self._f[:] = 0.0
         self._s = 0.0
         self._frames = self._held = 0
 
-    def _hop(self, p: np.ndarray, s: float) -> None:
+    def _hop(self, p: np.ndarray, s: float, mean_f: np.ndarray) -> None:
+        self._change = None if self._last is None else mean_f - self._last
+        self._last = mean_f
         g = self._g
         if g is not None:
             u = float(p @ g)
-            d = u - self._u
-            self.theta += d
-            self._d2 = 0.5 * s * s * d * d / self._gn2
+            self.theta += u - self._u
             self._u = u
-            self._ramp.push(self.theta, 0.0, self._gn2 / (s * s))
+            # the angle's noise variance: sum of g_hat^2 times each taxel's, over S^2
+            self._ramp.push(self.theta, 0.0, float(self._g2 @ self._var) / (s * s))
             self._score = None
         self._since += 1
         if self._since < self.block:
@@ -200,35 +211,42 @@ class TurnFlow:
         # renew the template from the last blocks' hops but this one, and take this
         # hop's projection on it (so that the next change is taken with one template)
         self._since = 0
-        made = self._grid.template(sum(self._blocks) / len(self._blocks)) if self._blocks else None
+        made = self._grid.template(sum(self._blocks) / len(self._blocks), self._var) if self._blocks else None
         if made is not None:
             g_new, gg, spread = made
-            q = self._noise
-            self.visibility = gg * s * s * len(self._blocks) / (q * spread) if q > 0 else math.inf
+            self.visibility = gg * s * s * len(self._blocks) / spread if spread > 0 else math.inf
             if self.visibility < self.min_visibility:
                 # no turn to see: the template is mostly the noise of its own mean (a
                 # contact on one taxel, a light or very noisy grip), and each renewal
                 # would turn it at random; silent until one stands out again
                 self._g = None
-                self._d2 = None
                 self._score = 0.0
                 self._ramp.reset()
                 return
             self._g = g_new
-            self._gn2 = float(g_new @ g_new)
+            self._g2 = g_new * g_new
             self._u = float(p @ g_new)
 
+    def restart(self) -> None:
+        """Start the template and the ramp again (the learnt noise stays): the
+        distribution has moved, and a template over the last blocks smears it."""
+        self._blocks.clear()
+        self._since = 0
+        self._g = None
+        self._score = 0.0
+        self._ramp.reset()
+
     def score(self, min_rad: float) -> float:
-        if self._score is None:
-            q = self._noise
-            self._score = self._ramp.score(q, q, min_rad) if q > 0.0 else 0.0
+        if self._score is None:  # (the noise is in the scale pushed with each angle)
+            self._score = self._ramp.score(1.0, 1.0, min_rad)
         return self._score
 
     def learn(self) -> None:
         """Count the last hop's change as calm noise (the caller knows it was calm)."""
-        if self._d2 is None:
+        change = self._change
+        if change is None:
             return
         self._learnt += 1
         gain = max(1.0 / self._learnt, self._a_noise)
-        self._noise += gain * (self._d2 - self._noise)
-        self._d2 = None
+        self._var += gain * (0.5 * change * change - self._var)
+        self._change = None
