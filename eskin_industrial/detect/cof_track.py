@@ -78,9 +78,9 @@ class CofTrack(ScoredDetector):
         self._ripple_dof = ripple_dof(lag, window)
         self._evidence_cap = 0.5 * max(0.0, c.ramp_z ** 2 - c.ramp_support_z ** 2)
         # the torsion channel (detect/torsion.py): a turn keeps the CoF and the total
-        # (it works on each hop's mean: its times count hops)
+        # (it works on each of its hops' mean: its times count them)
         grid = grid_of(x_mm, y_mm) if c.torsion else None
-        hop = max(1, round(c.hop_s * rate_hz))
+        hop = max(1, round(c.torsion_hop_s * rate_hz))
         hops = rate_hz / hop  # per second
         self._turn = None if grid is None else TurnFlow(
             *grid, hop, round(c.torsion_ref_s / c.torsion_blocks * hops), c.torsion_blocks,
@@ -231,7 +231,7 @@ class CofTrack(ScoredDetector):
         tr = turn.score(self._turn_min) if steady and turn is not None else 0.0
         self.fast_score, self.ramp_score, self.turn_score = a, r, tr
         slip = slip or tr > 1.0
-        if turn is not None and not slip and tr < 0.5 and not filled:
+        if turn is not None and turn.learnable and not slip and tr < 0.5 and not filled:
             turn.learn()
         if not slip and a < 0.5 and not filled:  # learn the noise only while calm
             self._learnt += 1
@@ -243,4 +243,6 @@ class CofTrack(ScoredDetector):
             self._fnoise += gain * ((s - prev[2]) ** 2 * 0.5 - self._fnoise)
             if rip_d2 is not None:
                 self._rnoise += gain * (rip_d2 - self._rnoise)
-        return max(a, r, tr), b, slip, varying
+        if tr > r:
+            r = tr
+        return (a if a > r else r), b, slip, varying

@@ -79,10 +79,13 @@ class CofTrackSettings:
     torsion_z: float = field(default=5.5, metadata=positive())
     #: ... and the turn it implies this many degrees (in the flow's own units).
     torsion_min_deg: float = field(default=1.0, metadata=non_negative())
+    #: The channel works on the mean distribution of each stretch this long (its votes
+    #: come as often; shorter costs more: each stretch is a projection and a ramp test)
+    torsion_hop_s: float = field(default=0.04, metadata=positive())
     #: The rotational derivative is taken from the mean distribution over this long,
     #: renewed ``torsion_blocks`` times as often.
     torsion_ref_s: float = field(default=0.5, metadata=positive())
-    torsion_blocks: int = field(default=5, metadata=positive("an integer >= 1"))
+    torsion_blocks: int = field(default=2, metadata=positive("an integer >= 1"))
     #: The channel looks only while the rotational derivative stands out of its own
     #: noise: its square at least this many times what the noise of the template's
     #: mean alone would give (noise alone gave 0.4-30 on a one-taxel contact, a 0.4 N

@@ -105,29 +105,24 @@ def turn_template(p: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray |
     return None if out is None else out[0]
 
 
-def hop_means(forces: np.ndarray, hop: int) -> np.ndarray:
-    """Each whole hop's mean distribution (H, n): its summed forces over its summed totals."""
-    h = len(forces) // hop
-    f = forces[:h * hop].reshape(h, hop, -1).sum(axis=1)
-    return f / f.sum(axis=1, keepdims=True)
-
-
 def turn_batch(forces: np.ndarray, xs: np.ndarray, ys: np.ndarray, hop: int, block: int,
                blocks: int = 1) -> np.ndarray:
     """The angle ``theta`` after each whole hop (H,) of a series of frames in contact,
     with no streaming state: what :class:`TurnFlow` must reproduce (with no
     ``min_visibility``)."""
-    p = hop_means(forces, hop)
-    theta = np.zeros(len(p))
+    h = len(forces) // hop
+    f = forces[:h * hop].reshape(h, hop, -1).sum(axis=1)  # each hop's summed forces
+    p = f / f.sum(axis=1, keepdims=True)
+    theta = np.zeros(h)
     g: np.ndarray | None = None
     ends: list[int] = []  # the hops at which g was renewed
-    for k in range(len(p)):
+    for k in range(h):
         if k:
             theta[k] = theta[k - 1] + (float((p[k] - p[k - 1]) @ g) if g is not None else 0.0)
         if (k + 1) % block == 0:  # renew g from the last blocks, less the hops g was renewed at
             ends.append(k)
             use = [j for j in range(max(0, k + 1 - blocks * block), k + 1) if j not in ends]
-            g_new = turn_template(p[use].mean(axis=0), xs, ys)
+            g_new = turn_template(f[use].sum(axis=0) / f[use].sum(), xs, ys)
             g = g_new if g_new is not None else g
     return theta
 
@@ -150,26 +145,33 @@ class TurnFlow:
         self._grid = _Grid(xs, ys)
         self.hop, self.block, self.blocks = max(1, hop), max(2, block), max(1, blocks)
         self._ramp = RampBank(horizons, base, z)
-        self._a_noise = 1.0 / max(1.0, noise_n)
+        self._a_noise = 1.0 / max(1.0, noise_n / max(2, block))  # (it learns once a block)
         self.reset()
 
     def reset(self) -> None:
         n = len(self.xs) * len(self.ys)
         self._f = np.zeros(n)  # this hop's sum of forces, frames and totals
-        self._s = 0.0
+        self._last = np.zeros(n)  # the hop before's (the two swap at every hop)
+        self._s = self._last_s = 0.0
+        self._last_frames = 1
         self._frames = 0
         self._held = 0
-        self._blocks: list[np.ndarray] = []  # the template's last hop means, up to blocks x block
+        self._hops = 0
+        self._block = np.zeros(n)  # this block's summed forces and totals, less the renewal hop
+        self._block_s = 0.0
+        self._ring = [(np.zeros(n), 0.0) for _ in range(self.blocks)]  # the last blocks'
+        self._ring_i = 0
         self._since = 0  # hops since the template was renewed
         self._g: np.ndarray | None = None
         self._g2 = np.zeros(n)  # g_hat^2: each taxel's weight in the angle's noise
-        self._u = 0.0  # ... its projection on g_hat
+        self._unit = 0.0  # g_hat^2 . var: the angle's noise variance times S^2
+        self._u = 0.0  # the last hop's p . g_hat
         self.theta = 0.0
-        self._last: np.ndarray | None = None  # the last hop's mean forces ...
-        self._change: np.ndarray | None = None  # ... and their change from the hop before
-        #: each taxel's noise variance (of a hop's mean force, N^2), learnt while calm:
-        #: a taxel with no load reads a clipped, quieter noise, so the angle's noise
-        #: depends on which taxels its template weighs
+        self._change: np.ndarray | None = None  # a hop's mean forces' change from the hop before
+        self.learnable = False  #: a change waits to be learnt from
+        #: each taxel's noise variance (of a hop's mean force, N^2), learnt while calm
+        #: once a block: a taxel with no load reads a clipped, quieter noise, so the
+        #: angle's noise depends on which taxels its template weighs
         self._var = np.zeros(n)
         self._learnt = 0
         self.visibility = 0.0
@@ -182,55 +184,80 @@ class TurnFlow:
         else:
             self._f += f
             self._s += s
-        self._frames += 1
-        if self._frames < self.hop:
+        frames = self._frames = self._frames + 1
+        if frames < self.hop:
             return
+        frames = self._frames - self._held
         if self._s > 0.0:
-            n = self._frames - self._held
-            self._hop(self._f / self._s, self._s / n, self._f / n)
+            self._hop(frames)
+        # the two sums swap: the newest is kept as the hop before
+        self._last, self._f = self._f, self._last
+        self._last_s, self._s = self._s, 0.0
+        self._last_frames = frames
         self._f[:] = 0.0
-        self._s = 0.0
         self._frames = self._held = 0
 
-    def _hop(self, p: np.ndarray, s: float, mean_f: np.ndarray) -> None:
-        self._change = None if self._last is None else mean_f - self._last
-        self._last = mean_f
+    def _hop(self, frames: int) -> None:
+        fs, s = self._f, self._s
+        self._hops += 1
+        if self._hops % self.block == 1 and self._last_s > 0.0:  # once a block, a change to learn from
+            self._change = fs / frames - self._last / self._last_frames
+            self.learnable = True
         g = self._g
         if g is not None:
-            u = float(p @ g)
+            u = float(fs @ g) / s
             self.theta += u - self._u
             self._u = u
-            # the angle's noise variance: sum of g_hat^2 times each taxel's, over S^2
-            self._ramp.push(self.theta, 0.0, float(self._g2 @ self._var) / (s * s))
+            mean_s = s / frames
+            self._ramp.push(self.theta, 0.0, self._unit / (mean_s * mean_s))
             self._score = None
         self._since += 1
         if self._since < self.block:
-            self._blocks.append(p)
-            del self._blocks[:-(self.blocks * self.block - self.blocks)]
+            self._block += fs
+            self._block_s += s
             return
         # renew the template from the last blocks' hops but this one, and take this
         # hop's projection on it (so that the next change is taken with one template)
         self._since = 0
-        made = self._grid.template(sum(self._blocks) / len(self._blocks), self._var) if self._blocks else None
-        if made is not None:
-            g_new, gg, spread = made
-            self.visibility = gg * s * s * len(self._blocks) / spread if spread > 0 else math.inf
-            if self.visibility < self.min_visibility:
-                # no turn to see: the template is mostly the noise of its own mean (a
-                # contact on one taxel, a light or very noisy grip), and each renewal
-                # would turn it at random; silent until one stands out again
-                self._g = None
-                self._score = 0.0
-                self._ramp.reset()
-                return
-            self._g = g_new
-            self._g2 = g_new * g_new
-            self._u = float(p @ g_new)
+        old = self._ring[self._ring_i]
+        self._ring[self._ring_i] = (self._block, self._block_s)
+        self._ring_i = (self._ring_i + 1) % self.blocks
+        self._block, self._block_s = old[0], 0.0  # (recycled)
+        self._block[:] = 0.0
+        total = sum(b for _, b in self._ring)
+        if not total > 0.0:
+            return
+        made = self._grid.template(sum(a for a, _ in self._ring) / total, self._var)
+        if made is None:
+            return
+        g_new, gg, spread = made
+        used = (self.block - 1) * min(self.blocks, self._hops // self.block)  # hops in the template
+        mean_s = s / frames
+        self.visibility = gg * mean_s * mean_s * used / spread if spread > 0 else math.inf
+        if self.visibility < self.min_visibility:
+            # no turn to see: the template is mostly the noise of its own mean (a
+            # contact on one taxel, a light or very noisy grip), and each renewal
+            # would turn it at random; silent until one stands out again
+            self._g = None
+            self._score = 0.0
+            self._ramp.reset()
+            return
+        self._g = g_new
+        self._g2 = g_new * g_new
+        self._unit = float(self._g2 @ self._var)
+        self._u = float(fs @ g_new) / s
 
     def restart(self) -> None:
         """Start the template and the ramp again (the learnt noise stays): the
         distribution has moved, and a template over the last blocks smears it."""
-        self._blocks.clear()
+        if self._hops == 0 and self._since == 0:
+            return  # (nothing since the last restart: called at every frame of a slide)
+        for a, _ in self._ring:
+            a[:] = 0.0
+        self._ring = [(a, 0.0) for a, _ in self._ring]
+        self._block[:] = 0.0
+        self._block_s = 0.0
+        self._hops = 0
         self._since = 0
         self._g = None
         self._score = 0.0
@@ -249,4 +276,6 @@ class TurnFlow:
         self._learnt += 1
         gain = max(1.0 / self._learnt, self._a_noise)
         self._var += gain * (0.5 * change * change - self._var)
+        self._unit = float(self._g2 @ self._var)
         self._change = None
+        self.learnable = False
