@@ -227,7 +227,7 @@ class TurnFlow:
         total = sum(b for _, b in self._ring)
         if not total > 0.0:
             return
-        made = self._grid.template(sum(a for a, _ in self._ring) / total, self._var)
+        made = self._grid.template(np.sum([a for a, _ in self._ring], axis=0) / total, self._var)
         if made is None:
             return
         g_new, gg, spread = made
