@@ -28,7 +28,7 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
 
 The cost per frame is one 3-column matrix product, three running sums per ramp horizon,
 a ring of squared changes for the evidence and a few scalar operations, and for the
-torsion channel one vector sum (the rest once a hop, its template once per 0.1 s): the
+torsion channel one vector sum (the rest once per 40 ms, its template once per 0.25 s): the
 same at 100 Hz and at 1 kHz.  The score columns hold max(a, r, t) and b (1 = threshold).
 """
 

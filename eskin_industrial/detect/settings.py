@@ -88,8 +88,9 @@ class CofTrackSettings:
     torsion_blocks: int = field(default=2, metadata=positive("an integer >= 1"))
     #: The channel looks only while the rotational derivative stands out of its own
     #: noise: its square at least this many times what the noise of the template's
-    #: mean alone would give (noise alone gave 0.4-30 on a one-taxel contact, a 0.4 N
-    #: grip and 0.1 N of taxel noise; real footprints 70 and more on the tuning seeds)
+    #: mean alone would give (noise alone gave 0.8-36 on a one-taxel contact, a 0.4 N
+    #: grip and 0.1 N of taxel noise; real footprints 159 and more nine times in ten,
+    #: on tuning seed 3: docs/evaluation.md)
     torsion_min_visibility: float = field(default=40.0, metadata=non_negative())
 
     def __post_init__(self) -> None:
