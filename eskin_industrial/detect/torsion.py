@@ -12,10 +12,10 @@ least-squares angle of a change is ``dp . g / (g . g)``: a rotational optical fl
 The second moments would see a long footprint turn but not a square one (they are
 isotropic); the flow sees the corners of either.
 
-The channel works on the mean distribution of each hop (``p_h``: the hop's summed
-forces over its summed totals; one vector sum per frame, the rest once a hop, so at
-1 kHz it costs a tenth of what it costs at 100 Hz, and a hop's mean is as good as
-its frames).  Each hop adds ``d_h = (p_h - p_{h-1}) . g_hat`` (``g_hat = g / g.g``)
+The channel works on the mean distribution of each of its own hops (``p_h``: the
+hop's summed forces over its summed totals, 40 ms by default; one vector sum per
+frame, the rest once a hop: a hop's mean is as good as its frames, and the cost per
+frame stays within the budget at 100 Hz, where cof-track's own hop is one frame).  Each hop adds ``d_h = (p_h - p_{h-1}) . g_hat`` (``g_hat = g / g.g``)
 to an angle ``theta_h``.  ``g`` comes from the mean distribution of the last
 ``blocks`` blocks of hops and is renewed once a block; ``d_h`` is taken with one ``g``
 for both hops, so between renewals the sum telescopes and ``theta`` carries a hop's
@@ -23,9 +23,8 @@ noise once, not a random walk.  The hop at which ``g`` is renewed is left out of
 (its noise would otherwise bias every renewal the same way: a ramp in ``theta`` that
 no part makes), and a template over several blocks changes little at each renewal
 (the noise of the hop it changes at, times that change, is a step of a random walk).
-The angle is in the flow's own units (a coarse grid's gradients make it read a
-square's turn several times too large, a long block's too small): what counts is
-the ratio to its noise.
+The angle is in the flow's own units (a 5 mm grid's gradients make it read a 20 mm
+square's turn 3.6 times too large): what counts is the ratio to its noise.
 
 The test is the ramp channel's (detect/ramp.py, :class:`RampBank`) on ``theta``, over
 horizons counted in hops: a turn that starts is a ramp.  Its noise is each taxel's
