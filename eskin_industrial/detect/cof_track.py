@@ -23,12 +23,16 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     p    = the profile channel (detect/profile_shift.py; off unless profile_shift): the
            ramp test on the column and row sums, a change of force projected out; taken
            into r (r = max(r, p)) while the force is steady and not in variable_force
-    slip when a > 1, b > 1 or r > 1, or the stick-slip channel fires (below) while the
-    force is steady
+    t    = the torsion channel (detect/torsion.py): the same ramp test on the angle of
+           the distribution's rotational flow about the CoF (a turn about the normal
+           keeps the CoF and the total); only while the force is steady
+    slip when a > 1, b > 1, r > 1 or t > 1, or the stick-slip channel fires (below)
+    while the force is steady
 
 The cost per frame is one 3-column matrix product, three running sums per ramp horizon,
-a ring of squared changes for the evidence and a few scalar operations: the same at
-100 Hz and at 1 kHz.  The scores (score_a, score_b) are max(a, r) and b (1 = threshold).
+a ring of squared changes for the evidence and a few scalar operations, and for the
+torsion channel one vector sum (the rest once per 40 ms, its template once per 0.25 s): the
+same at 100 Hz and at 1 kHz.  The scores (score_a, score_b) are max(a, r, t) and b (1 = threshold).
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ from .ramp import RampBank
 from .ripple import ForceRipple, ripple_dof, variance_evidence
 from .scored import ScoredDetector
 from .settings import DetectorSettings
+from .torsion import TurnFlow, grid_of
 
 
 class CofTrack(ScoredDetector):
@@ -81,6 +86,17 @@ class CofTrack(ScoredDetector):
         self._ripple = ForceRipple(lag, window) if c.ripple_s > 0 else None
         self._ripple_dof = ripple_dof(lag, window)
         self._evidence_cap = 0.5 * max(0.0, c.ramp_z ** 2 - c.ramp_support_z ** 2)
+        # the torsion channel (detect/torsion.py): a turn keeps the CoF and the total
+        # (it works on each of its hops' mean: its times count them)
+        grid = grid_of(x_mm, y_mm) if c.torsion else None
+        hop = max(1, round(c.torsion_hop_s * rate_hz))
+        hops = rate_hz / hop  # per second
+        self._turn = None if grid is None else TurnFlow(
+            *grid, hop, round(c.torsion_ref_s / c.torsion_blocks * hops), c.torsion_blocks,
+            tuple(max(2, round(h * hops)) for h in c.ramp_horizons_s), max(2, round(c.ramp_base_s * hops)),
+            c.torsion_z, round(c.noise_s * hops), c.torsion_min_visibility)
+        self._turn_min = math.radians(c.torsion_min_deg)
+        self.turn_score = 0.0
         self.fast_score = self.ramp_score = 0.0  # the two parts of the first column
         self._noise: float | None = None  # learnt CoF noise, in force units (N^2 mm^2)
         self._noise_x = 0.0  # the part of it along x (sigma_x^2 S^2)
@@ -104,6 +120,8 @@ class CofTrack(ScoredDetector):
         self._ramp.reset()
         if self._profile is not None:
             self._profile.reset()
+        if self._turn is not None:
+            self._turn.reset()
         if self._ripple is not None:
             self._ripple.reset()
 
@@ -175,6 +193,9 @@ class CofTrack(ScoredDetector):
             self._ramp.push(xc, yc, 1.0 / (s * s))
             if profile is not None:
                 profile.push(f)
+        turn = self._turn
+        if turn is not None:
+            turn.push(f, s, filled)
         noise_d = z * math.sqrt(2.0 * noise / m) / s
         if fast is not None:
             lim = self.min_fast
@@ -224,8 +245,14 @@ class CofTrack(ScoredDetector):
                 rp = profile.score()
                 if rp > r:
                     r = rp
-        self.fast_score, self.ramp_score = a, r
         slip = a > 1.0 or b > 1.0 or r > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
+        if slip and turn is not None:  # a slide: the turn's template would smear it
+            turn.restart()
+        tr = turn.score(self._turn_min) if steady and turn is not None else 0.0
+        self.fast_score, self.ramp_score, self.turn_score = a, r, tr
+        slip = slip or tr > 1.0
+        if turn is not None and turn.learnable and not slip and tr < 0.5 and not filled:
+            turn.learn()
         if not slip and a < 0.5 and not filled:  # learn the noise only while calm
             self._learnt += 1
             gain = 1.0 / self._learnt
@@ -238,4 +265,6 @@ class CofTrack(ScoredDetector):
                 self._rnoise += gain * (rip_d2 - self._rnoise)
             if profile is not None:
                 profile.calm()
+        if tr > r:
+            r = tr
         return (a if a > r else r), b, slip, varying

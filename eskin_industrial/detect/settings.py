@@ -80,6 +80,27 @@ class CofTrackSettings:
     #: finds torsional slip, which nothing else does (docs/evaluation.md).
     profile_shift: bool = False
     profile_z: float = field(default=6.0, metadata=positive())
+    #: Torsion channel (detect/torsion.py): the distribution's turn about the normal,
+    #: from its rotational derivative, as a ramp over the ramp channel's horizons and
+    #: base; ``false`` turns it off (a turn then reads as no slip).
+    torsion: bool = True
+    #: The turn's ramp must exceed this many standard deviations of its learnt noise ...
+    torsion_z: float = field(default=5.5, metadata=positive())
+    #: ... and the turn it implies this many degrees (in the flow's own units).
+    torsion_min_deg: float = field(default=1.0, metadata=non_negative())
+    #: The channel works on the mean distribution of each stretch this long (its votes
+    #: come as often; shorter costs more: each stretch is a projection and a ramp test)
+    torsion_hop_s: float = field(default=0.04, metadata=positive())
+    #: The rotational derivative is taken from the mean distribution over this long,
+    #: renewed ``torsion_blocks`` times as often.
+    torsion_ref_s: float = field(default=0.5, metadata=positive())
+    torsion_blocks: int = field(default=2, metadata=positive("an integer >= 1"))
+    #: The channel looks only while the rotational derivative stands out of its own
+    #: noise: its square at least this many times what the noise of the template's
+    #: mean alone would give (noise alone gave 0.8-36 on a one-taxel contact, a 0.4 N
+    #: grip and 0.1 N of taxel noise; real footprints 159 and more nine times in ten,
+    #: on tuning seed 3: docs/evaluation.md)
+    torsion_min_visibility: float = field(default=40.0, metadata=non_negative())
 
     def __post_init__(self) -> None:
         if not self.ramp_horizons_s:
