@@ -5,11 +5,8 @@ from __future__ import annotations
 
 import json
 import os
-import pty
-import select
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import click
@@ -72,26 +69,10 @@ def test_json_outputs_parse(tmp_path: Path) -> None:
 
 def _on_a_terminal(args: list[str], timeout: float = 60) -> tuple[int, str]:
     """Run ``eskin-bus ARGS`` with stderr on a pseudo-terminal; (exit code, what it showed)."""
-    leader, follower = pty.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "eskin_industrial", *args], stdout=subprocess.DEVNULL,
-                            stderr=follower, stdin=subprocess.DEVNULL, env={**os.environ, "COLUMNS": "120"})
-    os.close(follower)
-    shown = b""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([leader], [], [], 0.2)
-        if ready:
-            try:
-                chunk = os.read(leader, 65536)
-            except OSError:  # the other side closed
-                break
-            if not chunk:
-                break
-            shown += chunk
-        elif proc.poll() is not None:
-            break
-    os.close(leader)
-    return proc.wait(timeout=10), shown.decode(errors="replace")
+    from tests.helpers.terminal import on_a_terminal
+
+    run = on_a_terminal(args, Path(os.devnull), timeout_s=timeout)
+    return run.code, run.shown
 
 
 def test_progress_on_a_terminal_only_and_never_with_quiet() -> None:
