@@ -107,18 +107,19 @@ class PaperAlongside:
         ps, pss, pc = ps + list(s_t), pss + ss_t, pc + list(c_t)
         h, flen = self._h, self._flen
         zs = self._zs
-        energies = [0.0] * hop
-        c_blk = 0.0
-        e = [0.0, 0.0]
-        for i, (s, contact, (xc, yc)) in enumerate(zip(s_t, c_t, cof_t)):
-            k = k0 + i
+        energies: list[float] = []
+        c_blk = e0 = e1 = 0.0
+        full = len(zs) == flen  # (flen centres since the reset: from then on, every frame)
+        # each frame with its lagged one's total, squared norm and contact (pss[lag + i]
+        # is its own squared norm), in one pass
+        k = k0
+        for s, contact, (xc, yc), ss, s_b, ss_b, c_b, sab in zip(
+                s_t, c_t, cof_t, pss[lag:], ps, pss, pc, sab_t):
             d = 0.0
             if k >= lag:  # (as IndicatorStream._decorrelation)
-                c_b = pc[i]
                 if not (contact and c_b):
                     d = 1.0 if (contact or c_b) else 0.0
                 else:
-                    ss, s_b, ss_b = pss[lag + i], ps[i], pss[i]
                     var_a = n * ss - s * s
                     var_b = n * ss_b - s_b * s_b
                     flat_a = var_a <= _ZERO_VAR * s * s
@@ -126,24 +127,29 @@ class PaperAlongside:
                     if flat_a or flat_b:
                         d = 0.0 if (flat_a and flat_b) else 1.0
                     else:
-                        d = 1.0 - (n * sab_t[i] - s * s_b) / math.sqrt(var_a * var_b)
+                        d = 1.0 - (n * sab - s * s_b) / math.sqrt(var_a * var_b)
                         d = 0.0 if d < 0.0 else 2.0 if d > 2.0 else d
             zs.append(complex(xc, yc))
             energy = 0.0
-            if len(zs) == flen:
+            if full or len(zs) == flen:
+                full = True
                 # sum_j h[j] x[k - j], added from j = 0 as the stream adds it
                 dz = sum(map(mul, h, reversed(zs)))
                 dx, dy = dz.real, dz.imag
                 energy = dx * dx + dy * dy
-            energies[i] = energy
+            energies.append(energy)
             c_blk += d
-            e[k & 1] += energy
+            if k & 1:
+                e1 += energy
+            else:
+                e0 += energy
+            k += 1
         at = (k0 // hop) % self.blocks * hop
         self._energy[at: at + hop] = energies
         self._prev = (ps[hop:], pss[hop:], pc[hop:])
         self._rows = []
         self._k = k0 + hop
-        self._blocks.append((c_blk, e[0], e[1]))
+        self._blocks.append((c_blk, e0, e1))
         if len(self._blocks) == self.blocks:
             self._update()
 

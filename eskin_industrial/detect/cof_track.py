@@ -126,29 +126,32 @@ class CofTrack(ScoredDetector):
             self._ripple.reset()
 
     def score(self, t, f, s, xc, yc):
-        # (hot path: one call per frame, so attributes read once into locals)
+        # (hot path: one call per frame at any rate, ten per paper hop at 100 Hz; so
+        # attributes are read once into locals, and each (x, y, S) is one tuple)
         # running means of the last m centres and totals (the total is smoothed too,
         # so that sensor noise does not read as a varying force)
         hn = self._hn  # frames so far (the rings below are indexed by it)
         m = self.m
+        win = self._win
         slot = hn % m
-        old = self._win[slot]
-        self._win[slot] = (xc, yc, s)
+        old = win[slot]
+        now = (xc, yc, s)
+        win[slot] = now
         if hn < m:
-            self._cnt += 1
-            self._sx += xc
-            self._sy += yc
-            self._ss += s
+            cnt = self._cnt = self._cnt + 1
+            sx = self._sx = self._sx + xc
+            sy = self._sy = self._sy + yc
+            ss = self._ss = self._ss + s
         else:
-            self._sx += xc - old[0]
-            self._sy += yc - old[1]
-            self._ss += s - old[2]
-        cnt = self._cnt
-        mx, my, ms = self._sx / cnt, self._sy / cnt, self._ss / cnt
+            cnt = self._cnt
+            sx = self._sx = self._sx + (xc - old[0])
+            sy = self._sy = self._sy + (yc - old[1])
+            ss = self._ss = self._ss + (s - old[2])
+        mx, my, ms = sx / cnt, sy / cnt, ss / cnt
         prev = self._prev
-        self._prev = (xc, yc, s)
-        hist, ls = self._hist, self.ls
-        fast = hist[(hn - self.lf) % ls] if hn >= self.lf else None
+        self._prev = now
+        hist, ls, lf = self._hist, self.ls, self.lf
+        fast = hist[(hn - lf) % ls] if hn >= lf else None
         half = hist[(hn - ls // 2) % ls] if hn >= ls // 2 else None
         slow = hist[hn % ls] if hn >= ls else None
         hist[hn % ls] = (mx, my, ms)
@@ -209,18 +212,20 @@ class CofTrack(ScoredDetector):
             ux, uy = mx - slow[0], my - slow[1]
             total = math.hypot(ux, uy)
             onward = ((mx - half[0]) * ux + (my - half[1]) * uy) / total if total > 0 else 0.0
-            thr = noise_d if noise_d > self.min_slow else self.min_slow
+            lim = self.min_slow
+            thr = noise_d if noise_d > lim else lim
             # the onward half gets a noise margin of its own (4.5 sigma): half the
             # threshold alone would be only 3 sigma, met by noise every few seconds
             b = min(total / thr, onward / max(0.5 * thr, 0.75 * noise_d))
         # stick-slip excites the CoF's sample-to-sample steps (the band the paper's
         # wavelet detail sees); with some displacement to back it, that is a slip too
-        vib_n = self.vib_n
-        vslot = self._vib_count % vib_n
-        self._vib_sum += step2 - self._vib[vslot]
-        self._vib[vslot] = step2
-        self._vib_count += 1
-        vib = self._vib_sum / (vib_n * noise) if self._vib_count > vib_n else 0.0
+        vib_n, vib_ring = self.vib_n, self._vib
+        vib_count = self._vib_count
+        vslot = vib_count % vib_n
+        vib_sum = self._vib_sum = self._vib_sum + (step2 - vib_ring[vslot])
+        vib_ring[vslot] = step2
+        self._vib_count = vib_count = vib_count + 1
+        vib = vib_sum / (vib_n * noise) if vib_count > vib_n else 0.0
         # (not while the force changes, nor for a second after: a squeeze or a swaying
         # load moves a soft contact's CoF in steps too)
         self._calm_force = calm = 0 if varying else self._calm_force + 1
@@ -233,11 +238,16 @@ class CofTrack(ScoredDetector):
             # stick-slip channel: a soft pad's CoF follows its force, and a swaying
             # glass is no slip.  Stick-slip shakes the total force: that evidence adds
             # to the ramp's
-            qx, qy = self._noise_x, noise - self._noise_x
+            qx = self._noise_x
+            qy = noise - qx
             floor = 0.0025 * noise
             energy = ripple.energy if ripple is not None else None
-            evidence = min(variance_evidence(energy / self._rnoise, self._ripple_dof), self._evidence_cap) if (
-                energy is not None and self._rnoise > 0.0) else 0.0
+            rnoise = self._rnoise
+            evidence = 0.0
+            if energy is not None and rnoise > 0.0:
+                evidence = variance_evidence(energy / rnoise, self._ripple_dof)
+                if evidence > self._evidence_cap:
+                    evidence = self._evidence_cap
             r = self._ramp.score(qx if qx > floor else floor, qy if qy > floor else floor, self.ramp_min, evidence)
             if profile is not None and not self.decision.latch.on:  # the sums' own test, OR'd
                 # (silent in the variable_force state: a soft pad's outline changes
@@ -246,16 +256,19 @@ class CofTrack(ScoredDetector):
                 if rp > r:
                     r = rp
         slip = a > 1.0 or b > 1.0 or r > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
-        if slip and turn is not None:  # a slide: the turn's template would smear it
-            turn.restart()
-        tr = turn.score(self._turn_min) if steady and turn is not None else 0.0
+        tr = 0.0
+        if turn is not None:
+            if slip:  # a slide: the turn's template would smear it
+                turn.restart()
+            if steady:
+                tr = turn.score(self._turn_min)
         self.fast_score, self.ramp_score, self.turn_score = a, r, tr
         slip = slip or tr > 1.0
         if turn is not None and turn.learnable and not slip and tr < 0.5 and not filled:
             turn.learn()
         if not slip and a < 0.5 and not filled:  # learn the noise only while calm
-            self._learnt += 1
-            gain = 1.0 / self._learnt
+            learnt = self._learnt = self._learnt + 1
+            gain = 1.0 / learnt
             if gain < self._a_noise:
                 gain = self._a_noise
             self._noise = noise + gain * (step2 - noise)

@@ -101,6 +101,10 @@ class RampBank:
         self._kb = [length * (length + 1) / 2.0 / base for length in self.horizons]
         # recompute the sums every whole number of rounds, about every 500 pushes
         self._resync_every = self.n * max(1, round(500 / self.n))
+        # (the hot path's loops read one tuple per horizon: each horizon's index, length
+        # and reach into the ring; its sums' factor, T^2 scale and displacement scale)
+        self._pushes = tuple((h, length, length + base) for h, length in enumerate(self.horizons))
+        self._scores = tuple(zip(range(len(self.horizons)), self._kb, self._sd2, self._disp))
         self.reset()
 
     def reset(self) -> None:
@@ -113,22 +117,24 @@ class RampBank:
         self.count = 0
 
     def push(self, x: float, y: float, scale: float = 1.0) -> None:
-        i, n, ring = self._i, self.n, self._c
+        i, ring = self._i, self._c
         c = complex(x, y)
         w, p, b = self._w, self._p, self._b
-        for h, length in enumerate(self.horizons):
+        for h, length, reach in self._pushes:
             # the centre that leaves the newest L (it joins the base), and the one that
             # leaves the base; ``i`` holds the oldest of all n, about to be overwritten
             leave = ring[i - length]
             w[h] += length * c - p[h]
             p[h] += c - leave
-            b[h] += leave - ring[i - length - self.base]
+            b[h] += leave - ring[i - reach]
         ring[i] = c
-        self._scale_sum += scale - self._scale[i]  # the sample n pushes ago leaves
-        self._scale[i] = scale
-        self._i = i + 1 if i + 1 < n else 0
-        self.count += 1
-        if self.count % self._resync_every == 0:  # against the running sums' rounding drift
+        scales = self._scale
+        self._scale_sum += scale - scales[i]  # the sample n pushes ago leaves
+        scales[i] = scale
+        i += 1
+        self._i = i if i < self.n else 0
+        count = self.count = self.count + 1
+        if count % self._resync_every == 0:  # against the running sums' rounding drift
             self._resync()
 
     def _resync(self) -> None:
@@ -148,13 +154,17 @@ class RampBank:
             return 0.0
         inv_x, inv_y = 1.0 / (q_x * mean_scale), 1.0 / (q_y * mean_scale)
         extra = 2.0 * evidence
+        z = self._z
+        w, b = self._w, self._b
         best = 0.0
-        for w, b, kb, sd2, disp in zip(self._w, self._b, self._kb, self._sd2, self._disp):
-            num = w - kb * b
+        for h, kb, sd2, disp in self._scores:
+            num = w[h] - kb * b[h]
             nx, ny = num.real, num.imag
-            r = math.sqrt((nx * nx * inv_x + ny * ny * inv_y) / sd2 + extra) / self._z
+            r = math.sqrt((nx * nx * inv_x + ny * ny * inv_y) / sd2 + extra) / z
             if min_mm > 0.0:
-                r = min(r, math.sqrt(nx * nx + ny * ny) * disp / min_mm)
+                d = math.sqrt(nx * nx + ny * ny) * disp / min_mm
+                if d < r:
+                    r = d
             if r > best:
                 best = r
         return best

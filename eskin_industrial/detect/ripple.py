@@ -29,7 +29,6 @@ only ever adds to the displacement's.
 from __future__ import annotations
 
 import math
-from collections import deque
 
 
 def variance_evidence(ratio: float, dof: float) -> float:
@@ -60,7 +59,8 @@ class ForceRipple:
         self.reset()
 
     def reset(self) -> None:
-        self._s: deque[float] = deque()  # the last ``lag`` totals, oldest first
+        self._s = [0.0] * self.lag  # the last ``lag`` totals, a ring (index: pushes mod lag)
+        self._pushed = 0
         self._d2: list[float] = [0.0] * self.window
         self._i = 0
         self._sum = 0.0
@@ -70,16 +70,24 @@ class ForceRipple:
     def push(self, s: float, held: float | None = None) -> float | None:
         """Add a total.  ``held``: the value to count instead of the change (a held copy
         across a gap carries none of its own); ``None`` until ``lag`` totals are in."""
-        self._s.append(s)
-        if len(self._s) <= self.lag:
+        pushed = self._pushed
+        self._pushed = pushed + 1
+        totals = self._s
+        slot = pushed % self.lag
+        old = totals[slot]
+        totals[slot] = s
+        if pushed < self.lag:
             return None
-        old = self._s.popleft()
         d2 = (s - old) ** 2 if held is None else held
-        self._sum += d2 - self._d2[self._i]
-        self._d2[self._i] = d2
-        self._i = self._i + 1 if self._i + 1 < self.window else 0
-        self._n += 1
-        if self._i == 0:  # once a round, against the running sum's rounding drift
-            self._sum = math.fsum(self._d2)
-        self.energy = self._sum / self.window if self._n >= self.window else None
+        i, ring = self._i, self._d2
+        self._sum += d2 - ring[i]
+        ring[i] = d2
+        i += 1
+        window = self.window
+        if i == window:  # once a round, against the running sum's rounding drift
+            i = 0
+            self._sum = math.fsum(ring)
+        self._i = i
+        n = self._n = self._n + 1
+        self.energy = self._sum / window if n >= window else None
         return d2

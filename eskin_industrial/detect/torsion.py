@@ -149,8 +149,11 @@ class TurnFlow:
 
     def reset(self) -> None:
         n = len(self.xs) * len(self.ys)
-        self._f = np.zeros(n)  # this hop's sum of forces, frames and totals
-        self._last = np.zeros(n)  # the hop before's (the two swap at every hop)
+        # this hop's own frames (summed at its end: one list append a frame) and the sum
+        # of their totals; the hop before's summed forces, total and frames
+        self._fl: list[np.ndarray] = []
+        self._zero = np.zeros(n)
+        self._last = self._zero
         self._s = self._last_s = 0.0
         self._last_frames = 1
         self._frames = 0
@@ -181,23 +184,26 @@ class TurnFlow:
         if held:
             self._held += 1
         else:
-            self._f += f
+            self._fl.append(f)  # (the caller's frame, which it keeps unchanged)
             self._s += s
         frames = self._frames = self._frames + 1
         if frames < self.hop:
             return
-        frames = self._frames - self._held
+        frames -= self._held
+        # the hop's summed forces, added in the order they came, from zero (as a
+        # running sum would): sum() adds left to right, each step a new array
+        fs = sum(self._fl, self._zero)
         if self._s > 0.0:
-            self._hop(frames)
-        # the two sums swap: the newest is kept as the hop before
-        self._last, self._f = self._f, self._last
+            self._hop(fs, frames)
+        # the newest is kept as the hop before
+        self._last = fs
         self._last_s, self._s = self._s, 0.0
         self._last_frames = frames
-        self._f[:] = 0.0
+        self._fl = []
         self._frames = self._held = 0
 
-    def _hop(self, frames: int) -> None:
-        fs, s = self._f, self._s
+    def _hop(self, fs: np.ndarray, frames: int) -> None:
+        s = self._s
         self._hops += 1
         if self._hops % self.block == 1 and self._last_s > 0.0:  # once a block, a change to learn from
             self._change = fs / frames - self._last / self._last_frames
