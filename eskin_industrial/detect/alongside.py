@@ -22,8 +22,9 @@ from operator import mul
 
 import numpy as np
 
-from .indicators import _EPS, _ZERO_VAR, decorrelation_pair, odd_offsets
+from .indicators import _ZERO_VAR, decorrelation_pair, odd_offsets
 from .settings import DetectorSettings
+from .stream import r_of, window_sums
 
 
 class PaperAlongside:
@@ -204,38 +205,14 @@ class PaperAlongside:
             self._update()
 
     def _update(self) -> None:
-        """R from the window sums, as :meth:`~.stream.IndicatorStream._update` forms them."""
-        c_win = e0 = e1 = 0.0
-        for cb, a, b in self._blocks:
-            c_win += cb
-            e0 += a
-            e1 += b
-        start = self._k - self.window
-        p = (start + 1) & 1
-        dw = e1 if p else e0
-        flen = self._flen
-        short = self.window < flen
-        if short:
-            dw = 0.0
-        else:
-            partial = 0.0
-            ring = self._energy
-            for o in range(flen - 1):
-                e = start + o
-                partial += float(ring[e % len(ring)]) if (e & 1) == p else 0.0
-            dw = max(dw - partial, 0.0)
-        c_win += self._c_floor
-        dw += self._e_floor
+        """R from the window sums, as :class:`~.stream.IndicatorStream` forms them."""
+        short = self.window < self._flen
+        c_win, dw = window_sums(self._blocks, self._energy, self._k, self.window, self._flen, self._c_floor,
+                                self._e_floor)
         if self._prev_sums is not None:
-            self.r_coe = self._r(c_win, self._prev_sums[0])
-            self.r_dw = 0.0 if short else self._r(dw, self._prev_sums[1])
+            self.r_coe = r_of(c_win, self._prev_sums[0], self._symmetric)
+            self.r_dw = 0.0 if short else r_of(dw, self._prev_sums[1], self._symmetric)
         self._prev_sums = (c_win, dw)
-
-    def _r(self, now: float, before: float) -> float:
-        ratio = (now + _EPS) / (before + _EPS)
-        if self._symmetric:
-            return (ratio if ratio >= 1.0 else 1.0 / ratio) - 1.0
-        return ratio - 1.0 if ratio > 1.0 else 0.0
 
 
 def _decorrelation(n: int, s_a: np.ndarray, ss_a: np.ndarray, s_b: np.ndarray, ss_b: np.ndarray, sab: np.ndarray,

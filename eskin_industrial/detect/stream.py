@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -157,37 +158,52 @@ class IndicatorStream(FrameHygiene):
     def _update(self, t: float, block_flags: int, s: float, xc: float, yc: float, contact: bool,
                 vf: float) -> RawUpdate:
         geo = self.geo
-        c_win = e0 = e1 = 0.0
-        for c, a, b in self._blocks:
-            c_win += c
-            e0 += a
-            e1 += b
         start = self._k - geo.window
-        p = (start + 1) & 1
-        dw = e1 if p else e0
-        flen = len(self._h)
-        short = geo.window < flen
-        if short:
-            dw = 0.0
-        else:
-            partial = 0.0
-            for o in range(flen - 1):
-                e = start + o
-                partial += self._energy[e % len(self._energy)] if (e & 1) == p else 0.0
-            dw = max(dw - partial, 0.0)
-        c_win += self._c_floor
-        dw += self._e_floor
+        short = geo.window < len(self._h)
+        c_win, dw = window_sums(self._blocks, self._energy, self._k, geo.window, len(self._h), self._c_floor,
+                                self._e_floor)
         r_coe = r_dw = 0.0
         if self._prev_sums is not None:
-            r_coe = self._r(c_win, self._prev_sums[0])
-            r_dw = 0.0 if short else self._r(dw, self._prev_sums[1])
+            r_coe = r_of(c_win, self._prev_sums[0], self._symmetric)
+            r_dw = 0.0 if short else r_of(dw, self._prev_sums[1], self._symmetric)
         self._prev_sums = (c_win, dw)
         warm = start - geo.hop < geo.lag
         flags = block_flags | (_WARMUP if warm else 0) | (_SHORT if short else 0)
         return (t, r_coe, r_dw, not warm and not short, flags, s, xc, yc, contact, vf)
 
-    def _r(self, now: float, before: float) -> float:
-        ratio = (now + _EPS) / (before + _EPS)
-        if self._symmetric:
-            return (ratio if ratio >= 1.0 else 1.0 / ratio) - 1.0
-        return ratio - 1.0 if ratio > 1.0 else 0.0
+
+def window_sums(blocks: Iterable[tuple[float, float, float]], energy: Sequence[float] | np.ndarray, k: int,
+                window: int, flen: int, c_floor: float, e_floor: float) -> tuple[float, float]:
+    """A window's decorrelation sum and wavelet detail energy, floors added, from its
+    hops' sums ``(decorrelation, even frames' energy, odd frames' energy)`` and the ring
+    of per-frame energies (``energy[i % len]``), for the window of ``window`` frames
+    ending before frame ``k``.  The detail coefficients are those of one parity, and the first
+    ``flen - 1`` frames' of them need padding: they come off.  Every hop of the paper's
+    streaming indicators ends here (:class:`IndicatorStream` and
+    :class:`~.alongside.PaperAlongside`), so their values agree to the last bit."""
+    c_win = e0 = e1 = 0.0
+    for c, a, b in blocks:
+        c_win += c
+        e0 += a
+        e1 += b
+    start = k - window
+    p = (start + 1) & 1
+    dw = e1 if p else e0
+    if window < flen:  # a window shorter than the filter: no coefficient
+        dw = 0.0
+    else:
+        partial = 0.0
+        for o in range(flen - 1):
+            e = start + o
+            partial += float(energy[e % len(energy)]) if (e & 1) == p else 0.0
+        dw = max(dw - partial, 0.0)
+    return c_win + c_floor, dw + e_floor
+
+
+def r_of(now: float, before: float, symmetric: bool) -> float:
+    """One indicator from a window's sum and the previous window's: the ratio's rise
+    (``rise``), or its departure from 1 either way (``symmetric``)."""
+    ratio = (now + _EPS) / (before + _EPS)
+    if symmetric:
+        return (ratio if ratio >= 1.0 else 1.0 / ratio) - 1.0
+    return ratio - 1.0 if ratio > 1.0 else 0.0
