@@ -183,7 +183,9 @@ def _figures(s: Any) -> dict[str, Any]:
             "vf_episodes": s.vf_episodes, "vf_found": s.vf_found, "vf_recall": s.vf_recall,
             "vf_coverage": s.vf_coverage if s.vf_coverages else None,
             "vf_changes_per_episode_max": max(s.vf_episode_changes) if s.vf_episode_changes else None,
-            "vf_changes_per_min": s.vf_changes_per_min, "still_changes_per_min": s.still_changes_per_min}
+            "vf_changes_per_min": s.vf_changes_per_min, "still_changes_per_min": s.still_changes_per_min,
+            "slip_episodes_per_event_max": max(s.slip_episodes) if s.slip_episodes else None,
+            "slip_episodes_per_event_mean": float(np.mean(s.slip_episodes)) if s.slip_episodes else None}
 
 
 def _json_row(r: Any, res: dict[str, Any], within_ms: tuple[int, ...]) -> dict[str, Any]:
@@ -227,8 +229,8 @@ def _stability_table(res: dict[str, Any], per_scene: bool) -> None:
     click.echo("| method | varying-force episodes | found (recall) | coverage after 150 ms: pooled / worst / episodes >= 90 % "
                "| state changes per episode: mean / max | changes per min in varying force | "
                "changes per min in still holds (min held) | varying force entered after onset, p50 / p90 (ms) "
-               "| left after its end | slip left after its end |")
-    click.echo("|---|---|---|---|---|---|---|---|---|---|")
+               "| left after its end | slip left after its end | slip episodes per found event: mean / max |")
+    click.echo("|---|---|---|---|---|---|---|---|---|---|---|")
     for name, r in res.items():
         rows = [(name, r.score)] + ([(f"  {scene}", ss) for scene, ss in r.per_scene.items()] if per_scene else [])
         for label, s in rows:
@@ -243,7 +245,11 @@ def _stability(s: Any) -> str:
     changes = f"{np.mean(ch):.1f} / {max(ch)}" if ch else "- / -"
     return (f"{s.vf_episodes} | {s.vf_found} ({_num(s.vf_recall, '', 2)}) | {coverage} | {changes} | "
             f"{_num(s.vf_changes_per_min)} | {_num(s.still_changes_per_min, '', 2)} ({s.still_s / 60:.1f}) | "
-            f"{_ms(s.vf_entry_s)} | {_ms(s.vf_exit_s)} | {_ms(s.slip_exit_s)}")
+            f"{_ms(s.vf_entry_s)} | {_ms(s.vf_exit_s)} | {_ms(s.slip_exit_s)} | {_episodes(s.slip_episodes)}")
+
+
+def _episodes(per_event: list[int]) -> str:
+    return f"{np.mean(per_event):.2f} / {max(per_event)}" if per_event else "- / -"
 
 
 def _ms(values: list[float]) -> str:

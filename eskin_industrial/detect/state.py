@@ -12,8 +12,10 @@ policy a PLC program relies on: docs/plc.md):
   an update that does not know never reports anything confident (its ``valid`` is 0,
   which the PLC sees);
 - slip evidence for ``confirm`` consecutive updates: ``slip`` at once, whatever the
-  state; left at the first update without slip evidence once ``hold_s`` has passed
-  since it was entered;
+  state; left once ``hold_s`` has passed without slip evidence (an off-delay, like a
+  PLC's TOF timer: a slide whose evidence comes and goes, near its threshold, stays
+  one slip, where a hold counted from the entry let it flicker off and on, each
+  entry a new slip for the PLC);
 - otherwise ``variable_force`` while the :class:`VaryingLatch` holds, else ``stable``.
   The latch is set at the first update whose varying-force score reaches 1 (or with
   slip evidence not yet confirmed), and cleared once the score has stayed below
@@ -149,7 +151,7 @@ class Decision:
     persist across a detector's restarts after long gaps, as the PLC's view does.
     ``varying`` is the update's varying-force score (1 = evidence; a bool is 0 or 1)."""
 
-    __slots__ = ("hold_s", "confirm", "state", "entered_t", "slip_run", "latch")
+    __slots__ = ("hold_s", "confirm", "state", "entered_t", "slip_t", "slip_run", "latch")
 
     def __init__(self, hold_s: float, confirm: int = 1, latch: VaryingLatch | None = None) -> None:
         self.hold_s = hold_s
@@ -157,6 +159,7 @@ class Decision:
         self.latch = latch if latch is not None else VaryingLatch.from_settings(VaryingForceSettings())
         self.state = _NO_CONTACT
         self.entered_t = -math.inf
+        self.slip_t = -math.inf  #: the newest update with confirmed slip evidence
         self.slip_run = 0  #: consecutive valid updates with slip evidence
 
     @classmethod
@@ -189,10 +192,11 @@ class Decision:
             self.slip_run = 0
         held = _VARIABLE if self.latch.update(t, varying) else _STABLE
         if confirmed:
+            self.slip_t = t
             if cur != _SLIP:
                 self.state, self.entered_t = _SLIP, t  # slip pre-empts everything, at once
         elif cur == _SLIP:
-            if t - self.entered_t >= self.hold_s:
+            if t - self.slip_t >= self.hold_s:
                 self.state, self.entered_t = held, t
         elif held != cur:
             self.state, self.entered_t = held, t
