@@ -177,6 +177,12 @@ class TurnFlow:
         self._var = np.zeros(n)
         self._learnt = 0
         self.visibility = 0.0
+        #: the turn cannot be seen here (TURN_UNSEEN): set until a renewal with learnt
+        #: noise judges the contact (what it shows is not known before), then with a
+        #: hysteresis: set below ``min_visibility``, clear again at twice it, so that a
+        #: visibility that wanders about the limit leaves it set rather than flapping.
+        #: Kept across :meth:`restart` (the same contact); read once a hop, by the caller
+        self.blind = True
         self._score: float | None = 0.0  # (None: to be computed for the newest hop)
         self._ramp.reset()
 
@@ -239,6 +245,11 @@ class TurnFlow:
         used = (self.block - 1) * min(self.blocks, self._hops // self.block)  # hops in the template
         mean_s = s / frames
         self.visibility = gg * mean_s * mean_s * used / spread if spread > 0 else math.inf
+        if self._learnt:  # (before any learnt noise, spread is 0: no judgement)
+            if self.visibility < self.min_visibility:
+                self.blind = True
+            elif self.visibility >= 2.0 * self.min_visibility:
+                self.blind = False
         if self.visibility < self.min_visibility:
             # no turn to see: the template is mostly the noise of its own mean (a
             # contact on one taxel, a light or very noisy grip), and each renewal
