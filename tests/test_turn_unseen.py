@@ -4,9 +4,15 @@ behaviour of a turn the detector cannot see."""
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
+import pytest
+
+from eskin_industrial.bridge.loop import NodeLoop
+from eskin_industrial.bus.replay import ReplaySource
+from eskin_industrial.calibration import Calibrator
 
 from eskin_industrial.detect.cof_track import CofTrack
 from eskin_industrial.detect.state import GraspState
@@ -14,7 +20,10 @@ from eskin_industrial.detect.updates import Update
 from eskin_industrial.evaluation import conditions
 from eskin_industrial.evaluation.suite import DEFAULT_SETTINGS, by_name, run_one
 from eskin_industrial.frames import FrameFlag
+from eskin_industrial.plc.image import IMAGE_COUNT, REG, Status
+from eskin_industrial.plc.server import PlcServer
 from eskin_industrial.scenes import load_scene, render
+from tests.helpers.modbus import free_port, mbpoll, mbpoll_values
 
 X, Y = np.tile(np.arange(5) * 5.0, 5), np.repeat(np.arange(5) * 5.0, 5)  # the 5 x 5 array, 5 mm pitch
 UNSEEN = int(FrameFlag.TURN_UNSEEN)
@@ -117,3 +126,39 @@ def test_without_the_channel_and_in_other_methods_nothing_is_flagged() -> None:
     for name, factory in by_name("paper", "cof-velocity", "force-rate", "hf-energy").items():
         table, _ = run_one(factory, DEFAULT_SETTINGS, r)
         assert not (table.flags & UNSEEN).any(), name
+
+
+# -- on the wire: what a PLC reads --------------------------------------------------
+
+@pytest.mark.parametrize(("size_mm", "unseen"), [(5.0, True), (None, False)])
+def test_mbpoll_reads_the_bit_in_flags_through_a_turn(paper_profile, size_mm, unseen) -> None:
+    """The bridge in server mode replays the twist (on a 5 mm contact, and as it is);
+    mbpoll reads the image 0.3 s into the turn: DATA_VALID, no slip and TURN_UNSEEN in
+    FLAGS on the small contact; slip and the bit clear on the block."""
+    prof = paper_profile
+    assert prof.detector.method == "cof-track"
+    spec = load_scene("twist")
+    if size_mm is not None:
+        spec = conditions.contact_size(size_mm)(spec)
+    scene = render(spec, prof.sensor.rate_hz, 1000)
+    raw = np.rint(Calibrator.from_section(prof.calibration, prof.taxels).to_raw(scene.forces))
+    port = free_port()
+    server = PlcServer(prof.modbus.plc, tcp=("127.0.0.1", port)).start()
+    try:
+        bridge = NodeLoop(prof, ReplaySource(prof, scene.t, raw, 4000.0), [server.block(0)])
+        deadline = time.monotonic() + 15.0
+        while (u := bridge.pipeline.last_update) is None or u.t < TURN[0] + 0.3:
+            assert time.monotonic() < deadline, "the scene did not reach the turn"
+            bridge.step()
+        bridge.publish_if_due(True)
+        out = mbpoll("-m", "tcp", "-p", str(port), "-a", "1", "-r", "1", "-c", str(IMAGE_COUNT), "-1", "127.0.0.1")
+        assert out.returncode == 0, out.stderr
+        got = mbpoll_values(out.stdout)
+        reg = {name: got[r.offset + 1] for name, r in REG.items()}
+    finally:
+        server.stop()
+    assert reg["STATUS"] & int(Status.DATA_VALID)
+    assert bool(reg["FLAGS"] & UNSEEN) is unseen
+    # (from the sensor's raw counts, the one-taxel footprint's total wavers as the
+    # square turns over it: this profile reads variable_force there, one entry)
+    assert (reg["STATE"] == GraspState.SLIP) is not unseen
