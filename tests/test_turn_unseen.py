@@ -4,6 +4,8 @@ behaviour of a turn the detector cannot see."""
 
 from __future__ import annotations
 
+import json
+import re
 import time
 from dataclasses import replace
 
@@ -22,8 +24,11 @@ from eskin_industrial.evaluation.suite import DEFAULT_SETTINGS, by_name, run_one
 from eskin_industrial.frames import FrameFlag
 from eskin_industrial.plc.image import IMAGE_COUNT, REG, Status
 from eskin_industrial.plc.server import PlcServer
+from eskin_industrial.recording import read_updates, write_recording
 from eskin_industrial.scenes import load_scene, render
 from tests.helpers.modbus import free_port, mbpoll, mbpoll_values
+from tests.helpers.paths import ROOT
+from tests.test_cli_detect import PAPER, cli
 
 X, Y = np.tile(np.arange(5) * 5.0, 5), np.repeat(np.arange(5) * 5.0, 5)  # the 5 x 5 array, 5 mm pitch
 UNSEEN = int(FrameFlag.TURN_UNSEEN)
@@ -162,3 +167,30 @@ def test_mbpoll_reads_the_bit_in_flags_through_a_turn(paper_profile, size_mm, un
     # (from the sensor's raw counts, the one-taxel footprint's total wavers as the
     # square turns over it: this profile reads variable_force there, one entry)
     assert (reg["STATE"] == GraspState.SLIP) is not unseen
+
+
+def test_detect_counts_the_unseen_updates_apart_from_flagged_frames(tmp_path) -> None:
+    """`eskin-bus detect`: the CSV's flags carry the bit, and the summary counts those
+    updates as turn unseen, not as updates with flagged frames (no frame was wrong)."""
+    r = render(conditions.contact_size(5.0)(load_scene("twist")), 100.0, 1000)
+    rec = tmp_path / "tw5.csv"
+    write_recording(rec, r.t, r.forces)
+    out = tmp_path / "out.csv"
+    res = cli("detect", "-p", PAPER, str(rec), "-o", str(out), "--json")
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stderr.strip().splitlines()[-1])
+    cols = read_updates(out)
+    unseen = (cols["flags"].astype(int) & UNSEEN) != 0
+    assert summary["turn_unseen"] == int(unseen.sum()) > 0.8 * len(unseen)
+    assert summary["flagged"] == 0
+
+
+def test_the_flags_bit_table_in_the_docs_names_every_bit() -> None:
+    """docs/plc.md's FLAGS table: one row per FrameFlag, bit number and value right,
+    and every bit within the 16 of the register."""
+    docs = (ROOT / "docs" / "plc.md").read_text(encoding="utf-8")
+    section = docs.split("## FLAGS bits", 1)[1].split("\n## ", 1)[0]
+    rows = re.findall(r"^\| (\d+) \| (\d+) \| ([A-Z_]+) \|", section, re.M)
+    assert [(int(b), int(v), n) for b, v, n in rows] == [
+        (int(f).bit_length() - 1, int(f), f.name) for f in FrameFlag]
+    assert max(int(f) for f in FrameFlag) < 1 << 16

@@ -99,7 +99,8 @@ class CofTrackSettings:
     #: noise: its square at least this many times what the noise of the template's
     #: mean alone would give (noise alone gave 0.8-36 on a one-taxel contact, a 0.4 N
     #: grip and 0.1 N of taxel noise; real footprints 159 and more nine times in ten,
-    #: on tuning seed 3: docs/evaluation.md)
+    #: on tuning seed 3: docs/evaluation.md); below it the updates in contact carry
+    #: TURN_UNSEEN, cleared again at twice it (docs/plc.md, FLAGS bits)
     torsion_min_visibility: float = field(default=40.0, metadata=non_negative())
 
     def __post_init__(self) -> None:
