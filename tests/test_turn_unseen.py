@@ -20,7 +20,7 @@ from eskin_industrial.detect.cof_track import CofTrack
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.detect.updates import Update
 from eskin_industrial.evaluation import conditions
-from eskin_industrial.evaluation.suite import DEFAULT_SETTINGS, by_name, run_one
+from eskin_industrial.evaluation.suite import DEFAULT_SETTINGS, by_name, evaluate, run_one
 from eskin_industrial.frames import FrameFlag
 from eskin_industrial.plc.image import IMAGE_COUNT, REG, Status
 from eskin_industrial.plc.server import PlcServer
@@ -99,10 +99,12 @@ def test_a_still_hold_on_a_real_footprint_clears_the_flag_for_good() -> None:
 def test_a_visibility_about_the_limit_leaves_the_flag_set_not_flapping() -> None:
     """A 5.5 mm contact (70 s hold, seed 1002): the channel's visibility lies about its
     limit (most renewals below, a few above, where the channel looks for a moment).
-    The flag stays set through the whole contact: it clears only at twice the limit."""
+    The flag stays set through the whole contact: it clears only at twice the limit.
+    (The footprint's own limit is off here: alone it would keep the flag set.)"""
     spec = conditions.contact_size(5.5)(load_scene("hold"))
     r = render(spec, 100.0, 1002)
-    det = CofTrack(DEFAULT_SETTINGS, X, Y, 100.0)
+    det = CofTrack(replace(DEFAULT_SETTINGS, cof_track=replace(DEFAULT_SETTINGS.cof_track, torsion_min_footprint=0.0)),
+                   X, Y, 100.0)
     turn = det._turn
     assert turn is not None
     seen: list[float] = []
@@ -120,6 +122,23 @@ def test_a_visibility_about_the_limit_leaves_the_flag_set_not_flapping() -> None
     assert 0 < above < 0.2 * len(seen)  # the channel itself looks now and then
     (contact,) = _contacts(ups)
     assert all(u.flags & UNSEEN for u in contact)
+
+
+def test_a_turn_on_a_12_mm_square_is_missed_and_flagged_a_16_mm_one_found() -> None:
+    """The channel finds a 12 mm square's template far out of its noise (visibility in
+    the thousands) but not its turn: 0 of 10 on the held-out seeds.  Its footprint
+    (1.2 squared pitches from its centre) is below ``torsion_min_footprint`` (1.3):
+    flagged throughout, not a plain miss.  A 16 mm square's turn is found (1.76),
+    and the flag is clear."""
+    for seed in (1000, 1001):
+        small = _updates("twist", seed, 12.0)
+        (contact,) = _contacts(small)
+        assert all(u.flags & UNSEEN for u in contact), seed
+        assert not any(u.state == GraspState.SLIP for u in small), seed
+        big = _updates("twist", seed, 16.0)
+        (contact,) = _contacts(big)
+        assert not any(u.flags & UNSEEN for u in contact if u.t >= contact[0].t + FIRST_LOOK_S), seed
+        assert any(u.state == GraspState.SLIP for u in big if TURN[0] <= u.t <= TURN[1]), seed
 
 
 def test_without_the_channel_and_in_other_methods_nothing_is_flagged() -> None:
@@ -194,3 +213,24 @@ def test_the_flags_bit_table_in_the_docs_names_every_bit() -> None:
     assert [(int(b), int(v), n) for b, v, n in rows] == [
         (int(f).bit_length() - 1, int(f), f.name) for f in FrameFlag]
     assert max(int(f) for f in FrameFlag) < 1 << 16
+
+
+# -- the failure map: a turn unseen and said so, against a plain miss ---------------
+
+def test_evaluate_tells_a_flagged_miss_from_a_plain_one() -> None:
+    """The twist on a 5 mm contact: its turn missed, flagged unseen, the flag in effect
+    all the holding time; as it is: found, the flag never in effect while holding;
+    with the channel off: missed, and nothing said (a plain miss)."""
+    def score(size_mm: float | None, **overrides):
+        settings = replace(DEFAULT_SETTINGS, cof_track=replace(DEFAULT_SETTINGS.cof_track, **overrides))
+        hook = None if size_mm is None else conditions.contact_size(size_mm)
+        return evaluate(by_name("cof-track"), scenes=("twist",), seeds=(1000,), settings=settings,
+                        spec_hook=hook)["cof-track"].score
+
+    small = score(5.0)
+    assert small.events == 1 and small.found == 0 and small.missed_unseen == 1
+    assert small.unseen_share == 1.0
+    seen = score(None)
+    assert seen.found == 1 and seen.missed_unseen == 0 and seen.unseen_share == 0.0
+    blind = score(None, torsion=False)
+    assert blind.found == 0 and blind.missed_unseen == 0 and blind.unseen_share == 0.0
