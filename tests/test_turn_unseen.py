@@ -22,6 +22,7 @@ from eskin_industrial.detect.updates import Update
 from eskin_industrial.evaluation import conditions
 from eskin_industrial.evaluation.suite import DEFAULT_SETTINGS, by_name, evaluate, run_one
 from eskin_industrial.frames import FrameFlag
+from eskin_industrial.plc.export import slip_guard_st
 from eskin_industrial.plc.image import IMAGE_COUNT, REG, Status
 from eskin_industrial.plc.server import PlcServer
 from eskin_industrial.recording import read_updates, write_recording
@@ -234,3 +235,10 @@ def test_evaluate_tells_a_flagged_miss_from_a_plain_one() -> None:
     assert seen.found == 1 and seen.missed_unseen == 0 and seen.unseen_share == 0.0
     blind = score(None, torsion=False)
     assert blind.found == 0 and blind.missed_unseen == 0 and blind.unseen_share == 0.0
+
+
+def test_slip_guard_reads_turn_unseen_from_the_flags_word() -> None:
+    """FB_SlipGuard's FLAGS input and the bit it reads come from the tables."""
+    text = slip_guard_st()
+    assert re.search(rf"\bwFlags\s*: WORD;\s*\(\* %MW{REG['FLAGS'].offset}\b", text)
+    assert re.search(rf"\bbTurnUnseen\s*:= wFlags\.{UNSEEN.bit_length() - 1};", text)
