@@ -10,6 +10,11 @@ Definitions (also in docs/evaluation.md):
 - *holding time* is the time labelled ``stable`` or ``variable_force``;
 - *variable force read as slip*: false-alarm episodes that start in a
   ``variable_force`` span (the paper's central claim is that there are none).
+- a missed event is *flagged unseen* when every update in contact from its onset to
+  its end carried TURN_UNSEEN: the detector said a turn there would read ``stable``
+  (for a turn, the defined degraded behaviour; the bit says nothing of slides, so a
+  slide missed on such a contact counts too); the *unseen share* is the share of
+  holding time in which the newest update carried TURN_UNSEEN.
 
 Stability of the reported state (what a PLC acts on); the state "in effect" at a
 frame is that of the newest update at or before it, and a *state change* is an
@@ -44,9 +49,11 @@ import numpy as np
 
 from ..detect.state import GraspState
 from ..detect.updates import UpdateTable
+from ..frames import FrameFlag
 
 _SLIP = int(GraspState.SLIP)
 _VARIABLE = int(GraspState.VARIABLE_FORCE)
+_UNSEEN = int(FrameFlag.TURN_UNSEEN)
 
 #: The first this long of a varying-force episode is not counted in its coverage (the
 #: force has hardly changed yet).
@@ -86,6 +93,8 @@ class SceneScore:
     vf_entry_s: list[float] = field(default_factory=list)  #: episode onset -> variable_force
     vf_exit_s: list[float] = field(default_factory=list)  #: episode end -> any other state
     slip_exit_s: list[float] = field(default_factory=list)  #: slip event end -> any other state
+    missed_unseen: int = 0  #: missed events flagged unseen (the module's doc)
+    unseen_s: float = 0.0  #: holding time with TURN_UNSEEN in effect
 
     def __iadd__(self, other: "SceneScore") -> "SceneScore":
         self.events += other.events
@@ -108,6 +117,8 @@ class SceneScore:
         self.vf_entry_s += other.vf_entry_s
         self.vf_exit_s += other.vf_exit_s
         self.slip_exit_s += other.slip_exit_s
+        self.missed_unseen += other.missed_unseen
+        self.unseen_s += other.unseen_s
         return self
 
     @property
@@ -159,6 +170,10 @@ class SceneScore:
         return self.holding_changes / (self.holding_s / 60.0) if self.holding_s else float("nan")
 
     @property
+    def unseen_share(self) -> float:
+        return self.unseen_s / self.holding_s if self.holding_s else float("nan")
+
+    @property
     def still_changes_per_min(self) -> float:
         return self.still_changes / (self.still_s / 60.0) if self.still_s else float("nan")
 
@@ -174,6 +189,9 @@ def score_scene(updates: UpdateTable, t: np.ndarray, labels: np.ndarray, toleran
     idx = np.clip(np.searchsorted(t, updates.t, side="right") - 1, 0, len(t) - 1)
     up_label = labels[idx]
     flagged = updates.state == _SLIP
+    unseen = (np.asarray(updates.flags) & _UNSEEN) != 0
+    eff = np.searchsorted(updates.t, t, side="right") - 1  # the newest update at each frame
+    out.unseen_s = float(dt[holding & (eff >= 0) & unseen[np.maximum(eff, 0)]].sum()) if len(updates) else 0.0
     credited = np.zeros(len(updates), bool)
     for a, b in spans(labels == "slip"):
         out.events += 1
@@ -188,6 +206,9 @@ def score_scene(updates: UpdateTable, t: np.ndarray, labels: np.ndarray, toleran
             after = np.flatnonzero((updates.t >= stop) & ~flagged)
             if after.size:
                 out.slip_exit_s.append(float(updates.t[after[0]] - stop))
+        else:
+            touching = (updates.t >= onset) & (updates.t <= t[b - 1]) & (updates.state != 0)
+            out.missed_unseen += int(touching.any() and unseen[touching].all())
     for a, b in spans(flagged):
         if credited[a:b].any() or (up_label[a:b] == "transition").all():
             continue
