@@ -27,6 +27,10 @@ class FrameFlag(enum.IntFlag):
     RESET = 64  #: the detector restarted here (a gap longer than ``max_gap_s``)
     SHORT_WINDOW = 128  #: the window is shorter than the wavelet filter: R_dw not computed
     WARMUP = 256  #: not enough history yet since start or reset: indicators not valid
+    #: in contact, but the torsion channel cannot see a turn here (a contact on about one
+    #: taxel, a very light or noisy grip; or it has not judged this contact yet): a turn
+    #: would read ``stable``.  cof-track's only (detect/torsion.py, ``TurnFlow.blind``)
+    TURN_UNSEEN = 512
 
     @classmethod
     def describe(cls, value: int) -> str:

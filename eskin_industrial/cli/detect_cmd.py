@@ -140,17 +140,20 @@ def _summary(name: str, frames: int, rate: float, method: str, table: UpdateTabl
     """One line on stderr: prose, or with --json one object; the same figures for a
     recording, a CAN log and a live log."""
     counts = {s.label: int(np.sum(table.state == s)) for s in GraspState}
-    flagged = int(np.sum(table.flags & ~int(FrameFlag.WARMUP) != 0))
+    # (WARMUP and TURN_UNSEEN say what the update could not do, not what was wrong with a frame)
+    flagged = int(np.sum(table.flags & ~int(FrameFlag.WARMUP | FrameFlag.TURN_UNSEEN) != 0))
+    unseen = int(np.sum(table.flags & int(FrameFlag.TURN_UNSEEN) != 0))
     valid = int(table.valid.sum())
     refused = sum(time_faults.values())
     if as_json:
         line = json.dumps({"input": name, "frames": frames, "rate_hz": rate, "method": method,
-                           "updates": len(table), "valid": valid, "flagged": flagged, "states": counts,
+                           "updates": len(table), "valid": valid, "flagged": flagged, "turn_unseen": unseen,
+                           "states": counts,
                            "refused_times": time_faults, **({"transport": transport} if transport else {})})
     else:
         states = ", ".join(f"{k} {v}" for k, v in counts.items())
         line = (f"{name}: {frames} {'scans' if transport else 'frames'} at {rate:.1f} Hz, method {method} -> "
-                f"{len(table)} updates ({valid} valid, {flagged} with flagged frames); {states}; "
+                f"{len(table)} updates ({valid} valid, {flagged} with flagged frames, {unseen} turn unseen); {states}; "
                 f"{refused} frames refused for their time" + (f" ({_faults(time_faults)})" if refused else ""))
         if transport:
             line += "; " + ", ".join(f"{k} {v}" for k, v in transport.items()

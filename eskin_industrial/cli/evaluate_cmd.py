@@ -146,6 +146,10 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
                            f"{_delays(ss)} | | |")
     _stability_table(res, per_scene)
     for name, r in res.items():
+        _unseen_line(name, r.score)
+        if per_scene:
+            for scene, ss in r.per_scene.items():
+                _unseen_line(f"{name}, {scene}", ss)
         if within_ms:
             shares = ", ".join(f"{_within(r.score, ms):.0f} % within {ms} ms" for ms in within_ms)
             click.echo(f"# {name}: of {r.score.events} slip events, {shares}")
@@ -185,7 +189,9 @@ def _figures(s: Any) -> dict[str, Any]:
             "vf_changes_per_episode_max": max(s.vf_episode_changes) if s.vf_episode_changes else None,
             "vf_changes_per_min": s.vf_changes_per_min, "still_changes_per_min": s.still_changes_per_min,
             "slip_episodes_per_event_max": max(s.slip_episodes) if s.slip_episodes else None,
-            "slip_episodes_per_event_mean": float(np.mean(s.slip_episodes)) if s.slip_episodes else None}
+            "slip_episodes_per_event_mean": float(np.mean(s.slip_episodes)) if s.slip_episodes else None,
+            # a turn the detector said it could not see (TURN_UNSEEN; evaluation/metrics.py)
+            "missed_turn_unseen": s.missed_unseen, "turn_unseen_share": s.unseen_share}
 
 
 def _json_row(r: Any, res: dict[str, Any], within_ms: tuple[int, ...]) -> dict[str, Any]:
@@ -221,6 +227,13 @@ def _conditions(items: tuple[str, ...]) -> Any:
         return spec
 
     return hook
+
+
+def _unseen_line(label: str, s: Any) -> None:
+    """Where the method said a turn would read stable (TURN_UNSEEN; cof-track only)."""
+    if s.unseen_s > 0 or s.missed_unseen:
+        click.echo(f"# {label}: of {s.events - s.found} missed slip events, {s.missed_unseen} flagged TURN_UNSEEN "
+                   f"throughout; TURN_UNSEEN in effect {_num(100 * s.unseen_share, ' %')} of the holding time")
 
 
 def _stability_table(res: dict[str, Any], per_scene: bool) -> None:

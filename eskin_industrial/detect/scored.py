@@ -31,11 +31,13 @@ from .alongside import PaperAlongside
 from .hygiene import FrameHygiene, feed
 from .settings import DetectorSettings
 from .state import ContactRule, Decision
+from .torsion import TurnFlow
 from .updates import Update
 from .vforce import ForceVariation
 
 _WARMUP = int(FrameFlag.WARMUP)
 _FILLED = int(FrameFlag.FILLED)
+_TURN_UNSEEN = int(FrameFlag.TURN_UNSEEN)
 
 
 class ScoredDetector(FrameHygiene):
@@ -44,6 +46,9 @@ class ScoredDetector(FrameHygiene):
     columns = ("score", "unused")
     #: frames of contact needed before the score is trusted
     history_s = 0.1
+    #: a torsion channel (cof-track's): while in contact and it is ``blind``, the
+    #: updates carry TURN_UNSEEN; none in the others, which see no turn at all
+    _turn: TurnFlow | None = None
 
     def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
                  hop_s: float | None = None, confirm: int = 1) -> None:
@@ -131,6 +136,9 @@ class ScoredDetector(FrameHygiene):
         varying = self._hop_vf if self._vf is not None else float(self._hop_var)
         state = self.decision.decide(t, contact, valid, self._hop_slip, varying)
         flags = self._hop_flags | (0 if valid else _WARMUP)
+        turn = self._turn
+        if contact and turn is not None and turn.blind:
+            flags |= _TURN_UNSEEN
         paper = self.paper
         upd = Update(t, paper.r_coe, paper.r_dw, state, valid, s, self._cof[0], self._cof[1], flags,
                      self._hop_a, self._hop_b)

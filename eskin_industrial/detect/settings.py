@@ -99,8 +99,16 @@ class CofTrackSettings:
     #: noise: its square at least this many times what the noise of the template's
     #: mean alone would give (noise alone gave 0.8-36 on a one-taxel contact, a 0.4 N
     #: grip and 0.1 N of taxel noise; real footprints 159 and more nine times in ten,
-    #: on tuning seed 3: docs/evaluation.md)
+    #: on tuning seed 3: docs/evaluation.md); below it the updates in contact carry
+    #: TURN_UNSEEN, cleared again at twice it (docs/plc.md, FLAGS bits)
     torsion_min_visibility: float = field(default=40.0, metadata=non_negative())
+    #: A footprint whose mean squared distance from its centre of force is less than
+    #: this many squared taxel pitches shows no turn the channel can be relied on to
+    #: find (the twist's turn on a square of 12 mm on the 5 mm grid, 1.20: 1 of 10
+    #: found on tuning seeds 0-9; 12.5 mm, 1.23: 10 of 10, 665 ms at the median; 13 mm,
+    #: 1.27: 520 ms; the margin errs on the side of saying so): its updates in contact
+    #: carry TURN_UNSEEN, cleared again at 1.2 times it.  The channel still looks
+    torsion_min_footprint: float = field(default=1.3, metadata=non_negative())
 
     def __post_init__(self) -> None:
         if not self.ramp_horizons_s:

@@ -72,6 +72,8 @@ class _Grid:
         self.pad = np.zeros((len(ys) + 2, len(xs) + 2))  # the grid with nothing around it
         self.inv_dx2 = np.tile(self.inv_dx.ravel() ** 2, len(ys))
         self.inv_dy2 = np.repeat(self.inv_dy.ravel() ** 2, len(xs))
+        self.pitch2 = float(np.diff(xs).min() * np.diff(ys).min())  # a taxel's cell, mm^2
+        self.footprint = 0.0  #: the last template's p: mean squared distance from its centre, in cells
 
     def template(self, p: np.ndarray, var: np.ndarray | None = None) -> tuple[np.ndarray, float, float] | None:
         """``g_hat``, ``g . g``, and what ``g . g`` would be from the noise of ``p``
@@ -82,6 +84,7 @@ class _Grid:
         dx = (pad[1:-1, 2:] - pad[1:-1, :-2]) * self.inv_dx
         dy = (pad[2:, 1:-1] - pad[:-2, 1:-1]) * self.inv_dy
         x, y = self.x - float(p @ self.x), self.y - float(p @ self.y)
+        self.footprint = float(p @ (x * x + y * y)) / self.pitch2
         g = x * dy.ravel() - y * dx.ravel()
         gg = float(g @ g)
         if not gg > 1e-18:
@@ -135,11 +138,15 @@ class TurnFlow:
     (it counts each hop's change once)."""
 
     def __init__(self, xs: np.ndarray, ys: np.ndarray, hop: int, block: int, blocks: int,
-                 horizons: tuple[int, ...], base: int, z: float, noise_n: int, min_visibility: float = 0.0) -> None:
+                 horizons: tuple[int, ...], base: int, z: float, noise_n: int, min_visibility: float = 0.0,
+                 min_footprint: float = 0.0) -> None:
         """``block``, ``horizons``, ``base`` and ``noise_n`` count hops of ``hop`` frames;
         ``min_visibility``: the least ``g . g`` over what its template's noise alone
-        would give (:attr:`visibility`) at which the channel looks."""
+        would give (:attr:`visibility`) at which the channel looks; ``min_footprint``: the
+        least mean squared distance of the force from its centre, in taxel cells, at
+        which a turn shows (below it the channel looks, but :attr:`blind` says it cannot see)."""
         self.min_visibility = min_visibility
+        self.min_footprint = min_footprint
         self.xs, self.ys = xs, ys
         self._grid = _Grid(xs, ys)
         self.hop, self.block, self.blocks = max(1, hop), max(2, block), max(1, blocks)
@@ -177,6 +184,15 @@ class TurnFlow:
         self._var = np.zeros(n)
         self._learnt = 0
         self.visibility = 0.0
+        #: the turn cannot be seen here (TURN_UNSEEN): set until a renewal with learnt
+        #: noise first judges the contact (what it shows is not known before): set if
+        #: the visibility is below ``min_visibility`` or the footprint below
+        #: ``min_footprint``; after that with a hysteresis, cleared only at twice the one
+        #: and 1.2 times the other, so that a contact about a limit leaves it set rather
+        #: than flapping.  Kept across :meth:`restart` (the same contact); read once a
+        #: hop, by the caller
+        self.blind = True
+        self._judged = False
         self._score: float | None = 0.0  # (None: to be computed for the newest hop)
         self._ramp.reset()
 
@@ -239,6 +255,14 @@ class TurnFlow:
         used = (self.block - 1) * min(self.blocks, self._hops // self.block)  # hops in the template
         mean_s = s / frames
         self.visibility = gg * mean_s * mean_s * used / spread if spread > 0 else math.inf
+        if self._learnt:  # (before any learnt noise, the visibility is no judgement)
+            size = self._grid.footprint
+            if self.visibility < self.min_visibility or size < self.min_footprint:
+                self.blind = True
+            elif not self._judged or (self.visibility >= 2.0 * self.min_visibility
+                                      and size >= 1.2 * self.min_footprint):
+                self.blind = False
+            self._judged = True
         if self.visibility < self.min_visibility:
             # no turn to see: the template is mostly the noise of its own mean (a
             # contact on one taxel, a light or very noisy grip), and each renewal

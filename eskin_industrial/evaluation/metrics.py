@@ -12,7 +12,12 @@ Definitions (also in docs/evaluation.md):
   ``variable_force`` span (the paper's central claim is that there are none);
 - a found event's *slip episodes*: the flag episodes that have an update in its
   [onset, end + tolerance_s]; one slide read as one slip makes 1, a slip that
-  flickers off and on during it more (each entry a new SLIP_EVENTS count for the PLC).
+  flickers off and on during it more (each entry a new SLIP_EVENTS count for the PLC);
+- a missed event is *flagged unseen* when every update in contact from its onset to
+  its end carried TURN_UNSEEN: the detector said a turn there would read ``stable``
+  (for a turn, the defined degraded behaviour; the bit says nothing of slides, so a
+  slide missed on such a contact counts too); the *unseen share* is the share of
+  holding time in which the newest update carried TURN_UNSEEN.
 
 Stability of the reported state (what a PLC acts on); the state "in effect" at a
 frame is that of the newest update at or before it, and a *state change* is an
@@ -47,9 +52,11 @@ import numpy as np
 
 from ..detect.state import GraspState
 from ..detect.updates import UpdateTable
+from ..frames import FrameFlag
 
 _SLIP = int(GraspState.SLIP)
 _VARIABLE = int(GraspState.VARIABLE_FORCE)
+_UNSEEN = int(FrameFlag.TURN_UNSEEN)
 
 #: The first this long of a varying-force episode is not counted in its coverage (the
 #: force has hardly changed yet).
@@ -90,6 +97,8 @@ class SceneScore:
     vf_exit_s: list[float] = field(default_factory=list)  #: episode end -> any other state
     slip_exit_s: list[float] = field(default_factory=list)  #: slip event end -> any other state
     slip_episodes: list[int] = field(default_factory=list)  #: flag episodes per found event
+    missed_unseen: int = 0  #: missed events flagged unseen (the module's doc)
+    unseen_s: float = 0.0  #: holding time with TURN_UNSEEN in effect
 
     def __iadd__(self, other: "SceneScore") -> "SceneScore":
         self.events += other.events
@@ -113,6 +122,8 @@ class SceneScore:
         self.vf_exit_s += other.vf_exit_s
         self.slip_exit_s += other.slip_exit_s
         self.slip_episodes += other.slip_episodes
+        self.missed_unseen += other.missed_unseen
+        self.unseen_s += other.unseen_s
         return self
 
     @property
@@ -164,6 +175,10 @@ class SceneScore:
         return self.holding_changes / (self.holding_s / 60.0) if self.holding_s else float("nan")
 
     @property
+    def unseen_share(self) -> float:
+        return self.unseen_s / self.holding_s if self.holding_s else float("nan")
+
+    @property
     def still_changes_per_min(self) -> float:
         return self.still_changes / (self.still_s / 60.0) if self.still_s else float("nan")
 
@@ -181,6 +196,9 @@ def score_scene(updates: UpdateTable, t: np.ndarray, labels: np.ndarray, toleran
     flagged = updates.state == _SLIP
     # each update's flag episode (its count from 1; 0 when not flagged)
     episode = np.where(flagged, np.cumsum(flagged & ~np.concatenate(([False], flagged[:-1]))), 0)
+    unseen = (np.asarray(updates.flags) & _UNSEEN) != 0
+    eff = np.searchsorted(updates.t, t, side="right") - 1  # the newest update at each frame
+    out.unseen_s = float(dt[holding & (eff >= 0) & unseen[np.maximum(eff, 0)]].sum()) if len(updates) else 0.0
     credited = np.zeros(len(updates), bool)
     for a, b in spans(labels == "slip"):
         out.events += 1
@@ -196,6 +214,9 @@ def score_scene(updates: UpdateTable, t: np.ndarray, labels: np.ndarray, toleran
             after = np.flatnonzero((updates.t >= stop) & ~flagged)
             if after.size:
                 out.slip_exit_s.append(float(updates.t[after[0]] - stop))
+        else:
+            touching = (updates.t >= onset) & (updates.t <= t[b - 1]) & (updates.state != 0)
+            out.missed_unseen += int(touching.any() and unseen[touching].all())
     for a, b in spans(flagged):
         if credited[a:b].any() or (up_label[a:b] == "transition").all():
             continue

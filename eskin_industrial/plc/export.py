@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import Literal
 from xml.sax.saxutils import escape
 
+from ..frames import FrameFlag
 from ..profile import ModbusPlcSection
 from . import image
 from .image import BIT_DOC, BITS, COILS, Register, Status, map_rows
@@ -188,8 +189,9 @@ def slip_guard_st() -> str:
     """``FB_SlipGuard``: act on SLIP only when the data is trustworthy.  The register
     offsets and bit numbers come from the tables."""
     reg = image.REG
-    st, hb, age = reg["STATUS"].offset, reg["HEARTBEAT"].offset, reg["FRAME_AGE"].offset
+    st, hb, age, fl = reg["STATUS"].offset, reg["HEARTBEAT"].offset, reg["FRAME_AGE"].offset, reg["FLAGS"].offset
     b = {s: _bit(s) for s in Status}
+    unseen = f"bTurnUnseen  := wFlags.{int(FrameFlag.TURN_UNSEEN).bit_length() - 1};"
 
     def bit(var: str, s: Status, note: str) -> str:
         lhs = f"{var:<12} := wStatus.{b[s]};"
@@ -201,12 +203,14 @@ VAR_INPUT
     wStatus     : WORD;   (* %MW{st:<2} STATUS    *)
     wHeartbeat  : WORD;   (* %MW{hb:<2} HEARTBEAT *)
     wFrameAgeMs : WORD;   (* %MW{age:<2} FRAME_AGE *)
+    wFlags      : WORD;   (* %MW{fl:<2} FLAGS     *)
     rGripForceN : REAL;   (* current set-point *)
 END_VAR
 VAR_OUTPUT
     rGripSetN   : REAL;   (* new set-point *)
     bAck        : BOOL;   (* pulse: write COMMAND := 1 (or coil ACK_SLIP := TRUE) *)
     bNoVerdict  : BOOL;   (* the skin cannot tell: do not rely on it *)
+    bTurnUnseen : BOOL;   (* a turn of the part would read stable: no twisting motion on "no slip" *)
 END_VAR
 VAR
     wLastHeartbeat : WORD;
@@ -221,6 +225,7 @@ END_VAR
 {bit("bSlip", Status.SLIP, "SLIP (live) ")}
 {bit("bSlipLatched", Status.SLIP_LATCHED, "SLIP_LATCHED")}
 {bit("bOffline", Status.BRIDGE_OFFLINE, "BRIDGE_OFFLINE: the bridge stopped on purpose")}
+{unseen:<29}(* FLAGS TURN_UNSEEN: slides are seen, turns not *)
 
 (* Bridge watchdog: the heartbeat must move within 500 ms. *)
 tonBridgeDead(IN := (wHeartbeat = wLastHeartbeat), PT := T#500MS);
@@ -294,7 +299,8 @@ def codesys_st(settings: ModbusPlcSection, name: str, input_word: int = 0, outpu
    implementation; both are the same in the file of every node: one copy serves all).
    Call it with the block's words:
      fbGuard(wStatus := {gvl}.stIn.STATUS, wHeartbeat := {gvl}.stIn.HEARTBEAT,
-             wFrameAgeMs := {gvl}.stIn.FRAME_AGE, rGripForceN := rForce);
+             wFrameAgeMs := {gvl}.stIn.FRAME_AGE, wFlags := {gvl}.stIn.FLAGS,
+             rGripForceN := rForce);
 
    Bridge in server mode (the PLC is the Modbus master): under the Modbus TCP (or
    serial) master, the bridge's slave device gets two channels:
