@@ -97,6 +97,9 @@ def test_cli_lists_families_and_scores_per_family():
     md = _cli("--per-family", "--family", "lift-off", "-m", "cof-track", "--seeds", "0", "--per-scene", "--within", "100")
     assert md.returncode == 0, md.stderr
     assert "|   | case6 | 4 | 4 |" in md.stdout and "# lift-off, cof-track: 100 % within 100 ms" in md.stdout
+    row = next(line for line in md.stdout.splitlines() if line.startswith("| lift-off | cof-track |"))
+    mean, top = row.split("|")[-2].split(" / ")  # slip episodes per found slide
+    assert 1.0 <= float(mean) <= int(top) and doc["families"]["lift-off"]["cof-track"]["slip_episodes_per_event_max"] >= 1
     bad = _cli("--per-family", "--family", "torsoin", "--seeds", "0")
     assert bad.returncode == 2 and "unknown family 'torsoin'" in bad.stderr
     two = _cli("--hold-out-family", "torsion", "-m", "cof-track", "-m", "paper")

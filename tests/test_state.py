@@ -182,3 +182,26 @@ def test_a_slow_slide_whose_evidence_comes_and_goes_is_one_slip():
     assert score.found == score.events == 1 and score.slip_episodes == [1]
     slips = np.flatnonzero(np.diff(np.r_[0, (updates.state == S.SLIP).astype(int)]) == 1)
     assert len(slips) == 1
+
+
+def test_hold_from_entry_keeps_the_minimum_length_rule(tmp_path):
+    """``hold_from = "entry"`` counts hold_s from the slip's entry (a minimum length,
+    the rule before the off-delay): the same evidence flickers the state; a profile
+    sets it, and a misspelt value is refused before anything starts."""
+    from eskin_industrial import load_profile
+    from eskin_industrial.errors import ProfileError
+    from tests.helpers.paths import PROFILES
+
+    d = Decision(hold_s=0.2, hold_from="entry")
+    seq = [(0.0, False), (0.01, True), (0.15, False), (0.25, True), (0.3, False), (0.4, True), (0.5, False)]
+    got = [S(d.decide(t, True, True, slip, 0.0)) for t, slip in seq]
+    assert got == [S.STABLE, S.SLIP, S.SLIP, S.SLIP, S.STABLE, S.SLIP, S.SLIP]  # out at 0.3, a new slip at 0.4
+    text = (PROFILES / "paper-5x5.toml").read_text()
+    path = tmp_path / "p.toml"
+    path.write_text(text.replace("hold_s = 0.2\n", 'hold_s = 0.2\nhold_from = "entry"\n', 1))
+    det = load_profile(path).detector
+    assert det.hold_from == "entry" and Decision.from_settings(det).from_entry
+    assert not Decision.from_settings(load_profile(PROFILES / "paper-5x5.toml").detector).from_entry
+    path.write_text(text.replace("hold_s = 0.2\n", 'hold_s = 0.2\nhold_from = "entri"\n', 1))
+    with pytest.raises(ProfileError, match="hold_from"):
+        load_profile(path)

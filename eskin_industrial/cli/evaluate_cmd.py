@@ -25,7 +25,7 @@ from ..evaluation.suite import (
 )
 from .common import open_profile
 from .console import Ticker, echo_json
-from .evaluate_families import family_names, leave_one_out, list_families, per_family
+from .evaluate_families import family_names, leave_one_out, list_families, per_family, slip_episodes
 
 
 def _seeds(value: str) -> tuple[int, ...]:
@@ -258,11 +258,7 @@ def _stability(s: Any) -> str:
     changes = f"{np.mean(ch):.1f} / {max(ch)}" if ch else "- / -"
     return (f"{s.vf_episodes} | {s.vf_found} ({_num(s.vf_recall, '', 2)}) | {coverage} | {changes} | "
             f"{_num(s.vf_changes_per_min)} | {_num(s.still_changes_per_min, '', 2)} ({s.still_s / 60:.1f}) | "
-            f"{_ms(s.vf_entry_s)} | {_ms(s.vf_exit_s)} | {_ms(s.slip_exit_s)} | {_episodes(s.slip_episodes)}")
-
-
-def _episodes(per_event: list[int]) -> str:
-    return f"{np.mean(per_event):.2f} / {max(per_event)}" if per_event else "- / -"
+            f"{_ms(s.vf_entry_s)} | {_ms(s.vf_exit_s)} | {_ms(s.slip_exit_s)} | {slip_episodes(s.slip_episodes)}")
 
 
 def _ms(values: list[float]) -> str:

@@ -151,10 +151,12 @@ class Decision:
     persist across a detector's restarts after long gaps, as the PLC's view does.
     ``varying`` is the update's varying-force score (1 = evidence; a bool is 0 or 1)."""
 
-    __slots__ = ("hold_s", "confirm", "state", "entered_t", "slip_t", "slip_run", "latch")
+    __slots__ = ("hold_s", "confirm", "state", "entered_t", "slip_t", "slip_run", "latch", "from_entry")
 
-    def __init__(self, hold_s: float, confirm: int = 1, latch: VaryingLatch | None = None) -> None:
+    def __init__(self, hold_s: float, confirm: int = 1, latch: VaryingLatch | None = None,
+                 hold_from: str = "evidence") -> None:
         self.hold_s = hold_s
+        self.from_entry = hold_from == "entry"  #: hold_s from the entry, not the last evidence
         self.confirm = confirm
         self.latch = latch if latch is not None else VaryingLatch.from_settings(VaryingForceSettings())
         self.state = _NO_CONTACT
@@ -165,7 +167,7 @@ class Decision:
     @classmethod
     def from_settings(cls, settings: DetectorSettings, confirm: int | None = None) -> "Decision":
         return cls(settings.hold_s, settings.slip_confirm_updates if confirm is None else confirm,
-                   VaryingLatch.from_settings(settings.varying_force))
+                   VaryingLatch.from_settings(settings.varying_force), settings.hold_from)
 
     def decide(self, t: float, contact: bool, valid: bool, slip: bool, varying: float) -> int:
         cur = self.state
@@ -192,9 +194,10 @@ class Decision:
             self.slip_run = 0
         held = _VARIABLE if self.latch.update(t, varying) else _STABLE
         if confirmed:
-            self.slip_t = t
             if cur != _SLIP:
                 self.state, self.entered_t = _SLIP, t  # slip pre-empts everything, at once
+            if not self.from_entry or cur != _SLIP:
+                self.slip_t = t
         elif cur == _SLIP:
             if t - self.slip_t >= self.hold_s:
                 self.state, self.entered_t = held, t
