@@ -24,6 +24,13 @@ from .schema import (SchemaError, in_range, ip_network, non_negative, parse_toml
 
 #: A sensor silent for this many scan periods is stale (the PLC must see it within three).
 STALE_PERIODS = 2.5
+#: ... but never less than this: the bridge's threads share one interpreter, which
+#: switches between them every 5 ms (``sys.getswitchinterval()``), so a loop can take
+#: a scan that long after it came and a 1 kHz node's 2.5 ms flagged a healthy sensor
+#: stale now and then, each time a flicker of SENSOR_STALE and DATA_VALID for the PLC
+#: (15 in 20 s for one node in a busy process: docs/benchmarks.md).  Four switch
+#: intervals; from 125 Hz down the periods decide.
+STALE_FLOOR_S = 0.02
 
 # Bounds of the settings, each in docs/profiles.md: past them a value is a typo or a
 # unit mistake, and is refused before the run rather than met in it.
@@ -45,8 +52,8 @@ MAX_WINDOW_SAMPLES = 1_000_000
 
 def derived_stale_s(rate_hz: float, poll_hz: float | None) -> float:
     """The default ``[modbus.plc] stale_s``: 2.5 periods of the slower of the scan
-    rate and the RTU poll rate."""
-    return STALE_PERIODS / min(rate_hz, poll_hz or rate_hz)
+    rate and the RTU poll rate, at least :data:`STALE_FLOOR_S`."""
+    return max(STALE_PERIODS / min(rate_hz, poll_hz or rate_hz), STALE_FLOOR_S)
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ import pytest
 
 from eskin_industrial.bridge.config import load_bridge_config, resolve
 from eskin_industrial.errors import ProfileError
+from eskin_industrial.profile import STALE_FLOOR_S, load_profile
 from tests.helpers.bridge import PAPER
 from tests.helpers.modbus import free_port
 
@@ -86,6 +87,23 @@ def test_a_slower_node_than_its_profile_gets_its_own_stale_limit(tmp_path):
     left, right = resolve(load_bridge_config(path))
     assert left.profile.modbus.plc.stale_s == pytest.approx(0.025)
     assert right.rate_hz == 20.0 and right.profile.modbus.plc.stale_s == pytest.approx(0.125)
+
+
+def test_a_fast_node_is_not_stale_within_the_interpreters_switch_interval(tmp_path):
+    """At 1 kHz 2.5 periods are 2.5 ms, less than the 5 ms for which the interpreter
+    may run another of the bridge's threads: the default limit has a floor of 20 ms
+    (from 125 Hz down the periods decide); a limit the profile sets is kept."""
+    assert STALE_FLOOR_S >= 4 * sys.getswitchinterval()
+    path = write(tmp_path, TWO_NODES.replace('base_address = 100', 'base_address = 100\nrate_hz = 1000.0'))
+    left, right = resolve(load_bridge_config(path))
+    assert left.profile.modbus.plc.stale_s == pytest.approx(0.025)  # 100 Hz: 2.5 periods
+    assert right.rate_hz == 1000.0 and right.profile.modbus.plc.stale_s == pytest.approx(STALE_FLOOR_S)
+    fast = Path(PAPER).read_text().replace("rate_hz = 100.0", "rate_hz = 1000.0", 1)
+    assert "rate_hz = 1000.0" in fast
+    (tmp_path / "fast.toml").write_text(fast)
+    assert load_profile(tmp_path / "fast.toml").modbus.plc.stale_s == pytest.approx(STALE_FLOOR_S)
+    (tmp_path / "set.toml").write_text(fast.replace("[modbus.plc]\n", "[modbus.plc]\nstale_s = 0.004\n", 1))
+    assert load_profile(tmp_path / "set.toml").modbus.plc.stale_s == pytest.approx(0.004)
 
 
 @pytest.mark.parametrize("old, new, expected", [

@@ -306,3 +306,22 @@ def test_the_delay_against_changes_chart_marks_the_front_of_lower_delay_and_fewe
     # lower delay and fewer changes are better: cof-velocity is dominated by cof-track
     pts = [(50.0, -0.1), (3000.0, -0.0), (90.0, -12.0)]
     assert sorted(pareto(pts)) == [0, 1]
+
+
+@pytest.mark.slow
+def test_the_family_map_marks_the_families_that_miss_a_target_and_every_unseen_turn(tmp_path):
+    """families.png: each family's delay against the targets, red where missed, and a
+    turn against the contact's size: found, or missed and flagged TURN_UNSEEN; a turn
+    missed with no flag would be a plain miss, and there is none."""
+    from eskin_industrial.evaluation.family_map import TARGET_P50_S, TARGET_P90_S, family_map
+
+    lines: list[str] = []
+    shown = family_map(tmp_path, (1000,), lines.append)
+    assert (tmp_path / "families.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    by = {r["family"]: r for r in shown["families"]}
+    assert by["line-contact"]["misses"] and by["torsion"]["misses"] and not by["hand"]["misses"]
+    assert all(r["misses"] == (r["p50"] > TARGET_P50_S or r["p90"] > TARGET_P90_S) for r in by.values())
+    turns = {t["size_mm"]: t for t in shown["turns"]}
+    assert turns[5.0]["unseen"] == turns[5.0]["events"] == 1 and turns[20.0]["found"] == 1
+    assert all(t["unflagged"] == 0 for t in turns.values())
+    assert any("line-contact" in line for line in lines)

@@ -97,6 +97,9 @@ def test_cli_lists_families_and_scores_per_family():
     md = _cli("--per-family", "--family", "lift-off", "-m", "cof-track", "--seeds", "0", "--per-scene", "--within", "100")
     assert md.returncode == 0, md.stderr
     assert "|   | case6 | 4 | 4 |" in md.stdout and "# lift-off, cof-track: 100 % within 100 ms" in md.stdout
+    row = next(line for line in md.stdout.splitlines() if line.startswith("| lift-off | cof-track |"))
+    mean, top = row.split("|")[-2].split(" / ")  # slip episodes per found slide
+    assert 1.0 <= float(mean) <= int(top) and doc["families"]["lift-off"]["cof-track"]["slip_episodes_per_event_max"] >= 1
     bad = _cli("--per-family", "--family", "torsoin", "--seeds", "0")
     assert bad.returncode == 2 and "unknown family 'torsoin'" in bad.stderr
     two = _cli("--hold-out-family", "torsion", "-m", "cof-track", "-m", "paper")
@@ -114,3 +117,24 @@ def test_new_families_draw_their_own_noise_at_the_same_seed():
     assert not np.allclose(ours.forces, same_draws.forces)
     assert get_family("stick-slip").stream is None  # the suite's own draw as the suite does
     assert len({f.stream for f in FAMILIES.values() if not f.in_suite}) == 9
+
+
+def test_where_a_family_defeats_the_delay_target_the_state_is_late_but_steady():
+    """Most families miss the delay target (median 40 ms; line contact and torsion by
+    far: docs/evaluation.md). The defined degraded behaviour there is a late slip that
+    is one slip: no flicker off and on within a slide, and no state changes in still
+    holds, on every family at a tuning seed (0).  (With ``hold_from = "entry"``, the
+    rule before, 7 families flicker, up to 5 entries for one slide.)"""
+    from eskin_industrial.evaluation.families import evaluate_families
+    from eskin_industrial.evaluation.suite import by_name
+
+    res = evaluate_families(by_name("cof-track"), tuple(FAMILIES), (0,))
+    late = {f for f, by in res.items() if by["cof-track"].score.delays_s
+            and by["cof-track"].score.delay_percentile(50) > 0.040}
+    assert {"line-contact", "torsion", "creep"} <= late  # the families where the target is out of reach
+    for fam, by in res.items():
+        s = by["cof-track"].score
+        assert s.found == s.events, fam
+        assert not s.slip_episodes or max(s.slip_episodes) <= 2, (fam, s.slip_episodes)
+        assert sum(e > 1 for e in s.slip_episodes) <= max(1, len(s.slip_episodes) // 10), (fam, s.slip_episodes)
+        assert s.still_changes == 0, fam

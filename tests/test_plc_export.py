@@ -22,6 +22,7 @@ from eskin_industrial.plc.image import BITS, COILS, IMAGE_COUNT, REGISTERS, STAT
 from tests.helpers.paths import PROFILES, ROOT
 
 PROFILE = load_profile(PROFILES / "paper-5x5.toml")
+METHOD = PROFILE.detector.method
 #: A value of every published register, each one different and using all its bits.
 VALUES = {"STATUS": int(Status.CONTACT | Status.SLIP | Status.SLIP_LATCHED | Status.DATA_VALID | Status.BRIDGE_ALIVE
                         | Status.BRIDGE_OFFLINE), "STATE": 3, "R_COE": 1234, "R_DW": 65535, "F_SUM": 0x12345678,
@@ -242,16 +243,44 @@ def test_export_command_writes_the_file_into_the_folder(fmt, name, tmp_path):
     assert [p.name for p in (tmp_path / "out").iterdir()] == [name]
     data = (tmp_path / "out" / name).read_bytes()
     if fmt == "tia":
-        assert data == tia_xlsx(PROFILE.modbus.plc, PROFILE.name)
+        assert data == tia_xlsx(PROFILE.modbus.plc, PROFILE.name, method=METHOD)
     else:
-        assert data.decode() == (codesys_st(PROFILE.modbus.plc, PROFILE.name) if fmt == "codesys"
-                                 else flat_csv(PROFILE.modbus.plc))
+        assert data.decode() == (codesys_st(PROFILE.modbus.plc, PROFILE.name, method=METHOD) if fmt == "codesys"
+                                 else flat_csv(PROFILE.modbus.plc, method=METHOD))
 
 
 def test_export_to_standard_output():
     res = CliRunner().invoke(main, ["plc", "export", "-p", str(PROFILES / "paper-5x5.toml"), "--format", "csv"])
     assert res.exit_code == 0
-    assert res.output == flat_csv(PROFILE.modbus.plc)
+    assert res.output == flat_csv(PROFILE.modbus.plc, method=METHOD)
+
+
+@pytest.mark.parametrize("method", ["cof-track", "paper", "force-rate"])
+def test_exported_files_say_what_the_profiles_method_puts_in_its_scores(method, tmp_path):
+    """METHOD_ID and SCORE_A/SCORE_B hold what the profile's deciding method puts
+    there: each file describes them as `plc map` does, not with the generic words."""
+    from eskin_industrial.detect.methods import METHODS
+
+    text = (PROFILES / "paper-5x5.toml").read_text()
+    path = tmp_path / "p.toml"
+    path.write_text(re.sub(r'(?m)^method = "[^"]*"', f'method = "{method}"', text, count=1))
+    a, b = METHODS[method].scores
+    out = {}
+    for fmt in ("csv", "codesys", "tia"):
+        res = subprocess.run([sys.executable, "-m", "eskin_industrial", "plc", "export", "-p", str(path),
+                              "--format", fmt, "-o", str(tmp_path / "out")], capture_output=True, timeout=60)
+        assert res.returncode == 0, res.stderr
+    rows = {r["name"]: r["description"] for r in
+            csv.DictReader(io.StringIO((tmp_path / "out" / "eskin_paper_5x5_tags.csv").read_text()))}
+    assert f"{METHODS[method].code} = {method} here" in rows["METHOD_ID"]
+    assert rows["SCORE_A"].startswith(f"{method}'s {a.name}") and rows["SCORE_B"].startswith(f"{method}'s {b.name}")
+    shown = CliRunner().invoke(main, ["plc", "map", "-p", str(path), "--format", "csv"]).output
+    assert rows["SCORE_A"] in shown and rows["SCORE_B"] in shown  # the same words as the map's
+    out["st"] = (tmp_path / "out" / "eskin_paper_5x5.st").read_text()
+    assert f"{method}'s {a.name}" in out["st"] and f"{method}'s {b.name}" in out["st"]
+    tia = openpyxl.load_workbook(tmp_path / "out" / "eskin_paper_5x5_tags.xlsx")["PLC Tags"]
+    comments = {r[0]: r[TIA_COLUMNS.index("Comment")] for r in tia.iter_rows(values_only=True)}
+    assert f"{method}'s {a.name}" in comments["SCORE_A"]
 
 
 def test_a_register_added_to_the_table_appears_in_every_file(monkeypatch, tmp_path):

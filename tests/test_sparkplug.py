@@ -140,6 +140,8 @@ def _check_sequence(decoded, device="grip"):
                     states.append(spb.value(m))
                 elif declared[m.alias][0] == "Score A":
                     states.append(("Score A", spb.value(m)))
+                elif declared[m.alias][0] == "Turn Unseen":
+                    states.append(("Turn Unseen", spb.value(m)))
     return states, bd_seq
 
 
@@ -169,8 +171,12 @@ def test_a_bridge_publishes_births_the_slip_and_deaths(paper_profile, tmp_path, 
     decoded = _decoded(msgs)
     states, _ = _check_sequence(decoded)
     # cof-track's onset score passes its threshold (1) in the slide
-    scores = [v for s in states if isinstance(s, tuple) for v in s[1:]]
+    scores = [s[1] for s in states if isinstance(s, tuple) and s[0] == "Score A"]
     assert scores and max(scores) > 1.0
+    # TURN_UNSEEN: set on contact until the torsion channel has looked at the block's
+    # footprint, then clear (a 20 mm block shows a turn), each change sent at once
+    unseen = [s[1] for s in states if isinstance(s, tuple) and s[0] == "Turn Unseen"]
+    assert unseen[-2:] == [True, False], unseen
     states = [s for s in states if not isinstance(s, tuple)]
     assert "slip" in states and states[states.index("slip") - 1] != "slip"
     topics = {t for _, t, _ in decoded}

@@ -232,3 +232,30 @@ def test_a_watch_snapshots_the_newest_values_of_a_running_pipeline(hand_profile)
     assert s.scan_rate_hz == pytest.approx(120.0)  # scans since the first snapshot, a second before
     published.append(image.render(Health(5.0, False, 0, 0)))  # the node has gone quiet
     assert watch.snapshot(101.7).stale
+
+
+def test_the_monitor_view_shows_the_deciding_methods_scores_with_the_registers(hand_profile):
+    """SCORE_A and SCORE_B are published in a second run (after COMMAND and ENABLE):
+    the view's register block shows them too, as a sink kept them."""
+    from eskin_industrial.pipeline import Pipeline
+    from eskin_industrial.sinks.base import Publication
+    from eskin_industrial.view.live import KeptImage, Watch
+
+    image = PlcImage(hand_profile.modbus.plc)
+    image.observe(Update(1.0, 0.5, 0.2, 3, True, 6.0, 10.0, 12.0, 0, 2.5, 0.75))
+    regs = image.render(Health(0.002, False, 0, 0))
+    kept = KeptImage()
+    kept._publish(Publication(regs, image, True, 0.0, tail=tuple(image.tail)))
+    assert kept.tail == tuple(image.tail) and len(kept.tail) == 2
+    pipe = Pipeline(hand_profile, rate_hz=100.0)
+    watch = Watch(hand_profile, pipe, method="cof-track", registers=lambda: kept.registers,
+                  tail=lambda: kept.tail, registers_from="as the bridge would publish them",
+                  counters=lambda: {}, source="hand-4x5", title="eskin-bus monitor", started=0.0)
+    s = watch.snapshot(1.0)
+    scale = hand_profile.modbus.plc.r_scale
+    assert s.registers["SCORE_A"] == round(2.5 * scale) and s.registers["SCORE_B"] == round(0.75 * scale)
+    text = ANSI.sub("", "\n".join(render(s, 120, 40, color=False)))
+    assert f"SCORE_A {round(2.5 * scale)}" in text and "METHOD_ID" in text
+    without = Watch(hand_profile, pipe, method="cof-track", registers=lambda: kept.registers,
+                    registers_from="", counters=lambda: {}, source="", title="", started=0.0).snapshot(1.0)
+    assert "SCORE_A" not in without.registers

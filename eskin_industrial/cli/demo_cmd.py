@@ -64,7 +64,7 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
 def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> DemoResult:
     """The demo under the live view; the lines it would have printed are kept and
     printed once the view has left the screen."""
-    from ..plc.image import STATUS_COUNT
+    from ..plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT
     from ..sim.demo import DemoParts, run_demo
     from ..view.live import Watch, live_screen
     from ..view.terminal import color_wanted
@@ -81,6 +81,7 @@ def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> De
         loop, plc = parts.loop, parts.plc
         watch = Watch(parts.profile, loop.pipeline, method=parts.profile.detector.method,
                       registers=lambda: plc.memory.regs[:STATUS_COUNT], registers_from="as the PLC reads them",
+                      tail=lambda: plc.memory.regs[TAIL_AT:TAIL_AT + TAIL_COUNT],
                       counters=loop.counters, title="eskin-bus demo",
                       source=f"{rec.name} | {parts.profile.name} | {parts.profile.detector.method}",
                       started=parts.started)

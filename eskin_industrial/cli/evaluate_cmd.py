@@ -25,7 +25,7 @@ from ..evaluation.suite import (
 )
 from .common import open_profile
 from .console import Ticker, echo_json
-from .evaluate_families import family_names, leave_one_out, list_families, per_family
+from .evaluate_families import family_names, leave_one_out, list_families, per_family, slip_episodes
 
 
 def _seeds(value: str) -> tuple[int, ...]:
@@ -188,6 +188,8 @@ def _figures(s: Any) -> dict[str, Any]:
             "vf_coverage": s.vf_coverage if s.vf_coverages else None,
             "vf_changes_per_episode_max": max(s.vf_episode_changes) if s.vf_episode_changes else None,
             "vf_changes_per_min": s.vf_changes_per_min, "still_changes_per_min": s.still_changes_per_min,
+            "slip_episodes_per_event_max": max(s.slip_episodes) if s.slip_episodes else None,
+            "slip_episodes_per_event_mean": float(np.mean(s.slip_episodes)) if s.slip_episodes else None,
             # a turn the detector said it could not see (TURN_UNSEEN; evaluation/metrics.py)
             "missed_turn_unseen": s.missed_unseen, "turn_unseen_share": s.unseen_share}
 
@@ -240,8 +242,8 @@ def _stability_table(res: dict[str, Any], per_scene: bool) -> None:
     click.echo("| method | varying-force episodes | found (recall) | coverage after 150 ms: pooled / worst / episodes >= 90 % "
                "| state changes per episode: mean / max | changes per min in varying force | "
                "changes per min in still holds (min held) | varying force entered after onset, p50 / p90 (ms) "
-               "| left after its end | slip left after its end |")
-    click.echo("|---|---|---|---|---|---|---|---|---|---|")
+               "| left after its end | slip left after its end | slip episodes per found event: mean / max |")
+    click.echo("|---|---|---|---|---|---|---|---|---|---|---|")
     for name, r in res.items():
         rows = [(name, r.score)] + ([(f"  {scene}", ss) for scene, ss in r.per_scene.items()] if per_scene else [])
         for label, s in rows:
@@ -256,7 +258,7 @@ def _stability(s: Any) -> str:
     changes = f"{np.mean(ch):.1f} / {max(ch)}" if ch else "- / -"
     return (f"{s.vf_episodes} | {s.vf_found} ({_num(s.vf_recall, '', 2)}) | {coverage} | {changes} | "
             f"{_num(s.vf_changes_per_min)} | {_num(s.still_changes_per_min, '', 2)} ({s.still_s / 60:.1f}) | "
-            f"{_ms(s.vf_entry_s)} | {_ms(s.vf_exit_s)} | {_ms(s.slip_exit_s)}")
+            f"{_ms(s.vf_entry_s)} | {_ms(s.vf_exit_s)} | {_ms(s.slip_exit_s)} | {slip_episodes(s.slip_episodes)}")
 
 
 def _ms(values: list[float]) -> str:

@@ -45,6 +45,11 @@ def _row(s: Any, delays: Callable[[Any], str]) -> str:
             f"{s.vf_as_slip} | {delays(s)}")
 
 
+def slip_episodes(per_event: list[int]) -> str:
+    """Slip episodes per found slip event, mean / max (1 / 1: no slip flickered)."""
+    return f"{sum(per_event) / len(per_event):.2f} / {max(per_event)}" if per_event else "- / -"
+
+
 def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, seed_set: tuple[int, ...],
                rate_hz: float, settings: DetectorSettings, tolerance_s: float, fmt: str,
                figures: Callable[[Any], dict[str, Any]], delays: Callable[[Any], str], per_scene: bool = False,
@@ -62,14 +67,14 @@ def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, se
     click.echo(f"# eskin-bus evaluate --per-family --seeds {seeds} --rate {rate_hz:g}  "
                f"({len(families)} families x {len(seed_set)} seeds, {time.perf_counter() - start:.0f} s)")
     click.echo("| family | method | events | found | F1 | false alarms (per h holding) | varying force as slip | "
-               "delay p50 / p90 (ms) |")
-    click.echo("|---|---|---|---|---|---|---|---|")
+               "delay p50 / p90 (ms) | slip episodes per found event: mean / max |")
+    click.echo("|---|---|---|---|---|---|---|---|---|")
     for fam, by in res.items():
         for m, r in by.items():
-            click.echo(f"| {fam} | {m} | {_row(r.score, delays)} |")
+            click.echo(f"| {fam} | {m} | {_row(r.score, delays)} | {slip_episodes(r.score.slip_episodes)} |")
             if per_scene:
                 for scene, ss in r.per_scene.items():
-                    click.echo(f"|   | {scene} | {_row(ss, delays)} |")
+                    click.echo(f"|   | {scene} | {_row(ss, delays)} | {slip_episodes(ss.slip_episodes)} |")
     if within is not None:
         for fam, by in res.items():
             for m, r in by.items():

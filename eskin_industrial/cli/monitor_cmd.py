@@ -51,7 +51,7 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, bus_ext
     where = loop.source.describe_where() if channel is None else channel
     stdout = sys.stdout
     live = not plain and stdout.isatty()
-    watch = Watch(prof, loop.pipeline, method=chosen, registers=lambda: sink.registers,
+    watch = Watch(prof, loop.pipeline, method=chosen, registers=lambda: sink.registers, tail=lambda: sink.tail,
                   registers_from="as the bridge would publish them", counters=loop.counters,
                   title="eskin-bus monitor", source=f"{prof.name} | {chosen} | {where}", started=time.monotonic())
 

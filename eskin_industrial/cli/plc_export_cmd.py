@@ -24,6 +24,7 @@ class _Block:
     name: str
     settings: ModbusPlcSection
     prefix: str  #: before every tag name ("" for a lone profile)
+    method: str  #: the deciding method (what METHOD_ID and the scores hold)
 
 
 @click.command("export")
@@ -63,7 +64,7 @@ def export(profile_path: str | None, config_path: str | None, fmt: str, out_dir:
             raise click.UsageError("--config writes one file per node: give -o DIR")
         from ..bridge.config import load_bridge_config, resolve
 
-        blocks = [_Block(n.name, n.profile.modbus.plc, f"{ident(n.name)}_")
+        blocks = [_Block(n.name, n.profile.modbus.plc, f"{ident(n.name)}_", n.profile.detector.method)
                   for n in resolve(load_bridge_config(config_path))]
     else:
         assert profile_path is not None
@@ -71,16 +72,17 @@ def export(profile_path: str | None, config_path: str | None, fmt: str, out_dir:
         settings = prof.modbus.plc
         if base_address is not None:
             settings = dataclasses.replace(settings, base_address=base_address)
-        blocks = [_Block(node_name or prof.name, settings, f"{ident(node_name)}_" if node_name else "")]
+        blocks = [_Block(node_name or prof.name, settings, f"{ident(node_name)}_" if node_name else "",
+                         prof.detector.method)]
     first = min(b.settings.base_address for b in blocks)
     for b in blocks:
         data: bytes
         if fmt == "codesys":
-            data = codesys_st(b.settings, b.name, input_word, output_word).encode()
+            data = codesys_st(b.settings, b.name, input_word, output_word, b.method).encode()
         elif fmt == "csv":
-            data = flat_csv(b.settings, b.prefix).encode()
+            data = flat_csv(b.settings, b.prefix, b.method).encode()
         else:
-            data = tia_xlsx(b.settings, b.name, m_byte + 2 * (b.settings.base_address - first), b.prefix)
+            data = tia_xlsx(b.settings, b.name, m_byte + 2 * (b.settings.base_address - first), b.prefix, b.method)
         if out_dir is None:
             if fmt == "tia" and sys.stdout.isatty():
                 raise click.UsageError("--format tia writes an .xlsx workbook: give -o DIR or redirect the output")

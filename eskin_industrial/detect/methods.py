@@ -99,8 +99,8 @@ METHODS: dict[str, Method] = {
     "cof-velocity": _method("cof-velocity", "rival: centre-of-force speed above a threshold", CofVelocity, 6, (
         Score("cof_speed_mm_s", "centre-of-force speed, mm/s (slip above threshold_mm_s)"), UNUSED)),
     "cof-track": _method("cof-track", "ours: centre-of-force displacement against its learnt noise", CofTrack, 7, (
-        Score("onset_score", "onset: the larger of the fast displacement and the ramp, over their noise "
-                             "thresholds (slip above 1)"),
+        Score("onset_score", "onset: the largest of the fast displacement, the ramp and the turn about the "
+                             "normal, over their noise thresholds (slip above 1)"),
         Score("slow_score", "the slow displacement still moving onward, over its threshold (slip above 1)"))),
     "learned": _method("learned", "accuracy ceiling: a small classifier on the other methods' features (extra: learn)", Learned,
                        8, (Score("p_slip", "the model's slip probability (slip above slip_p, confirm_hops in a row)"),

@@ -223,9 +223,14 @@ class DetectorSettings:
     hysteresis: float = field(default=0.2, metadata=in_range(0.0, 0.95))
     #: Consecutive updates a slip candidate must persist before it is reported.
     slip_confirm_updates: int = field(default=1, metadata=positive("an integer >= 1"))
-    #: A reported slip state is held at least this long (the varying-force state has
-    #: its own exit and dwell: ``[detector.varying_force]``).
+    #: A reported slip state is left once this long has passed since its last slip
+    #: evidence (the varying-force state has its own exit and dwell:
+    #: ``[detector.varying_force]``).
     hold_s: float = field(default=0.2, metadata=non_negative())
+    #: What ``hold_s`` counts from: the last slip evidence (an off-delay: one slide is
+    #: one slip), or the slip's entry (a minimum length: evidence that comes and goes
+    #: near its threshold makes the state flicker, each entry a new slip).
+    hold_from: Literal["evidence", "entry"] = "evidence"
     #: Noise floor added to each decorrelation window sum, per sample in the window.
     coe_floor: float = field(default=2e-3, metadata=non_negative())
     #: Noise floor added to each CoF detail-energy window sum, per coefficient (mm^2).

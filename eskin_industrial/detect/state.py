@@ -12,8 +12,10 @@ policy a PLC program relies on: docs/plc.md):
   an update that does not know never reports anything confident (its ``valid`` is 0,
   which the PLC sees);
 - slip evidence for ``confirm`` consecutive updates: ``slip`` at once, whatever the
-  state; left at the first update without slip evidence once ``hold_s`` has passed
-  since it was entered;
+  state; left once ``hold_s`` has passed without slip evidence (an off-delay, like a
+  PLC's TOF timer: a slide whose evidence comes and goes, near its threshold, stays
+  one slip, where a hold counted from the entry let it flicker off and on, each
+  entry a new slip for the PLC);
 - otherwise ``variable_force`` while the :class:`VaryingLatch` holds, else ``stable``.
   The latch is set at the first update whose varying-force score reaches 1 (or with
   slip evidence not yet confirmed), and cleared once the score has stayed below
@@ -149,20 +151,23 @@ class Decision:
     persist across a detector's restarts after long gaps, as the PLC's view does.
     ``varying`` is the update's varying-force score (1 = evidence; a bool is 0 or 1)."""
 
-    __slots__ = ("hold_s", "confirm", "state", "entered_t", "slip_run", "latch")
+    __slots__ = ("hold_s", "confirm", "state", "entered_t", "slip_t", "slip_run", "latch", "from_entry")
 
-    def __init__(self, hold_s: float, confirm: int = 1, latch: VaryingLatch | None = None) -> None:
+    def __init__(self, hold_s: float, confirm: int = 1, latch: VaryingLatch | None = None,
+                 hold_from: str = "evidence") -> None:
         self.hold_s = hold_s
+        self.from_entry = hold_from == "entry"  #: hold_s from the entry, not the last evidence
         self.confirm = confirm
         self.latch = latch if latch is not None else VaryingLatch.from_settings(VaryingForceSettings())
         self.state = _NO_CONTACT
         self.entered_t = -math.inf
+        self.slip_t = -math.inf  #: the newest update with confirmed slip evidence
         self.slip_run = 0  #: consecutive valid updates with slip evidence
 
     @classmethod
     def from_settings(cls, settings: DetectorSettings, confirm: int | None = None) -> "Decision":
         return cls(settings.hold_s, settings.slip_confirm_updates if confirm is None else confirm,
-                   VaryingLatch.from_settings(settings.varying_force))
+                   VaryingLatch.from_settings(settings.varying_force), settings.hold_from)
 
     def decide(self, t: float, contact: bool, valid: bool, slip: bool, varying: float) -> int:
         cur = self.state
@@ -191,8 +196,10 @@ class Decision:
         if confirmed:
             if cur != _SLIP:
                 self.state, self.entered_t = _SLIP, t  # slip pre-empts everything, at once
+            if not self.from_entry or cur != _SLIP:
+                self.slip_t = t
         elif cur == _SLIP:
-            if t - self.entered_t >= self.hold_s:
+            if t - self.slip_t >= self.hold_s:
                 self.state, self.entered_t = held, t
         elif held != cur:
             self.state, self.entered_t = held, t

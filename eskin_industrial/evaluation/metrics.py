@@ -9,7 +9,10 @@ Definitions (also in docs/evaluation.md):
   [onset, end + tolerance_s] and not all of them fall in ``transition`` spans;
 - *holding time* is the time labelled ``stable`` or ``variable_force``;
 - *variable force read as slip*: false-alarm episodes that start in a
-  ``variable_force`` span (the paper's central claim is that there are none).
+  ``variable_force`` span (the paper's central claim is that there are none);
+- a found event's *slip episodes*: the flag episodes that have an update in its
+  [onset, end + tolerance_s]; one slide read as one slip makes 1, a slip that
+  flickers off and on during it more (each entry a new SLIP_EVENTS count for the PLC);
 - a missed event is *flagged unseen* when every update in contact from its onset to
   its end carried TURN_UNSEEN: the detector said a turn there would read ``stable``
   (for a turn, the defined degraded behaviour; the bit says nothing of slides, so a
@@ -93,6 +96,7 @@ class SceneScore:
     vf_entry_s: list[float] = field(default_factory=list)  #: episode onset -> variable_force
     vf_exit_s: list[float] = field(default_factory=list)  #: episode end -> any other state
     slip_exit_s: list[float] = field(default_factory=list)  #: slip event end -> any other state
+    slip_episodes: list[int] = field(default_factory=list)  #: flag episodes per found event
     missed_unseen: int = 0  #: missed events flagged unseen (the module's doc)
     unseen_s: float = 0.0  #: holding time with TURN_UNSEEN in effect
 
@@ -117,6 +121,7 @@ class SceneScore:
         self.vf_entry_s += other.vf_entry_s
         self.vf_exit_s += other.vf_exit_s
         self.slip_exit_s += other.slip_exit_s
+        self.slip_episodes += other.slip_episodes
         self.missed_unseen += other.missed_unseen
         self.unseen_s += other.unseen_s
         return self
@@ -189,6 +194,8 @@ def score_scene(updates: UpdateTable, t: np.ndarray, labels: np.ndarray, toleran
     idx = np.clip(np.searchsorted(t, updates.t, side="right") - 1, 0, len(t) - 1)
     up_label = labels[idx]
     flagged = updates.state == _SLIP
+    # each update's flag episode (its count from 1; 0 when not flagged)
+    episode = np.where(flagged, np.cumsum(flagged & ~np.concatenate(([False], flagged[:-1]))), 0)
     unseen = (np.asarray(updates.flags) & _UNSEEN) != 0
     eff = np.searchsorted(updates.t, t, side="right") - 1  # the newest update at each frame
     out.unseen_s = float(dt[holding & (eff >= 0) & unseen[np.maximum(eff, 0)]].sum()) if len(updates) else 0.0
@@ -202,6 +209,7 @@ def score_scene(updates: UpdateTable, t: np.ndarray, labels: np.ndarray, toleran
         if hits.size:
             out.found += 1
             out.delays_s.append(float(updates.t[hits[0]] - onset))
+            out.slip_episodes.append(int(np.unique(episode[hits]).size))
             stop = t[b - 1] + dt[b - 1]
             after = np.flatnonzero((updates.t >= stop) & ~flagged)
             if after.size:

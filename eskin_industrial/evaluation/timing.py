@@ -106,7 +106,7 @@ def state_timing(out: Path, settings: DetectorSettings = DEFAULT_SETTINGS, log: 
         axes[3, 1].annotate("slip: at the first update\nwith slip evidence", (t0, 3), xytext=(t0 + 0.35, 2.3),
                             fontsize=8, arrowprops={"arrowstyle": "->", "lw": 0.8})
         t1 = float(table.t[slip[-1] + 1]) if slip[-1] + 1 < len(table) else t0
-        axes[3, 1].annotate(f"left {settings.hold_s:g} s after entry at the earliest,\n"
+        axes[3, 1].annotate(f"left {settings.hold_s:g} s after the last slip evidence,\n"
                             "to the varying force still on", (t1, table.state[slip[-1] + 1]),
                             xytext=(t1 + 0.1, 0.6), fontsize=8, arrowprops={"arrowstyle": "->", "lw": 0.8})
     axes[0, 0].set_title(f"paper case 1 (seed {CASE1_SEED}): 6 -> 10 N over 1.5 s")
@@ -114,7 +114,8 @@ def state_timing(out: Path, settings: DetectorSettings = DEFAULT_SETTINGS, log: 
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
     fig.suptitle(f"State policy: varying force in at a score of 1, out once below {vf.exit_fraction:g} for "
-                 f"{vf.exit_s:g} s and at least {vf.min_dwell_s:g} s after entry; slip pre-empts at once")
+                 f"{vf.exit_s:g} s and at least {vf.min_dwell_s:g} s after entry;\nslip pre-empts at once, and "
+                 f"is left {settings.hold_s:g} s after its last evidence")
     fig.tight_layout()
     path = out / "state-timing-detail.png"
     fig.savefig(path, dpi=100)

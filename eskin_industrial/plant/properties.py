@@ -16,7 +16,7 @@ Property = tuple[str, tuple[int, Any]]
 
 #: The ``[detector]`` keys of the paper's rule (and of the methods built on its indicators).
 PAPER_KEYS = ("slip_r_coe", "slip_r_dw", "slip_rule", "variable_r_coe", "variable_r_dw", "hysteresis",
-              "slip_confirm_updates", "hold_s")
+              "slip_confirm_updates", "hold_s", "hold_from")
 
 
 def _typed(value: Any) -> tuple[int, Any] | None:

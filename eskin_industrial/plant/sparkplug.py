@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 from .. import __version__
 from ..detect.state import LABELS
 from ..errors import EskinError, ProfileError
+from ..frames import FrameFlag
 from ..plc.image import Command, PlcImage, Status, decode_registers
 from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Publication, Sink, SinkHealth
@@ -147,6 +148,8 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Score A", pb.FLOAT, "", True, "the deciding method's first score (SCORE_A / r_scale); DBIRTH "
               "properties: method, score (its name), description"),
     MetricDef("Score B", pb.FLOAT, "", True, "the deciding method's second score (SCORE_B / r_scale), likewise"),
+    MetricDef("Turn Unseen", pb.BOOLEAN, "", False, "in contact, but a turn about the normal would go unseen: "
+              "read stable (FLAGS bit TURN_UNSEEN)"),
 )
 #: The taxel frame: declared (and sent) only with ``frame_interval_s``; its alias is
 #: the device's base + :data:`FRAME_ALIAS`.
@@ -157,6 +160,7 @@ FRAME_ALIAS = 50
 #: the one with the layout (``layout_properties``).
 METHOD_METRIC, LAYOUT_METRIC = "State", "CoF X"
 _ANALOG = tuple(m.analog for m in DEVICE_METRICS)
+_TURN_UNSEEN = int(FrameFlag.TURN_UNSEEN)
 _FLOATS = tuple(m.datatype == pb.FLOAT for m in DEVICE_METRICS)
 #: Node metrics (aliases 1..); a device's metrics start at 1000 x (its index + 1).
 NODE_METRICS = ("bdSeq", REBIRTH, "Node Info/Version", "Node Info/Uptime", "Store/Pending", "Store/Overflow")
@@ -171,7 +175,8 @@ def metric_values(pub: Publication, r_scale: float, word_order: str) -> tuple[An
             bool(st & Status.SENSOR_STALE), bool(st & Status.BUS_FAULT), bool(st & Status.CONTACT),
             bool(st & Status.ENABLED), v["R_COE"] / r_scale, v["R_DW"] / r_scale, v["F_SUM"] / 1000.0,
             v["XC"] / 100.0, v["YC"] / 100.0, v["FRAME_AGE"], v["SLIP_EVENTS"], v["STATE_CHANGES"],
-            v["LOST_SCANS"], v["BUS_ERRORS"], pub.scans, *_scores(pub.tail, r_scale))
+            v["LOST_SCANS"], v["BUS_ERRORS"], pub.scans, *_scores(pub.tail, r_scale),
+            bool(v["FLAGS"] & _TURN_UNSEEN))
 
 
 def _scores(tail: tuple[int, ...], r_scale: float) -> tuple[float, float]:

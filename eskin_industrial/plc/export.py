@@ -73,9 +73,10 @@ def _iec(r: Register) -> str:
     return "WORD" if r.unit == "bits" else IEC_TYPE[r.kind]
 
 
-def tags(settings: ModbusPlcSection) -> list[Tag]:
-    """Every register, coil and discrete input, in the order of :func:`map_rows`."""
-    rows = map_rows(settings)
+def tags(settings: ModbusPlcSection, method: str | None = None) -> list[Tag]:
+    """Every register, coil and discrete input, in the order of :func:`map_rows`
+    (``method``: the deciding method, which names what METHOD_ID and the scores hold)."""
+    rows = map_rows(settings, method)
     objects: list[Register | object] = [*image.REGISTERS, *COILS, *BITS]
     out: list[Tag] = []
     for row, obj in zip(rows, objects, strict=True):
@@ -99,13 +100,13 @@ CSV_COLUMNS = ("name", "table", "address", "reference", "data_type", "word_order
                "description")
 
 
-def flat_csv(settings: ModbusPlcSection, prefix: str = "") -> str:
+def flat_csv(settings: ModbusPlcSection, prefix: str = "", method: str | None = None) -> str:
     """One row per tag: the Modbus numbering, the IEC type, word order, scale and unit
     (``prefix`` before each name: several nodes in one PLC)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(CSV_COLUMNS)
-    for t in tags(settings):
+    for t in tags(settings, method):
         w.writerow([prefix + t.name, t.table, t.address, t.reference, t.iec_type, t.word_order or "", f"{t.scale:g}", t.unit,
                     t.access, t.description])
     return buf.getvalue()
@@ -125,11 +126,12 @@ class Member:
     access: Literal["R", "RW"] = "R"
 
 
-def members(registers: Sequence[Register], settings: ModbusPlcSection, native: Order) -> list[Member]:
+def members(registers: Sequence[Register], settings: ModbusPlcSection, native: Order,
+            method: str | None = None) -> list[Member]:
     """The registers as declared by a PLC whose 32-bit word order is ``native``;
     gaps in the table become ``RESERVED_<offset>`` words, so that an overlay stays
     aligned with the wire."""
-    by_tag = {t.name: t for t in tags(settings) if t.table == "holding register"}
+    by_tag = {t.name: t for t in tags(settings, method) if t.table == "holding register"}
     out: list[Member] = []
     at = registers[0].offset if registers else 0
     for r in sorted(registers, key=lambda r: r.offset):
@@ -271,7 +273,8 @@ def _comment(text: str) -> str:
     return text.replace("(*", "( *").replace("*)", "* )")
 
 
-def codesys_st(settings: ModbusPlcSection, name: str, input_word: int = 0, output_word: int = 0) -> str:
+def codesys_st(settings: ModbusPlcSection, name: str, input_word: int = 0, output_word: int = 0,
+               method: str | None = None) -> str:
     """A Codesys source: the structured types of the block (what the PLC reads, what
     it writes), a GVL that lays them over the I/O of a Modbus master's channels, and
     ``FB_SlipGuard``; ``name`` (a node's or the profile's) names the types and the GVL.  32-bit values are one UDINT in little word order (the
@@ -280,8 +283,8 @@ def codesys_st(settings: ModbusPlcSection, name: str, input_word: int = 0, outpu
     gvl = f"GVL_Eskin_{node}"
     base, wo = settings.base_address, settings.word_order
     published, written = _published(image.REGISTERS), _written(image.REGISTERS)
-    read = members(published, settings, native="little")
-    write = members(written, settings, native="little")
+    read = members(published, settings, native="little", method=method)
+    write = members(written, settings, native="little", method=method)
     in_type, out_type = f"ST_Eskin_{node}_In", f"ST_Eskin_{node}_Out"
     first_in, n_in = _span(published)
     first_out, n_out = _span(written)
@@ -351,7 +354,8 @@ TIA_COLUMNS = ("Name", "Path", "Data Type", "Logical Address", "Comment", "Hmi V
                "Hmi Writeable", "Typeobject ID", "Version ID")
 
 
-def tia_rows(settings: ModbusPlcSection, name: str, m_byte: int = 0, prefix: str = "") -> list[list[str]]:
+def tia_rows(settings: ModbusPlcSection, name: str, m_byte: int = 0, prefix: str = "",
+             method: str | None = None) -> list[list[str]]:
     """The PLC tags of the block in an S7's memory: the holding registers from
     ``%MB m_byte`` (the MB_CLIENT or MB_SERVER buffer, two bytes per register, high
     byte first), and the STATUS bits as Bool tags over the STATUS word; the tag table
@@ -361,7 +365,7 @@ def tia_rows(settings: ModbusPlcSection, name: str, m_byte: int = 0, prefix: str
         raise ValueError(f"m_byte: expected an even byte address (a word's), got {m_byte}")
     path = f"eskin_{ident(name)}"
     rows: list[list[str]] = []
-    regs = members(image.REGISTERS, settings, native="big")
+    regs = members(image.REGISTERS, settings, native="big", method=method)
     first = regs[0].offset
     for m in regs:
         byte = m_byte + 2 * (m.offset - first)
@@ -378,10 +382,11 @@ def tia_rows(settings: ModbusPlcSection, name: str, m_byte: int = 0, prefix: str
     return rows
 
 
-def tia_xlsx(settings: ModbusPlcSection, name: str, m_byte: int = 0, prefix: str = "") -> bytes:
+def tia_xlsx(settings: ModbusPlcSection, name: str, m_byte: int = 0, prefix: str = "",
+             method: str | None = None) -> bytes:
     """The tag table as the workbook TIA Portal's "Import" of PLC tags reads: one
     sheet "PLC Tags" with the columns of :data:`TIA_COLUMNS`."""
-    return xlsx("PLC Tags", [list(TIA_COLUMNS), *tia_rows(settings, name, m_byte, prefix)])
+    return xlsx("PLC Tags", [list(TIA_COLUMNS), *tia_rows(settings, name, m_byte, prefix, method)])
 
 
 # -- a minimal XLSX writer (Office Open XML, inline strings) ---------------------------

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import collections
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import TextIO
 
 import numpy as np
@@ -19,7 +19,7 @@ import numpy as np
 from ..detect.state import GraspState
 from ..detect.updates import Update
 from ..pipeline import Pipeline
-from ..plc.image import decode_registers
+from ..plc.image import decode_registers, decode_tail
 from ..profile import Profile
 from ..sinks.base import Publication, Sink
 from .screen import render
@@ -55,10 +55,12 @@ class KeptImage(Sink):
         super().__init__()
         self.where = "the live view"
         self.registers: list[int] | None = None
+        self.tail: tuple[int, ...] = ()  #: the newest SCORE_A..SCORE_B
         self.publications = 0
 
     def _publish(self, publication: Publication) -> None:
         self.registers = list(publication.registers)
+        self.tail = publication.tail
         self.publications += 1
 
 
@@ -71,11 +73,14 @@ class Watch:
     def __init__(self, profile: Profile, pipeline: Pipeline, *, method: str,
                  registers: Callable[[], list[int] | None], registers_from: str,
                  counters: Callable[[], Mapping[str, int]], source: str, title: str, started: float,
-                 log_lines: int = 100) -> None:
+                 log_lines: int = 100, tail: Callable[[], Sequence[int]] | None = None) -> None:
+        """``registers``: the first published run (STATUS..METHOD_ID); ``tail``: the
+        second (SCORE_A..SCORE_B), shown with them."""
         self.profile = profile
         self.pipeline = pipeline
         self.scale = indicator_scale(method, profile.detector, pipeline.detector)
         self.registers = registers
+        self.tail = tail
         self.registers_from = registers_from
         self.counters = counters
         self.source = source
@@ -96,6 +101,8 @@ class Watch:
         forces = None if frame is None else np.array(frame.forces, dtype=np.float64).reshape(lay.rows, lay.cols)
         raw = self.registers()
         regs = None if raw is None else decode_registers(raw, self.profile.modbus.plc.word_order)
+        if regs is not None and self.tail is not None:
+            regs.update(decode_tail(self.tail()))
         bits = status_names(regs["STATUS"]) if regs is not None else ()
         counters = dict(self.counters())
         scans = int(counters.get("scans", 0))
