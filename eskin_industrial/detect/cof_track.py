@@ -16,7 +16,9 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     b    = min(D_s / T, onward / max(T/2, 0.75 n)),   T = max(n, min_slow_mm)
     r    = the ramp channel (detect/ramp.py): a least-squares ramp in the raw CoF against
            the mean before it, over a bank of horizons, each axis in units of ramp_z of
-           its own noise (q_x, q_y learnt like q); only while the force is steady
+           its own noise (q_x, q_y learnt like q); only while the force is steady, and
+           taken once a hop (10 ms) at any rate, so that its tests per hour do not grow
+           with the rate
     e    = stick-slip evidence (detect/ripple.py): a rise in the energy of the total
            force's 10 ms change, as a log-likelihood ratio added to the ramp's; capped so
            that the ramp still needs ramp_support_z of its own
