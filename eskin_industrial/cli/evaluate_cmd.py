@@ -16,6 +16,7 @@ from ..evaluation.suite import (
     DEFAULT_SETTINGS,
     EVALUATION_SEEDS,
     HOLD_EVALUATION_SEEDS,
+    HOLD_FRESH_SEEDS,
     HOLD_SCENES,
     HOLD_TUNING_SEEDS,
     SUITE,
@@ -64,7 +65,8 @@ def _seeds(value: str) -> tuple[int, ...]:
                    "of docs/plc.md (seconds).")
 @click.option("--long-holds", is_flag=True,
               help="False alarms over hours of still holding instead: the hold scenes over 100 held-out seeds "
-                   "(2000-2099, 3.8 h; with --seeds tuning, the 300 tuning seeds 100-399, 11.3 h), "
+                   "(2000-2099, 3.8 h; with --seeds tuning, the 300 tuning seeds 100-399, 11.3 h; with --seeds fresh, "
+                   "100 more held out, 2100-2199), "
                    "about 25 s per 100 seeds and method.")
 @click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None,
               help="Take the detector settings from this profile's [detector] (default: the built-in defaults).")
@@ -108,8 +110,9 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
         if scenes:
             raise click.UsageError("--long-holds scores the hold scenes; leave out --scene")
         scenes = HOLD_SCENES
-        seed_set = {"tuning": HOLD_TUNING_SEEDS, "evaluation": HOLD_EVALUATION_SEEDS}.get(seeds) or _seeds(seeds)
-        seeds = {"tuning": "tuning-holds", "evaluation": "evaluation-holds"}.get(seeds, seeds)
+        seed_set = ({"tuning": HOLD_TUNING_SEEDS, "evaluation": HOLD_EVALUATION_SEEDS, "fresh": HOLD_FRESH_SEEDS}
+                    .get(seeds) or _seeds(seeds))
+        seeds = {"tuning": "tuning-holds", "evaluation": "evaluation-holds", "fresh": "fresh-holds"}.get(seeds, seeds)
         methods = methods or ("cof-track", "paper")
     else:
         seed_set = _seeds(seeds)

@@ -16,7 +16,9 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     b    = min(D_s / T, onward / max(T/2, 0.75 n)),   T = max(n, min_slow_mm)
     r    = the ramp channel (detect/ramp.py): a least-squares ramp in the raw CoF against
            the mean before it, over a bank of horizons, each axis in units of ramp_z of
-           its own noise (q_x, q_y learnt like q); only while the force is steady
+           its own noise (q_x, q_y learnt like q); only while the force is steady, and
+           taken once a hop (10 ms) at any rate, so that its tests per hour do not grow
+           with the rate
     e    = stick-slip evidence (detect/ripple.py): a rise in the energy of the total
            force's 10 ms change, as a log-likelihood ratio added to the ramp's; capped so
            that the ramp still needs ramp_support_z of its own
@@ -117,6 +119,7 @@ class CofTrack(ScoredDetector):
         self._vib_count = 0
         self._vib_sum = 0.0
         self._calm_force = 0
+        self._ramp_on = False  # the ramp's verdict at the last hop's end
         self._ramp.reset()
         if self._profile is not None:
             self._profile.reset()
@@ -231,7 +234,13 @@ class CofTrack(ScoredDetector):
         self._calm_force = calm = 0 if varying else self._calm_force + 1
         steady = calm > self._steady_n
         r = 0.0
-        if steady:
+        # the ramp's test is taken once a hop, on the frame the decision reads the hop
+        # at: its statistic moves little from one frame to the next, and tested at every
+        # frame of a 1 kHz node its noise crossed the threshold twice as often per hour
+        # as at 100 Hz (docs/evaluation.md); its verdict stands for the hop's other frames
+        if not steady:
+            self._ramp_on = False
+        elif (self._k + 1) % self.hop == 0:
             # the ramp weighs raw centres, each axis against its own noise (in force
             # units, like q; the floor keeps a constant axis, a strip's y, harmless);
             # silent while the force changes and for a second after, like the
@@ -255,18 +264,21 @@ class CofTrack(ScoredDetector):
                 rp = profile.score()
                 if rp > r:
                     r = rp
+            self._ramp_on = r > 1.0
         slip = a > 1.0 or b > 1.0 or r > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
+        moving = slip or self._ramp_on  # (what the noise must not be learnt from)
         tr = 0.0
         if turn is not None:
-            if slip:  # a slide: the turn's template would smear it
+            if moving:  # a slide: the turn's template would smear it
                 turn.restart()
             if steady:
                 tr = turn.score(self._turn_min)
         self.fast_score, self.ramp_score, self.turn_score = a, r, tr
-        slip = slip or tr > 1.0
-        if turn is not None and turn.learnable and not slip and tr < 0.5 and not filled:
+        if tr > 1.0:
+            slip = moving = True
+        if turn is not None and turn.learnable and not moving and tr < 0.5 and not filled:
             turn.learn()
-        if not slip and a < 0.5 and not filled:  # learn the noise only while calm
+        if not moving and a < 0.5 and not filled:  # learn the noise only while calm
             learnt = self._learnt = self._learnt + 1
             gain = 1.0 / learnt
             if gain < self._a_noise:

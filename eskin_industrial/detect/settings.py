@@ -46,7 +46,7 @@ class CofTrackSettings:
     #: of the long-hold tuning seeds; 0.6, the smallest of 0.5-0.8 with none there, costs
     #: no delay on the suite's tuning seeds: docs/evaluation.md.)
     vib_support: float = field(default=0.6, metadata=non_negative())
-    #: Time between updates.
+    #: Time between updates, and between the ramp channel's tests (at any rate).
     hop_s: float = field(default=0.01, metadata=positive())
     #: Ramp channel (detect/ramp.py): a slide that starts is a ramp in the CoF.  Over
     #: each horizon the least-squares ramp against the mean of the ``ramp_base_s``

@@ -18,6 +18,7 @@ from ..scenes import Rendered, SceneSpec, load_scene, render
 from .corpus import (
     EVALUATION_SEEDS,
     HOLD_EVALUATION_SEEDS,
+    HOLD_FRESH_SEEDS,
     HOLD_SCENES,
     HOLD_TUNING_SEEDS,
     SUITE,
@@ -30,8 +31,8 @@ from .train import hand_model
 #: Detector settings per layout, from the shipped profiles' [detector] sections.
 DEFAULT_SETTINGS = DetectorSettings()
 
-__all__ = ["DEFAULT_SETTINGS", "EVALUATION_SEEDS", "HOLD_EVALUATION_SEEDS", "HOLD_SCENES", "HOLD_TUNING_SEEDS",
-           "SUITE", "TUNING_SEEDS", "Factory", "Result", "by_name", "coordinates", "evaluate", "run_one"]
+__all__ = ["DEFAULT_SETTINGS", "EVALUATION_SEEDS", "HOLD_EVALUATION_SEEDS", "HOLD_FRESH_SEEDS", "HOLD_SCENES",
+           "HOLD_TUNING_SEEDS", "SUITE", "TUNING_SEEDS", "Factory", "Result", "by_name", "coordinates", "evaluate", "run_one"]
 
 
 @dataclass
