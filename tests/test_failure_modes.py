@@ -116,5 +116,6 @@ def test_a_swaying_glass_on_a_hand_with_eight_dead_taxels_stays_bounded():
     starts = np.flatnonzero(slip & ~np.r_[False, slip[:-1]])
     ends = np.flatnonzero(slip & ~np.r_[slip[1:], False])
     false_lengths = [t[b] - t[a] for a, b in zip(starts, ends) if t[a] < 15.5]
-    # (each lasts its evidence and then hold_s, 0.2 s, without any)
-    assert len(false_lengths) == s.false_alarms and max(false_lengths) <= 0.4
+    # (each lasts its evidence, kept down to 0.8 of the thresholds, and then hold_s,
+    # 0.2 s, without any)
+    assert len(false_lengths) == s.false_alarms and max(false_lengths) <= 0.5

@@ -205,3 +205,28 @@ def test_hold_from_entry_keeps_the_minimum_length_rule(tmp_path):
     path.write_text(text.replace("hold_s = 0.2\n", 'hold_s = 0.2\nhold_from = "entri"\n', 1))
     with pytest.raises(ProfileError, match="hold_from"):
         load_profile(path)
+
+
+def test_cof_track_keeps_a_slip_while_its_evidence_stays_above_the_hysteresis_level():
+    """In the slip state cof-track's scores keep the slip above (1 - hysteresis) of
+    their thresholds, as the paper's rule keeps its indicators: a slide slowing to a
+    stop (paper case 3 at 1 mm/s, tuning seed 0) is one slip; entries are unchanged."""
+    from eskin_industrial.detect.cof_track import CofTrack
+    from eskin_industrial.detect.updates import UpdateTable
+    from eskin_industrial.evaluation.conditions import CONDITIONS
+    from eskin_industrial.evaluation.corpus import coordinates
+    from eskin_industrial.evaluation.metrics import score_scene
+    from eskin_industrial.evaluation.suite import DEFAULT_SETTINGS
+    from eskin_industrial.scenes import load_scene, render
+
+    r = render(CONDITIONS["speed"][2](1.0)(load_scene("case3")), 100.0, 0)
+    runs = {}
+    for hysteresis in (0.0, DEFAULT_SETTINGS.hysteresis):
+        det = CofTrack(replace(DEFAULT_SETTINGS, hysteresis=hysteresis), *coordinates(r), r.rate_hz)
+        table = UpdateTable.from_updates(det.feed(r.t, r.forces))
+        runs[hysteresis] = (table, score_scene(table, r.t, r.labels))
+    without, kept = runs[0.0][1], runs[DEFAULT_SETTINGS.hysteresis][1]
+    assert without.slip_episodes == [4] and kept.slip_episodes == [1]
+    assert kept.delays_s == without.delays_s  # the entry is the same
+    slip = [np.asarray(t.state) == S.SLIP for t, _ in runs.values()]
+    assert not (slip[0] & ~slip[1]).any()  # the kept run reads slip wherever the other does

@@ -29,7 +29,8 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
            the distribution's rotational flow about the CoF (a turn about the normal
            keeps the CoF and the total); only while the force is steady
     slip when a > 1, b > 1, r > 1 or t > 1, or the stick-slip channel fires (below)
-    while the force is steady
+    while the force is steady; in the slip state, also while a, b or r stays above
+    1 - hysteresis (0.8): a slow slide's evidence fades in and out as it stops
 
 The cost per frame is one 3-column matrix product, three running sums per ramp horizon,
 a ring of squared changes for the evidence and a few scalar operations, and for the
@@ -47,7 +48,11 @@ from .ramp import RampBank
 from .ripple import ForceRipple, ripple_dof, variance_evidence
 from .scored import ScoredDetector
 from .settings import DetectorSettings
+from .state import GraspState
 from .torsion import TurnFlow, grid_of
+
+
+_SLIP = int(GraspState.SLIP)
 
 
 class CofTrack(ScoredDetector):
@@ -104,6 +109,7 @@ class CofTrack(ScoredDetector):
         self._noise_x = 0.0  # the part of it along x (sigma_x^2 S^2)
         self._fnoise = 0.0  # learnt noise of the total force (N^2)
         self._rnoise = 0.0  # learnt calm level of the ripple's squared change (N^2)
+        self._keep = 1.0 - settings.hysteresis  # the scores' level that keeps a slip
         super().__init__(settings, x_mm, y_mm, rate_hz, hop_s=c.hop_s, confirm=1)
 
     def reset_scores(self) -> None:
@@ -292,4 +298,8 @@ class CofTrack(ScoredDetector):
                 profile.calm()
         if tr > r:
             r = tr
+        if not slip and self.decision.state == _SLIP:
+            # a slip is kept while its evidence stays above (1 - hysteresis) of the
+            # thresholds: a slow slide's evidence fades in and out as it stops
+            slip = a > self._keep or b > self._keep or r > self._keep
         return (a if a > r else r), b, slip, varying
