@@ -332,6 +332,32 @@ def test_the_scores_are_written_after_the_command_registers_at_each_refresh(pape
     assert writer.counters()["plc_score_writes"] >= 2
 
 
+@pytest.mark.parametrize("inline", [True, False])
+def test_an_urgent_images_scores_follow_it_at_once_not_at_the_next_refresh(paper_profile, inline):
+    """A PLC reacting to a state change reads the scores that made it: after an urgent
+    image the scores are written at once (sent by the offering thread or by the
+    writer), not refresh_s later (30 s here: only the urgent path can write them)."""
+    settings = replace(paper_profile.modbus.plc, refresh_s=30.0)
+    with PlcStandIn("ok") as plc:
+        writer = PlcWriter(settings, "127.0.0.1", plc.port)
+        writer._inline = inline  # (False: the writer thread sends it, as over RTU)
+        writer.start()
+        try:
+            writer.offer(image(1), urgent=True, tail=(1234, 56))
+            wait_for(lambda: plc.regs[TAIL_AT:TAIL_AT + TAIL_COUNT] == [1234, 56], timeout_s=3.0,
+                     what="the first urgent image's scores")
+            writer.offer(image(2), urgent=True, tail=(7, 8))
+            wait_for(lambda: plc.regs[TAIL_AT:TAIL_AT + TAIL_COUNT] == [7, 8], timeout_s=3.0,
+                     what="the urgent image's scores")
+            assert plc.regs[:STATUS_COUNT] == image(2)
+            writer.offer(image(3), tail=(9, 10))  # not urgent: its scores wait for the refresh
+            time.sleep(0.5)
+            assert plc.regs[:STATUS_COUNT] == image(2) and plc.regs[TAIL_AT:TAIL_AT + TAIL_COUNT] == [7, 8]
+        finally:
+            writer.stop(flush_s=0.0)
+    assert writer.counters()["plc_score_writes"] == 2
+
+
 def test_a_plc_whose_map_ends_at_enable_takes_the_image_and_refuses_the_scores_without_an_outage(paper_profile):
     """A PLC program written for the 22-register image: the scores' write is refused
     (exception 02), counted, logged once and backed off; the image and the commands

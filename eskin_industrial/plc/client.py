@@ -10,7 +10,9 @@ each refresh the writer reads COMMAND and ENABLE from the PLC, hands their comma
 to the bridge, and writes COMMAND back to 0 (the handshake).  The method's scores
 (SCORE_A..SCORE_B, after COMMAND and ENABLE) are written at each refresh too, in a
 request of their own; a PLC whose map ends before them answers with an exception,
-which is no outage (counted, logged once, retried with the back-off).
+which is no outage (counted, logged once, retried with the back-off).  After an urgent
+image they are written at once as well, so that a PLC reacting to a state change reads
+the scores that made it.
 
 One request at a time, and a PLC that fails is not hammered.  A request has
 ``timeout_s`` to be answered; an answer up to as long again still counts as written,
@@ -231,11 +233,14 @@ class PlcWriter(Sink):
                 self.stats.connects += 1
             registers = item[0] if item is not None else self._last
             if registers is not None:
+                urgent = item is not None and item[1]
                 t_sent = time.monotonic()
                 self.master.write_registers(s.base_address, registers)
-                self._written(registers, item[2] if item is not None and item[1] else None,
+                self._written(registers, item[2] if urgent and item is not None else None,
                               time.monotonic() - t_sent)
                 item = None  # written: a failure of the read below does not bring it back
+                if urgent:
+                    self._urgent_tail()
             if time.monotonic() >= next_refresh:
                 next_refresh = time.monotonic() + s.refresh_s
                 # (after an image: never scores in a PLC that has no image yet)
@@ -260,6 +265,14 @@ class PlcWriter(Sink):
             self._fail(exc, (registers, True, t_event))  # written again once the PLC answers
             return False
         self._written(registers, t_event, time.monotonic() - t_sent)
+        try:
+            self._urgent_tail()
+        except ModbusFault as exc:
+            self._fail(exc, None)
+            return False
+        except Exception as exc:  # noqa: BLE001 - the writer must outlive any one failure
+            self._fail(ModbusFault("connection", f"{type(exc).__name__}: {exc}"), None)
+            return False
         return True
 
     def _written(self, registers: list[int], t_event: float | None, took_s: float) -> None:
@@ -372,6 +385,12 @@ class PlcWriter(Sink):
         if self._commands_delay is not None:
             self._commands_delay = None
             self._event("plc_commands_read", plc=self.where, refused=st.command_reads_refused)
+
+    def _urgent_tail(self) -> None:
+        """The scores right after an urgent image (unless the PLC refuses them and the
+        back-off has not run out): the PLC reads the scores of the state change."""
+        if self._tail and time.monotonic() >= self._tail_after:
+            self._write_tail()
 
     def _write_tail(self) -> None:
         """Write the newest SCORE_A..SCORE_B.  A PLC that takes the image but answers
