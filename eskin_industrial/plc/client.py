@@ -79,6 +79,23 @@ class WriterStats:
 
 
 @dataclass
+class _Optional:
+    """A request the PLC may refuse with an exception reply (a map with no COMMAND and
+    ENABLE, or one that ends at ENABLE): no outage.  Its refusals are counted in
+    ``WriterStats.<refused>``, logged once (``refused_event``), and the request backs
+    off as writes do until it is answered again (``answered_event``)."""
+
+    refused: str
+    refused_event: str
+    answered_event: str
+    after: float = 0.0  #: monotonic: not before (a back-off)
+    delay: float | None = None  #: the next back-off, while the PLC refuses
+
+    def due(self) -> bool:
+        return time.monotonic() >= self.after
+
+
+@dataclass
 class _Outage:
     """From the first failure to the next acknowledged write."""
 
@@ -136,11 +153,9 @@ class PlcWriter(Sink):
         self._outage: _Outage | None = None
         self._late_since: tuple[float, int] | None = None  #: (monotonic, late writes) when answers went late
         self._ever_written = False
-        self._commands_after = 0.0  #: monotonic: no command read before (a back-off)
-        self._commands_delay: float | None = None  #: while the PLC refuses command reads
+        self._commands = _Optional("command_reads_refused", "plc_commands_refused", "plc_commands_read")
         self._tail: tuple[int, ...] = ()  #: the newest image's SCORE_A..SCORE_B
-        self._tail_after = 0.0  #: monotonic: no score write before (a back-off)
-        self._tail_delay: float | None = None  #: while the PLC refuses the score writes
+        self._scores = _Optional("score_writes_refused", "plc_scores_refused", "plc_scores_written")
 
         if serial is not None:
             self.where = f"rtu {serial.port} at {serial.baudrate} baud, unit {settings.unit_id} (client)"
@@ -244,9 +259,9 @@ class PlcWriter(Sink):
             if time.monotonic() >= next_refresh:
                 next_refresh = time.monotonic() + s.refresh_s
                 # (after an image: never scores in a PLC that has no image yet)
-                if self._tail and self._last is not None and time.monotonic() >= self._tail_after:
+                if self._tail and self._last is not None and self._scores.due():
                     self._write_tail()
-                if self.poll_commands and time.monotonic() >= self._commands_after:
+                if self.poll_commands and self._commands.due():
                     self._poll_commands()
         except ModbusFault as exc:
             self._fail(exc, item)
@@ -368,54 +383,44 @@ class PlcWriter(Sink):
         """Read the PLC's commands.  A PLC that accepts the image but answers the read
         with an exception (no COMMAND/ENABLE in its map) is no outage: the refusal is
         counted, logged once, and the reads back off as writes do."""
+        self._optional(self._commands, self._read_commands)
+
+    def _optional(self, req: _Optional, call: Callable[[], None]) -> bool:
+        """``call`` (a request of ``req``'s); False when the PLC refused it."""
         st = self.stats
         try:
-            self._read_commands()
+            call()
         except ModbusFault as exc:
             if exc.kind != "exception":
                 raise
             st.exceptions[exc.code] += 1
-            st.command_reads_refused += 1
-            if self._commands_delay is None:
-                self._commands_delay = self.settings.backoff_s
-                self._event("plc_commands_refused", "warning", plc=self.where, exception=exc.code, error=str(exc))
-            self._commands_after = time.monotonic() + self._commands_delay
-            self._commands_delay = min(2 * self._commands_delay, self.settings.backoff_max_s)
-            return
-        if self._commands_delay is not None:
-            self._commands_delay = None
-            self._event("plc_commands_read", plc=self.where, refused=st.command_reads_refused)
+            setattr(st, req.refused, getattr(st, req.refused) + 1)
+            if req.delay is None:
+                req.delay = self.settings.backoff_s
+                self._event(req.refused_event, "warning", plc=self.where, exception=exc.code, error=str(exc))
+            req.after = time.monotonic() + req.delay
+            req.delay = min(2 * req.delay, self.settings.backoff_max_s)
+            return False
+        if req.delay is not None:
+            req.delay = None
+            self._event(req.answered_event, plc=self.where, refused=getattr(st, req.refused))
+        return True
 
     def _urgent_tail(self) -> None:
         """The scores right after an urgent image (unless the PLC refuses them and the
         back-off has not run out): the PLC reads the scores of the state change."""
-        if self._tail and time.monotonic() >= self._tail_after:
+        if self._tail and self._scores.due():
             self._write_tail()
 
     def _write_tail(self) -> None:
         """Write the newest SCORE_A..SCORE_B.  A PLC that takes the image but answers
         this write with an exception (a map that ends at ENABLE) is no outage: as for
         the command reads, the refusal is counted, logged once, and retried with back-off."""
-        st = self.stats
         with self._cond:
-            tail = self._tail
-        try:
-            self.master.write_registers(self.settings.base_address + TAIL_AT, list(tail))
-        except ModbusFault as exc:
-            if exc.kind != "exception":
-                raise
-            st.exceptions[exc.code] += 1
-            st.score_writes_refused += 1
-            if self._tail_delay is None:
-                self._tail_delay = self.settings.backoff_s
-                self._event("plc_scores_refused", "warning", plc=self.where, exception=exc.code, error=str(exc))
-            self._tail_after = time.monotonic() + self._tail_delay
-            self._tail_delay = min(2 * self._tail_delay, self.settings.backoff_max_s)
-            return
-        st.score_writes += 1
-        if self._tail_delay is not None:
-            self._tail_delay = None
-            self._event("plc_scores_written", plc=self.where, refused=st.score_writes_refused)
+            tail = list(self._tail)
+        at = self.settings.base_address + TAIL_AT
+        if self._optional(self._scores, lambda: self.master.write_registers(at, tail)):
+            self.stats.score_writes += 1
 
     def _read_commands(self) -> None:
         s = self.settings
