@@ -79,15 +79,25 @@ def test_renewing_the_template_adds_no_drift() -> None:
         assert np.std(theta) < 1.25 * sd, (block, blocks)
 
 
+@pytest.mark.parametrize("projected", [False, True])
 @pytest.mark.parametrize("hop", [1, 4])
-def test_streaming_angle_equals_batch(hop: int) -> None:
+def test_streaming_angle_equals_batch(hop: int, projected: bool) -> None:
     """After every whole hop the streaming angle is the batch one (hop means, the
-    template renewed every 7 hops from the last 3 blocks)."""
+    template renewed every 7 hops from the last 3 blocks); also when each frame's
+    projection on the template comes from the caller's matrix product, whose column
+    the channel keeps its template in (cof-track's way)."""
     f = _square(np.concatenate([np.zeros(150), 20.0 * np.arange(1, 101) / 100.0]), seed=3)
     flow = TurnFlow(XS, YS, hop, 7, 3, (5, 10, 20), 20, 5.5, 300)
+    mat = np.column_stack([np.ones(f.shape[1]), np.zeros(f.shape[1])])
+    if projected:
+        flow.project_into(mat[:, 1])
     got = []
     for k, frame in enumerate(f):
-        flow.push(frame, float(frame.sum()))
+        if projected:
+            s, fg = (frame @ mat).tolist()
+            flow.push(frame, s, False, fg)
+        else:
+            flow.push(frame, float(frame.sum()))
         if (k + 1) % hop == 0:
             got.append(flow.theta)
     np.testing.assert_allclose(got, turn_batch(f, XS, YS, hop, 7, 3), rtol=0, atol=1e-9)

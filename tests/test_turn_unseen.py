@@ -111,8 +111,8 @@ def test_a_visibility_about_the_limit_leaves_the_flag_set_not_flapping() -> None
     seen: list[float] = []
     hop = turn._hop
 
-    def watched(fs: np.ndarray, frames: int) -> None:
-        hop(fs, frames)
+    def watched(frames: int) -> None:
+        hop(frames)
         if turn._since == 0 and turn._learnt:  # a renewal that judged
             seen.append(turn.visibility)
 

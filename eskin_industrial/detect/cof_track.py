@@ -32,9 +32,10 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     while the force is steady; in the slip state, also while a, b or r stays above
     1 - hysteresis (0.8): a slow slide's evidence fades in and out as it stops
 
-The cost per frame is one 3-column matrix product, three running sums per ramp horizon,
-a ring of squared changes for the evidence and a few scalar operations, and for the
-torsion channel one vector sum (the rest once per 40 ms, its template once per 0.25 s): the
+The cost per frame is one 4-column matrix product (the total, the centre of force and
+the torsion channel's projection), three running sums per ramp horizon, a ring of
+squared changes for the evidence and a few scalar operations (the torsion channel's
+angle once per 40 ms, its template once per 0.25 s): the
 same at 100 Hz and at 1 kHz.  The scores (score_a, score_b) are max(a, r, t) and b (1 = threshold).
 """
 
@@ -207,7 +208,7 @@ class CofTrack(ScoredDetector):
                 profile.push(f)
         turn = self._turn
         if turn is not None:
-            turn.push(f, s, filled)
+            turn.push(f, s, filled, self.projected)
         noise_d = z * math.sqrt(2.0 * noise / m) / s
         if fast is not None:
             lim = self.min_fast

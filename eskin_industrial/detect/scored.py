@@ -43,6 +43,7 @@ _TURN_UNSEEN = int(FrameFlag.TURN_UNSEEN)
 class ScoredDetector(FrameHygiene):
     name = "scored"
     filled = False  #: the current frame is a held copy (set before ``score`` is called)
+    projected = 0.0  #: the current frame times the projection column (set likewise)
     columns = ("score", "unused")
     #: frames of contact needed before the score is trusted
     history_s = 0.1
@@ -59,7 +60,11 @@ class ScoredDetector(FrameHygiene):
         self.hop = max(1, round((hop_s if hop_s is not None else settings.hop_s) * rate_hz))
         self.history = max(1, round(self.history_s * rate_hz))
         self.confirm = confirm
-        self._mat = np.column_stack([np.ones(self.n), x_mm, y_mm]).astype(np.float64)
+        # each frame's (S, Sx, Sy) and one projection, in one product: column 3 is the
+        # torsion channel's template (its hop's angle is a sum of these), zeros without one
+        self._mat = np.column_stack([np.ones(self.n), x_mm, y_mm, np.zeros(self.n)]).astype(np.float64)
+        if self._turn is not None:
+            self._turn.project_into(self._mat[:, 3])
         self._touching = ContactRule.from_settings(settings).touching
         # (confirmation is per frame, above: the decision reports a hop's slip vote at once)
         self.decision = Decision.from_settings(settings, confirm=1)
@@ -96,7 +101,7 @@ class ScoredDetector(FrameHygiene):
 
     # -- the per-frame loop -----------------------------------------------------
     def _step(self, t: float, f: np.ndarray, flags: int, out: list[Update]) -> None:
-        s, sx, sy = (f @ self._mat).tolist()
+        s, sx, sy, self.projected = (f @ self._mat).tolist()
         contact = self._touching(s, self._contact_run > 0)
         if self._vf is not None:
             vf = self._vf.push(s, contact, bool(flags & _FILLED))

@@ -13,9 +13,12 @@ The second moments would see a long footprint turn but not a square one (they ar
 isotropic); the flow sees the corners of either.
 
 The channel works on the mean distribution of each of its own hops (``p_h``: the
-hop's summed forces over its summed totals, 40 ms by default; one vector sum per
-frame, the rest once a hop: a hop's mean is as good as its frames, and the cost per
-frame stays within the budget at 100 Hz, where cof-track's own hop is one frame).  Each hop adds ``d_h = (p_h - p_{h-1}) . g_hat`` (``g_hat = g / g.g``)
+hop's summed forces over its summed totals, 40 ms by default: a hop's mean is as good
+as its frames).  Per frame it keeps the frame and adds ``f . g_hat``, which the caller's
+one matrix product per frame (total and centre of force) yields in a fourth column
+(:meth:`TurnFlow.project_into`): the hop's angle is their sum over the hop's total, and
+the frames are summed only once a block, for the template; so the cost per frame
+stays within the budget at 100 Hz, where cof-track's own hop is one frame.  Each hop adds ``d_h = (p_h - p_{h-1}) . g_hat`` (``g_hat = g / g.g``)
 to an angle ``theta_h``.  ``g`` comes from the mean distribution of the last
 ``blocks`` blocks of hops and is renewed once a block; ``d_h`` is taken with one ``g``
 for both hops, so between renewals the sum telescopes and ``theta`` carries a hop's
@@ -95,6 +98,11 @@ class _Grid:
         return g / gg, gg, float((x * x * self.inv_dy2) @ along + (y * y * self.inv_dx2) @ across)
 
 
+def _summed(frames: list[np.ndarray], zero: np.ndarray) -> np.ndarray:
+    """Frames summed in the order they came (a running sum's floats)."""
+    return np.array(frames).sum(axis=0) if frames else zero
+
+
 def turn_template(p: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray | None:
     """``g / (g . g)`` for the distribution ``p`` (row-major, summing to 1) about its
     centre; ``None`` if ``g`` vanishes (a flat distribution shows no turn).
@@ -152,25 +160,29 @@ class TurnFlow:
         self.hop, self.block, self.blocks = max(1, hop), max(2, block), max(1, blocks)
         self._ramp = RampBank(horizons, base, z)
         self._a_noise = 1.0 / max(1.0, noise_n / max(2, block))  # (it learns once a block)
+        self._proj = np.zeros(len(xs) * len(ys))  # the template, zeros while none (project_into)
         self.reset()
 
     def reset(self) -> None:
         n = len(self.xs) * len(self.ys)
-        # this hop's own frames (summed at its end: one list append a frame) and the sum
-        # of their totals; the hop before's summed forces, total and frames
+        # this hop's own frames (one list append a frame: summed only when a change is
+        # learnt or a template made) and the sum of their totals; the hop before's
+        # frames, total and frame count
         self._fl: list[np.ndarray] = []
+        self._fg = 0.0  # the sum of its frames' f . g_hat
         self._zero = np.zeros(n)
-        self._last = self._zero
+        self._last: list[np.ndarray] = []
         self._s = self._last_s = 0.0
         self._last_frames = 1
         self._frames = 0
         self._held = 0
         self._hops = 0
-        self._block = np.zeros(n)  # this block's summed forces and totals, less the renewal hop
+        self._block: list[np.ndarray] = []  # this block's frames and summed totals, less the renewal hop's
         self._block_s = 0.0
         self._ring = [(np.zeros(n), 0.0) for _ in range(self.blocks)]  # the last blocks'
         self._ring_i = 0
         self._since = 0  # hops since the template was renewed
+        self._proj[:] = 0.0
         self._g: np.ndarray | None = None
         self._g2 = np.zeros(n)  # g_hat^2: each taxel's weight in the angle's noise
         self._unit = 0.0  # g_hat^2 . var: the angle's noise variance times S^2
@@ -196,37 +208,46 @@ class TurnFlow:
         self._score: float | None = 0.0  # (None: to be computed for the newest hop)
         self._ramp.reset()
 
-    def push(self, f: np.ndarray, s: float, held: bool = False) -> None:
+    def project_into(self, column: np.ndarray) -> None:
+        """Keep the template in ``column`` (zeros while there is none): a column of the
+        caller's per-frame matrix product, which then hands each frame's ``f . g_hat``
+        to :meth:`push` at no cost of its own (a hop's angle is their sum over its
+        total; the hop's summed forces are needed only once a block)."""
+        column[:] = self._proj
+        self._proj = column
+
+    def push(self, f: np.ndarray, s: float, held: bool = False, fg: float | None = None) -> None:
+        """One frame in contact; ``fg``: ``f . g_hat`` with the column of
+        :meth:`project_into` (computed here if not given)."""
         if held:
             self._held += 1
         else:
             self._fl.append(f)  # (the caller's frame, which it keeps unchanged)
             self._s += s
+            self._fg += float(f @ self._proj) if fg is None else fg
         frames = self._frames = self._frames + 1
         if frames < self.hop:
             return
         frames -= self._held
-        # the hop's summed forces, added in the order they came, from zero (as a
-        # running sum would): sum() adds left to right, each step a new array
-        fs = sum(self._fl, self._zero)
         if self._s > 0.0:
-            self._hop(fs, frames)
-        # the newest is kept as the hop before
-        self._last = fs
+            self._hop(frames)
+        # the newest is kept as the hop before (its frames: summed only if needed)
+        self._last = self._fl
         self._last_s, self._s = self._s, 0.0
         self._last_frames = frames
         self._fl = []
+        self._fg = 0.0
         self._frames = self._held = 0
 
-    def _hop(self, fs: np.ndarray, frames: int) -> None:
-        s = self._s
+    def _hop(self, frames: int) -> None:
+        s, fl = self._s, self._fl
         self._hops += 1
         if self._hops % self.block == 1 and self._last_s > 0.0:  # once a block, a change to learn from
-            self._change = fs / frames - self._last / self._last_frames
+            self._change = _summed(fl, self._zero) / frames - _summed(self._last, self._zero) / self._last_frames
             self.learnable = True
         g = self._g
         if g is not None:
-            u = float(fs @ g) / s
+            u = self._fg / s  # (every frame of the hop was taken with this g)
             self.theta += u - self._u
             self._u = u
             mean_s = s / frames
@@ -234,17 +255,15 @@ class TurnFlow:
             self._score = None
         self._since += 1
         if self._since < self.block:
-            self._block += fs
+            self._block += fl
             self._block_s += s
             return
         # renew the template from the last blocks' hops but this one, and take this
         # hop's projection on it (so that the next change is taken with one template)
         self._since = 0
-        old = self._ring[self._ring_i]
-        self._ring[self._ring_i] = (self._block, self._block_s)
+        self._ring[self._ring_i] = (_summed(self._block, self._zero), self._block_s)
         self._ring_i = (self._ring_i + 1) % self.blocks
-        self._block, self._block_s = old[0], 0.0  # (recycled)
-        self._block[:] = 0.0
+        self._block, self._block_s = [], 0.0
         total = sum(b for _, b in self._ring)
         if not total > 0.0:
             return
@@ -267,28 +286,30 @@ class TurnFlow:
             # no turn to see: the template is mostly the noise of its own mean (a
             # contact on one taxel, a light or very noisy grip), and each renewal
             # would turn it at random; silent until one stands out again
-            self._g = None
+            self._set_g(None)
             self._score = 0.0
             self._ramp.reset()
             return
-        self._g = g_new
+        self._set_g(g_new)
         self._g2 = g_new * g_new
         self._unit = float(self._g2 @ self._var)
-        self._u = float(fs @ g_new) / s
+        self._u = float(_summed(fl, self._zero) @ g_new) / s
+
+    def _set_g(self, g: np.ndarray | None) -> None:
+        self._g = g
+        self._proj[:] = 0.0 if g is None else g
 
     def restart(self) -> None:
         """Start the template and the ramp again (the learnt noise stays): the
         distribution has moved, and a template over the last blocks smears it."""
         if self._hops == 0 and self._since == 0:
             return  # (nothing since the last restart: called at every frame of a slide)
-        for a, _ in self._ring:
-            a[:] = 0.0
-        self._ring = [(a, 0.0) for a, _ in self._ring]
-        self._block[:] = 0.0
+        self._ring = [(np.zeros_like(a), 0.0) for a, _ in self._ring]
+        self._block = []
         self._block_s = 0.0
         self._hops = 0
         self._since = 0
-        self._g = None
+        self._set_g(None)
         self._score = 0.0
         self._ramp.reset()
 
