@@ -202,3 +202,37 @@ def test_a_profile_refuses_no_horizon(tmp_path, section, key):
     bad.write_text((PROFILES / "paper-5x5.toml").read_text() + f"\n[detector.{section}]\n{key} = []\n")
     with pytest.raises(EskinError, match=f"{section}.{key}: expected at least one horizon"):
         load_profile(bad)
+
+
+@pytest.mark.parametrize("method", ["cof-track", "paper"])
+def test_a_machines_50_hz_vibration_at_1_khz_is_no_varying_force(paper_profile, method):
+    """The vibration scene (an 8 N hold under 0.3 N of 50 Hz machine vibration) at 1 kHz,
+    a tuning seed: the hold reads `stable` throughout, as at 100 Hz.  The test samples
+    the total force's 10 ms means (``hop_s``).  Taken frame by frame at 1 kHz, the
+    vibration is smooth from one frame to the next, so the second difference learnt
+    none of it as noise and the ramps read it as a varying force: with a one-frame
+    ``hop_s`` the hold's state changes 7 (paper) and 20 times (cof-track) (docs/evaluation.md)."""
+    rec = render("vibration", 1000.0, 0)
+    x, y = paper_profile.coordinates_mm
+
+    def still_changes(settings) -> int:
+        table = get_method(method).batch(settings, x, y, rec.rate_hz, rec.t, rec.forces)
+        return score_scene(table, rec.t, rec.labels).still_changes
+
+    assert still_changes(paper_profile.detector) == 0
+    per_frame = replace(paper_profile.detector, varying_force=replace(paper_profile.detector.varying_force, hop_s=0.001))
+    assert still_changes(per_frame) >= 5
+
+
+def test_at_1_khz_the_test_takes_10_ms_means_and_each_hops_score_stands_for_its_frames():
+    """At 1 kHz a sample of the test is a hop's mean: the score changes only at a hop's
+    last frame, and equals the score of the same means pushed at 100 Hz."""
+    s, contact, filled = grip(12_000, 4, 1000.0)
+    contact[:] = True
+    filled[:] = False
+    cfg = VaryingForceSettings()
+    fine = force_variation_batch(s, contact, filled, cfg, 1000.0)
+    means = s.reshape(-1, 10).mean(axis=1)
+    coarse = force_variation_batch(means, np.ones(len(means), bool), np.zeros(len(means), bool), cfg, 100.0)
+    np.testing.assert_allclose(fine[9::10], coarse, rtol=1e-9, atol=1e-9)
+    assert (fine.reshape(-1, 10)[1:, :-1] == fine[9:-1:10, None]).all()  # held until the next hop's end

@@ -26,14 +26,27 @@ from noise.
 sigma^2 = mean of (S_k - 2 S_{k-1} + S_{k-2})^2 / 6: a ramp or a slow swing has
 almost none, so the noise can be learnt while the force changes, and a varying
 force does not teach the test to ignore itself.  (A machine's vibration is learnt
-as noise: the test then needs a larger change.)  A held copy across a gap is no
+as noise: the test then needs a larger change.)
+
+**The samples are 10 ms means** (``hop_s``): one frame at 100 Hz, ten at 1 kHz, the
+horizons, base and noise counted in them.  Frame by frame at 1 kHz, a machine's
+50 Hz vibration is smooth: its second difference is (2 pi 50 / 1000)^2, a tenth of
+its amplitude, so almost none of it was learnt as noise, while the ramps over 0.1-0.4 s
+still saw its residue: the vibration scene's 8 N hold changed state 20 times before its slide
+(cof-track; 7 times for the paper's method), none at 100 Hz, where 50 Hz is the
+Nyquist frequency and the second difference sees all of it.  On the 10 ms means the
+test sees the band it sees at 100 Hz, whatever the rate.  A hop is held if any of
+its frames was a held copy; a hop's score stands for its frames until the next
+hop's last frame.
+
+A held copy across a gap is no
 sample of the noise; it repeats one, which the ramp's sums then count twice, so the
 noise used is sigma^2 (1 + 2 f), f the share of held copies among the last max L + B
 frames (with a fifth of the frames lost, a still hold otherwise entered the state
 about once a minute).
 
 Contact lost: everything is forgotten; the score is 0 until ``max L + B`` frames of
-contact have come.  :class:`ForceVariation` is the streaming form (bounded state:
+contact (of hops, above 100 Hz) have come.  :class:`ForceVariation` is the streaming form (bounded state:
 the last ``max L + B`` totals, three running sums per horizon);
 :func:`force_variation_batch` the same over a recording, with no streaming state.
 """
@@ -53,6 +66,11 @@ def _centred_j2(length: int) -> float:
     return length * (length * length - 1) / 12.0
 
 
+def _hop_of(c: VaryingForceSettings, rate_hz: float) -> int:
+    """Frames per sample of the test (one at 100 Hz)."""
+    return max(1, round(c.hop_s * rate_hz))
+
+
 def _geometry(c: VaryingForceSettings, rate_hz: float) -> tuple[tuple[int, ...], int]:
     horizons = tuple(max(2, round(h * rate_hz)) for h in c.horizons_s)
     return horizons, max(2, round(c.base_s * rate_hz))
@@ -64,6 +82,8 @@ class ForceVariation:
     entry threshold, 0 out of contact and until the test has its history)."""
 
     def __init__(self, settings: VaryingForceSettings, rate_hz: float) -> None:
+        self.hop = _hop_of(settings, rate_hz)
+        rate_hz /= self.hop  # the test's own rate: one sample (a hop's mean) per hop
         horizons, base = _geometry(settings, rate_hz)
         _, sd, _ = ramp_weights(horizons, base)
         self.horizons, self.base = horizons, base
@@ -90,13 +110,27 @@ class ForceVariation:
         self._learnt = 0
         self._s1: float | None = None  # the last two totals (None: a held copy, or none)
         self._s2: float | None = None
+        # the hop so far: its totals' sum, frames, and whether any was a held copy; the
+        # last hop's score, which stands for its frames until the next hop's
+        self._acc = 0.0
+        self._in = 0
+        self._held_in = False
+        self._last = 0.0
 
     def push(self, s: float, contact: bool, filled: bool = False) -> float:
         if not contact:
-            if self.count:
+            if self.count or self._in:
                 self.reset()
             return 0.0
         # (hot path: once per frame)
+        if self.hop > 1:  # a hop's mean is the test's sample (a hop with a held copy is held)
+            self._acc += s
+            self._held_in |= filled
+            self._in += 1
+            if self._in < self.hop:
+                return self._last
+            s, filled = self._acc / self.hop, self._held_in
+            self._acc, self._in, self._held_in = 0.0, 0, False
         s1, s2 = self._s1, self._s2
         if not filled and s1 is not None and s2 is not None:
             d = s - 2.0 * s1 + s2
@@ -124,6 +158,7 @@ class ForceVariation:
             self._resync()
         noise = self.noise
         if count < self.n or noise <= 0.0:
+            self._last = 0.0
             return 0.0
         if self._held_count:
             noise *= 1.0 + 2.0 * self._held_count / self.n
@@ -138,6 +173,7 @@ class ForceVariation:
                     r = rate
             if r > best:
                 best = r
+        self._last = best
         return best
 
     def _resync(self) -> None:
@@ -158,39 +194,61 @@ def force_variation_batch(s: np.ndarray, contact: np.ndarray, filled: np.ndarray
     s = np.asarray(s, dtype=np.float64)
     contact = np.asarray(contact, dtype=bool)
     filled = np.asarray(filled, dtype=bool)
-    horizons, base = _geometry(settings, rate_hz)
-    g, sd, _ = ramp_weights(horizons, base)
-    n = g.shape[1]
-    # the least-squares slope of the newest L, per horizon (rows like g's, oldest first)
-    slope = np.zeros_like(g)
-    for h, length in enumerate(horizons):
-        slope[h, n - length:] = (np.arange(1.0, length + 1.0) - (length + 1) / 2.0) / _centred_j2(length)
-    a_noise = 1.0 / max(1.0, settings.noise_s * rate_hz)
+    hop = _hop_of(settings, rate_hz)
     out = np.zeros(len(s))
     m = np.concatenate(([False], contact, [False]))
     edges = np.flatnonzero(m[1:] != m[:-1])
     for a, b in zip(edges[::2], edges[1::2]):  # each run of contact starts afresh
         run, held = s[a:b], filled[a:b]
-        # the noise: a running mean of the squared second difference over 6, from frames
-        # whose two predecessors (and themselves) are no held copies
-        usable = np.zeros(len(run), bool)
-        usable[2:] = ~held[2:] & ~held[1:-1] & ~held[:-2]
-        d2 = (run[2:] - 2.0 * run[1:-1] + run[:-2]) ** 2 / 6.0
-        learnt = running_mean(d2[usable[2:]], a_noise)
-        last = np.cumsum(usable) - 1  # how many usable frames so far, less one
-        noise = np.where(last >= 0, learnt[np.maximum(last, 0)] if learnt.size else 0.0, 0.0)
-        if len(run) < n:
+        if hop == 1:
+            out[a:b] = _sample_scores(run, held, settings, rate_hz)
             continue
-        num = np.abs(_against_rows(run, g))
-        held_n = np.convolve(held.astype(float), np.ones(n), mode="valid")  # held copies among the last n
-        sigma = np.sqrt(noise[n - 1:] * (1.0 + 2.0 * held_n / n))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            score = num / (sd * settings.z) / sigma[:, None]
-            if settings.min_rate_per_s > 0:
-                rate = np.abs(_against_rows(run, slope))
-                score = np.minimum(score, rate * rate_hz / run[n - 1:, None] / settings.min_rate_per_s)
-        best = np.where(noise[n - 1:] > 0, score.max(axis=1), 0.0)
-        out[a + n - 1:b] = best
+        # each whole hop's mean, its frames added in the order they came (as the
+        # stream adds them); a hop with a held copy is held
+        k = len(run) // hop
+        if not k:
+            continue
+        means = run[0:k * hop:hop].copy()
+        for j in range(1, hop):
+            means += run[j:k * hop:hop]
+        means /= hop
+        scores = _sample_scores(means, held[:k * hop].reshape(k, hop).any(axis=1), settings, rate_hz / hop)
+        # a hop's score stands from its last frame until the next hop's
+        which = (np.arange(len(run)) + 1) // hop - 1
+        out[a:b] = np.where(which >= 0, scores[np.maximum(which, 0)], 0.0)
+    return out
+
+
+def _sample_scores(run: np.ndarray, held: np.ndarray, settings: VaryingForceSettings, rate_hz: float) -> np.ndarray:
+    """The score of each sample of one run of contact (totals, or hop means at the
+    test's own rate)."""
+    horizons, base = _geometry(settings, rate_hz)
+    g, sd, _ = ramp_weights(horizons, base)
+    n = g.shape[1]
+    out = np.zeros(len(run))
+    # the noise: a running mean of the squared second difference over 6, from samples
+    # whose two predecessors (and themselves) are no held copies
+    usable = np.zeros(len(run), bool)
+    usable[2:] = ~held[2:] & ~held[1:-1] & ~held[:-2]
+    d2 = (run[2:] - 2.0 * run[1:-1] + run[:-2]) ** 2 / 6.0
+    learnt = running_mean(d2[usable[2:]], 1.0 / max(1.0, settings.noise_s * rate_hz))
+    last = np.cumsum(usable) - 1  # how many usable samples so far, less one
+    noise = np.where(last >= 0, learnt[np.maximum(last, 0)] if learnt.size else 0.0, 0.0)
+    if len(run) < n:
+        return out
+    num = np.abs(_against_rows(run, g))
+    held_n = np.convolve(held.astype(float), np.ones(n), mode="valid")  # held copies among the last n
+    sigma = np.sqrt(noise[n - 1:] * (1.0 + 2.0 * held_n / n))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        score = num / (sd * settings.z) / sigma[:, None]
+        if settings.min_rate_per_s > 0:
+            # the least-squares slope of the newest L, per horizon (rows like g's, oldest first)
+            slope = np.zeros_like(g)
+            for h, length in enumerate(horizons):
+                slope[h, n - length:] = (np.arange(1.0, length + 1.0) - (length + 1) / 2.0) / _centred_j2(length)
+            rate = np.abs(_against_rows(run, slope))
+            score = np.minimum(score, rate * rate_hz / run[n - 1:, None] / settings.min_rate_per_s)
+    out[n - 1:] = np.where(noise[n - 1:] > 0, score.max(axis=1), 0.0)
     return out
 
 
