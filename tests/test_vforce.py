@@ -124,15 +124,17 @@ def test_the_paper_reading_of_varying_force_is_still_available(paper_profile):
     assert papers.vf_coverage < 0.5 < ours.vf_coverage
 
 
-def test_a_profile_refuses_a_bad_varying_force_setting(tmp_path):
+@pytest.mark.parametrize("line, named", [("exit_fraction = 1.5", "exit_fraction"),
+                                         ("hop_s = 0.06", r"hop_s: expected at most half the shortest horizon \(0.05 s\)")])
+def test_a_profile_refuses_a_bad_varying_force_setting(tmp_path, line, named):
     from eskin_industrial import load_profile
     from eskin_industrial.errors import EskinError
     from tests.helpers.paths import PROFILES
 
-    text = (PROFILES / "paper-5x5.toml").read_text() + "\n[detector.varying_force]\nexit_fraction = 1.5\n"
+    text = (PROFILES / "paper-5x5.toml").read_text() + f"\n[detector.varying_force]\n{line}\n"
     bad = tmp_path / "bad.toml"
     bad.write_text(text)
-    with pytest.raises(EskinError, match="exit_fraction"):
+    with pytest.raises(EskinError, match=named):
         load_profile(bad)
 
 

@@ -153,6 +153,9 @@ class VaryingForceSettings:
     def __post_init__(self) -> None:
         if not self.horizons_s:
             raise ValueError("horizons_s: expected at least one horizon, such as [0.1, 0.2, 0.4]")
+        if self.hop_s > 0.5 * min(self.horizons_s):  # (the shortest ramp needs two samples)
+            raise ValueError(f"hop_s: expected at most half the shortest horizon ({0.5 * min(self.horizons_s):g} s), "
+                             f"got {self.hop_s:g}")
 
 
 @dataclass(frozen=True)

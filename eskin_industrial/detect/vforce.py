@@ -212,7 +212,8 @@ def force_variation_batch(s: np.ndarray, contact: np.ndarray, filled: np.ndarray
         for j in range(1, hop):
             means += run[j:k * hop:hop]
         means /= hop
-        scores = _sample_scores(means, held[:k * hop].reshape(k, hop).any(axis=1), settings, rate_hz / hop)
+        held_hops = np.any(held[:k * hop].reshape(k, hop), axis=1, keepdims=False)
+        scores = _sample_scores(means, np.asarray(held_hops, bool), settings, rate_hz / hop)
         # a hop's score stands from its last frame until the next hop's
         which = (np.arange(len(run)) + 1) // hop - 1
         out[a:b] = np.where(which >= 0, scores[np.maximum(which, 0)], 0.0)
