@@ -33,3 +33,20 @@ def test_a_silent_bridge_gets_no_reaction():
     scan(g, BASE | Status.STABLE, 1, 0.0)
     msgs, ack = scan(g, BASE | Status.SLIP | Status.SLIP_LATCHED, 1, 1.0)  # heartbeat frozen
     assert g.raises == 0 and not ack and any("NO VERDICT" in m for m in msgs)
+
+
+def test_the_turn_unseen_flag_is_mirrored_as_the_function_block_does():
+    """FLAGS bit TURN_UNSEEN, read like FB_SlipGuard's bTurnUnseen: said once when it
+    rises and once when it clears; not while the data cannot be trusted."""
+    from eskin_industrial.frames import FrameFlag
+
+    g = Gripper()
+    unseen = int(FrameFlag.TURN_UNSEEN)
+    assert g.cycle({"STATUS": int(BASE | Status.STABLE), "HEARTBEAT": 1, "FLAGS": 0}, 0.0)[0] == ["data trusted"]
+    msgs, _ = g.cycle({"STATUS": int(BASE | Status.STABLE), "HEARTBEAT": 2, "FLAGS": unseen}, 0.01)
+    assert g.turn_unseen and len(msgs) == 1 and msgs[0].startswith("TURN UNSEEN")
+    assert g.cycle({"STATUS": int(BASE | Status.STABLE), "HEARTBEAT": 3, "FLAGS": unseen}, 0.02)[0] == []
+    msgs, _ = g.cycle({"STATUS": int(BASE | Status.STABLE), "HEARTBEAT": 4, "FLAGS": 0}, 0.03)
+    assert not g.turn_unseen and msgs == ["turns seen again"]
+    g.cycle({"STATUS": int(BASE | Status.STABLE), "HEARTBEAT": 4, "FLAGS": unseen}, 1.0)  # heartbeat frozen
+    assert not g.turn_unseen

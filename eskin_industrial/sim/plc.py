@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from ..bus.modbus.codec import ILLEGAL_ADDRESS
 from ..bus.modbus.io import RegisterServer, SerialSettings
 from ..detect.state import GraspState
+from ..frames import FrameFlag
 from ..plc.image import (
     CMD_ACK,
     IMAGE_COUNT,
@@ -73,6 +74,9 @@ class Gripper:
     heartbeat_timeout_s: float = 0.5
     raises: int = 0
     trusted: bool = False
+    #: FLAGS TURN_UNSEEN, as ``FB_SlipGuard``'s ``bTurnUnseen``: a turn of the part would
+    #: read stable, so "no slip" says nothing about twisting it
+    turn_unseen: bool = False
     _last_hb: int = -1
     _hb_time: float = 0.0
     _latched_before: bool = False
@@ -106,6 +110,11 @@ class Gripper:
         if not latched:
             self._acked = False
         self._latched_before = latched
+        unseen = trusted and bool(v.get("FLAGS", 0) & FrameFlag.TURN_UNSEEN)
+        if unseen != self.turn_unseen:
+            self.turn_unseen = unseen
+            msgs.append("TURN UNSEEN: a turn would read stable, no twisting motion on 'no slip'" if unseen
+                        else "turns seen again")
         return msgs, ack
 
 
