@@ -28,9 +28,10 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     t    = the torsion channel (detect/torsion.py): the same ramp test on the angle of
            the distribution's rotational flow about the CoF (a turn about the normal
            keeps the CoF and the total); only while the force is steady
-    slip when a > 1, b > 1, r > 1 or t > 1, or the stick-slip channel fires (below)
-    while the force is steady; in the slip state, also while a, b or r stays above
-    1 - hysteresis (0.8): a slow slide's evidence fades in and out as it stops
+    slip when a > 1, b > 1, r > 1 or t > 1 (r and t only while the force is steady);
+    in the slip state, also while a, b or r stays above 1 - hysteresis (0.8): a slow
+    slide's evidence fades in and out as it stops.  (The CoF's step energy was a vote
+    too, until it was found to add only false alarms: docs/evaluation.md.)
 
 The cost per frame is one 4-column matrix product (the total, the centre of force and
 the torsion channel's projection), three running sums per ramp horizon, a ring of
@@ -78,7 +79,6 @@ class CofTrack(ScoredDetector):
         self.vib_n = max(2, round(c.vib_s * rate_hz))
         self._settle = max(1, round(self.settle_s * rate_hz))
         self._steady_n = max(1, round(1.0 * rate_hz))
-        self.vib_ratio, self.vib_support = c.vib_ratio, c.vib_support
         self.ramp_min = c.ramp_min_mm
         horizons = tuple(max(2, round(h * rate_hz)) for h in c.ramp_horizons_s)
         base = max(2, round(c.ramp_base_s * rate_hz))
@@ -227,15 +227,13 @@ class CofTrack(ScoredDetector):
             # the onward half gets a noise margin of its own (4.5 sigma): half the
             # threshold alone would be only 3 sigma, met by noise every few seconds
             b = min(total / thr, onward / max(0.5 * thr, 0.75 * noise_d))
-        # stick-slip excites the CoF's sample-to-sample steps (the band the paper's
-        # wavelet detail sees); with some displacement to back it, that is a slip too
-        vib_n, vib_ring = self.vib_n, self._vib
-        vib_count = self._vib_count
-        vslot = vib_count % vib_n
-        vib_sum = self._vib_sum = self._vib_sum + (step2 - vib_ring[vslot])
+        # the CoF's step energy over vib_s (the band the paper's wavelet detail sees):
+        # a feature of the learned method (detect/learned.py), no vote here
+        vib_ring = self._vib
+        vslot = self._vib_count % self.vib_n
+        self._vib_sum += step2 - vib_ring[vslot]
         vib_ring[vslot] = step2
-        self._vib_count = vib_count = vib_count + 1
-        vib = vib_sum / (vib_n * noise) if vib_count > vib_n else 0.0
+        self._vib_count += 1
         # (not while the force changes, nor for a second after: a squeeze or a swaying
         # load moves a soft contact's CoF in steps too)
         self._calm_force = calm = 0 if varying else self._calm_force + 1
@@ -272,7 +270,7 @@ class CofTrack(ScoredDetector):
                 if rp > r:
                     r = rp
             self._ramp_on = r > 1.0
-        slip = a > 1.0 or b > 1.0 or r > 1.0 or (vib > self.vib_ratio and a > self.vib_support and steady)
+        slip = a > 1.0 or b > 1.0 or r > 1.0
         moving = slip or self._ramp_on  # (what the noise must not be learnt from)
         tr = 0.0
         if turn is not None:
