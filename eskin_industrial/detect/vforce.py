@@ -54,6 +54,7 @@ the last ``max L + B`` totals, three running sums per horizon);
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -195,13 +196,14 @@ def force_variation_batch(s: np.ndarray, contact: np.ndarray, filled: np.ndarray
     contact = np.asarray(contact, dtype=bool)
     filled = np.asarray(filled, dtype=bool)
     hop = _hop_of(settings, rate_hz)
+    weights = _Weights.of(settings, rate_hz / hop)  # (at the test's own rate)
     out = np.zeros(len(s))
     m = np.concatenate(([False], contact, [False]))
     edges = np.flatnonzero(m[1:] != m[:-1])
     for a, b in zip(edges[::2], edges[1::2]):  # each run of contact starts afresh
         run, held = s[a:b], filled[a:b]
         if hop == 1:
-            out[a:b] = _sample_scores(run, held, settings, rate_hz)
+            out[a:b] = _sample_scores(run, held, settings, weights)
             continue
         # each whole hop's mean, its frames added in the order they came (as the
         # stream adds them); a hop with a held copy is held
@@ -212,19 +214,38 @@ def force_variation_batch(s: np.ndarray, contact: np.ndarray, filled: np.ndarray
         for j in range(1, hop):
             means += run[j:k * hop:hop]
         means /= hop
-        held_hops = np.any(held[:k * hop].reshape(k, hop), axis=1, keepdims=False)
-        scores = _sample_scores(means, np.asarray(held_hops, bool), settings, rate_hz / hop)
+        held_hops: np.ndarray = held[:k * hop].reshape(k, hop).max(axis=1)
+        scores = _sample_scores(means, held_hops, settings, weights)
         # a hop's score stands from its last frame until the next hop's
         which = (np.arange(len(run)) + 1) // hop - 1
         out[a:b] = np.where(which >= 0, scores[np.maximum(which, 0)], 0.0)
     return out
 
 
-def _sample_scores(run: np.ndarray, held: np.ndarray, settings: VaryingForceSettings, rate_hz: float) -> np.ndarray:
+class _Weights(NamedTuple):
+    """What the batch test needs of its geometry, worked out once per recording."""
+
+    rate_hz: float  #: the test's own rate (a sample per hop)
+    g: np.ndarray  #: the ramps' weights, per horizon (oldest first)
+    sd: np.ndarray  #: their noise per unit sample noise
+    slope: np.ndarray  #: the least-squares slope of the newest L, per horizon (rows like g's)
+    a_noise: float  #: the noise learner's least gain
+
+    @classmethod
+    def of(cls, settings: VaryingForceSettings, rate_hz: float) -> "_Weights":
+        horizons, base = _geometry(settings, rate_hz)
+        g, sd, _ = ramp_weights(horizons, base)
+        n = g.shape[1]
+        slope = np.zeros_like(g)
+        for h, length in enumerate(horizons):
+            slope[h, n - length:] = (np.arange(1.0, length + 1.0) - (length + 1) / 2.0) / _centred_j2(length)
+        return cls(rate_hz, g, sd, slope, 1.0 / max(1.0, settings.noise_s * rate_hz))
+
+
+def _sample_scores(run: np.ndarray, held: np.ndarray, settings: VaryingForceSettings, w: _Weights) -> np.ndarray:
     """The score of each sample of one run of contact (totals, or hop means at the
     test's own rate)."""
-    horizons, base = _geometry(settings, rate_hz)
-    g, sd, _ = ramp_weights(horizons, base)
+    g, sd = w.g, w.sd
     n = g.shape[1]
     out = np.zeros(len(run))
     # the noise: a running mean of the squared second difference over 6, from samples
@@ -232,7 +253,7 @@ def _sample_scores(run: np.ndarray, held: np.ndarray, settings: VaryingForceSett
     usable = np.zeros(len(run), bool)
     usable[2:] = ~held[2:] & ~held[1:-1] & ~held[:-2]
     d2 = (run[2:] - 2.0 * run[1:-1] + run[:-2]) ** 2 / 6.0
-    learnt = running_mean(d2[usable[2:]], 1.0 / max(1.0, settings.noise_s * rate_hz))
+    learnt = running_mean(d2[usable[2:]], w.a_noise)
     last = np.cumsum(usable) - 1  # how many usable samples so far, less one
     noise = np.where(last >= 0, learnt[np.maximum(last, 0)] if learnt.size else 0.0, 0.0)
     if len(run) < n:
@@ -243,12 +264,8 @@ def _sample_scores(run: np.ndarray, held: np.ndarray, settings: VaryingForceSett
     with np.errstate(divide="ignore", invalid="ignore"):
         score = num / (sd * settings.z) / sigma[:, None]
         if settings.min_rate_per_s > 0:
-            # the least-squares slope of the newest L, per horizon (rows like g's, oldest first)
-            slope = np.zeros_like(g)
-            for h, length in enumerate(horizons):
-                slope[h, n - length:] = (np.arange(1.0, length + 1.0) - (length + 1) / 2.0) / _centred_j2(length)
-            rate = np.abs(_against_rows(run, slope))
-            score = np.minimum(score, rate * rate_hz / run[n - 1:, None] / settings.min_rate_per_s)
+            rate = np.abs(_against_rows(run, w.slope))
+            score = np.minimum(score, rate * w.rate_hz / run[n - 1:, None] / settings.min_rate_per_s)
     out[n - 1:] = np.where(noise[n - 1:] > 0, score.max(axis=1), 0.0)
     return out
 
