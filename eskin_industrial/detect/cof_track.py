@@ -76,7 +76,6 @@ class CofTrack(ScoredDetector):
         self.force_rate = c.force_rate_per_s
         self.fast_s = c.fast_s
         self._a_noise = 1.0 / max(1.0, c.noise_s * rate_hz)
-        self.vib_n = max(2, round(c.vib_s * rate_hz))
         self._settle = max(1, round(self.settle_s * rate_hz))
         self._steady_n = max(1, round(1.0 * rate_hz))
         self.ramp_min = c.ramp_min_mm
@@ -122,9 +121,6 @@ class CofTrack(ScoredDetector):
         self._hn = 0
         self._prev: tuple[float, float, float] | None = None
         self._seen = 0
-        self._vib = [0.0] * self.vib_n  # the last vib_n CoF step energies
-        self._vib_count = 0
-        self._vib_sum = 0.0
         self._calm_force = 0
         self._ramp_on = False  # the ramp's verdict at the last hop's end
         self._ramp.reset()
@@ -134,6 +130,11 @@ class CofTrack(ScoredDetector):
             self._turn.reset()
         if self._ripple is not None:
             self._ripple.reset()
+
+    def _stepped(self, step2: float) -> None:
+        """Each scored frame's CoF step energy (S^2 |c_k - c_{k-1}|^2 / 2; a held copy's:
+        the learnt noise), for a subclass: the learned method's feature (cof-track
+        itself no longer votes on it: docs/evaluation.md)."""
 
     def score(self, t, f, s, xc, yc):
         # (hot path: one call per frame at any rate, ten per paper hop at 100 Hz; so
@@ -227,13 +228,7 @@ class CofTrack(ScoredDetector):
             # the onward half gets a noise margin of its own (4.5 sigma): half the
             # threshold alone would be only 3 sigma, met by noise every few seconds
             b = min(total / thr, onward / max(0.5 * thr, 0.75 * noise_d))
-        # the CoF's step energy over vib_s (the band the paper's wavelet detail sees):
-        # a feature of the learned method (detect/learned.py), no vote here
-        vib_ring = self._vib
-        vslot = self._vib_count % self.vib_n
-        self._vib_sum += step2 - vib_ring[vslot]
-        vib_ring[vslot] = step2
-        self._vib_count += 1
+        self._stepped(step2)
         # (not while the force changes, nor for a second after: a squeeze or a swaying
         # load moves a soft contact's CoF in steps too)
         self._calm_force = calm = 0 if varying else self._calm_force + 1

@@ -117,6 +117,7 @@ class Learned(CofTrack):
         self._l20 = max(1, round(0.02 * rate_hz))
         self._l50 = max(1, round(0.05 * rate_hz))
         self._x = np.zeros(len(FEATURES))
+        self.vib_n = max(2, round(settings.cof_track.vib_s * rate_hz))
         super().__init__(settings, x_mm, y_mm, rate_hz)
 
     def reset_scores(self) -> None:
@@ -126,6 +127,17 @@ class Learned(CofTrack):
         self._ring20 = _Lagged(self._l20, None)
         self._ring50 = _Lagged(self._l50, None)
         self._run = 0  # consecutive hops over slip_p
+        self._vib = [0.0] * self.vib_n  # the last vib_n CoF step energies (a feature)
+        self._vib_count = 0
+        self._vib_sum = 0.0
+
+    def _stepped(self, step2: float) -> None:
+        # the CoF's step energy over vib_s: the band the paper's wavelet detail sees
+        ring = self._vib
+        slot = self._vib_count % self.vib_n
+        self._vib_sum += step2 - ring[slot]
+        ring[slot] = step2
+        self._vib_count += 1
 
     def score(self, t, f, s, xc, yc):
         _, b, _slip, _varying = super().score(t, f, s, xc, yc)
