@@ -135,8 +135,13 @@ class VaryingForceSettings:
     #: pass ``min_rate_per_s`` plus ``rate_z`` of them.  A film's creep after a grab
     #: (1-2 % of the grip per second) sits under the floor, but a short horizon's slope
     #: scatters by 2 % a second and more, and carried it over (docs/evaluation.md,
-    #: *Film creep*).  ``min_rate_per_s`` and ``rate_z`` both 0: no rate test.
+    #: *Film creep after a grab*).  ``min_rate_per_s`` and ``rate_z`` both 0: no rate test.
     rate_z: float = field(default=2.5, metadata=non_negative())
+    #: ... or by more than this share of the grip per second whatever that noise: so
+    #: fast a change is no creep, and under a machine's vibration (learnt as noise)
+    #: the margin alone asked a swinging load for a slope it has only between its
+    #: turning points, and let it out at each.  0: no ceiling.
+    max_rate_per_s: float = field(default=0.075, metadata=non_negative())
     #: Time constant of the learnt noise of the total force.
     noise_s: float = field(default=3.0, metadata=positive())
     #: The test runs on the total force's means over this long (one frame at 100 Hz,
@@ -157,6 +162,9 @@ class VaryingForceSettings:
     def __post_init__(self) -> None:
         if not self.horizons_s:
             raise ValueError("horizons_s: expected at least one horizon, such as [0.1, 0.2, 0.4]")
+        if 0 < self.max_rate_per_s < self.min_rate_per_s:
+            raise ValueError(f"max_rate_per_s: expected 0 (no ceiling) or at least min_rate_per_s "
+                             f"({self.min_rate_per_s:g}), got {self.max_rate_per_s:g}")
         if self.hop_s > 0.5 * min(self.horizons_s):  # (the shortest ramp needs two samples)
             raise ValueError(f"hop_s: expected at most half the shortest horizon ({0.5 * min(self.horizons_s):g} s), "
                              f"got {self.hop_s:g}")

@@ -12,17 +12,19 @@ S: for a change that began ``L`` samples ago, the least-squares ramp of the newe
     T_L    = |num_L| / (sigma sd_L),     sd_L = sqrt(sum j^2 + (sum j)^2 / B)
     rate_L = |sum_{j=1..L} (j - (L+1)/2) S_{k-L+j}| / C_L x f_s / S_k,   C_L = L (L^2 - 1) / 12
     sd_L   = sigma / sqrt(C_L) x f_s / S_k            (the slope's own noise)
-    score  = max over L of min(T_L / z, rate_L / (min_rate + rate_z sd_L))
+    score  = max over L of min(T_L / z, rate_L / min(min_rate + rate_z sd_L, max_rate))
 
 so the score is 1 at the entry threshold: the change is z standard deviations of
 its own noise, and the force's least-squares slope over the horizon is faster than
 ``min_rate_per_s`` of the grip per second (creep is slower) by ``rate_z`` standard
-deviations of the slope's own noise.  The margin matters where the change is
-significant but slow: a film's creep after a grab rises 1-2 % of the grip a second,
-under the 3 % floor, while the slope of the newest 0.1 s scatters by 2 % a second
-(10 ms means at 1 kHz) to 7 % (frames at 100 Hz) and carried the creep over it;
-a genuine ramp that passes z has its slope some 2.5 standard deviations out
-already, so the margin costs it little (docs/evaluation.md, *Film creep*).  The slope is taken
+deviations of the slope's own noise, or faster than ``max_rate_per_s`` whatever
+that noise.  The margin matters where the change is significant but slow: a film's
+creep after a grab rises 1-2 % of the grip a second, under the 3 % floor, while the
+slope of the newest 0.1 s scatters by 2 % a second (10 ms means at 1 kHz) to 7 %
+(frames at 100 Hz) and carried the creep over it.  The ceiling matters where the
+slope's noise is large (a machine's vibration is learnt as noise): the margin alone
+then asked a swinging load for a slope it has only between its turning points, and
+let it out at each (docs/evaluation.md, *Film creep after a grab*).  The slope is taken
 within the horizon, not against the base: a creep that has gone on for a while
 raises the newest samples above the base's mean as a change that began L samples
 ago would, but not their slope.  The horizons are times (0.1, 0.2, 0.4 s): the shortest answers a sharp
@@ -79,14 +81,16 @@ def _rate_test(c: VaryingForceSettings) -> bool:
     return c.min_rate_per_s > 0 or c.rate_z > 0
 
 
-def _rate_scales(c: VaryingForceSettings, horizons: tuple[int, ...], rate_hz: float) -> tuple[list[float], list[float]]:
+def _rate_scales(c: VaryingForceSettings, horizons: tuple[int, ...],
+                 rate_hz: float) -> tuple[list[float], list[float], list[float]]:
     """Per horizon, the rate test's threshold on the centred slope sum
-    ``sum (j - (L+1)/2) S_j`` as ``a S + b sigma``: the slope (in samples) is that sum
-    over ``C_L = L (L^2 - 1) / 12``, its noise sigma / sqrt(C_L), so
-    ``slope x f_s / S > min_rate + rate_z sd`` reads ``|sum| > (min_rate C_L / f_s) S +
-    (rate_z sqrt(C_L)) sigma``."""
+    ``sum (j - (L+1)/2) S_j`` as ``min(a S + b sigma, m S)``: the slope (in samples) is
+    that sum over ``C_L = L (L^2 - 1) / 12``, its noise sigma / sqrt(C_L), so
+    ``slope x f_s / S > min(min_rate + rate_z sd, max_rate)`` reads ``|sum| >
+    min((min_rate C_L / f_s) S + (rate_z sqrt(C_L)) sigma, (max_rate C_L / f_s) S)``."""
     cj2 = [_centred_j2(length) for length in horizons]
-    return [c.min_rate_per_s * v / rate_hz for v in cj2], [c.rate_z * math.sqrt(v) for v in cj2]
+    return ([c.min_rate_per_s * v / rate_hz for v in cj2], [c.rate_z * math.sqrt(v) for v in cj2],
+            [c.max_rate_per_s * v / rate_hz for v in cj2])
 
 
 def _hop_of(c: VaryingForceSettings, rate_hz: float) -> int:
@@ -115,9 +119,10 @@ class ForceVariation:
         # |num| x this / sigma = T / z;  |slope sum| x this / S = rate / min_rate
         self._to_z = [1.0 / (float(v) * settings.z) for v in sd]
         self._mid = [(length + 1) / 2.0 for length in horizons]
-        # |slope sum| / (this x S + that x sigma) = rate / (min_rate + rate_z sd_rate)
+        # |slope sum| / min(this x S + that x sigma, ceiling x S)
+        #   = rate / min(min_rate + rate_z sd_rate, max_rate)
         self._rate_on = _rate_test(settings)
-        self._rate_s, self._rate_sigma = _rate_scales(settings, horizons, rate_hz)
+        self._rate_s, self._rate_sigma, self._rate_max = _rate_scales(settings, horizons, rate_hz)
         self._a_noise = 1.0 / max(1.0, settings.noise_s * rate_hz)
         self._resync_every = self.n * max(1, round(500 / self.n))
         self.reset()
@@ -190,11 +195,14 @@ class ForceVariation:
         inv_sigma = 1.0 / sigma
         rate_on = self._rate_on
         best = 0.0
-        for wh, ph, bh, kb, mid, to_z, rs, rsig in zip(w, p, b, self._kb, self._mid, self._to_z, self._rate_s,
-                                                      self._rate_sigma):
+        for wh, ph, bh, kb, mid, to_z, rs, rsig, rmax in zip(w, p, b, self._kb, self._mid, self._to_z, self._rate_s,
+                                                            self._rate_sigma, self._rate_max):
             r = abs(wh - kb * bh) * to_z * inv_sigma
             if rate_on:
-                rate = abs(wh - mid * ph) / (rs * s + rsig * sigma)
+                floor = rs * s + rsig * sigma
+                if rmax and floor > rmax * s:
+                    floor = rmax * s
+                rate = abs(wh - mid * ph) / floor
                 if rate < r:
                     r = rate
             if r > best:
@@ -254,8 +262,9 @@ class _Weights(NamedTuple):
     g: np.ndarray  #: the ramps' weights, per horizon (oldest first)
     sd: np.ndarray  #: their noise per unit sample noise
     slope: np.ndarray  #: the least-squares slope sum of the newest L, per horizon (rows like g's)
-    rate_s: np.ndarray  #: the rate test's denominator per unit S, per horizon ...
-    rate_sigma: np.ndarray  #: ... and per unit noise sigma
+    rate_s: np.ndarray  #: the rate test's threshold per unit S, per horizon ...
+    rate_sigma: np.ndarray  #: ... and per unit noise sigma ...
+    rate_max: np.ndarray  #: ... at most this per unit S (0: no ceiling)
     a_noise: float  #: the noise learner's least gain
 
     @classmethod
@@ -266,8 +275,8 @@ class _Weights(NamedTuple):
         slope = np.zeros_like(g)
         for h, length in enumerate(horizons):
             slope[h, n - length:] = np.arange(1.0, length + 1.0) - (length + 1) / 2.0
-        rate_s, rate_sigma = _rate_scales(settings, horizons, rate_hz)
-        return cls(rate_hz, g, sd, slope, np.array(rate_s), np.array(rate_sigma),
+        rate_s, rate_sigma, rate_max = _rate_scales(settings, horizons, rate_hz)
+        return cls(rate_hz, g, sd, slope, np.array(rate_s), np.array(rate_sigma), np.array(rate_max),
                    1.0 / max(1.0, settings.noise_s * rate_hz))
 
 
@@ -294,7 +303,10 @@ def _sample_scores(run: np.ndarray, held: np.ndarray, settings: VaryingForceSett
         score = num / (sd * settings.z) / sigma[:, None]
         if _rate_test(settings):
             rate = np.abs(_against_rows(run, w.slope))
-            score = np.minimum(score, rate / (w.rate_s * run[n - 1:, None] + w.rate_sigma * sigma[:, None]))
+            floor = w.rate_s * run[n - 1:, None] + w.rate_sigma * sigma[:, None]
+            if settings.max_rate_per_s > 0:
+                floor = np.minimum(floor, w.rate_max * run[n - 1:, None])
+            score = np.minimum(score, rate / floor)
     out[n - 1:] = np.where(noise[n - 1:] > 0, score.max(axis=1), 0.0)
     return out
 
