@@ -200,13 +200,59 @@ class CofTrack(ScoredDetector):
             noise = self._noise = step2
             self._learnt = 1
             self._noise_x = 0.5 * step2
+        # (not while the force changes, nor for a second after: a squeeze or a swaying
+        # load moves a soft contact's CoF in steps too)
+        self._calm_force = calm = 0 if varying else self._calm_force + 1
+        steady = calm > self._steady_n
         # the ramp's base must not hold the grab: its centres start once it has settled;
         # a held copy is no sample (repeats would count one noise draw twice)
-        profile = self._profile
-        if not filled:
-            self._ramp.push(xc, yc, 1.0 / (s * s))
-            if profile is not None:
-                profile.push(f)
+        ramp, profile = self._ramp, self._profile
+        r = 0.0
+        # the ramp's test is taken once a hop, on the frame the decision reads the hop
+        # at: its statistic moves little from one frame to the next, and tested at every
+        # frame of a 1 kHz node its noise crossed the threshold twice as often per hour
+        # as at 100 Hz (docs/evaluation.md); its verdict stands for the hop's other frames
+        if steady and (self._k + 1) % self.hop == 0:
+            # the ramp weighs raw centres, each axis against its own noise (in force
+            # units, like q; the floor keeps a constant axis, a strip's y, harmless);
+            # silent while the force changes and for a second after, like the
+            # stick-slip channel: a soft pad's CoF follows its force, and a swaying
+            # glass is no slip.  Stick-slip shakes the total force: that evidence adds
+            # to the ramp's
+            qx = self._noise_x
+            qy = noise - qx
+            floor = 0.0025 * noise
+            if not qx > floor:
+                qx = floor
+            if not qy > floor:
+                qy = floor
+            energy = ripple.energy if ripple is not None else None
+            rnoise = self._rnoise
+            evidence = 0.0
+            if energy is not None and rnoise > 0.0:
+                evidence = variance_evidence(energy / rnoise, self._ripple_dof)
+                if evidence > self._evidence_cap:
+                    evidence = self._evidence_cap
+            if filled:
+                r = ramp.score(qx, qy, self.ramp_min, evidence)
+            else:  # (the push and the test in one pass: at 100 Hz every frame has both)
+                r = ramp.push_score(xc, yc, 1.0 / (s * s), qx, qy, self.ramp_min, evidence)
+                if profile is not None:
+                    profile.push(f)
+            if profile is not None and not self.decision.latch.on:  # the sums' own test, OR'd
+                # (silent in the variable_force state: a soft pad's outline changes
+                # with its force, which no scaling of the sums describes)
+                rp = profile.score()
+                if rp > r:
+                    r = rp
+            self._ramp_on = r > 1.0
+        else:
+            if not filled:
+                ramp.push(xc, yc, 1.0 / (s * s))
+                if profile is not None:
+                    profile.push(f)
+            if not steady:
+                self._ramp_on = False
         turn = self._turn
         if turn is not None:
             turn.push(f, s, filled, self.projected)
@@ -229,42 +275,6 @@ class CofTrack(ScoredDetector):
             # threshold alone would be only 3 sigma, met by noise every few seconds
             b = min(total / thr, onward / max(0.5 * thr, 0.75 * noise_d))
         self._stepped(step2)
-        # (not while the force changes, nor for a second after: a squeeze or a swaying
-        # load moves a soft contact's CoF in steps too)
-        self._calm_force = calm = 0 if varying else self._calm_force + 1
-        steady = calm > self._steady_n
-        r = 0.0
-        # the ramp's test is taken once a hop, on the frame the decision reads the hop
-        # at: its statistic moves little from one frame to the next, and tested at every
-        # frame of a 1 kHz node its noise crossed the threshold twice as often per hour
-        # as at 100 Hz (docs/evaluation.md); its verdict stands for the hop's other frames
-        if not steady:
-            self._ramp_on = False
-        elif (self._k + 1) % self.hop == 0:
-            # the ramp weighs raw centres, each axis against its own noise (in force
-            # units, like q; the floor keeps a constant axis, a strip's y, harmless);
-            # silent while the force changes and for a second after, like the
-            # stick-slip channel: a soft pad's CoF follows its force, and a swaying
-            # glass is no slip.  Stick-slip shakes the total force: that evidence adds
-            # to the ramp's
-            qx = self._noise_x
-            qy = noise - qx
-            floor = 0.0025 * noise
-            energy = ripple.energy if ripple is not None else None
-            rnoise = self._rnoise
-            evidence = 0.0
-            if energy is not None and rnoise > 0.0:
-                evidence = variance_evidence(energy / rnoise, self._ripple_dof)
-                if evidence > self._evidence_cap:
-                    evidence = self._evidence_cap
-            r = self._ramp.score(qx if qx > floor else floor, qy if qy > floor else floor, self.ramp_min, evidence)
-            if profile is not None and not self.decision.latch.on:  # the sums' own test, OR'd
-                # (silent in the variable_force state: a soft pad's outline changes
-                # with its force, which no scaling of the sums describes)
-                rp = profile.score()
-                if rp > r:
-                    r = rp
-            self._ramp_on = r > 1.0
         slip = a > 1.0 or b > 1.0 or r > 1.0
         moving = slip or self._ramp_on  # (what the noise must not be learnt from)
         tr = 0.0

@@ -105,6 +105,7 @@ class RampBank:
         # and reach into the ring; its sums' factor, T^2 scale and displacement scale)
         self._pushes = tuple((h, length, length + base) for h, length in enumerate(self.horizons))
         self._scores = tuple(zip(range(len(self.horizons)), self._kb, self._sd2, self._disp))
+        self._both = tuple(push + score[1:] for push, score in zip(self._pushes, self._scores))
         self.reset()
 
     def reset(self) -> None:
@@ -161,10 +162,51 @@ class RampBank:
             num = w[h] - kb * b[h]
             nx, ny = num.real, num.imag
             r = math.sqrt((nx * nx * inv_x + ny * ny * inv_y) / sd2 + extra) / z
-            if min_mm > 0.0:
-                d = math.sqrt(nx * nx + ny * ny) * disp / min_mm
-                if d < r:
-                    r = d
+            if r > best:  # (else min(r, d) cannot be the largest: d is not needed)
+                if min_mm > 0.0:
+                    d = math.sqrt(nx * nx + ny * ny) * disp / min_mm
+                    if d < r:
+                        r = d
+                if r > best:
+                    best = r
+        return best
+
+    def push_score(self, x: float, y: float, scale: float, q_x: float, q_y: float, min_mm: float,
+                   evidence: float = 0.0) -> float:
+        """:meth:`push`, then :meth:`score`: the same floats, in one pass over the
+        horizons (the caller's hot path at 100 Hz, where it tests every frame)."""
+        i, ring, scales = self._i, self._c, self._scale
+        count = self.count + 1
+        scale_sum = self._scale_sum + (scale - scales[i])
+        mean_scale = scale_sum / self.n
+        if count < self.n or count % self._resync_every == 0 or not (q_x > 0.0 and q_y > 0.0 and mean_scale > 0.0):
+            self.push(x, y, scale)  # (no score yet, or the sums renewed first)
+            return self.score(q_x, q_y, min_mm, evidence)
+        self._scale_sum = scale_sum
+        scales[i] = scale
+        c = complex(x, y)
+        inv_x, inv_y = 1.0 / (q_x * mean_scale), 1.0 / (q_y * mean_scale)
+        extra = 2.0 * evidence
+        z = self._z
+        w, p, b = self._w, self._p, self._b
+        best = 0.0
+        for h, length, reach, kb, sd2, disp in self._both:
+            leave = ring[i - length]
+            wh = w[h] = w[h] + (length * c - p[h])
+            p[h] += c - leave
+            bh = b[h] = b[h] + (leave - ring[i - reach])
+            num = wh - kb * bh
+            nx, ny = num.real, num.imag
+            r = math.sqrt((nx * nx * inv_x + ny * ny * inv_y) / sd2 + extra) / z
             if r > best:
-                best = r
+                if min_mm > 0.0:
+                    d = math.sqrt(nx * nx + ny * ny) * disp / min_mm
+                    if d < r:
+                        r = d
+                if r > best:
+                    best = r
+        ring[i] = c
+        i += 1
+        self._i = i if i < self.n else 0
+        self.count = count
         return best
