@@ -58,7 +58,7 @@ def test_push_score_is_push_then_score() -> None:
         apart.push(*c[i], scale[i])
         want = apart.score(*q[i], floors[i], evidence[i])
         assert fused.push_score(*c[i], scale[i], *q[i], floors[i], evidence[i]) == want
-    assert (fused._c, fused._w, fused._p, fused._b, fused._scale_sum) == (apart._c, apart._w, apart._p, apart._b, apart._scale_sum)
+    assert (fused._x, fused._y, fused._sums, fused._scale_sum) == (apart._x, apart._y, apart._sums, apart._scale_sum)
 
 
 def test_weights_are_the_least_squares_ramp_against_the_base() -> None:
