@@ -71,12 +71,16 @@ class CofTrack(ScoredDetector):
         self.m = max(1, round(c.smooth_s * rate_hz))
         self.lf = max(1, round(c.fast_s * rate_hz))
         self.ls = max(self.lf + 1, round(c.slow_s * rate_hz))
+        self._half = self.ls // 2  # (the half-slow lag)
         self.z = c.z
         self.min_fast, self.min_slow = c.min_fast_mm, c.min_slow_mm
         self.force_rate = c.force_rate_per_s
         self.fast_s = c.fast_s
         self._a_noise = 1.0 / max(1.0, c.noise_s * rate_hz)
         self._settle = max(1, round(self.settle_s * rate_hz))
+        # frames since a reset before the settling time has passed: the first frame
+        # that gets this far (with a previous centre and m of them) is max(1, m - 1)
+        self._settled = max(1, self.m - 1) + self._settle
         self._steady_n = max(1, round(1.0 * rate_hz))
         self.ramp_min = c.ramp_min_mm
         horizons = tuple(max(2, round(h * rate_hz)) for h in c.ramp_horizons_s)
@@ -120,7 +124,6 @@ class CofTrack(ScoredDetector):
         self._hist: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * self.ls
         self._hn = 0
         self._prev: tuple[float, float, float] | None = None
-        self._seen = 0
         self._calm_force = 0
         self._ramp_on = False  # the ramp's verdict at the last hop's end
         self._ramp.reset()
@@ -131,10 +134,13 @@ class CofTrack(ScoredDetector):
         if self._ripple is not None:
             self._ripple.reset()
 
+    #: whether :meth:`_stepped` is wanted (a subclass's; no call a frame for nothing)
+    _keeps_steps = False
+
     def _stepped(self, step2: float) -> None:
         """Each scored frame's CoF step energy (S^2 |c_k - c_{k-1}|^2 / 2; a held copy's:
-        the learnt noise), for a subclass: the learned method's feature (cof-track
-        itself no longer votes on it: docs/evaluation.md)."""
+        the learnt noise), for a subclass that sets :attr:`_keeps_steps`: the learned
+        method's feature (cof-track itself no longer votes on it: docs/evaluation.md)."""
 
     def score(self, t, f, s, xc, yc):
         # (hot path: one call per frame at any rate, ten per paper hop at 100 Hz; so
@@ -161,11 +167,12 @@ class CofTrack(ScoredDetector):
         mx, my, ms = sx / cnt, sy / cnt, ss / cnt
         prev = self._prev
         self._prev = now
-        hist, ls, lf = self._hist, self.ls, self.lf
-        fast = hist[(hn - lf) % ls] if hn >= lf else None
-        half = hist[(hn - ls // 2) % ls] if hn >= ls // 2 else None
-        slow = hist[hn % ls] if hn >= ls else None
-        hist[hn % ls] = (mx, my, ms)
+        hist, ls, lf, lh = self._hist, self.ls, self.lf, self._half
+        at = hn % ls
+        fast = hist[at - lf] if hn >= lf else None  # (a negative index counts from the end)
+        half = hist[at - lh] if hn >= lh else None
+        slow = hist[at] if hn >= ls else None
+        hist[at] = (mx, my, ms)
         self._hn = hn + 1
         filled = self.filled
         # the total's change over the ripple's lag (a held copy counts as calm)
@@ -179,7 +186,8 @@ class CofTrack(ScoredDetector):
         else:
             rate_d = self.force_rate * ms * self.fast_s
             noise_s = z * math.sqrt(2.0 * self._fnoise / m)
-            varying = abs(ms - fast[2]) > (rate_d if rate_d > noise_s else noise_s)
+            change = ms - fast[2]
+            varying = (change if change >= 0.0 else -change) > (rate_d if rate_d > noise_s else noise_s)
         if prev is None or cnt < m:
             return 0.0, 0.0, False, varying
         # CoF noise scales as 1 / S (sigma_F * spread / S): learn it in force units so
@@ -189,11 +197,10 @@ class CofTrack(ScoredDetector):
         step2 = (dx * dx + (yc - prev[1]) ** 2) * 0.5 * s * s
         if filled:  # a held copy has no step of its own: neither noise nor vibration
             step2 = noise if noise is not None else 0.0
-        self._seen += 1
         if noise is None or noise <= 0.0:
             # nothing learnt yet: the first frames after a grab still settle, so
             # vote nothing until a running mean over the settling time exists
-            if self._seen <= self._settle:
+            if hn < self._settled:
                 return 0.0, 0.0, False, varying
             if filled or step2 <= 0.0:
                 return 0.0, 0.0, False, varying
@@ -273,8 +280,15 @@ class CofTrack(ScoredDetector):
             thr = noise_d if noise_d > lim else lim
             # the onward half gets a noise margin of its own (4.5 sigma): half the
             # threshold alone would be only 3 sigma, met by noise every few seconds
-            b = min(total / thr, onward / max(0.5 * thr, 0.75 * noise_d))
-        self._stepped(step2)
+            # (min and max written out: two builtin calls a frame)
+            margin = 0.75 * noise_d
+            if not margin > 0.5 * thr:
+                margin = 0.5 * thr
+            b = total / thr
+            if onward / margin < b:
+                b = onward / margin
+        if self._keeps_steps:
+            self._stepped(step2)
         slip = a > 1.0 or b > 1.0 or r > 1.0
         moving = slip or self._ramp_on  # (what the noise must not be learnt from)
         tr = 0.0
