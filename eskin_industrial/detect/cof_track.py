@@ -105,8 +105,8 @@ class CofTrack(ScoredDetector):
         self._turn = None if grid is None else TurnFlow(
             *grid, hop, round(c.torsion_ref_s / c.torsion_blocks * hops), c.torsion_blocks,
             tuple(max(2, round(h * hops)) for h in c.ramp_horizons_s), max(2, round(c.ramp_base_s * hops)),
-            c.torsion_z, round(c.noise_s * hops), c.torsion_min_visibility, c.torsion_min_footprint)
-        self._turn_min = math.radians(c.torsion_min_deg)
+            c.torsion_z, round(c.noise_s * hops), c.torsion_min_visibility, c.torsion_min_footprint,
+            math.radians(c.torsion_min_deg))
         self.turn_score = 0.0
         self.fast_score = self.ramp_score = 0.0  # the two parts of the first column
         self._noise: float | None = None  # learnt CoF noise, in force units (N^2 mm^2)
@@ -296,7 +296,7 @@ class CofTrack(ScoredDetector):
             if moving:  # a slide: the turn's template would smear it
                 turn.restart()
             if steady:
-                tr = turn.score(self._turn_min)
+                tr = turn.score
         self.fast_score, self.ramp_score, self.turn_score = a, r, tr
         if tr > 1.0:
             slip = moving = True

@@ -157,19 +157,21 @@ class TurnFlow:
     """Streaming :func:`turn_batch`, and the ramp test on its angle.
 
     ``push(f, s)`` each frame in contact (``held``: a held copy across a gap, which
-    is no sample of its own); ``score(min_rad)`` the ramp's score (1 = threshold)
-    against the learnt noise, as of the last whole hop; ``learn()`` after a calm frame
-    (it counts each hop's change once)."""
+    is no sample of its own); :attr:`score` the ramp's score (1 = threshold) against
+    the learnt noise, as of the last whole hop; ``learn()`` after a calm frame (it
+    counts each hop's change once)."""
 
     def __init__(self, xs: np.ndarray, ys: np.ndarray, hop: int, block: int, blocks: int,
                  horizons: tuple[int, ...], base: int, z: float, noise_n: int, min_visibility: float = 0.0,
-                 min_footprint: float = 0.0) -> None:
+                 min_footprint: float = 0.0, min_rad: float = 0.0) -> None:
         """``block``, ``horizons``, ``base`` and ``noise_n`` count hops of ``hop`` frames;
         ``min_visibility``: the least ``g . g`` over what its template's noise alone
         would give (:attr:`visibility`) at which the channel looks; ``min_footprint``: the
         least mean squared distance of the force from its centre, in taxel cells, at
-        which a turn shows (below it the channel looks, but :attr:`blind` says it cannot see)."""
+        which a turn shows (below it the channel looks, but :attr:`blind` says it cannot see);
+        ``min_rad``: the least turn, in the flow's units, that the ramp test counts."""
         self.min_visibility = min_visibility
+        self.min_rad = min_rad
         self.min_footprint = min_footprint
         self.xs, self.ys = xs, ys
         self._grid = _Grid(xs, ys)
@@ -225,7 +227,7 @@ class TurnFlow:
         #: hop, by the caller
         self.blind = True
         self._judged = False
-        self._score: float | None = 0.0  # (None: to be computed for the newest hop)
+        self.score = 0.0  #: the ramp test's score as of the last whole hop (1 = threshold)
         self._ramp.reset()
 
     def project_into(self, column: np.ndarray) -> None:
@@ -273,8 +275,10 @@ class TurnFlow:
             self.theta += u - self._u
             self._u = u
             mean_s = s / frames
-            self._ramp.push(self.theta, 0.0, self._unit / (mean_s * mean_s))
-            self._score = None
+            # (the noise is in the scale pushed with each angle; the test is taken with
+            # the push, once a hop, as the caller reads it at every frame)
+            self.score = self._ramp.push_score(self.theta, 0.0, self._unit / (mean_s * mean_s), 1.0, 1.0,
+                                               self.min_rad)
         self._since += 1
         if self._since < self.block:
             self._block += fl
@@ -309,7 +313,7 @@ class TurnFlow:
             # contact on one taxel, a light or very noisy grip), and each renewal
             # would turn it at random; silent until one stands out again
             self._set_g(None)
-            self._score = 0.0
+            self.score = 0.0
             self._ramp.reset()
             return
         self._set_g(g_new)
@@ -333,13 +337,8 @@ class TurnFlow:
         self._hops = 0
         self._since = 0
         self._set_g(None)
-        self._score = 0.0
+        self.score = 0.0
         self._ramp.reset()
-
-    def score(self, min_rad: float) -> float:
-        if self._score is None:  # (the noise is in the scale pushed with each angle)
-            self._score = self._ramp.score(1.0, 1.0, min_rad)
-        return self._score
 
     def learn(self) -> None:
         """Count the last hop's change as calm noise (the caller knows it was calm)."""
