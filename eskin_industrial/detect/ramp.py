@@ -163,16 +163,17 @@ class RampBank:
             return 0.0
         inv_x, inv_y = 1.0 / (q_x * mean_scale), 1.0 / (q_y * mean_scale)
         extra = 2.0 * evidence
-        z = self._z
+        z, sqrt = self._z, math.sqrt
         sums = self._sums
         best = 0.0
         for h, kb, sd2, disp in self._scores:
             wx, wy, _, _, bx, by = sums[h]
             nx, ny = wx - kb * bx, wy - kb * by
-            r = math.sqrt((nx * nx * inv_x + ny * ny * inv_y) / sd2 + extra) / z
+            nx2, ny2 = nx * nx, ny * ny
+            r = sqrt((nx2 * inv_x + ny2 * inv_y) / sd2 + extra) / z
             if r > best:  # (else min(r, d) cannot be the largest: d is not needed)
                 if min_mm > 0.0:
-                    d = math.sqrt(nx * nx + ny * ny) * disp / min_mm
+                    d = sqrt(nx2 + ny2) * disp / min_mm
                     if d < r:
                         r = d
                 if r > best:
@@ -194,22 +195,25 @@ class RampBank:
         scales[i] = scale
         inv_x, inv_y = 1.0 / (q_x * mean_scale), 1.0 / (q_y * mean_scale)
         extra = 2.0 * evidence
-        z = self._z
+        z, sqrt = self._z, math.sqrt
         ring_x, ring_y, sums = self._x, self._y, self._sums
         best = 0.0
         for h, weight, length, reach, kb, sd2, disp in self._both:
             wx, wy, px, py, bx, by = sums[h]
-            lx, ly = ring_x[i - length], ring_y[i - length]
+            j = i - length
+            lx, ly = ring_x[j], ring_y[j]
+            j = i - reach
             wx += weight * x - px
             wy += weight * y - py
-            bx += lx - ring_x[i - reach]
-            by += ly - ring_y[i - reach]
+            bx += lx - ring_x[j]
+            by += ly - ring_y[j]
             sums[h] = (wx, wy, px + (x - lx), py + (y - ly), bx, by)
             nx, ny = wx - kb * bx, wy - kb * by
-            r = math.sqrt((nx * nx * inv_x + ny * ny * inv_y) / sd2 + extra) / z
+            nx2, ny2 = nx * nx, ny * ny
+            r = sqrt((nx2 * inv_x + ny2 * inv_y) / sd2 + extra) / z
             if r > best:
                 if min_mm > 0.0:
-                    d = math.sqrt(nx * nx + ny * ny) * disp / min_mm
+                    d = sqrt(nx2 + ny2) * disp / min_mm
                     if d < r:
                         r = d
                 if r > best:
