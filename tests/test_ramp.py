@@ -42,6 +42,25 @@ def test_streaming_equals_batch() -> None:
     assert bank.score(0.1, 0.1, 0.1) == 0.0
 
 
+def test_push_score_is_push_then_score() -> None:
+    """The fused form gives the same floats as a push and then a score, across the
+    sums' renewal, a noise of zero, a score before the ring is full and no floor."""
+    k = 1300
+    rng = np.random.default_rng(8)
+    c = np.cumsum(rng.normal(0, 0.05, (k, 2)), axis=0)
+    q = (np.abs(rng.normal(0.1, 0.02, (k, 2))) + 0.01) ** 2
+    q[rng.integers(0, k, 20), 0] = 0.0
+    scale = rng.uniform(0.2, 5.0, k)
+    floors = np.where(rng.uniform(size=k) < 0.2, 0.0, rng.uniform(0.01, 0.3, k))
+    evidence = np.where(rng.uniform(size=k) < 0.5, 0.0, rng.exponential(3.0, k))
+    apart, fused = RampBank(HORIZONS, BASE, z=5.0), RampBank(HORIZONS, BASE, z=5.0)
+    for i in range(k):
+        apart.push(*c[i], scale[i])
+        want = apart.score(*q[i], floors[i], evidence[i])
+        assert fused.push_score(*c[i], scale[i], *q[i], floors[i], evidence[i]) == want
+    assert (fused._x, fused._y, fused._sums, fused._scale_sum) == (apart._x, apart._y, apart._sums, apart._scale_sum)
+
+
 def test_weights_are_the_least_squares_ramp_against_the_base() -> None:
     """G c, for a ramp of speed v starting L samples ago, is v * sum j^2 per axis: so
     |G c| * disp is the displacement over the horizon."""

@@ -74,7 +74,9 @@ class PaperAlongside:
         # (a real tap times x + iy is (h x) + i (h y) exactly, and complex sums add each
         # part on its own)
         self._zs: deque[complex] = deque(maxlen=self._flen)
-        self._energy = np.zeros(max(self.window, 1))
+        # each frame's detail energy, a ring of the window (a list: the window's sums
+        # read its first frames one by one, and a list's floats are read cheaply)
+        self._energy = [0.0] * max(self.window, 1)
         self._blocks: deque[tuple[float, float, float]] = deque(maxlen=self.blocks)
         self._prev_sums: tuple[float, float] | None = None
         # which of a hop's frames are even (row 1) and odd (row 2), by the parity of its
@@ -92,7 +94,9 @@ class PaperAlongside:
     def _hop_scalars(self) -> None:
         """The hop as :class:`~.stream.IndicatorStream` steps its frames, in Python
         floats, from the hop's squared norms and lagged products (two numpy calls)."""
-        lag, hop, n = self.lag, self.hop, self.n
+        lag, hop = self.lag, self.hop
+        n = float(self.n)  # (a float times a float is the interpreter's fast path; the same product)
+        zero_var, sqrt = _ZERO_VAR, math.sqrt
         k0 = self._k
         frames, s_t, c_t, cof_t = zip(*self._rows)
         cur = np.array(frames)
@@ -123,12 +127,12 @@ class PaperAlongside:
                 else:
                     var_a = n * ss - s * s
                     var_b = n * ss_b - s_b * s_b
-                    flat_a = var_a <= _ZERO_VAR * s * s
-                    flat_b = var_b <= _ZERO_VAR * s_b * s_b
+                    flat_a = var_a <= zero_var * s * s
+                    flat_b = var_b <= zero_var * s_b * s_b
                     if flat_a or flat_b:
                         d = 0.0 if (flat_a and flat_b) else 1.0
                     else:
-                        d = 1.0 - (n * sab - s * s_b) / math.sqrt(var_a * var_b)
+                        d = 1.0 - (n * sab - s * s_b) / sqrt(var_a * var_b)
                         d = 0.0 if d < 0.0 else 2.0 if d > 2.0 else d
             zs.append(complex(xc, yc))
             energy = 0.0
@@ -193,7 +197,7 @@ class PaperAlongside:
             energy[j0:] = dxy[:, 0] + dxy[:, 1]
         # the ring holds a window of whole hops: this hop's slot is one slice
         at = (k0 // hop) % self.blocks * hop
-        self._energy[at: at + hop] = energy
+        self._energy[at: at + hop] = energy.tolist()
         self._cof_tail = xy[max(0, end - (flen - 1)):]
         # cumulative sums add left to right, as the stream's running sums do:
         # the decorrelations, the even frames' energies and the odd ones'

@@ -71,12 +71,16 @@ class CofTrack(ScoredDetector):
         self.m = max(1, round(c.smooth_s * rate_hz))
         self.lf = max(1, round(c.fast_s * rate_hz))
         self.ls = max(self.lf + 1, round(c.slow_s * rate_hz))
+        self._half = self.ls // 2  # (the half-slow lag)
         self.z = c.z
         self.min_fast, self.min_slow = c.min_fast_mm, c.min_slow_mm
         self.force_rate = c.force_rate_per_s
         self.fast_s = c.fast_s
         self._a_noise = 1.0 / max(1.0, c.noise_s * rate_hz)
         self._settle = max(1, round(self.settle_s * rate_hz))
+        # frames since a reset before the settling time has passed: the first frame
+        # that gets this far (with a previous centre and m of them) is max(1, m - 1)
+        self._settled = max(1, self.m - 1) + self._settle
         self._steady_n = max(1, round(1.0 * rate_hz))
         self.ramp_min = c.ramp_min_mm
         horizons = tuple(max(2, round(h * rate_hz)) for h in c.ramp_horizons_s)
@@ -101,8 +105,8 @@ class CofTrack(ScoredDetector):
         self._turn = None if grid is None else TurnFlow(
             *grid, hop, round(c.torsion_ref_s / c.torsion_blocks * hops), c.torsion_blocks,
             tuple(max(2, round(h * hops)) for h in c.ramp_horizons_s), max(2, round(c.ramp_base_s * hops)),
-            c.torsion_z, round(c.noise_s * hops), c.torsion_min_visibility, c.torsion_min_footprint)
-        self._turn_min = math.radians(c.torsion_min_deg)
+            c.torsion_z, round(c.noise_s * hops), c.torsion_min_visibility, c.torsion_min_footprint,
+            math.radians(c.torsion_min_deg))
         self.turn_score = 0.0
         self.fast_score = self.ramp_score = 0.0  # the two parts of the first column
         self._noise: float | None = None  # learnt CoF noise, in force units (N^2 mm^2)
@@ -120,7 +124,6 @@ class CofTrack(ScoredDetector):
         self._hist: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * self.ls
         self._hn = 0
         self._prev: tuple[float, float, float] | None = None
-        self._seen = 0
         self._calm_force = 0
         self._ramp_on = False  # the ramp's verdict at the last hop's end
         self._ramp.reset()
@@ -131,10 +134,13 @@ class CofTrack(ScoredDetector):
         if self._ripple is not None:
             self._ripple.reset()
 
+    #: whether :meth:`_stepped` is wanted (a subclass's; no call a frame for nothing)
+    _keeps_steps = False
+
     def _stepped(self, step2: float) -> None:
         """Each scored frame's CoF step energy (S^2 |c_k - c_{k-1}|^2 / 2; a held copy's:
-        the learnt noise), for a subclass: the learned method's feature (cof-track
-        itself no longer votes on it: docs/evaluation.md)."""
+        the learnt noise), for a subclass that sets :attr:`_keeps_steps`: the learned
+        method's feature (cof-track itself no longer votes on it: docs/evaluation.md)."""
 
     def score(self, t, f, s, xc, yc):
         # (hot path: one call per frame at any rate, ten per paper hop at 100 Hz; so
@@ -161,11 +167,12 @@ class CofTrack(ScoredDetector):
         mx, my, ms = sx / cnt, sy / cnt, ss / cnt
         prev = self._prev
         self._prev = now
-        hist, ls, lf = self._hist, self.ls, self.lf
-        fast = hist[(hn - lf) % ls] if hn >= lf else None
-        half = hist[(hn - ls // 2) % ls] if hn >= ls // 2 else None
-        slow = hist[hn % ls] if hn >= ls else None
-        hist[hn % ls] = (mx, my, ms)
+        hist, ls, lf, lh = self._hist, self.ls, self.lf, self._half
+        at = hn % ls
+        fast = hist[at - lf] if hn >= lf else None  # (a negative index counts from the end)
+        half = hist[at - lh] if hn >= lh else None
+        slow = hist[at] if hn >= ls else None
+        hist[at] = (mx, my, ms)
         self._hn = hn + 1
         filled = self.filled
         # the total's change over the ripple's lag (a held copy counts as calm)
@@ -179,7 +186,8 @@ class CofTrack(ScoredDetector):
         else:
             rate_d = self.force_rate * ms * self.fast_s
             noise_s = z * math.sqrt(2.0 * self._fnoise / m)
-            varying = abs(ms - fast[2]) > (rate_d if rate_d > noise_s else noise_s)
+            change = ms - fast[2]
+            varying = (change if change >= 0.0 else -change) > (rate_d if rate_d > noise_s else noise_s)
         if prev is None or cnt < m:
             return 0.0, 0.0, False, varying
         # CoF noise scales as 1 / S (sigma_F * spread / S): learn it in force units so
@@ -189,24 +197,69 @@ class CofTrack(ScoredDetector):
         step2 = (dx * dx + (yc - prev[1]) ** 2) * 0.5 * s * s
         if filled:  # a held copy has no step of its own: neither noise nor vibration
             step2 = noise if noise is not None else 0.0
-        self._seen += 1
         if noise is None or noise <= 0.0:
             # nothing learnt yet: the first frames after a grab still settle, so
             # vote nothing until a running mean over the settling time exists
-            if self._seen <= self._settle:
+            if hn < self._settled:
                 return 0.0, 0.0, False, varying
             if filled or step2 <= 0.0:
                 return 0.0, 0.0, False, varying
             noise = self._noise = step2
             self._learnt = 1
             self._noise_x = 0.5 * step2
+        # (not while the force changes, nor for a second after: a squeeze or a swaying
+        # load moves a soft contact's CoF in steps too)
+        self._calm_force = calm = 0 if varying else self._calm_force + 1
+        steady = calm > self._steady_n
         # the ramp's base must not hold the grab: its centres start once it has settled;
         # a held copy is no sample (repeats would count one noise draw twice)
-        profile = self._profile
-        if not filled:
-            self._ramp.push(xc, yc, 1.0 / (s * s))
-            if profile is not None:
-                profile.push(f)
+        ramp, profile = self._ramp, self._profile
+        r = 0.0
+        # the ramp's test is taken once a hop, on the frame the decision reads the hop
+        # at: its statistic moves little from one frame to the next, and tested at every
+        # frame of a 1 kHz node its noise crossed the threshold twice as often per hour
+        # as at 100 Hz (docs/evaluation.md); its verdict stands for the hop's other frames
+        if steady and (self._k + 1) % self.hop == 0:
+            # the ramp weighs raw centres, each axis against its own noise (in force
+            # units, like q; the floor keeps a constant axis, a strip's y, harmless);
+            # silent while the force changes and for a second after, like the
+            # stick-slip channel: a soft pad's CoF follows its force, and a swaying
+            # glass is no slip.  Stick-slip shakes the total force: that evidence adds
+            # to the ramp's
+            qx = self._noise_x
+            qy = noise - qx
+            floor = 0.0025 * noise
+            if not qx > floor:
+                qx = floor
+            if not qy > floor:
+                qy = floor
+            energy = ripple.energy if ripple is not None else None
+            rnoise = self._rnoise
+            evidence = 0.0
+            if energy is not None and rnoise > 0.0:
+                evidence = variance_evidence(energy / rnoise, self._ripple_dof)
+                if evidence > self._evidence_cap:
+                    evidence = self._evidence_cap
+            if filled:
+                r = ramp.score(qx, qy, self.ramp_min, evidence)
+            else:  # (the push and the test in one pass: at 100 Hz every frame has both)
+                r = ramp.push_score(xc, yc, 1.0 / (s * s), qx, qy, self.ramp_min, evidence)
+                if profile is not None:
+                    profile.push(f)
+            if profile is not None and not self.decision.latch.on:  # the sums' own test, OR'd
+                # (silent in the variable_force state: a soft pad's outline changes
+                # with its force, which no scaling of the sums describes)
+                rp = profile.score()
+                if rp > r:
+                    r = rp
+            self._ramp_on = r > 1.0
+        else:
+            if not filled:
+                ramp.push(xc, yc, 1.0 / (s * s))
+                if profile is not None:
+                    profile.push(f)
+            if not steady:
+                self._ramp_on = False
         turn = self._turn
         if turn is not None:
             turn.push(f, s, filled, self.projected)
@@ -227,44 +280,15 @@ class CofTrack(ScoredDetector):
             thr = noise_d if noise_d > lim else lim
             # the onward half gets a noise margin of its own (4.5 sigma): half the
             # threshold alone would be only 3 sigma, met by noise every few seconds
-            b = min(total / thr, onward / max(0.5 * thr, 0.75 * noise_d))
-        self._stepped(step2)
-        # (not while the force changes, nor for a second after: a squeeze or a swaying
-        # load moves a soft contact's CoF in steps too)
-        self._calm_force = calm = 0 if varying else self._calm_force + 1
-        steady = calm > self._steady_n
-        r = 0.0
-        # the ramp's test is taken once a hop, on the frame the decision reads the hop
-        # at: its statistic moves little from one frame to the next, and tested at every
-        # frame of a 1 kHz node its noise crossed the threshold twice as often per hour
-        # as at 100 Hz (docs/evaluation.md); its verdict stands for the hop's other frames
-        if not steady:
-            self._ramp_on = False
-        elif (self._k + 1) % self.hop == 0:
-            # the ramp weighs raw centres, each axis against its own noise (in force
-            # units, like q; the floor keeps a constant axis, a strip's y, harmless);
-            # silent while the force changes and for a second after, like the
-            # stick-slip channel: a soft pad's CoF follows its force, and a swaying
-            # glass is no slip.  Stick-slip shakes the total force: that evidence adds
-            # to the ramp's
-            qx = self._noise_x
-            qy = noise - qx
-            floor = 0.0025 * noise
-            energy = ripple.energy if ripple is not None else None
-            rnoise = self._rnoise
-            evidence = 0.0
-            if energy is not None and rnoise > 0.0:
-                evidence = variance_evidence(energy / rnoise, self._ripple_dof)
-                if evidence > self._evidence_cap:
-                    evidence = self._evidence_cap
-            r = self._ramp.score(qx if qx > floor else floor, qy if qy > floor else floor, self.ramp_min, evidence)
-            if profile is not None and not self.decision.latch.on:  # the sums' own test, OR'd
-                # (silent in the variable_force state: a soft pad's outline changes
-                # with its force, which no scaling of the sums describes)
-                rp = profile.score()
-                if rp > r:
-                    r = rp
-            self._ramp_on = r > 1.0
+            # (min and max written out: two builtin calls a frame)
+            margin = 0.75 * noise_d
+            if not margin > 0.5 * thr:
+                margin = 0.5 * thr
+            b = total / thr
+            if onward / margin < b:
+                b = onward / margin
+        if self._keeps_steps:
+            self._stepped(step2)
         slip = a > 1.0 or b > 1.0 or r > 1.0
         moving = slip or self._ramp_on  # (what the noise must not be learnt from)
         tr = 0.0
@@ -272,7 +296,7 @@ class CofTrack(ScoredDetector):
             if moving:  # a slide: the turn's template would smear it
                 turn.restart()
             if steady:
-                tr = turn.score(self._turn_min)
+                tr = turn.score
         self.fast_score, self.ramp_score, self.turn_score = a, r, tr
         if tr > 1.0:
             slip = moving = True

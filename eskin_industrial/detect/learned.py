@@ -131,6 +131,8 @@ class Learned(CofTrack):
         self._vib_count = 0
         self._vib_sum = 0.0
 
+    _keeps_steps = True
+
     def _stepped(self, step2: float) -> None:
         # the CoF's step energy over vib_s: the band the paper's wavelet detail sees
         ring = self._vib

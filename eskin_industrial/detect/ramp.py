@@ -83,12 +83,18 @@ class RampBank:
     """Streaming :func:`ramp_batch`: ``push`` a centre and its noise scale, ``score``
     with the current noise variance per unit scale (and any evidence).
 
-    Each horizon keeps three running sums of the centre (as ``x + iy``, so one complex
-    addition moves both axes): ``w``, the ramp-weighted sum of its newest ``L``; ``p``,
-    their plain sum; ``b``, the sum of the ``B`` before them.  A push moves each by
-    the samples that enter and leave, so the cost per frame is the same at 100 Hz and
-    at 1 kHz (the horizons are times; a matrix product over them grew with the rate).
-    Every few rounds the sums are recomputed from the ring, against rounding drift."""
+    Each horizon keeps three running sums of the centre, each axis on its own: ``w``,
+    the ramp-weighted sum of its newest ``L``; ``p``, their plain sum; ``b``, the sum
+    of the ``B`` before them.  A push moves each by the samples that enter and leave,
+    so the cost per frame is the same at 100 Hz and at 1 kHz (the horizons are times;
+    a matrix product over them grew with the rate).  Every few rounds the sums are
+    recomputed from the ring, against rounding drift.
+
+    (The axes are Python floats, not one complex number ``x + iy``: a float's
+    arithmetic is the interpreter's specialised fast path, a complex's the generic
+    one, at twice the cost a push.  Each part of a complex sum is the same float;
+    the recomputation still takes the centres as complex numbers, whose sums numpy
+    adds in its own order.)"""
 
     def __init__(self, horizons: tuple[int, ...], base: int, z: float) -> None:
         _, sd, disp = ramp_weights(horizons, base)  # (the weights are the batch form's)
@@ -101,33 +107,34 @@ class RampBank:
         self._kb = [length * (length + 1) / 2.0 / base for length in self.horizons]
         # recompute the sums every whole number of rounds, about every 500 pushes
         self._resync_every = self.n * max(1, round(500 / self.n))
-        # (the hot path's loops read one tuple per horizon: each horizon's index, length
-        # and reach into the ring; its sums' factor, T^2 scale and displacement scale)
-        self._pushes = tuple((h, length, length + base) for h, length in enumerate(self.horizons))
+        # (the hot path's loops read one tuple per horizon: each horizon's index, its
+        # length (as the float it multiplies) and reach into the ring; its sums'
+        # factor, T^2 scale and displacement scale)
+        self._pushes = tuple((h, float(length), length, length + base) for h, length in enumerate(self.horizons))
         self._scores = tuple(zip(range(len(self.horizons)), self._kb, self._sd2, self._disp))
+        self._both = tuple(push + score[1:] for push, score in zip(self._pushes, self._scores))
         self.reset()
 
     def reset(self) -> None:
-        self._c = [0j] * self.n  # the last n centres, x + iy (zeros before the first)
-        h = len(self.horizons)
-        self._w, self._p, self._b = [0j] * h, [0j] * h, [0j] * h
+        self._x = [0.0] * self.n  # the last n centres (zeros before the first)
+        self._y = [0.0] * self.n
+        #: each horizon's sums (w_x, w_y, p_x, p_y, b_x, b_y)
+        self._sums = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)] * len(self.horizons)
         self._scale = [0.0] * self.n
         self._scale_sum = 0.0
         self._i = 0
         self.count = 0
 
     def push(self, x: float, y: float, scale: float = 1.0) -> None:
-        i, ring = self._i, self._c
-        c = complex(x, y)
-        w, p, b = self._w, self._p, self._b
-        for h, length, reach in self._pushes:
+        i, ring_x, ring_y, sums = self._i, self._x, self._y, self._sums
+        for h, weight, length, reach in self._pushes:
             # the centre that leaves the newest L (it joins the base), and the one that
             # leaves the base; ``i`` holds the oldest of all n, about to be overwritten
-            leave = ring[i - length]
-            w[h] += length * c - p[h]
-            p[h] += c - leave
-            b[h] += leave - ring[i - reach]
-        ring[i] = c
+            wx, wy, px, py, bx, by = sums[h]
+            lx, ly = ring_x[i - length], ring_y[i - length]
+            sums[h] = (wx + (weight * x - px), wy + (weight * y - py), px + (x - lx), py + (y - ly),
+                       bx + (lx - ring_x[i - reach]), by + (ly - ring_y[i - reach]))
+        ring_x[i], ring_y[i] = x, y
         scales = self._scale
         self._scale_sum += scale - scales[i]  # the sample n pushes ago leaves
         scales[i] = scale
@@ -139,12 +146,14 @@ class RampBank:
 
     def _resync(self) -> None:
         self._scale_sum = math.fsum(self._scale)
-        c = np.array(self._c)  # oldest first: a whole number of rounds has passed
+        c = np.empty(self.n, complex)  # oldest first: a whole number of rounds has passed
+        c.real, c.imag = self._x, self._y
         for h, length in enumerate(self.horizons):
             newest = c[self.n - length:]
-            self._w[h] = complex(np.arange(1.0, length + 1.0) @ newest)
-            self._p[h] = complex(newest.sum())
-            self._b[h] = complex(c[self.n - length - self.base:self.n - length].sum())
+            w = complex(np.arange(1.0, length + 1.0) @ newest)
+            p = complex(newest.sum())
+            b = complex(c[self.n - length - self.base:self.n - length].sum())
+            self._sums[h] = (w.real, w.imag, p.real, p.imag, b.real, b.imag)
 
     def score(self, q_x: float, q_y: float, min_mm: float, evidence: float = 0.0) -> float:
         """Largest over the horizons of min(sqrt(T^2 + 2 evidence) / z, d / min_mm); 0
@@ -154,17 +163,63 @@ class RampBank:
             return 0.0
         inv_x, inv_y = 1.0 / (q_x * mean_scale), 1.0 / (q_y * mean_scale)
         extra = 2.0 * evidence
-        z = self._z
-        w, b = self._w, self._b
+        z, sqrt = self._z, math.sqrt
+        sums = self._sums
         best = 0.0
         for h, kb, sd2, disp in self._scores:
-            num = w[h] - kb * b[h]
-            nx, ny = num.real, num.imag
-            r = math.sqrt((nx * nx * inv_x + ny * ny * inv_y) / sd2 + extra) / z
-            if min_mm > 0.0:
-                d = math.sqrt(nx * nx + ny * ny) * disp / min_mm
-                if d < r:
-                    r = d
+            wx, wy, _, _, bx, by = sums[h]
+            nx, ny = wx - kb * bx, wy - kb * by
+            nx2, ny2 = nx * nx, ny * ny
+            r = sqrt((nx2 * inv_x + ny2 * inv_y) / sd2 + extra) / z
+            if r > best:  # (else min(r, d) cannot be the largest: d is not needed)
+                if min_mm > 0.0:
+                    d = sqrt(nx2 + ny2) * disp / min_mm
+                    if d < r:
+                        r = d
+                if r > best:
+                    best = r
+        return best
+
+    def push_score(self, x: float, y: float, scale: float, q_x: float, q_y: float, min_mm: float,
+                   evidence: float = 0.0) -> float:
+        """:meth:`push`, then :meth:`score`: the same floats, in one pass over the
+        horizons (the caller's hot path at 100 Hz, where it tests every frame)."""
+        i, scales = self._i, self._scale
+        count = self.count + 1
+        scale_sum = self._scale_sum + (scale - scales[i])
+        mean_scale = scale_sum / self.n
+        if count < self.n or count % self._resync_every == 0 or not (q_x > 0.0 and q_y > 0.0 and mean_scale > 0.0):
+            self.push(x, y, scale)  # (no score yet, or the sums renewed first)
+            return self.score(q_x, q_y, min_mm, evidence)
+        self._scale_sum = scale_sum
+        scales[i] = scale
+        inv_x, inv_y = 1.0 / (q_x * mean_scale), 1.0 / (q_y * mean_scale)
+        extra = 2.0 * evidence
+        z, sqrt = self._z, math.sqrt
+        ring_x, ring_y, sums = self._x, self._y, self._sums
+        best = 0.0
+        for h, weight, length, reach, kb, sd2, disp in self._both:
+            wx, wy, px, py, bx, by = sums[h]
+            j = i - length
+            lx, ly = ring_x[j], ring_y[j]
+            j = i - reach
+            wx += weight * x - px
+            wy += weight * y - py
+            bx += lx - ring_x[j]
+            by += ly - ring_y[j]
+            sums[h] = (wx, wy, px + (x - lx), py + (y - ly), bx, by)
+            nx, ny = wx - kb * bx, wy - kb * by
+            nx2, ny2 = nx * nx, ny * ny
+            r = sqrt((nx2 * inv_x + ny2 * inv_y) / sd2 + extra) / z
             if r > best:
-                best = r
+                if min_mm > 0.0:
+                    d = sqrt(nx2 + ny2) * disp / min_mm
+                    if d < r:
+                        r = d
+                if r > best:
+                    best = r
+        ring_x[i], ring_y[i] = x, y
+        i += 1
+        self._i = i if i < self.n else 0
+        self.count = count
         return best

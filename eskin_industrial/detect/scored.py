@@ -38,6 +38,10 @@ from .vforce import ForceVariation
 _WARMUP = int(FrameFlag.WARMUP)
 _FILLED = int(FrameFlag.FILLED)
 _TURN_UNSEEN = int(FrameFlag.TURN_UNSEEN)
+#: an :class:`Update` from all its fields in order, without the named tuple's own
+#: ``__new__`` (a Python function: half an update's cost, and a method that decides
+#: every 10 ms builds one a frame at 100 Hz)
+_new_update = tuple.__new__
 
 
 class ScoredDetector(FrameHygiene):
@@ -103,54 +107,72 @@ class ScoredDetector(FrameHygiene):
     def _step(self, t: float, f: np.ndarray, flags: int, out: list[Update]) -> None:
         s, sx, sy, self.projected = (f @ self._mat).tolist()
         contact = self._touching(s, self._contact_run > 0)
-        if self._vf is not None:
-            vf = self._vf.push(s, contact, bool(flags & _FILLED))
-            if vf > self._hop_vf:
-                self._hop_vf = vf
+        filled = bool(flags & _FILLED)  # a held copy across a gap: no new information
+        vf = self._vf.push(s, contact, filled) if self._vf is not None else 0.0
+        a = b = 0.0
+        slip = varying = False
         if contact:
-            self._cof = (sx / s, sy / s)
+            xc, yc = sx / s, sy / s
+            self._cof = (xc, yc)
             self._contact_run += 1
-            self.filled = bool(flags & _FILLED)  # a held copy across a gap: no new information
-            a, b, slip, varying = self.score(t, f, s, self._cof[0], self._cof[1])
+            self.filled = filled
+            a, b, slip, varying = self.score(t, f, s, xc, yc)
             trusted = self._contact_run > self.history
             if not trusted:
                 slip = varying = False
             self._slip_run = self._slip_run + 1 if slip else 0
-            self._hop_slip |= self._slip_run >= self.confirm
-            self._hop_var |= varying
-            if a > self._hop_a:
-                self._hop_a = a
-            if b > self._hop_b:
-                self._hop_b = b
-            self._warm = not trusted
+            slip = self._slip_run >= self.confirm
+            warm = not trusted
         else:
             if self._contact_run:
                 self.reset_scores()
             self._contact_run = 0
             self._slip_run = 0
-            self._warm = False
+            warm = False
         self.paper.push(f, s, contact, self._cof)
-        self._hop_flags |= flags
         self._k += 1
+        if self.hop == 1:
+            # a hop of one frame (cof-track at 100 Hz): its votes are the frame's own,
+            # with no hop to gather them in (the largest of 0 and each score, as there)
+            carried = self._hop_flags  # (what a reset left for the first update)
+            if carried:
+                flags |= carried
+                self._hop_flags = 0
+            out.append(self._decide(t, s, contact, not warm, slip, varying, vf if vf > 0.0 else 0.0,
+                                    a if a > 0.0 else 0.0, b if b > 0.0 else 0.0, flags))
+            return
+        if vf > self._hop_vf:
+            self._hop_vf = vf
+        if contact:
+            self._hop_slip |= slip
+            self._hop_var |= varying
+            if a > self._hop_a:
+                self._hop_a = a
+            if b > self._hop_b:
+                self._hop_b = b
+        self._warm = warm
+        self._hop_flags |= flags
         if self._k % self.hop:
             return
-        out.append(self._decide(t, s, contact))
+        out.append(self._decide(t, s, contact, not self._warm, self._hop_slip, self._hop_var, self._hop_vf,
+                                self._hop_a, self._hop_b, self._hop_flags))
+        self._hop_a = self._hop_b = self._hop_vf = 0.0
+        self._hop_slip = self._hop_var = False
+        self._hop_flags = 0
 
-    def _decide(self, t: float, s: float, contact: bool) -> Update:
-        valid = not self._warm
-        varying = self._hop_vf if self._vf is not None else float(self._hop_var)
-        state = self.decision.decide(t, contact, valid, self._hop_slip, varying)
-        flags = self._hop_flags | (0 if valid else _WARMUP)
+    def _decide(self, t: float, s: float, contact: bool, valid: bool, slip: bool, var: bool, vf: float,
+                a: float, b: float, flags: int) -> Update:
+        """The update for a hop from its votes: any slip, any varying force, the largest
+        varying-force score, the largest scores, its frames' flags."""
+        state = self.decision.decide(t, contact, valid, slip, vf if self._vf is not None else float(var))
+        if not valid:
+            flags |= _WARMUP
         turn = self._turn
         if contact and turn is not None and turn.blind:
             flags |= _TURN_UNSEEN
         paper = self.paper
-        upd = Update(t, paper.r_coe, paper.r_dw, state, valid, s, self._cof[0], self._cof[1], flags,
-                     self._hop_a, self._hop_b)
-        self._hop_a = self._hop_b = self._hop_vf = 0.0
-        self._hop_slip = self._hop_var = False
-        self._hop_flags = 0
-        return upd
+        xc, yc = self._cof
+        return _new_update(Update, (t, paper.r_coe, paper.r_dw, state, valid, s, xc, yc, flags, a, b))
 
     def feed(self, t: np.ndarray, forces: np.ndarray, flags: np.ndarray | None = None) -> list[Update]:
         return feed(self.push, t, forces, flags)

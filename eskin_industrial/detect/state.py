@@ -192,7 +192,8 @@ class Decision:
                 varying = 1.0  # slip evidence not yet confirmed: something is changing
         else:
             self.slip_run = 0
-        held = _VARIABLE if self.latch.update(t, varying) else _STABLE
+        latch = self.latch  # (a latch that is off stays off below 1: no call then)
+        held = _VARIABLE if (varying >= 1.0 or latch.on) and latch.update(t, varying) else _STABLE
         if confirmed:
             if cur != _SLIP:
                 self.state, self.entered_t = _SLIP, t  # slip pre-empts everything, at once
