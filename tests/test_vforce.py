@@ -12,8 +12,11 @@ import pytest
 from eskin_industrial.detect import GraspState, get_method
 from eskin_industrial.detect.settings import VaryingForceSettings
 from eskin_industrial.detect.vforce import ForceVariation, force_variation_batch
-from eskin_industrial.evaluation.metrics import score_scene
-from eskin_industrial.scenes import render
+from eskin_industrial.evaluation.conditions import vibration
+from eskin_industrial.evaluation.corpus import coordinates
+from eskin_industrial.evaluation.families import get_family
+from eskin_industrial.evaluation.metrics import SceneScore, score_scene
+from eskin_industrial.scenes import load_scene, render
 from tests.helpers.scenes import grasp
 
 S = GraspState
@@ -76,6 +79,17 @@ def synthetic(total: np.ndarray, seed: int, noise: float = 0.01) -> np.ndarray:
     shape = grasp(1, noise=0.0)[0]
     rng = np.random.default_rng(seed)
     return np.abs(total[:, None] * shape[None, :] / shape.sum() + rng.normal(0.0, noise, (len(total), 25)))
+
+
+def scored(method: str, settings, rec) -> SceneScore:
+    """``method``'s batch updates over a rendered scene, scored against its truth."""
+    x, y = coordinates(rec)
+    return score_scene(get_method(method).batch(settings, x, y, rec.rate_hz, rec.t, rec.forces), rec.t, rec.labels)
+
+
+def varying_force(settings, **changes):
+    """``settings`` with these ``[detector.varying_force]`` keys changed."""
+    return replace(settings, varying_force=replace(settings.varying_force, **changes))
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -162,7 +176,7 @@ def test_the_hands_pour_is_below_any_threshold_for_its_first_quarter_second_at_1
     signal-to-noise ratio of sqrt(sum of the change^2) / sigma = 2.4 against the total
     force's noise, under the 5 standard deviations the entry needs; at 1 kHz it is 7.6.
     (docs/evaluation.md)"""
-    from eskin_industrial.scenes import load_scene, physics
+    from eskin_industrial.scenes import physics
 
     spec = load_scene("hand")
     rec = render(spec, rate, 0)
@@ -218,15 +232,9 @@ def test_a_machines_50_hz_vibration_at_1_khz_is_no_varying_force(paper_profile, 
     none of it as noise and the ramps read it as a varying force: with a one-frame
     ``hop_s`` the hold's state changes 7 (paper) and 20 times (cof-track) (docs/evaluation.md)."""
     rec = render("vibration", 1000.0, 0)
-    x, y = paper_profile.coordinates_mm
-
-    def still_changes(settings) -> int:
-        table = get_method(method).batch(settings, x, y, rec.rate_hz, rec.t, rec.forces)
-        return score_scene(table, rec.t, rec.labels).still_changes
-
-    assert still_changes(paper_profile.detector) == 0
-    per_frame = replace(paper_profile.detector, varying_force=replace(paper_profile.detector.varying_force, hop_s=0.001))
-    assert still_changes(per_frame) >= 5
+    cfg = paper_profile.detector
+    assert scored(method, cfg, rec).still_changes == 0
+    assert scored(method, varying_force(cfg, hop_s=0.001), rec).still_changes >= 5
 
 
 def test_at_1_khz_the_test_takes_10_ms_means_and_each_hops_score_stands_for_its_frames():
@@ -274,22 +282,12 @@ def test_a_films_creep_after_the_grab_is_no_varying_force_at_1_khz(paper_profile
     at 1 kHz, a tuning seed: `stable` throughout the hold.  Without the margin over the
     slope's own noise (``rate_z`` 0) the first seconds after the grab, where the film
     creeps 1-2 % of the grip a second, changed state 4 times (docs/evaluation.md)."""
-    from eskin_industrial.evaluation.corpus import coordinates
-    from eskin_industrial.evaluation.families import get_family
-    from eskin_industrial.scenes import load_scene
-
     fam = get_family("film-creep")
     assert fam.hook is not None
     rec = render(fam.hook(load_scene("hold")), 1000.0, 2, fam.stream)
-    x, y = coordinates(rec)
-
-    def still_changes(settings) -> int:
-        table = get_method(method).batch(settings, x, y, rec.rate_hz, rec.t, rec.forces)
-        return score_scene(table, rec.t, rec.labels).still_changes
-
-    assert still_changes(paper_profile.detector) == 0
-    no_margin = replace(paper_profile.detector, varying_force=replace(paper_profile.detector.varying_force, rate_z=0.0))
-    assert still_changes(no_margin) >= 3
+    cfg = paper_profile.detector
+    assert scored(method, cfg, rec).still_changes == 0
+    assert scored(method, varying_force(cfg, rate_z=0.0), rec).still_changes >= 3
 
 
 def test_under_machine_vibration_a_swinging_load_stays_one_episode(paper_profile):
@@ -299,17 +297,7 @@ def test_under_machine_vibration_a_swinging_load_stays_one_episode(paper_profile
     for a slope it has only between its turning points, and the state left and
     re-entered at them (8 changes in an episode).  With it, every episode is one entry
     and one exit."""
-    from eskin_industrial.evaluation.conditions import vibration
-    from eskin_industrial.evaluation.corpus import coordinates
-    from eskin_industrial.scenes import load_scene
-
     rec = render(vibration(0.3)(load_scene("hand")), 100.0, 0)
-    x, y = coordinates(rec)
-
-    def most_changes(settings) -> int:
-        table = get_method("cof-track").batch(settings, x, y, rec.rate_hz, rec.t, rec.forces)
-        return max(score_scene(table, rec.t, rec.labels).vf_episode_changes)
-
     cfg = paper_profile.detector
-    assert most_changes(cfg) <= 2
-    assert most_changes(replace(cfg, varying_force=replace(cfg.varying_force, max_rate_per_s=0.0))) >= 6
+    assert max(scored("cof-track", cfg, rec).vf_episode_changes) <= 2
+    assert max(scored("cof-track", varying_force(cfg, max_rate_per_s=0.0), rec).vf_episode_changes) >= 6

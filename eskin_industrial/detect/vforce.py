@@ -116,7 +116,7 @@ class ForceVariation:
         self.horizons, self.base = horizons, base
         self.n = max(horizons) + base
         self._kb = [length * (length + 1) / 2.0 / base for length in horizons]
-        # |num| x this / sigma = T / z;  |slope sum| x this / S = rate / min_rate
+        # |num| x this / sigma = T / z
         self._to_z = [1.0 / (float(v) * settings.z) for v in sd]
         self._mid = [(length + 1) / 2.0 for length in horizons]
         # |slope sum| / min(this x S + that x sigma, ceiling x S)
@@ -200,8 +200,10 @@ class ForceVariation:
             r = abs(wh - kb * bh) * to_z * inv_sigma
             if rate_on:
                 floor = rs * s + rsig * sigma
-                if rmax and floor > rmax * s:
-                    floor = rmax * s
+                if rmax:
+                    cap = rmax * s
+                    if floor > cap:
+                        floor = cap
                 rate = abs(wh - mid * ph) / floor
                 if rate < r:
                     r = rate
@@ -258,7 +260,6 @@ def force_variation_batch(s: np.ndarray, contact: np.ndarray, filled: np.ndarray
 class _Weights(NamedTuple):
     """What the batch test needs of its geometry, worked out once per recording."""
 
-    rate_hz: float  #: the test's own rate (a sample per hop)
     g: np.ndarray  #: the ramps' weights, per horizon (oldest first)
     sd: np.ndarray  #: their noise per unit sample noise
     slope: np.ndarray  #: the least-squares slope sum of the newest L, per horizon (rows like g's)
@@ -276,7 +277,7 @@ class _Weights(NamedTuple):
         for h, length in enumerate(horizons):
             slope[h, n - length:] = np.arange(1.0, length + 1.0) - (length + 1) / 2.0
         rate_s, rate_sigma, rate_max = _rate_scales(settings, horizons, rate_hz)
-        return cls(rate_hz, g, sd, slope, np.array(rate_s), np.array(rate_sigma), np.array(rate_max),
+        return cls(g, sd, slope, np.array(rate_s), np.array(rate_sigma), np.array(rate_max),
                    1.0 / max(1.0, settings.noise_s * rate_hz))
 
 
