@@ -192,6 +192,25 @@ class CofVelocitySettings:
 
 
 @dataclass(frozen=True)
+class CofStepSettings:
+    """Rival ``cof-step``: the plain displacement test (detect/cof_step.py), the
+    yardstick for delay claims."""
+
+    #: Slip when the newest ``step_s`` of the CoF lies this many standard deviations
+    #: of the base's scatter from the base's mean (the distance over both axes, each in
+    #: its own standard deviations); chosen for the false-alarm rate of ``cof-track``
+    #: over the tuning holds (docs/evaluation.md).
+    threshold: float = field(default=4.5, metadata=in_range(1.0, 50.0))
+    #: The newest this long is averaged (two frames at 100 Hz) ...
+    step_s: float = field(default=0.02, metadata=in_range(0.0001, 1.0))
+    #: ... against the centres over ``base_s`` that ended this long before the newest frame.
+    gap_s: float = field(default=0.1, metadata=in_range(0.0, 5.0))
+    base_s: float = field(default=0.5, metadata=in_range(0.001, 10.0))
+    #: The test is taken once this long (every frame at 100 Hz), at any rate.
+    hop_s: float = field(default=0.01, metadata=in_range(0.0001, 1.0))
+
+
+@dataclass(frozen=True)
 class HfEnergySettings:
     """Rival ``hf-energy`` (vibration-based slip detection): energy of the second
     difference of the taxels (or of the total force) against its running baseline."""
@@ -270,6 +289,7 @@ class DetectorSettings:
     #: Settings of the rivals and of the learned ceiling, one section each.
     force_rate: ForceRateSettings = field(default_factory=ForceRateSettings)
     cof_velocity: CofVelocitySettings = field(default_factory=CofVelocitySettings)
+    cof_step: CofStepSettings = field(default_factory=CofStepSettings)
     hf_energy: HfEnergySettings = field(default_factory=HfEnergySettings)
     learned: LearnedSettings = field(default_factory=LearnedSettings)
 

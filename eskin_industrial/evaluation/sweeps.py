@@ -7,6 +7,7 @@ from dataclasses import replace
 from functools import partial
 from typing import Any, Callable, Literal
 
+from ..detect.cof_step import CofStep
 from ..detect.cof_track import CofTrack
 from ..detect.learned import Learned
 from ..detect.methods import get_method
@@ -43,6 +44,8 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
         points.append(("hf-energy", f"total >{thr}x", partial(HfEnergy, threshold=thr, total=True)))
     for thr in (2.0, 4.0, 8.0, 16.0):
         points.append(("cof-velocity", f">{thr} mm/s", partial(CofVelocity, threshold_mm_s=thr)))
+    for thr in (3.5, 4.5, 6.0, 8.0):  # the plain displacement test (4.5: cof-track's false alarms on long holds)
+        points.append(("cof-step", f">{thr:g} sd", partial(CofStep, threshold=thr)))
     for z in (4.0, 5.0, 6.0, 8.0):
         for fast in (0.05, 0.1, 0.2):
             points.append(("cof-track", f"z{z} fast {fast}s", partial(CofTrack, z=z, fast_s=fast)))
@@ -61,5 +64,5 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
 
 
 def defaults() -> dict[str, Callable[..., Any]]:
-    names = ("paper", "paper-coe", "paper-dw", "force-rate", "hf-energy", "cof-velocity", "cof-track")
+    names = ("paper", "paper-coe", "paper-dw", "force-rate", "hf-energy", "cof-velocity", "cof-step", "cof-track")
     return {n: get_method(n).stream for n in names}
