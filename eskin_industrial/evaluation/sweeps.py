@@ -56,6 +56,10 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
     points.append(("cof-track", "no ripple evidence", partial(CofTrack, ripple_s=0.0)))
     for support in (0.0, 3.0, 4.5):
         points.append(("cof-track", f"ramp support z{support:g}", partial(CofTrack, ramp_support_z=support)))
+    # the step channel: off, and its threshold around the default
+    points.append(("cof-track", "no step channel", partial(CofTrack, step_s=0.0)))
+    for step_z in (5.5, 6.0, 7.5):
+        points.append(("cof-track", f"step z{step_z:g}", partial(CofTrack, step_z=step_z)))
     if importlib.util.find_spec("sklearn") is not None:  # the optional extra: one model, several decision rules
         model = default_model()  # trained here, once per process
         for p, hops in ((0.5, 1), (0.7, 1), (0.5, 2), (0.7, 2), (0.5, 3), (0.7, 3)):
