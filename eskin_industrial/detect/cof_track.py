@@ -127,7 +127,6 @@ class CofTrack(ScoredDetector):
         # total's learnt noise, in z standard deviations
         self._level_rate = c.force_rate_per_s * c.fast_s
         self._level_noise = c.z * c.z * jumps.level_weight if jumps is not None else 0.0
-        self.step_score = 0.0
         # the torsion channel (detect/torsion.py): a turn keeps the CoF and the total
         # (it works on each of its hops' mean: its times count them)
         grid = grid_of(x_mm, y_mm) if c.torsion else None
@@ -184,35 +183,6 @@ class CofTrack(ScoredDetector):
         if energy is None or not rnoise > 0.0:
             return 0.0
         return variance_evidence(energy / rnoise, self._ripple_dof)
-
-    def _step_score(self, dx: float, dy: float, s: float, evidence: float, noise: float) -> float:
-        """The step channel's score (1 = threshold) for a difference (dx, dy) at total
-        ``s``: against its learnt noise per axis, never below white noise's share of
-        the frame noise ``noise`` (q), the evidence added (capped), and the
-        displacement floor."""
-        vx, vy = self._step_vx, self._step_vy
-        qx = self._noise_x
-        white = self._step_white
-        if qx * white > vx:
-            vx = qx * white
-        if (noise - qx) * white > vy:
-            vy = (noise - qx) * white
-        floor = 0.0025 * (vx + vy)  # (a constant axis, a strip's y, stays harmless)
-        if not vx > floor:
-            vx = floor
-        if not vy > floor:
-            vy = floor
-        if not vx > 0.0:
-            return 0.0
-        if evidence > self._step_cap:
-            evidence = self._step_cap
-        rs = math.sqrt((dx * dx / vx + dy * dy / vy) * s * s + 2.0 * evidence) / self._step_z
-        if self.ramp_min > 0.0:
-            mm = math.sqrt(dx * dx + dy * dy) / self.ramp_min
-            if mm < rs:
-                rs = mm
-        self.step_score = rs
-        return rs
 
     def score(self, t, f, s, xc, yc):
         # (hot path: one call per frame at any rate, ten per paper hop at 100 Hz; so
@@ -355,11 +325,36 @@ class CofTrack(ScoredDetector):
             self._level_calm = calm_level = self._level_calm + 1 if change * change <= limit else 0
             level_open = calm_level > self._steady_n
             if hop_end and level_open and self._step_learnt and step.ready:
+                # (the step's score, written out: a call a frame at 100 Hz) against its learnt
+                # noise per axis, never below white noise's share of q; the evidence added
+                # (capped: the step must reach ramp_support_z itself); the displacement floor
                 if raw < 0.0:
                     raw = self._evidence()
-                rs = self._step_score(step.dx, step.dy, s, raw, noise)
-                if rs > r:
-                    r = rs
+                vx, vy = self._step_vx, self._step_vy
+                qx = self._noise_x
+                white = self._step_white
+                if qx * white > vx:
+                    vx = qx * white
+                if (noise - qx) * white > vy:
+                    vy = (noise - qx) * white
+                floor = 0.0025 * (vx + vy)  # (a constant axis, a strip's y, stays harmless)
+                if not vx > floor:
+                    vx = floor
+                if not vy > floor:
+                    vy = floor
+                if vx > 0.0:
+                    jx, jy = step.dx, step.dy
+                    if raw > self._step_cap:
+                        raw = self._step_cap
+                    rs = math.sqrt((jx * jx / vx + jy * jy / vy) * s * s + 2.0 * raw) / self._step_z
+                    if rs > r:  # (else min(rs, mm) cannot raise r: mm is not needed)
+                        lim = self.ramp_min
+                        if lim > 0.0:
+                            mm = math.sqrt(jx * jx + jy * jy) / lim
+                            if mm < rs:
+                                rs = mm
+                        if rs > r:
+                            r = rs
                 self._ramp_on = r > 1.0
         turn = self._turn
         if turn is not None:

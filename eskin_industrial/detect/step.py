@@ -59,17 +59,17 @@ class StepTest:
         self._resync_every = self.n * max(1, round(500 / self.n))
         #: the level change's variance per unit variance of one total (white noise)
         self.level_weight = 1.0 / self.gap + 1.0 / self.base
+        self._geometry = (self.newest, self.gap, self.n)
         self.reset()
 
     def reset(self) -> None:
         self._x = [0.0] * self.n  # the last n centres and totals, a ring; ``_i`` the oldest
         self._y = [0.0] * self.n
         self._s = [0.0] * self.n
-        self._gs = self._bs = 0.0  # sums of the total over the gap (the newest ``gap``) and the base
         self._i = 0
         self.count = 0
-        self._nx = self._ny = 0.0  # sums of the newest ``newest``
-        self._bx = self._by = 0.0  # sums of the base (the oldest ``base``)
+        #: sums of the newest ``newest`` (x, y), of the total over the gap, of the base (x, y, total)
+        self._sums = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         #: ``d`` (mm) and the level change after the latest push (0 until ``ready``)
         self.dx = self.dy = self.level = 0.0
         self.ready = False
@@ -77,19 +77,22 @@ class StepTest:
     def push(self, x: float, y: float, s: float) -> bool:
         """Add a centre and its total; whether ``gap + base`` are in (then :attr:`dx`,
         :attr:`dy` and :attr:`level` hold the test's values)."""
-        i, n = self._i, self.n
+        newest, gap, n = self._geometry
+        i = self._i
         ring_x, ring_y, ring_s = self._x, self._y, self._s
         count = self.count
         # the newest ``newest`` lose the one that many pushes ago; the base gains the one
         # ``gap`` pushes ago and loses the oldest (the ring holds the base first)
-        nx, ny, gs = self._nx + x, self._ny + y, self._gs + s
-        if count >= self.newest:
-            j = i - self.newest  # (a negative index counts from the end)
+        nx, ny, gs, bx, by, bs = self._sums
+        nx += x
+        ny += y
+        gs += s
+        if count >= newest:
+            j = i - newest  # (a negative index counts from the end)
             nx -= ring_x[j]
             ny -= ring_y[j]
-        bx, by, bs = self._bx, self._by, self._bs
-        if count >= self.gap:
-            j = i - self.gap
+        if count >= gap:
+            j = i - gap
             bx += ring_x[j]
             by += ring_y[j]
             old = ring_s[j]
@@ -105,26 +108,24 @@ class StepTest:
         i += 1
         self._i = i if i < n else 0
         count = self.count = count + 1
-        self._nx, self._ny, self._gs, self._bx, self._by, self._bs = nx, ny, gs, bx, by, bs
+        self._sums = (nx, ny, gs, bx, by, bs)
         if count % self._resync_every == 0:  # against the running sums' rounding drift
             self._resync()
-            nx, ny, gs, bx, by, bs = self._nx, self._ny, self._gs, self._bx, self._by, self._bs
+            nx, ny, gs, bx, by, bs = self._sums
         if count < n:
             return False
         self.ready = True
-        self.dx = nx / self.newest - bx / self.base
-        self.dy = ny / self.newest - by / self.base
-        self.level = gs / self.gap - bs / self.base
+        base = self.base
+        self.dx = nx / newest - bx / base
+        self.dy = ny / newest - by / base
+        self.level = gs / gap - bs / base
         return True
 
     def _resync(self) -> None:
         """The sums again from the ring (a whole number of rounds: oldest first)."""
-        self._bx = math.fsum(self._x[:self.base])
-        self._by = math.fsum(self._y[:self.base])
-        self._nx = math.fsum(self._x[self.n - self.newest:])
-        self._ny = math.fsum(self._y[self.n - self.newest:])
-        self._bs = math.fsum(self._s[:self.base])
-        self._gs = math.fsum(self._s[self.base:])
+        base, cut = self.base, self.n - self.newest
+        self._sums = (math.fsum(self._x[cut:]), math.fsum(self._y[cut:]), math.fsum(self._s[base:]),
+                      math.fsum(self._x[:base]), math.fsum(self._y[:base]), math.fsum(self._s[:base]))
 
     def difference(self) -> tuple[float, float] | None:
         """``d`` (mm), or None until ``gap + base`` centres are in."""
