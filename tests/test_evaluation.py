@@ -325,3 +325,19 @@ def test_the_family_map_marks_the_families_that_miss_a_target_and_every_unseen_t
     assert turns[5.0]["unseen"] == turns[5.0]["events"] == 1 and turns[20.0]["found"] == 1
     assert all(t["unflagged"] == 0 for t in turns.values())
     assert any("line-contact" in line for line in lines)
+
+
+def test_the_slides_force_ripple_is_a_condition_of_the_command_not_of_the_map():
+    from click.testing import CliRunner
+
+    from eskin_industrial.cli import main
+    from eskin_industrial.evaluation.conditions import CONDITIONS, MORE_CONDITIONS
+    from eskin_industrial.scenes import load_scene
+
+    spec = MORE_CONDITIONS["ripple"][2](0.12)(load_scene("case6"))
+    assert [e.stick_slip_force for e in spec.events if e.kind == "slide"] == [0.12] * 4
+    assert spec.events[0] == load_scene("case6").events[0] and "ripple" not in CONDITIONS  # the map's nine stay
+    res = CliRunner().invoke(main, ["evaluate", "-m", "cof-step", "-s", "case2", "--seeds", "0",
+                                    "--condition", "ripple=0.12"])
+    assert res.exit_code == 0, res.output
+    assert res.output.startswith("# eskin-bus evaluate --seeds 0 --rate 100 --condition ripple=0.12 ")

@@ -72,7 +72,7 @@ def _seeds(value: str) -> tuple[int, ...]:
               help="Take the detector settings from this profile's [detector] (default: the built-in defaults).")
 @click.option("--condition", "conditions", multiple=True, metavar="NAME=VALUE",
               help="Push one property of every scene as the failure map does (repeatable), e.g. noise=0.1, "
-                   "vibration=0.3, drops=0.2, dead=8, force=0.15, onset=1 (evaluation/conditions.py).")
+                   "vibration=0.3, drops=0.2, dead=8, force=0.15, onset=1, ripple=0.08 (evaluation/conditions.py).")
 @click.option("--within", "within_ms", multiple=True, type=click.IntRange(min=0),
               help="Also print the share of slip events found within this many ms of onset (repeatable).")
 @click.option("--families", "show_families", is_flag=True, help="List the effect families and exit.")
@@ -247,14 +247,15 @@ def _json_row(r: Any, res: dict[str, Any], within_ms: tuple[int, ...]) -> dict[s
 
 def _conditions(items: tuple[str, ...]) -> Any:
     """One scene hook from NAME=VALUE items (the failure map's conditions, but the rate)."""
-    from ..evaluation.conditions import CONDITIONS
+    from ..evaluation.conditions import CONDITIONS, MORE_CONDITIONS
 
+    every = {**CONDITIONS, **MORE_CONDITIONS}
     hooks = []
     for item in items:
         name, _, value = item.partition("=")
-        entry = CONDITIONS.get(name)
+        entry = every.get(name)
         if entry is None or entry[2] is None:
-            known = ", ".join(n for n, c in CONDITIONS.items() if c[2] is not None)
+            known = ", ".join(n for n, c in every.items() if c[2] is not None)
             raise click.BadParameter(f"{item!r}: expected NAME=VALUE with NAME one of {known} (the rate is --rate)",
                                      param_hint="--condition")
         try:
