@@ -4,8 +4,8 @@ The node keeps its newest scan in ``taxels x words`` registers from the profile'
 ``[modbus.node] start_address`` (input registers for function 4, holding registers
 for function 3), row-major, each the calibration's raw value as ``value_type``;
 with ``counter_register`` the node's scan counter comes first.
-:func:`encode_scan` / :func:`decode_scans` are the pure codec; the poller
-(``modbus_source``) and the simulator here share them.
+:func:`encode_scan` / :func:`decode_scans` are the pure codec; the RTU source
+(``bus/modbus/rtu.py``) and the simulator here share them.
 """
 
 from __future__ import annotations
@@ -16,9 +16,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..bus.modbus.codec import ILLEGAL_ADDRESS, ILLEGAL_FUNCTION, encode_scan, register_count
-from ..bus.modbus.io import RegisterServer, SerialSettings
+from ..bus.modbus.codec import encode_scan, register_count
 from ..calibration import Calibrator
+from ..modbus.exception_codes import ILLEGAL_ADDRESS, ILLEGAL_FUNCTION
+from ..modbus.pymodbus_io import RegisterServer
+from ..modbus.serial_line import SerialSettings
 from ..profile import ModbusNodeSection, Profile
 
 

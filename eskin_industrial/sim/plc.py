@@ -15,10 +15,11 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from ..bus.modbus.codec import ILLEGAL_ADDRESS
-from ..bus.modbus.io import RegisterServer, SerialSettings
 from ..detect.state import GraspState
 from ..frames import FrameFlag
+from ..modbus.exception_codes import ILLEGAL_ADDRESS
+from ..modbus.pymodbus_io import RegisterServer
+from ..modbus.serial_line import SerialSettings
 from ..plc.image import (
     CMD_ACK,
     IMAGE_COUNT,

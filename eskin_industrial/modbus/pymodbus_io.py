@@ -5,7 +5,7 @@ minor releases; the tested range is pinned in ``pyproject.toml``).
   from a background thread; the handler answers every read and write itself, so
   it decides which addresses exist and which exception a refused request gets.
   The simulators (the sensor node, the PLC stand-in) use it: a server that someone
-  else wrote.  The bridge's server mode has its own (:mod:`.server`, :mod:`.rtu_server`),
+  else wrote.  The bridge's server mode has its own (:mod:`.tcp_server`, :mod:`.rtu_server`),
   for answers that follow the specification and an access policy.
 - :class:`TcpMaster` / :class:`RtuMaster`: synchronous clients that raise
   :class:`ModbusFault` instead of returning error objects.
@@ -20,8 +20,6 @@ import logging
 import socket
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Literal
 
 from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
@@ -31,9 +29,10 @@ from pymodbus.exceptions import ModbusException, NoSuchIdException
 from pymodbus.framer.rtu import FramerRTU
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
-from ...errors import EskinError, ModbusFault
-from ...netaddr import listen_problem
+from ..errors import EskinError, ModbusFault
+from ..netaddr import listen_problem
 from .pdu import RegisterHandler, Table
+from .serial_line import SerialSettings
 
 
 _TABLE_OF_FC: dict[int, Table] = {1: "coils", 5: "coils", 15: "coils", 2: "discrete", 3: "holding", 6: "holding",
@@ -81,14 +80,6 @@ class _HandlerContext(ModbusServerContext):
 
     def device_ids(self):
         return sorted(self.unit_ids) if self.unit_ids is not None else [0]
-
-
-@dataclass(frozen=True)
-class SerialSettings:
-    port: str
-    baudrate: int = 115200
-    parity: Literal["N", "E", "O"] = "N"
-    stopbits: int = 1
 
 
 class RegisterServer:
@@ -300,12 +291,3 @@ class RtuMaster:
 def _valid_frame(data: bytes) -> bool:
     return len(data) >= 4 and FramerRTU.compute_CRC(data[:-2]) == int.from_bytes(data[-2:], "big")
 
-
-def rtu_transaction_s(count: int, baudrate: int, bits_per_char: int = 11) -> float:
-    """The theoretical time of one read of ``count`` registers: an 8-byte request, a
-    5 + 2·count byte response, each preceded by the 3.5-character silence (1.75 ms
-    fixed above 19200 baud, as the Modbus serial line specification says)."""
-    chars = 8 + 5 + 2 * count
-    char_s = bits_per_char / baudrate
-    gap = 1.75e-3 if baudrate > 19200 else 3.5 * char_s
-    return chars * char_s + 2 * gap

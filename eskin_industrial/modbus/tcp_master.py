@@ -15,8 +15,9 @@ import threading
 import time
 from collections.abc import Sequence
 
-from ...errors import DecodeError, ModbusFault
+from ..errors import DecodeError, ModbusFault
 from . import mbap
+from .exception_codes import exception_name
 
 
 class PipelinedTcpMaster:
@@ -96,7 +97,7 @@ class PipelinedTcpMaster:
                 continue
             if resp.exception:
                 raise ModbusFault("exception", f"{self.where} answered exception {resp.exception:02d} "
-                                  f"({mbap.exception_name(resp.exception)}) to function {resp.function}",
+                                  f"({exception_name(resp.exception)}) to function {resp.function}",
                                   resp.exception)
             return resp
 
