@@ -4,9 +4,9 @@ the poller's handling of whatever a read returns.
 pymodbus' master does the RTU framing itself; what is ours is fuzzed here without a
 serial line: the codec (:func:`encode_scan` / :func:`decode_scans`), the simulated
 node's register file, and :class:`RtuSource` with a stand-in master that answers each
-read with random words, wrong counts or faults, and the CRC check that tells garbled
-frames from timeouts.  The 32-bit word split is fuzzed beside its module, in
-tests/test_modbus_words.py.
+read with random words, wrong counts or faults.  The protocol's own pieces are fuzzed
+beside their modules: the 32-bit word split in tests/test_modbus_words.py, the CRC
+check that tells garbled frames from timeouts in tests/test_modbus_rtu_frame.py.
 """
 from __future__ import annotations
 
@@ -16,13 +16,11 @@ import math
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
-from pymodbus.framer.rtu import FramerRTU
 
 from eskin_industrial import load_profile
 from eskin_industrial.bus.modbus.codec import decode_scans, encode_scan, register_count
 from eskin_industrial.bus.modbus.rtu import RtuSource
 from eskin_industrial.errors import ModbusFault
-from eskin_industrial.modbus.pymodbus_io import _valid_frame
 from eskin_industrial.profile import ModbusNodeSection
 from eskin_industrial.sim.modbus_node import NodeRegisters
 from tests.helpers.fuzz import fuzz
@@ -140,22 +138,3 @@ def test_the_poller_survives_any_answer_and_counts_every_attempt(data):
     assert all(b > a for a, b in zip(seqs, seqs[1:])), seqs
     if node.counter_register:
         assert all(s.t == s.seq / profile.sensor.rate_hz for s in scans)
-
-
-@fuzz(200)
-@given(body=st.binary(min_size=2, max_size=40), flip=st.integers(0, 10**6))
-def test_the_rtu_frame_check_accepts_intact_frames_and_no_single_bit_error(body, flip):
-    frame = body + FramerRTU.compute_CRC(body).to_bytes(2, "big")
-    assert _valid_frame(frame)
-    bit = flip % (8 * len(frame))
-    garbled = bytearray(frame)
-    garbled[bit // 8] ^= 1 << (bit % 8)
-    assert not _valid_frame(bytes(garbled))  # CRC-16 catches every single-bit error
-
-
-@fuzz(300)
-@given(data=st.binary(max_size=300))
-def test_the_rtu_frame_check_takes_any_bytes(data):
-    assert _valid_frame(data) in (True, False)
-    if len(data) < 4:
-        assert _valid_frame(data) is False
