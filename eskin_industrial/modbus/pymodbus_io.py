@@ -175,10 +175,6 @@ class TcpMaster:
         if not ok:
             raise ModbusFault("connection", f"cannot connect to {self.host}:{self.port}")
 
-    @property
-    def connected(self) -> bool:
-        return self._client.socket is not None
-
     def write_registers(self, address: int, values: Sequence[int]) -> None:
         try:
             r = self._client.write_registers(address, list(values), device_id=self.unit_id)
@@ -243,10 +239,6 @@ class RtuMaster:
 
     def read_holding(self, address: int, count: int) -> list[int]:
         return self.read(3, address, count)
-
-    @property
-    def connected(self) -> bool:
-        return bool(self._client.connected)
 
     def reset_input(self) -> None:
         """Drop whatever is pending on the line (after garbage)."""

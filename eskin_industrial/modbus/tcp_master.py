@@ -46,10 +46,6 @@ class PipelinedTcpMaster:
         self.sock = sock
         self._rx.clear()
 
-    @property
-    def connected(self) -> bool:
-        return self.sock is not None
-
     def close(self) -> None:
         sock, self.sock = self.sock, None
         if sock is not None:
