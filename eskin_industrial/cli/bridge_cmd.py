@@ -17,10 +17,10 @@ import click
 
 from .can_common import bus_options
 from .console import verbosity
-from .outputs import given_output_options, output_options, outputs_from_cli
+from .outputs import given_output_options, node_outputs_from_cli, output_options, outputs_from_cli
 
 
-def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_address: int | None,
+def node_from_options(profile_path: str, source: str, bus: dict[str, Any], outputs: dict[str, Any],
                       rate_hz: float | None, name: str):
     """One ``[[node]]`` from ``--source KIND:WHERE`` and python-can's bus options."""
     from ..bridge.config import NodeConfig
@@ -38,7 +38,7 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_
         keys = cls.options_from_spec(where, bus)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--source") from None
-    return NodeConfig.of(name, profile_path, cls.kind, rate_hz=rate_hz, base_address=base_address, **keys)
+    return NodeConfig.of(name, profile_path, cls.kind, rate_hz=rate_hz, outputs=outputs, **keys)
 
 
 @click.command()
@@ -52,8 +52,6 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_
                    "recording:FILE.csv.")
 @bus_options
 @output_options
-@click.option("--base-address", type=click.IntRange(0, 65000), default=None,
-              help="One node: its register block (default: the profile's).")
 @click.option("--rate", "rate_hz", type=click.FloatRange(min=0.1), default=None,
               help="One node: scan rate in Hz (default: the profile's).")
 @click.option("--name", default="node", show_default=True, help="One node: its name in logs.")
@@ -67,7 +65,7 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_
 @click.option("--check", is_flag=True, help="Validate the configuration and profiles, print the plan, exit.")
 @click.option("--explain", is_flag=True,
               help="With --check: also every node's resolved settings and where each came from.")
-def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, bus_extra, base_address, rate_hz,
+def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, bus_extra, rate_hz,
            name, log_format, log_level, status_every, duration_s, check, explain, **output_values) -> None:
     """Run the bridge: decode each node's scans, detect, and keep the outputs (by
     default the PLC's register blocks) up to date, until SIGTERM, SIGINT, SIGHUP or
@@ -90,14 +88,13 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     if config_path is not None:
         given = [opt for opt, value in (("--source", source != "can"), ("-i", interface), ("-c", channel),
                                         ("-b", bitrate), ("--fd", fd is not None), ("--data-bitrate", data_bitrate),
-                                        ("--base-address", base_address is not None),
                                         ("--rate", rate_hz), ("--name", name != "node")) if value]
         given += given_output_options(output_values)
         if given:  # never silently ignored: the file says it all
             raise click.UsageError(f"{', '.join(given)}: one-node options; with --config the file gives them")
         cfg = load_bridge_config(config_path)
     else:
-        node = node_from_options(profile_path, source, bus, base_address, rate_hz, name)
+        node = node_from_options(profile_path, source, bus, node_outputs_from_cli(output_values), rate_hz, name)
         cfg = BridgeConfig(node=(node,), outputs=outputs_from_cli(output_values))
     log_level = log_level or {-1: "warning", 1: "debug", 2: "debug"}.get(verbosity())  # -q / -v
     logs = replace(cfg.log, **{k: v for k, v in (("format", log_format), ("level", log_level),
