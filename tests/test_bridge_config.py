@@ -4,6 +4,7 @@ opens anything."""
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import subprocess
@@ -236,3 +237,28 @@ def test_command_line_errors(tmp_path):
     assert res.returncode == 2 and "give --config FILE, or --profile P" in res.stderr
     res = cli("-p", PAPER, "--source", "scene:case2", "--plc", "serve:127.0.0.1:1502", "--check")
     assert res.returncode == 0 and "scene case2 -> PLC server block at 0" in res.stdout, res.stderr
+
+
+def test_a_file_with_moved_keys_is_one_warning_line_each_and_runs(tmp_path):
+    """From the command line: ``--check`` says each moved key in one line on stderr and
+    passes; ``profile check`` too; a run logs it as an event in the log's own format."""
+    old_profile = Path(PAPER).read_text().replace("\nrefresh_s = 0.05\n", "\n").replace(
+        "r_scale = 100.0\n", "r_scale = 100.0\nrefresh_s = 0.05\n", 1)
+    (tmp_path / "old.toml").write_text(old_profile)
+    port = free_port()
+    path = write(tmp_path, TWO_NODES.replace("[node.plc]\nbase_address = 100", "base_address = 100").replace(
+        '"{profile}"', '"old.toml"'), port=port)
+    res = cli("--config", str(path), "--check")
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.splitlines() == [
+        f"eskin-bus: warning: {path}: [node[1]] base_address is deprecated: write [node.plc] base_address",
+        f"eskin-bus: warning: {tmp_path / 'old.toml'}: [modbus.plc] refresh_s is deprecated: write [output] refresh_s"]
+    checked = subprocess.run([sys.executable, "-m", "eskin_industrial", "profile", "check", str(tmp_path / "old.toml")],
+                             capture_output=True, text=True, timeout=60)
+    assert checked.returncode == 0 and checked.stdout.startswith(f"{tmp_path / 'old.toml'}: ok")
+    assert checked.stderr == (f"eskin-bus: warning: {tmp_path / 'old.toml'}: [modbus.plc] refresh_s is deprecated: "
+                              "write [output] refresh_s\n")
+    run = cli("--config", str(path), "--duration", "0.2")
+    events = [json.loads(line) for line in run.stderr.splitlines() if line.startswith("{")]
+    moved = [e for e in events if e["event"] == "deprecated_key"]
+    assert len(moved) == 2 and moved[0]["level"] == "warning" and "[node.plc] base_address" in moved[0]["message"]

@@ -11,10 +11,12 @@ counters): bridge/signals.py, and the table in docs/operations.md.
 from __future__ import annotations
 
 import sys
+import warnings
 from typing import Any
 
 import click
 
+from ..errors import DeprecatedKey
 from .can_common import bus_options
 from .console import verbosity
 from .outputs import given_output_options, node_outputs_from_cli, output_options, outputs_from_cli
@@ -92,17 +94,27 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
         given += given_output_options(output_values)
         if given:  # never silently ignored: the file says it all
             raise click.UsageError(f"{', '.join(given)}: one-node options; with --config the file gives them")
-        cfg = load_bridge_config(config_path)
+        with warnings.catch_warnings(record=True) as moved:  # logged once the log is there (below)
+            warnings.simplefilter("always", DeprecatedKey)
+            cfg = load_bridge_config(config_path)
     else:
+        moved = []
         node = node_from_options(profile_path, source, bus, node_outputs_from_cli(output_values), rate_hz, name)
         cfg = BridgeConfig(node=(node,), outputs=outputs_from_cli(output_values))
     log_level = log_level or {-1: "warning", 1: "debug", 2: "debug"}.get(verbosity())  # -q / -v
     logs = replace(cfg.log, **{k: v for k, v in (("format", log_format), ("level", log_level),
                                                    ("status_every_s", status_every)) if v is not None})
     cfg = replace(cfg, log=logs)
-    nodes = resolve(cfg)  # every profile loads and the nodes fit together, or one line and exit 2
+    with warnings.catch_warnings(record=True) as moved_in_profiles:
+        warnings.simplefilter("always", DeprecatedKey)
+        nodes = resolve(cfg)  # every profile loads and the nodes fit together, or one line and exit 2
+    # once each (two nodes on one profile load it twice)
+    deprecated = list(dict.fromkeys(str(w.message) for w in (*moved, *moved_in_profiles)
+                                    if issubclass(w.category, DeprecatedKey)))
     check_sources(cfg, nodes)  # files and scenes the sources need exist
     if check:
+        for line in deprecated:
+            click.echo(f"eskin-bus: warning: {line}", err=True)
         probe_outputs(cfg, nodes)  # a server's port is free (the run would fail to listen)
         outputs = output_classes(cfg)
         for n in nodes:
@@ -117,6 +129,8 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
         raise click.UsageError("--explain goes with --check")
     quiet_pymodbus()
     log = EventLog(sys.stderr, logs.format, logs.level)
+    for line in deprecated:  # in the log's own format: a JSON log stays JSON
+        log.event("deprecated_key", level="warning", message=line)
     br = Bridge(cfg, nodes, log, notifier=Notifier.from_env())
     # From here on, no signal but KILL ends the process without the offline image
     # (a signal during open stops the bridge as soon as it has started).
