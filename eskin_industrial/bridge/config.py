@@ -58,7 +58,7 @@ from ..bus.source import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES, Source, source_
 from ..errors import DeprecatedKey, ProfileError
 from ..profile import MAX_RATE_HZ, Profile, derived_stale_s, load_profile
 from ..schema import SchemaError, build, in_range, positive_at_most, read_toml_file
-from ..sinks.base import DEFAULT_OUTPUT, SINKS, Sink, sink_class
+from ..sinks.base import DEFAULT_OUTPUT, Sink, sink_class, sink_kinds
 
 COMMAND_LINE = "<command line>"
 
@@ -145,7 +145,7 @@ class BridgeConfig:
     def output_kinds(self, default_output: bool = True) -> dict[str, Any]:
         """The outputs to open: the configured ones, or the default one."""
         if self.outputs or not default_output:
-            return {k: self.outputs[k] for k in SINKS if k in self.outputs}
+            return {k: self.outputs[k] for k in sink_kinds() if k in self.outputs}
         return {DEFAULT_OUTPUT: sink_class(DEFAULT_OUTPUT).default_options()}
 
 
@@ -193,14 +193,14 @@ def parse_bridge_config(text: str, source: str) -> BridgeConfig:
         raise ProfileError(f"{source}: not valid TOML: {exc}") from None
     nodes_raw = table.pop("node", None)
     outputs: dict[str, Any] = {}
-    for kind in SINKS:
+    for kind in sink_kinds():
         if kind in table:
             outputs[kind] = _section(sink_class(kind).Options, table.pop(kind), kind, source)
     try:
         top = build(_Top, table)
     except SchemaError as exc:
         if exc.message.startswith("unknown key"):
-            valid = ["node", *SINKS, *(f.name for f in dataclasses.fields(_Top))]
+            valid = ["node", *sink_kinds(), *(f.name for f in dataclasses.fields(_Top))]
             near = difflib.get_close_matches(exc.key, valid, n=1, cutoff=0.6)
             hint = f"did you mean {near[0]!r}?" if near else f"valid sections: {', '.join(valid)}"
             raise ProfileError(f"{source}: [{exc.key}]: unknown section; {hint}") from None
@@ -232,7 +232,7 @@ def _node(raw: Any, index: int, source: str) -> NodeConfig:
         raise ProfileError(f"{source}: {label} source: {exc}") from None
     raw = _moved_node_keys(dict(raw), label, source)
     outputs: dict[str, Any] = {}
-    for out_kind in SINKS:
+    for out_kind in sink_kinds():
         if out_kind in raw:
             table = raw.pop(out_kind)
             if not isinstance(table, dict):
@@ -264,7 +264,7 @@ def _node(raw: Any, index: int, source: str) -> NodeConfig:
 def _moved_node_keys(raw: dict[str, Any], label: str, source: str) -> dict[str, Any]:
     """``[[node]]`` keys of earlier releases that an output kind now owns
     (``base_address`` -> ``[node.plc] base_address``): moved, with one warning each."""
-    for kind in SINKS:
+    for kind in sink_kinds():
         for old, new in sink_class(kind).moved_node_keys.items():
             if old not in raw:
                 continue
@@ -393,7 +393,7 @@ def explain(config: BridgeConfig, node: ResolvedNode) -> list[tuple[str, Any, st
     out.append(("rate_hz", node.rate_hz, given if c.rate_hz is not None else prof))
     out.append(("source", c.source, given))
     add("", c.options, node.kind.profile_keys, given)
-    for kind in SINKS:  # the output kinds' keys of this node, as the profile resolves them
+    for kind in sink_kinds():  # the output kinds' keys of this node, as the profile resolves them
         cls = sink_class(kind)
         for key, profile_key in cls.node_profile_keys.items():
             mine = c.outputs.get(kind)

@@ -26,7 +26,7 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], outpu
                       rate_hz: float | None, name: str):
     """One ``[[node]]`` from ``--source KIND:WHERE`` and python-can's bus options."""
     from ..bridge.config import NodeConfig
-    from ..bus.source import SOURCES, source_class
+    from ..bus.source import source_class, source_kinds
     from ..errors import ProfileError
 
     kind, _, where = source.partition(":")
@@ -34,7 +34,7 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], outpu
     try:
         cls = source_class(kind)
     except ProfileError as exc:
-        specs = ", ".join(source_class(k).spec for k in SOURCES)
+        specs = ", ".join(source_class(k).spec for k in source_kinds())
         raise click.BadParameter(f"{exc}; expected {specs}", param_hint="--source") from None
     try:
         keys = cls.options_from_spec(where, bus)

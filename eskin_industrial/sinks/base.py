@@ -19,7 +19,8 @@ The public methods are written once here over private hooks (``_publish``,
 ``_close``), as python-can's ``BusABC.send`` over its backend's hook.
 
 An *output kind* is one module plus one entry in :data:`SINKS` (section name ->
-``module:Class``, imported on first use).  The class declares what the bridge
+``module:Class``, imported on first use), or a plug-in: an entry point of the group
+``eskin_industrial.sinks`` in another distribution (:mod:`eskin_industrial.registry`).  The class declares what the bridge
 configuration (its own ``[SECTION]`` of ``bridge.toml``), the command line
 (:attr:`Sink.cli_options`) and ``--check`` need, and opens one sink per node
 (:meth:`Sink.open_nodes`; a kind may share one connection between its nodes, as the
@@ -37,7 +38,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from ..registry import load_kind
+from ..registry import SINK_GROUP, kinds, load_kind
 
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
@@ -254,5 +255,11 @@ class Sink(abc.ABC):
 
 def sink_class(kind: str) -> type[Sink]:
     """The class of an output kind by name; an unknown one is one line with the valid names."""
-    cls: type[Sink] = load_kind(SINKS, kind, "output kind", Sink)
+    cls: type[Sink] = load_kind(SINKS, kind, "output kind", Sink, SINK_GROUP)
     return cls
+
+
+def sink_kinds() -> dict[str, str]:
+    """Every output kind: :data:`SINKS`, then the plug-ins (entry-point group
+    ``eskin_industrial.sinks``), in the order of logs, ``--check`` and the options."""
+    return kinds(SINKS, SINK_GROUP)
