@@ -376,7 +376,7 @@ def test_a_tare_queued_before_contact_is_refused_when_applied(paper_profile):
     try:
         loop = bridge_on(paper_profile, server, 8.0)
         settle(loop)
-        from eskin_industrial.plc.image import Command
+        from eskin_industrial.node import Command
 
         server.handler.commands.put(Command("tare"))  # as if written just before the contact
         seen = []

@@ -52,7 +52,7 @@ def wait_for(cond: Callable[[], object], timeout_s: float = 5.0, what: str = "co
 
 def can_node(name: str, ch: str, *, base_id: int | None = None, base_address: int = 0, **kw) -> NodeConfig:
     return NodeConfig.of(name, PAPER, "can", interface="virtual", channel=ch, base_id=base_id,
-                         base_address=base_address, **kw)
+                         outputs={"plc": {"base_address": base_address}}, **kw)
 
 
 def server_config(*nodes: NodeConfig, port: int | None = None, linger_s: float = 0.0,
