@@ -41,11 +41,12 @@ from machine import describe  # noqa: E402  (benchmarks/machine.py)
 from tests.helpers.modbus import free_port, slip_recording  # noqa: E402
 
 from eskin_industrial import load_profile  # noqa: E402
-from eskin_industrial.bus.modbus.io import TcpMaster, quiet_pymodbus, rtu_transaction_s  # noqa: E402
 from eskin_industrial.bus.modbus.rtu import RtuSource  # noqa: E402
 from eskin_industrial.calibration import Calibrator  # noqa: E402
 from eskin_industrial.detect.state import GraspState  # noqa: E402
 from eskin_industrial.frames import RawScan  # noqa: E402
+from eskin_industrial.modbus.pymodbus_io import TcpMaster, quiet_pymodbus  # noqa: E402
+from eskin_industrial.modbus.serial_line import rtu_transaction_s  # noqa: E402
 from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.plc.client import PlcWriter  # noqa: E402
 from eskin_industrial.node import Health, NodeStatus  # noqa: E402

@@ -101,7 +101,7 @@ def test_plc_drops_and_comes_back_while_detection_runs(paper_profile):
 
 
 def test_client_mode_over_rtu(paper_profile, tmp_path):
-    from eskin_industrial.bus.modbus.io import SerialSettings
+    from eskin_industrial.modbus.serial_line import SerialSettings
     from tests.helpers.modbus import pty_pair
 
     settings = paper_profile.modbus.plc

@@ -81,7 +81,7 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     from ..bridge.notify import Notifier
     from ..bridge.runtime import Bridge
     from ..bridge.signals import EXIT_FAILED, handled_signals
-    from ..bus.modbus.io import quiet_pymodbus
+    from ..modbus.pymodbus_io import quiet_pymodbus
 
     if (config_path is None) == (profile_path is None):
         raise click.UsageError("give --config FILE, or --profile P for one node")

@@ -44,9 +44,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from ..bus.modbus.io import RtuMaster, SerialSettings
-from ..bus.modbus.tcp import PipelinedTcpMaster
 from ..errors import ModbusFault, Refused
+from ..modbus.pymodbus_io import RtuMaster
+from ..modbus.serial_line import SerialSettings
+from ..modbus.tcp_master import PipelinedTcpMaster
 from ..node import Command, NodeSnapshot
 from ..profile import ModbusPlcSection
 from ..sinks.base import Sink, SinkHealth

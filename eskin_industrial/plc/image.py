@@ -27,16 +27,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-from ..bus.modbus.codec import (
-    ILLEGAL_ADDRESS,
-    ILLEGAL_VALUE,
-    WordOrder,
-    join32,
-    split32,
-)
 from ..detect.methods import METHODS
 from ..detect.state import GraspState
 from ..errors import Refused
+from ..modbus.exception_codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE
+from ..modbus.words import WordOrder, join32, split32
 from ..node import Command, NodeSnapshot
 from ..profile import ModbusPlcSection
 

@@ -9,9 +9,9 @@ say (:func:`~eskin_industrial.node.refusal`, the rule every output uses).  Accep
 commands are queued for the bridge loop, which applies them (the server thread never
 changes the node's state).
 
-The servers are our own, with one PDU handler (:mod:`..bus.modbus.pdu`): over TCP
-:mod:`..bus.modbus.server` (connection cap, idle timeout, allow-lists, read-only
-mode, unit ids), over RTU :mod:`..bus.modbus.rtu_server` (our unit id, read-only
+The servers are our own, with one PDU handler (:mod:`..modbus.pdu`): over TCP
+:mod:`..modbus.tcp_server` (connection cap, idle timeout, allow-lists, read-only
+mode, unit ids), over RTU :mod:`..modbus.rtu_server` (our unit id, read-only
 mode).
 """
 
@@ -25,12 +25,13 @@ import threading
 import time
 from collections.abc import Sequence
 
-from ..bus.modbus.codec import DEVICE_FAILURE, ILLEGAL_ADDRESS
-from ..bus.modbus.io import SerialSettings
-from ..bus.modbus.pdu import Identity
-from ..bus.modbus.rtu_server import RtuServer
-from ..bus.modbus.server import PEER, Policy, RateLimitedLog, TcpServer, networks
 from ..errors import Refused
+from ..modbus.exception_codes import DEVICE_FAILURE, ILLEGAL_ADDRESS
+from ..modbus.pdu import Identity
+from ..modbus.rtu_server import RtuServer
+from ..modbus.serial_line import SerialSettings
+from ..modbus.serving import RateLimitedLog
+from ..modbus.tcp_server import PEER, Policy, TcpServer, networks
 from ..node import Command, NodeSnapshot, refusal
 from ..profile import ModbusPlcSection
 from ..sinks.base import Sink

@@ -220,7 +220,7 @@ class PlcSink(Sink):
 
     @classmethod
     def open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
-        from ..bus.modbus.io import SerialSettings
+        from ..modbus.serial_line import SerialSettings
         from .client import PlcWriter
         from .server import PlcServer, identity_of, policy_of
 

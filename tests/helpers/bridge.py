@@ -21,8 +21,8 @@ from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
 from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.bus.can.reader import open_bus
-from eskin_industrial.bus.modbus.io import RegisterServer
 from eskin_industrial.calibration import Calibrator
+from eskin_industrial.modbus.pymodbus_io import RegisterServer
 from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
 from eskin_industrial.plc.image import decode_registers as decode
 from eskin_industrial.plc.sink import PlcOptions
