@@ -4,9 +4,11 @@ event of ``SlipAlarmType``.
 
 - Each entry into slip raises it: ActiveState true, AckedState false, Retain true
   (a new slip while it is still active raises it again: one event per slip).
-- The slip's end clears ActiveState; the condition stays retained until it has been
-  acknowledged, so that a SCADA's alarm list keeps an unacknowledged slip that is
-  already over.
+- The slip's end clears ActiveState: a claimed state other than slip, or the bridge
+  stopping.  While nothing is claimed (detection disabled, the sensor stale) the alarm
+  stays as it was: the same slip claimed again is not a new alarm.  The condition
+  stays retained until it has been acknowledged, so that a SCADA's alarm list keeps an
+  unacknowledged slip that is already over.
 - Acknowledge (with the EventId of one of this slip's events) sets AckedState; an
   acknowledged, inactive condition is no longer retained.  Another EventId is
   BadEventIdUnknown; a second acknowledge is BadConditionBranchAlreadyAcked.
@@ -51,7 +53,7 @@ class AlarmState:
             self._ids.clear()
             self._new_id()
             return "raised"
-        if self.active and not slip:
+        if self.active and not slip and (s.state is not None or s.offline):
             self.active = False
             self.retain = not self.acked
             self._new_id()

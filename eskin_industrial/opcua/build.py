@@ -139,6 +139,8 @@ class _Builder:
         attrs.Description = ua.LocalizedText(description)
         attrs.DataType = datatype
         attrs.Value = value
+        if dims is None and isinstance(value.Value, list):
+            dims = [0]  # a one-dimensional array of any length (EnumStrings)
         attrs.ValueRank = ua.ValueRank.Scalar if dims is None else len(dims)
         if dims is not None:
             attrs.ArrayDimensions = [ua.UInt32(d) for d in dims]

@@ -34,7 +34,7 @@ async def _export(path: Path) -> None:
         return call
 
     await build_types(server, idx, no_call)
-    await server.export_xml_by_ns(str(path), [idx])
+    await server.export_xml_by_ns(str(path), [idx], export_values=True)  # EnumStrings, InputArguments
     server.iserver.method_service.stop()
 
 

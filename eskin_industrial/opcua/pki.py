@@ -65,10 +65,13 @@ def make_certificate(pki_dir: str | Path, application_uri: str, name: str, hosts
     alt: list[x509.GeneralName] = [x509.UniformResourceIdentifier(application_uri)]
     for host in dict.fromkeys([*hosts, socket.gethostname()]):
         try:
-            alt.append(x509.IPAddress(ipaddress.ip_address(host)))
+            address = ipaddress.ip_address(host)
         except ValueError:
             alt.append(x509.DNSName(host))
-    cert = generate_self_signed_app_certificate(key, name, {"O": "eskin-industrial"}, alt,
+            continue
+        if not address.is_unspecified:  # 0.0.0.0 and :: are every interface, no address of its own
+            alt.append(x509.IPAddress(address))
+    cert = generate_self_signed_app_certificate(key, name, {"organizationName": "eskin-industrial"}, alt,
                                                 [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
                                                 days=days)
     tmp = key_path.with_name(key_path.name + ".tmp")

@@ -19,6 +19,8 @@ from typing import Any
 
 import pytest
 
+from eskin_industrial.node import NodeSnapshot
+from eskin_industrial.sinks.base import Sink
 from tests.helpers.paths import ROOT
 
 PEER_DIR = ROOT / "tests" / "opcua_peer"
@@ -165,3 +167,34 @@ def wait_listening(port: int, timeout_s: float = 60.0) -> None:
 
 def by_path(nodes: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     return {n["path"]: n for n in nodes}
+
+
+def opcua_config(*nodes: Any, **options: Any) -> Any:
+    """A bridge of these nodes with the OPC UA output alone, on a free loopback port
+    (``options``: more ``[opcua]`` keys)."""
+    from eskin_industrial.bridge.config import BridgeConfig, LogSettings
+    from eskin_industrial.opcua.options import OpcuaOptions
+    from tests.helpers.modbus import free_port
+
+    keys = {"endpoint": f"opc.tcp://127.0.0.1:{free_port()}", "offline_linger_s": 0.3, **options}
+    return BridgeConfig(node=nodes, outputs={"opcua": OpcuaOptions(**keys)},
+                        log=LogSettings(format="json", status_every_s=0))
+
+
+class Capture(Sink):
+    """A sink that keeps every snapshot and frame the loop hands it (beside the
+    OPC UA output, on the same loop): what the server was given."""
+
+    kind = "capture"
+
+    def __init__(self, frame_every_s: float | None = None) -> None:
+        super().__init__()
+        self.snapshots: list[NodeSnapshot] = []
+        self.frames: list[Any] = []
+        self.frame_every_s = frame_every_s
+
+    def _publish(self, snapshot: NodeSnapshot) -> None:
+        self.snapshots.append(snapshot)
+
+    def on_frame(self, frame: Any) -> None:
+        self.frames.append(frame.forces.astype("<f4").copy())

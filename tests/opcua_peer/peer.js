@@ -270,7 +270,9 @@ async function handle(req) {
                 sensorMethods: sensor ? sensor.getMethods().map((c) => c.browseName.name) : null,
                 alarmIsAlarmCondition: alarm ? alarm.isSubtypeOf(addressSpace.findEventType("AlarmConditionType")) : false,
                 alarmProperties: alarm ? alarm.getProperties().map((c) => c.browseName.name) : null,
-                enumStrings: enumeration ? enumeration.getEnumStrings().map((t) => t.text) : null,
+                enumFields: enumeration ? enumeration.getEnumDefinition().fields.map((f) => f.name) : null,
+                enumStrings: enumeration && enumeration.getChildByName("EnumStrings")
+                    ? Array.from(enumeration.getChildByName("EnumStrings").readValue().value.value || []).map((t) => t.text) : null,
                 warnings,
             };
             addressSpace.dispose();
