@@ -11,8 +11,9 @@ const fs = require("fs");
 const {
     OPCUAClient, MessageSecurityMode, SecurityPolicy, AttributeIds, ClientSubscription, ClientMonitoredItem,
     TimestampsToReturn, DataType, BrowseDirection, NodeClass, UserTokenType, constructEventFilter, coerceNodeId,
-    OPCUACertificateManager, StatusCodes, makeBrowsePath,
+    StatusCodes, makeBrowsePath,
 } = require("node-opcua-client");
+const { OPCUACertificateManager } = require("node-opcua-certificate-manager");
 
 let client = null;
 let session = null;
