@@ -170,9 +170,12 @@ def test_security_is_off_only_on_loopback() -> None:
         OpcuaOptions(endpoint="opc.tcp://0.0.0.0:4840", pki_dir="pki")
     with pytest.raises(ValueError, match=r"^security_policies: 'None' on 10.0.0.5, not loopback"):
         OpcuaOptions(endpoint="opc.tcp://10.0.0.5:4840", security_policies=("None",), users_file="u.toml")
-    with pytest.raises(ValueError, match="^pki_dir: a secure policy needs"):
+    with pytest.raises(ValueError, match="^pki_dir: on 0.0.0.0, not loopback, the secure endpoints need"):
         OpcuaOptions(endpoint="opc.tcp://0.0.0.0:4840", users_file="u.toml")
-    allowed = OpcuaOptions(endpoint="opc.tcp://0.0.0.0:4840", security_policies=("None",), allow_insecure=True)
+    with pytest.raises(ValueError, match="^pki_dir: a secure policy needs"):
+        OpcuaOptions(security_policies=("Basic256Sha256_Sign",))
+    allowed = OpcuaOptions(endpoint="opc.tcp://0.0.0.0:4840", allow_insecure=True)
+    assert allowed.policies() == ("None",)
     assert allowed.anonymous and allowed.insecure() == ["SecurityPolicy None", "anonymous sessions (operator)"]
     with pytest.raises(ValueError, match="^users_file: no anonymous sessions and no users"):
         OpcuaOptions(anonymous_role="none")

@@ -72,8 +72,8 @@ class OpcuaOptions:
 
     #: ``opc.tcp://HOST:PORT``: where the server listens (and the URL it gives out).
     endpoint: str = f"opc.tcp://127.0.0.1:{DEFAULT_PORT}"
-    #: The endpoints offered (:data:`POLICIES`); unset: ``None`` on loopback, and the
-    #: four secure ones where a ``pki_dir`` is given (off loopback: the four secure ones).
+    #: The endpoints offered (:data:`POLICIES`); unset: ``None`` on loopback (or with
+    #: ``allow_insecure``), and the four secure ones where a ``pki_dir`` is given.
     security_policies: tuple[str, ...] | None = field(default=None, metadata={"check": (
         _policy_known, "one of " + ", ".join(POLICIES))})
     #: The application instance certificate and the trust lists: ``own/``, ``trusted/``,
@@ -116,10 +116,17 @@ class OpcuaOptions:
     alarm_severity: int = field(default=800, metadata=in_range(1, 1000))
 
     def __post_init__(self) -> None:
-        host, _ = parse_endpoint_url(self.endpoint)
+        try:
+            host, _ = parse_endpoint_url(self.endpoint)
+        except ValueError as exc:
+            text = str(exc)
+            raise ValueError(text if text.startswith("endpoint") else f"endpoint: {text}") from None
         if self.users_file is not None and self.users_env is not None:
             raise ValueError("users_file: give users_file or users_env, not both")
         policies = self.policies()
+        if not policies and self.security_policies is None:
+            raise ValueError(f"pki_dir: on {host}, not loopback, the secure endpoints need a folder for the "
+                             f"certificates (pki_dir)")
         if not policies:
             raise ValueError("security_policies: expected at least one policy")
         if len(set(policies)) != len(policies):
@@ -153,9 +160,8 @@ class OpcuaOptions:
         """The endpoints offered (the default resolved)."""
         if self.security_policies is not None:
             return self.security_policies
-        if not self.loopback:
-            return SECURE_POLICIES
-        return ("None", *SECURE_POLICIES) if self.pki_dir is not None else ("None",)
+        none = ("None",) if self.loopback or self.allow_insecure else ()
+        return none + (SECURE_POLICIES if self.pki_dir is not None else ())
 
     @property
     def anonymous(self) -> bool:

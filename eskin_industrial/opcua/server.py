@@ -64,6 +64,7 @@ _STACK_LINES = (
     ("Closing idle connection", "activation_timeouts", "opcua_activation_timeout"),
     ("Session ", "sessions_timed_out", "opcua_session_timeout"),
     ("Got malformed header", "malformed", "opcua_malformed"),
+    ("Exception raised while processing message", "malformed", "opcua_malformed"),  # a message that does not decode
     ("sending service fault", "service_faults", ""),
 )
 
@@ -267,7 +268,7 @@ class OpcuaServer:
         try:
             await server.start()
         except OSError as exc:
-            raise ProfileError(f"[opcua] port: {listen_error(o.host, o.port, exc)}") from None
+            raise ProfileError(f"[opcua] endpoint: {listen_error(o.host, o.port, exc)}") from None
         self.url = o.endpoint
         fields: dict[str, Any] = dict(endpoint=o.endpoint, policies=",".join(o.policies()),
                                       anonymous=anonymous or "none", users=len(self.users.users))
