@@ -2,13 +2,15 @@
 wins, and the loop never waits.
 
 The loop's side (:meth:`Handover.put`) appends to a bounded deque or replaces a
-slot, then wakes the server at most once until the server has looked
-(:class:`Waker`: one ``call_soon_threadsafe`` per batch, a byte on asyncio's self
-pipe).  Urgent snapshots (a state, validity, latch or health change) are kept in
+slot.  Urgent snapshots (a state, validity, latch or health change) wake the server
+at once, at most once until it has looked (:class:`Waker`: one
+``call_soon_threadsafe`` per batch, a byte on asyncio's self pipe), and are kept in
 order, up to :data:`URGENT_MAX` per node, so that a slip that starts and ends
 between two of the server's turns is still seen (its data changes, its alarm); past
-that bound the oldest go (counted).  A periodic refresh only replaces the previous
-one: the newest wins.
+that bound the oldest go (counted).  A periodic refresh, and a taxel frame, only
+replace the previous one (the newest wins) and wake nobody: the server takes them
+at its next turn, at least every ``refresh_s`` (one wake for every node's refresh,
+not one a node).
 """
 
 from __future__ import annotations
@@ -72,15 +74,14 @@ class Handover:
             if len(urgent) == URGENT_MAX:
                 self.dropped += 1
             urgent.append(item)
+            self.waker.wake()
         else:
             self._latest = item
-        self.waker.wake()
 
     def put_frame(self, forces: Any, wall_time_s: float) -> None:
         if self._frame is not None:
             self.frames_replaced += 1
         self._frame = (forces, wall_time_s)
-        self.waker.wake()
 
     # -- the server's thread ------------------------------------------------------
     def take(self) -> list[NodeSnapshot]:

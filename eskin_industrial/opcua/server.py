@@ -51,11 +51,13 @@ _POLICY_TYPES = {
     "Aes128_Sha256_RsaOaep_SignAndEncrypt": ua.SecurityPolicyType.Aes128Sha256RsaOaep_SignAndEncrypt,
 }
 _METHOD_COMMAND = {"Tare": "tare", "AcknowledgeSlip": "ack"}
+_VALUE = ua.AttributeIds.Value
 _OFFLINE = model.INDEX["Health/Offline"]
 _GROUP_INDEX = {"decision": 0, "measurement": 1, "fact": 2}
 _GROUPS = tuple(_GROUP_INDEX[g] for g in model.GROUPS)
 _VTYPES = tuple(variant_type(v.datatype) for v in model.VARIABLES)
 _UTC = datetime.timezone.utc
+_VARIANT_NONE = ua.Variant(None)
 _REQUESTS = {ua.ObjectIds.CallRequest_Encoding_DefaultBinary: "Call",
              ua.ObjectIds.WriteRequest_Encoding_DefaultBinary: "Write"}
 #: asyncua's log lines that are news, by what they start with: (counter, event).
@@ -89,8 +91,11 @@ class OpcuaServer:
     """One server, every node's object; started and stopped from the bridge's thread."""
 
     def __init__(self, options: OpcuaOptions, infos: Sequence[NodeInfo], users: tuple[UserEntry, ...] = (),
-                 on_event: Callable[..., None] | None = None) -> None:
+                 on_event: Callable[..., None] | None = None, refresh_s: float = 0.05) -> None:
         self.options = options
+        #: How often the server takes the nodes' periodic refreshes (the shortest
+        #: ``[output] refresh_s`` of the nodes): a change is taken at once.
+        self.refresh_s = refresh_s
         self.nodes = [_NodeState(i) for i in infos]
         self.users = Directory(users)
         self.on_event: Callable[..., None] = on_event or (lambda *args, **fields: None)
@@ -162,22 +167,18 @@ class OpcuaServer:
 
     # -- the server's thread ---------------------------------------------------------
     def _run(self) -> None:
-        loop = asyncio.new_event_loop()
-        self._loop = loop
         try:
-            loop.run_until_complete(self._main())
+            # asyncio.run: what is still pending at the end (a vanished client's session
+            # timer) is cancelled and awaited, the loop's executor shut down
+            asyncio.run(self._main())
         finally:
-            try:
-                loop.run_until_complete(loop.shutdown_asyncgens())
-                loop.run_until_complete(loop.shutdown_default_executor())
-            finally:
-                loop.close()
-                self._ready.set()  # (a failure before ready: start() is not left waiting)
+            self._ready.set()  # (a failure before ready: start() is not left waiting)
 
     async def _main(self) -> None:
         self._wake = asyncio.Event()
         wake = self._wake
         loop = asyncio.get_running_loop()
+        self._loop = loop
         def wake_up() -> None:
             loop.call_soon_threadsafe(wake.set)
 
@@ -191,8 +192,12 @@ class OpcuaServer:
             return
         self._ready.set()
         try:
+            tick = self.refresh_s
             while not self._stopping:
-                await wake.wait()
+                try:  # a change at once; the periodic refreshes at every tick
+                    await asyncio.wait_for(wake.wait(), tick)
+                except asyncio.TimeoutError:
+                    pass
                 wake.clear()
                 await self._turn()
             await self._turn()  # the offline snapshots
@@ -311,6 +316,7 @@ class OpcuaServer:
         now = datetime.datetime.now(_UTC)
         last = n.last
         writes = 0
+        aspace = server.iserver.aspace  # (what Server.write_attribute_value calls, two calls down)
         for j, value in enumerate(model.values(s)):
             code = status.GOOD if j == _OFFLINE else q[_GROUPS[j]]  # Offline is known even when stopped
             if status.is_bad(code):
@@ -323,8 +329,8 @@ class OpcuaServer:
             if last[j] == (value, code):
                 continue
             last[j] = (value, code)
-            variant = ua.Variant(None) if value is None else ua.Variant(value, _VTYPES[j])
-            await server.write_attribute_value(handles.variables[j], data_value(variant, code,
+            variant = _VARIANT_NONE if value is None else ua.Variant(value, _VTYPES[j])
+            await aspace.write_attribute_value(handles.variables[j], _VALUE, data_value(variant, code,
                                                                                   source_ts, now))
             writes += 1
         self.counts["writes"] += writes

@@ -210,7 +210,8 @@ class OpcuaSink(Sink):
                 held.append((name, level, fields))
 
         held: list[tuple[str, str, dict[str, Any]]] = []
-        server = OpcuaServer(options, [node_info(n, options.frame_interval_s) for n in nodes], users, on_event)
+        server = OpcuaServer(options, [node_info(n, options.frame_interval_s) for n in nodes], users, on_event,
+                             refresh_s=min(n.profile.output.refresh_s for n in nodes))
         server.start()
         context.closers.append(server.stop)
         sinks.extend(OpcuaSink(server, i, n.name) for i, n in enumerate(nodes))

@@ -16,8 +16,15 @@ def node_id(identifier: int | str, ns: int = 0) -> ua.NodeId:
     return ua.NodeId(ident, ua.Int16(ns))
 
 
+_CODES: dict[int, ua.StatusCode] = {}
+
+
 def status_code(code: int) -> ua.StatusCode:
-    return ua.StatusCode(ua.UInt32(code))
+    """The status code object of ``code`` (made once: values are written with a few codes, often)."""
+    made = _CODES.get(code)
+    if made is None:
+        made = _CODES[code] = ua.StatusCode(ua.UInt32(code))
+    return made
 
 
 def data_value(variant: ua.Variant, code: int, source: datetime.datetime, server: datetime.datetime) -> ua.DataValue:
