@@ -52,6 +52,7 @@ def test_the_kind_is_one_registry_entry() -> None:
     assert sink_class("opcua").kind == "opcua"
 
 
+@pytest.mark.slow
 def test_check_describes_the_server(tmp_path: Path) -> None:
     port = free_port()
     res = run("bridge", "-p", PAPER, "--source", "scene:case2", "--opcua", f"opc.tcp://127.0.0.1:{port}",
@@ -61,6 +62,7 @@ def test_check_describes_the_server(tmp_path: Path) -> None:
             f"0.5 s (5 x 5))") in res.output
 
 
+@pytest.mark.slow
 def test_check_and_the_run_refuse_a_port_in_use() -> None:
     with socket.socket() as taken:
         taken.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -159,3 +161,4 @@ def test_a_missing_extra_reads_like_the_others(monkeypatch: pytest.MonkeyPatch, 
 def test_the_model_in_the_docs_is_the_code() -> None:
     text = (ROOT / "docs" / "opcua.md").read_text()
     assert "\n".join(model.model_tree()) in text
+    assert "\n".join(model.variable_table()) in text

@@ -169,25 +169,38 @@ _NO_CONTACT = 0
 
 def model_tree(rows: int = 5, cols: int = 5) -> list[str]:
     """The model as a tree (``docs/opcua.md``): one node's object and what it holds."""
-    out = ["Objects", "└─ Machines  (FolderType)", "   └─ NODE  (GraspSensorType)  one per [[node]]",
-           "      ├─ Identification  (FolderType)"]
-    for name, dtype, _ in IDENTIFICATION:
-        out.append(f"      │  ├─ {name}  ({dtype}, property)")
-    out.append("      ├─ MachineryItemState  (BaseObjectType)")
-    out.append("      │  └─ CurrentState  (LocalizedText: " + ", ".join(MACHINERY_STATES) + ")")
-    shown: set[str] = set()
-    for v in VARIABLES:
-        folder, _, name = v.path.rpartition("/")
-        if folder and folder not in shown:
-            shown.add(folder)
-            out.append(f"      ├─ {folder}  (FolderType)")
-        kind = "AnalogItemType" if v.analog else "BaseDataVariableType"
+    def kind(v: Var) -> str:
         unit = f", {v.unit}" if v.unit else ""
-        out.append(f"      {'│  ' if folder else ''}├─ {name}  ({v.datatype}{unit}, {kind}, {v.group})")
-    out.append(f"      ├─ {FRAME.path}  (Float[{rows}][{cols}], N, AnalogItemType, "
-               f"measurement; with frame_interval_s only)")
-    out.append("      ├─ SlipAlarm  (SlipAlarmType, an AlarmConditionType)")
-    for name, arg, _ in METHODS:
-        out.append(f"      {'└' if name == METHODS[-1][0] else '├'}─ {name}({'' if arg is None else arg[0] + ': ' + arg[1]})"
-                   f"  (method)")
+        return f"({v.datatype}{unit}, {'AnalogItemType' if v.analog else 'BaseDataVariableType'}, {v.group})"
+
+    # (name, what, children): the node's object's children in the order a browse lists them
+    top: list[tuple[str, str, list[str]]] = [
+        ("Identification", "(FolderType)", [f"{name}  ({dtype}, property)" for name, dtype, _ in IDENTIFICATION]),
+        ("MachineryItemState", "(BaseObjectType)",
+         ["CurrentState  (LocalizedText: " + ", ".join(MACHINERY_STATES) + ")"]),
+    ]
+    for folder in FOLDERS:
+        top.append((folder, "(FolderType)", [f"{v.path.rpartition('/')[2]}  {kind(v)}" for v in VARIABLES
+                                              if v.path.startswith(folder + "/")]))
+    top += [(v.path, kind(v), []) for v in VARIABLES if "/" not in v.path]
+    top.append((FRAME.path, f"(Float[{rows}][{cols}], N, AnalogItemType, measurement; with frame_interval_s only)",
+                []))
+    top.append(("SlipAlarm", "(SlipAlarmType, an AlarmConditionType)", []))
+    top += [(f"{name}({'' if arg is None else arg[0] + ': ' + arg[1]})", "(method)", []) for name, arg, _ in METHODS]
+    out = ["Objects", "└─ Machines  (FolderType)", "   └─ NODE  (GraspSensorType)  one per [[node]]"]
+    for k, (name, what, children) in enumerate(top):
+        last = k == len(top) - 1
+        out.append(f"      {'└' if last else '├'}─ {name}  {what}")
+        for c, child in enumerate(children):
+            out.append(f"      {' ' if last else '│'}  {'└' if c == len(children) - 1 else '├'}─ {child}")
     return out
+
+
+def variable_table() -> list[str]:
+    """The variables of a node (``docs/opcua.md``; a test keeps the page equal to it)."""
+    rows = ["| browse path | data type | unit | status group | meaning |", "|---|---|---|---|---|"]
+    for v in (*VARIABLES, FRAME):
+        kind = " (AnalogItemType: EURange, EngineeringUnits)" if v.analog else ""
+        dtype = "Float[rows][cols]" if v is FRAME else v.datatype
+        rows.append(f"| `{v.path}` | {dtype} | {v.unit or '-'} | {v.group} | {v.doc}{kind} |")
+    return rows
