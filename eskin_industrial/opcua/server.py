@@ -34,7 +34,7 @@ from .access import Logins, Permissions
 from .alarm import AlarmState
 from .build import NodeHandles, NodeInfo, TypeIds, build_machines, build_node, build_types, variant_type
 from .handover import Handover, Waker
-from .options import OpcuaOptions
+from .options import OpcuaOptions, Role
 from .pki import TrustList, certificate_problem, default_application_uri, make_certificate, own_paths
 from .uaconv import data_value, node_id, status_code
 from .users import Directory, UserEntry
@@ -74,7 +74,8 @@ _STACK_LINES = (
 class _NodeState:
     """What the server keeps of one node."""
 
-    def __init__(self, info: NodeInfo) -> None:
+    def __init__(self, index: int, info: NodeInfo) -> None:
+        self.index = index
         self.info = info
         self.handles: NodeHandles | None = None
         self.last: list[tuple[Any, int]] = [(None, -1)] * len(model.VARIABLES)  #: (value, status) written
@@ -96,7 +97,7 @@ class OpcuaServer:
         #: How often the server takes the nodes' periodic refreshes (the shortest
         #: ``[output] refresh_s`` of the nodes): a change is taken at once.
         self.refresh_s = refresh_s
-        self.nodes = [_NodeState(i) for i in infos]
+        self.nodes = [_NodeState(i, info) for i, info in enumerate(infos)]
         self.users = Directory(users)
         self.on_event: Callable[..., None] = on_event or (lambda *args, **fields: None)
         self.waker = Waker()
@@ -179,6 +180,7 @@ class OpcuaServer:
         wake = self._wake
         loop = asyncio.get_running_loop()
         self._loop = loop
+
         def wake_up() -> None:
             loop.call_soon_threadsafe(wake.set)
 
@@ -223,9 +225,8 @@ class OpcuaServer:
             if not cert.exists():
                 make_certificate(o.pki_dir, uri, o.application_name, [o.host])
                 self.certificate_made = str(cert)
-        anonymous = o.anonymous_role if o.anonymous else None
-        server = Server(user_manager=Logins(self.users, anonymous if anonymous != "none" else None,
-                                            self._on_login))
+        anonymous: Role | None = o.anonymous_role if o.anonymous and o.anonymous_role != "none" else None
+        server = Server(user_manager=Logins(self.users, anonymous, self._on_login))
         self.server = server
         iserver = server.iserver
         iserver.bind_condition_methods = True  # ConditionRefresh
@@ -243,7 +244,7 @@ class OpcuaServer:
         await server.set_build_info(server.product_uri, server.manufacturer_name, "eskin-bus", __version__,
                                     __version__, datetime.datetime.now(_UTC))
         tokens: list[type] = [ua.UserNameIdentityToken] if self.users.users else []
-        if anonymous is not None and anonymous != "none":
+        if anonymous is not None:
             tokens.insert(0, ua.AnonymousIdentityToken)
         server.set_identity_tokens(tokens)
         # (asyncua types the ruleset as its SimpleRoleRuleset; any PermissionRuleset is called the same)
@@ -355,7 +356,7 @@ class OpcuaServer:
         now = datetime.datetime.now(_UTC)
         await self.server.write_attribute_value(n.handles.frame, data_value(
             variant, code, datetime.datetime.fromtimestamp(wall_time_s, _UTC), now))
-        self.node_counts[self.nodes.index(n)]["frames"] += 1
+        self.node_counts[n.index]["frames"] += 1
 
     def source_ended(self, index: int, error: str) -> None:
         """The node's source is gone (the loops' thread): its values say so at once."""
@@ -433,7 +434,7 @@ class OpcuaServer:
             ev.Message = ua.LocalizedText(
                 f"slip on {n.info.name}: {names[0]} {ev.ScoreA:.2f}, {names[1]} {ev.ScoreB:.2f}, "
                 f"raised {delay * 1000:.1f} ms after the deciding scan")
-            self.node_counts[self._index(n)]["alarms"] += 1
+            self.node_counts[n.index]["alarms"] += 1
             self._event("opcua_alarm", "info", node_event=n.info.name, transition=transition,
                         severity=self.options.alarm_severity, delay_ms=round(delay * 1000, 2))
         elif transition == "cleared":
@@ -582,9 +583,6 @@ class OpcuaServer:
         if i is not None:
             node = self.nodes[i].info.name
         self.on_event(name, level, node, **fields)
-
-    def _index(self, n: _NodeState) -> int:
-        return self.nodes.index(n)
 
     # -- health ---------------------------------------------------------------------
     def connections(self) -> tuple[int, int]:
