@@ -279,8 +279,7 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
 
 
 async def build_machines(server: Server, idx: int) -> ua.NodeId:
-    """``Objects/Machines`` (a folder that notifies: the Server object's events pass
-    through it to a SCADA that browses the notifier tree)."""
+    """``Objects/Machines``, in the Server object's notifier tree (HasNotifier)."""
     b = _Builder(server, idx)
     machines = await b.obj(node_id("Machines", idx), node_id(ua.ObjectIds.ObjectsFolder), "Machines",
                            ua.ObjectIds.FolderType, "the machines of this bridge: one per sensor node",
@@ -296,7 +295,8 @@ async def build_node(server: Server, idx: int, types: TypeIds, machines: ua.Node
     base = info.name
     obj = await b.obj(node_id(base, idx), machines, base, types.sensor, f"sensor node {base}",
                       ref=ua.ObjectIds.Organizes, notifier=True)
-    await b.node(machines).add_reference(obj, ua.ObjectIds.HasNotifier)
+    # (no HasNotifier from Machines as well: a browse would list the node twice; its
+    # events go to subscribers of the node's object and of the Server object)
 
     def nid(path: str) -> ua.NodeId:
         return node_id(f"{base}.{path}", idx)
