@@ -64,9 +64,10 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
 def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> DemoResult:
     """The demo under the live view; the lines it would have printed are kept and
     printed once the view has left the screen."""
-    from ..plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT
+    from ..plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names
     from ..sim.demo import DemoParts, run_demo
     from ..view.live import Watch, live_screen
+    from ..view.snapshot import RegisterTable
     from ..view.terminal import color_wanted
 
     kept: list[str] = []
@@ -79,9 +80,15 @@ def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> De
 
     def view(parts: DemoParts) -> LiveScreen:
         loop, plc = parts.loop, parts.plc
+        word_order = parts.profile.modbus.plc.word_order
+
+        def registers() -> RegisterTable:  # what the PLC stand-in holds, as it reads it
+            regs = plc.memory.regs
+            values = read_back(regs[:STATUS_COUNT], regs[TAIL_AT:TAIL_AT + TAIL_COUNT], word_order)
+            return RegisterTable(values, status_names(values["STATUS"]))
+
         watch = Watch(parts.profile, loop.pipeline, method=parts.profile.detector.method,
-                      registers=lambda: plc.memory.regs[:STATUS_COUNT], registers_from="as the PLC reads them",
-                      tail=lambda: plc.memory.regs[TAIL_AT:TAIL_AT + TAIL_COUNT],
+                      snapshot=lambda: loop.snapshot, registers=registers, registers_from="as the PLC reads them",
                       counters=loop.counters, title="eskin-bus demo",
                       source=f"{rec.name} | {parts.profile.name} | {parts.profile.detector.method}",
                       started=parts.started)

@@ -7,8 +7,8 @@ Each entry gives a streaming factory ``(settings, x_mm, y_mm, rate_hz) -> detect
 
 A method with ``needs_model`` (``learned``) must also be handed ``model=``; the
 registry does not know where models come from.  :meth:`Method.with_model` binds one;
-the layers that build detectors by name do so with the default model
-(``eskin_industrial.evaluation.train.ready``).
+every layer that builds detectors by name does so through one function that hands
+over the default model (``eskin_industrial.evaluation.binding``).
 """
 
 from __future__ import annotations
@@ -104,7 +104,7 @@ METHODS: dict[str, Method] = {
                              "normal, over their noise thresholds (slip above 1)"),
         Score("slow_score", "the slow displacement still moving onward, over its threshold (slip above 1)"))),
     "cof-step": _method("cof-step", "rival: the newest 20 ms of the centre of force against the mean and spread of "
-                        "the half-second that ended 100 ms earlier", CofStep, 9, (
+                        "the half-second that ended 100 ms earlier", CofStep, 10, (
         Score("step_score", "the newest CoF's distance from the base's mean in its standard deviations, over "
                             "threshold (slip above 1)"), UNUSED)),
     "learned": _method("learned", "accuracy ceiling: a small classifier on the other methods' features (extra: learn)", Learned,
@@ -125,6 +125,7 @@ def method_of_code(code: int) -> Method | None:
     return next((m for m in METHODS.values() if m.code == code), None)
 
 
-def needs_model(factory: Callable[..., Any]) -> bool:
-    """Whether ``factory`` is a registered method's stream factory that must be handed a model."""
-    return any(m.needs_model and factory is m.stream for m in METHODS.values())
+def method_of_stream(factory: Callable[..., Any]) -> Method | None:
+    """The registered method whose stream factory ``factory`` is (None: no registered
+    method's, such as a bound one or a sweep's own)."""
+    return next((m for m in METHODS.values() if factory is m.stream), None)
