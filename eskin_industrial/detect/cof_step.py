@@ -128,7 +128,7 @@ class CofStep(ScoredDetector):
         dy = self._ny / self.newest - my
         return math.sqrt(dx * dx / max(vx, fl) + dy * dy / max(vy, fl))
 
-    def score(self, t, f, s, xc, yc):
+    def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
         seen = self._seen = self._seen + 1
         if seen > self._settle and not self.filled:  # (a held copy is no sample)
             self._push(xc, yc)
