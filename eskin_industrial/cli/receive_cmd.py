@@ -22,6 +22,9 @@ if TYPE_CHECKING:
               help="Write the detector updates here as they come (CSV, '-' for stdout; .jsonl: JSON lines).")
 @click.option("--log", "log_path", default=None, type=click.Path(dir_okay=False),
               help="Record the raw traffic (python-can writer by suffix: .log candump, .blf, .asc, ...).")
+@click.option("--can-log", "can_log", default=None, type=click.Path(dir_okay=False), metavar="FILE",
+              help="Replay a CAN log (any format python-can reads) at its own pace instead of a bus, as if received: "
+                   "no hardware needed (eskin-bus node --can-log writes one).")
 @click.option("--rate", "rate_hz", type=float, default=None, help="The node's scan rate in Hz (default: the profile's).")
 @click.option("--duration", "duration_s", type=float, default=None, help="Stop after this many seconds.")
 @click.option("--idle-exit", "idle_s", type=float, default=None,
@@ -31,7 +34,7 @@ if TYPE_CHECKING:
               help="Frames the reader may queue ahead of the detector before dropping.")
 @click.option("-q", "--quiet", is_flag=True, help="Nothing on stderr (no start line, no counters).")
 def receive(profile_path: str, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None, data_bitrate: int | None, bus_extra: dict[str, Any],
-            output: str | None, log_path: str | None, rate_hz: float | None, duration_s: float | None,
+            output: str | None, log_path: str | None, can_log: str | None, rate_hz: float | None, duration_s: float | None,
             idle_s: float | None, max_scans: int | None, queue_frames: int, quiet: bool) -> None:
     """Receive scans from a CAN bus until stopped (Ctrl-C, --duration, --idle-exit,
     --scans), run the detector, and report the transport counters as JSON on stderr.
@@ -40,8 +43,15 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
     from ..bridge.runtime import SingleNode
     from ..sinks.recorder import RecorderOptions
 
-    node = NodeConfig.of("node", profile_path, "can", rate_hz=rate_hz, interface=interface, channel=channel,
-                         bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate, log=log_path, **bus_extra)
+    if can_log is None:
+        node = NodeConfig.of("node", profile_path, "can", rate_hz=rate_hz, interface=interface, channel=channel,
+                             bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate, log=log_path, **bus_extra)
+    elif interface is not None or channel is not None or log_path is not None or bus_extra:
+        raise click.UsageError("--can-log replays a log instead of a bus: give it without -i/-c, --log and the "
+                               "bus options")
+    else:  # the bridge's can-log source: the same assembler, pipeline and counters, paced by the log
+        node = NodeConfig.of("node", profile_path, "can-log", rate_hz=rate_hz, path=can_log,
+                             **({"fd": fd} if fd is not None else {}))
     outputs = {"recorder": RecorderOptions(path=output)} if output is not None else {}
     cfg = BridgeConfig(node=(node,), outputs=outputs, queue_frames=queue_frames)
     (resolved,) = resolve(cfg)
