@@ -9,9 +9,11 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from ..bus.can.busargs import parse_bus_kwargs, parse_filters, parse_timing
+from ..errors import NothingReceived
 
 if TYPE_CHECKING:
     from ..bus.can.logbus import LogBus
+    from ..profile import Profile
 
 
 def bus_extra(timing: tuple[str, ...], can_filter: tuple[str, ...], kwargs: tuple[str, ...]) -> dict[str, Any]:
@@ -81,3 +83,12 @@ def log_bus(path: str) -> LogBus:
     except (OSError, ValueError) as exc:
         detail = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise click.BadParameter(f"{path}: cannot write: {detail}", param_hint="--can-log") from None
+
+
+def nothing_received(profile: Profile, where: str, idle_s: float) -> NothingReceived:
+    """``--idle-exit`` with not one scan since the start: one line naming the channel
+    and the IDs listened on (exit 6, docs/cli.md)."""
+    lo = profile.can.base_id
+    return NothingReceived(f"no scan of profile {profile.name}'s node on {where} in {idle_s:g} s (--idle-exit): "
+                           f"nothing sent there on IDs {lo:#x}-{lo + 15:#x}; is the node on, on this channel, "
+                           "with this base_id?")

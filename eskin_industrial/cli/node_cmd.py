@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
+
+if TYPE_CHECKING:
+    import can
 
 from .can_common import bus_options, log_bus
 from .common import open_profile, profile_option, scene_or_recording
@@ -49,10 +52,9 @@ def node(profile_path: str, interface: str | None, channel: str | None, bitrate:
     --duration or Ctrl-C); or, with --can-log FILE, write the frames to a CAN log
     (no hardware, no vcan: detect --can-log reads it)."""
     from ..bus.can.layout import CanLayout
+    from ..bus.can.logbus import check_log_path
     from ..bus.can.reader import bus_kwargs, open_bus
     from ..sim.can_node import CanNode, Faults
-
-    from ..bus.can.logbus import check_log_path
 
     if can_log is not None:
         if modbus_rtu is not None or interface is not None or channel is not None:
@@ -76,6 +78,7 @@ def node(profile_path: str, interface: str | None, channel: str | None, bitrate:
                     filters=bus_extra.get("filter", ()), extra=bus_extra.get("bus_kwargs"))
     layout = CanLayout.from_profile(prof, fd=kw["fd"])
     faults = Faults(drop, duplicate, reorder, corrupt, silent_at_s, silent_for_s, seed)
+    bus: can.BusABC
     if can_log is not None:
         bus = log_bus(can_log)
         burst = burst or can_log != "-"  # a file is written at once; stdout is paced for a live reader

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any, cast
 import click
 
 from ..bus.source import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES
-from .can_common import bus_options
+from .can_common import bus_options, nothing_received
 from .common import profile_option
 
 if TYPE_CHECKING:
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 @click.option("--rate", "rate_hz", type=float, default=None, help="The node's scan rate in Hz (default: the profile's).")
 @click.option("--duration", "duration_s", type=float, default=None, help="Stop after this many seconds.")
 @click.option("--idle-exit", "idle_s", type=float, default=None,
-              help="Stop once no scan came for this many seconds (after the first).")
+              help="Stop once no scan came for this many seconds, counted from the start (none at all: exit 6).")
 @click.option("--scans", "max_scans", type=int, default=None, help="Stop after this many scans.")
 @click.option("--queue-frames", type=click.IntRange(min=1, max=MAX_QUEUE_FRAMES), default=DEFAULT_QUEUE_FRAMES, show_default=True,
               help="Frames the reader may queue ahead of the detector before dropping.")
@@ -50,20 +50,21 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
         raise click.UsageError("--can-log replays a log instead of a bus: give it without -i/-c, --log and the "
                                "bus options")
     else:  # the bridge's can-log source: the same assembler, pipeline and counters, paced by the log
-        node = NodeConfig.of("node", profile_path, "can-log", rate_hz=rate_hz, path=can_log,
-                             **({"fd": fd} if fd is not None else {}))
+        keys: dict[str, Any] = {"path": can_log} | ({"fd": fd} if fd is not None else {})
+        node = NodeConfig.of("node", profile_path, "can-log", rate_hz=rate_hz, **keys)
     outputs = {"recorder": RecorderOptions(path=output)} if output is not None else {}
     cfg = BridgeConfig(node=(node,), outputs=outputs, queue_frames=queue_frames)
     (resolved,) = resolve(cfg)
-    single = SingleNode(cfg, resolved, default_output=False, all_frames=True)  # a bus that cannot be opened: one line, exit 3
-    loop, source = single.loop, cast("CanSource", single.loop.source)  # the node's source is "can"
+    single = SingleNode(cfg, resolved, default_output=False, all_frames=True)  # a bus that cannot be opened: one line, exit 3 (5: no SocketCAN)
+    loop, source = single.loop, cast("CanSource", single.loop.source)  # the node's source is "can" or "can-log"
+    ended, where = "", source.describe_where()
     if not quiet:
         layout = source.assembler.layout
-        click.echo(f"eskin-bus: receiving {resolved.profile.name} on {source.describe_where()} "
+        click.echo(f"eskin-bus: receiving {resolved.profile.name} on {where} "
                    f"({layout.segments} frame{'s' if layout.segments > 1 else ''} per scan)", err=True)
     with single:
         try:
-            loop.run(duration_s=duration_s, idle_timeout_s=idle_s, max_scans=max_scans)
+            ended = loop.run(duration_s=duration_s, idle_timeout_s=idle_s, max_scans=max_scans)
         except KeyboardInterrupt:
             pass
         source.end_reception(loop.step)  # what the reader had queued is still recorded and decoded
@@ -73,3 +74,5 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
         if source.assembler.status is not None:
             summary["node_rate_hz"] = source.assembler.status.rate_hz
         click.echo(json.dumps(summary), err=True)
+    if ended == "silent" and idle_s is not None:
+        raise nothing_received(resolved.profile, where, idle_s)

@@ -13,8 +13,12 @@ from __future__ import annotations
 import io
 import sys
 from pathlib import PurePath
+from typing import TYPE_CHECKING
 
 import can
+
+if TYPE_CHECKING:
+    from can.io.generic import MessageWriter
 
 #: What ``--can-log`` writes, by suffix (python-can's writers that its readers, and so
 #: ``detect --can-log``, read back; ``.gz`` after a text suffix compresses it).
@@ -34,15 +38,15 @@ def check_log_path(path: str) -> None:
                      "on stdout)")
 
 
-def open_log_writer(path: str) -> can.io.MessageWriter:
+def open_log_writer(path: str) -> MessageWriter:
     """python-can's writer for ``path`` (``-``: candump ``-L`` lines on stdout, one
     line as soon as it is written, so that a reader downstream gets them live)."""
     check_log_path(path)
     if path == "-":
-        out = io.TextIOWrapper(open(sys.stdout.fileno(), "wb", closefd=False), encoding="ascii",  # noqa: SIM115 - closed by the writer
-                               line_buffering=True)
+        # stdout's descriptor, not sys.stdout: the writer closes its file when it stops
+        out = io.TextIOWrapper(open(sys.stdout.fileno(), "wb", closefd=False), encoding="ascii", line_buffering=True)
         return can.io.CanutilsLogWriter(out)
-    return can.Logger(path)  # type: ignore[no-any-return]  # (python-can's dispatcher is untyped here)
+    return can.Logger(path)
 
 
 class LogBus(can.BusABC):
@@ -53,6 +57,7 @@ class LogBus(can.BusABC):
         self.path = path
         self.writer = open_log_writer(path)
         self._last = float("-inf")
+        self._closed = False
         super().__init__(channel=channel)
         self.channel_info = f"CAN log {path}"
 
@@ -68,6 +73,7 @@ class LogBus(can.BusABC):
         return None, False
 
     def shutdown(self) -> None:
-        if not self._is_shutdown:
+        if not self._closed:
+            self._closed = True
             self.writer.stop()
         super().shutdown()
