@@ -30,6 +30,7 @@ from typing import Any
 from ..bus.source import Feeder, OpenContext, Source
 from ..detect.state import GraspState
 from ..detect.updates import Update
+from ..ratelimit import Throttle
 from ..sinks.base import Sink
 from .config import BridgeConfig, ResolvedNode, output_classes
 from .logs import EventLog
@@ -132,6 +133,7 @@ class Bridge:
         self.nodes = nodes
         self.log = log
         self.on_update = on_update
+        self._commands_logged = Throttle()
         #: systemd's READY/STOPPING/STATUS and its watchdog (does nothing outside systemd).
         self.notifier = notifier or Notifier(None)
         self.runs: list[NodeRun] = []
@@ -206,7 +208,17 @@ class Bridge:
         return hook
 
     def _command_hook(self, run: NodeRun) -> Callable[[str], None]:
-        return lambda name: self.log.event("plc_command", node=run.name, command=name)
+        log, throttle = self.log, self._commands_logged
+
+        def hook(name: str) -> None:
+            # A client may write commands as fast as the link goes: one line per
+            # command and node per LOG_EVERY_S, the next saying how many were held back
+            # (the loop's ``commands`` counter counts every one).
+            held = throttle.passes((run.name, name))
+            if held is not None:
+                log.event("plc_command", node=run.name, command=name, held_back=held)
+
+        return hook
 
     def _sink_event_hook(self, run: NodeRun) -> Callable[[str, str, dict[str, Any]], None]:
         return lambda name, level, fields: self.log.event(name, level, node=run.name, **fields)

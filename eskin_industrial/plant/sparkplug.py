@@ -38,6 +38,7 @@ from .. import __version__
 from ..detect.state import LABELS
 from ..errors import EskinError, ProfileError
 from ..node import Command, NodeSnapshot, refusal
+from ..ratelimit import Throttle
 from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Sink, SinkHealth
 from . import payload as pb
@@ -220,6 +221,7 @@ class EdgeNode:
         self.published = self.dropped = self.connects = self.failures = self.bad_commands = self.rebirths = 0
         self.unknown_devices = self.commands = self.commands_refused = self.bad_states = 0
         self._bad_logged: dict[str, tuple[float, int]] = {}
+        self.commands_logged = Throttle()  #: the DCMD lines, per device and event
         self.last_error = ""
         self.client = client_factory
         self.client.on_connect = self._on_connect
@@ -615,11 +617,19 @@ class SparkplugDevice(Sink[SparkplugOptions]):
             why = refusal(cmd, snapshot)
             if why is not None:
                 node.commands_refused += 1
-                self._event("sparkplug_command_refused", "warning", command=cmd.name, reason=why)
+                self._logged("sparkplug_command_refused", "warning", command=cmd.name, reason=why)
                 return
         node.commands += len(cmds)
         self._commands.extend(cmds)
-        self._event("sparkplug_command", "info", commands=",".join(c.name for c in cmds))
+        self._logged("sparkplug_command", "info", commands=",".join(c.name for c in cmds))
+
+    def _logged(self, name: str, level: str, **fields: Any) -> None:
+        """A DCMD's line: at most one per name per LOG_EVERY_S (a host may send them as
+        fast as the broker goes), the next saying how many were held back; the
+        counters count every one."""
+        held = self.node.commands_logged.passes((self.device_id, name))
+        if held is not None:
+            self._event(name, level, held_back=held, **fields)
 
     def source_ended(self, error: str) -> None:
         """The node's source is gone while the bridge goes on: DDEATH (its last
