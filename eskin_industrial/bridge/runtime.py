@@ -30,6 +30,7 @@ from typing import Any
 from ..bus.source import Feeder, OpenContext, Source
 from ..detect.state import GraspState
 from ..detect.updates import Update
+from ..errors import ListenError
 from ..ratelimit import Throttle
 from ..sinks.base import Sink
 from .config import BridgeConfig, ResolvedNode, output_classes
@@ -70,7 +71,11 @@ def open_nodes(config: BridgeConfig, nodes: list[ResolvedNode], closers: list[Ca
     context = OpenContext(queue_frames=config.queue_frames, all_frames=all_frames, closers=closers)
     per_node: list[list[Sink]] = [[] for _ in nodes]
     for cls, options in output_classes(config, default_output):
-        for i, sink in enumerate(cls.open_nodes(options, nodes, context)):
+        try:
+            opened = cls.open_nodes(options, nodes, context)
+        except ListenError as exc:  # a port in use: the line --check gives (probe_outputs)
+            raise ListenError(f"{config.source}: [{cls.kind}] port: {exc}") from None
+        for i, sink in enumerate(opened):
             per_node[i].append(sink)
     sources: list[Source | None] = [None] * len(nodes)
     by_kind: dict[type[Source], list[int]] = {}

@@ -45,7 +45,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import DecodeError, EskinError
+from ..errors import DecodeError, EskinError, ListenError
 from ..netaddr import listen_error
 from . import mbap, pdu
 from .exception_codes import GATEWAY_TARGET_FAILED, ILLEGAL_FUNCTION
@@ -376,7 +376,7 @@ class TcpServer:
         if not self._ready.wait(timeout_s):
             raise EskinError(f"modbus server ({self.where}): did not start within {timeout_s:g} s")
         if isinstance(self._error, OSError):  # in use, not this machine's address, ...: say which
-            raise EskinError(f"modbus server: {listen_error(self.host, self.port, self._error)}")
+            raise ListenError(listen_error(self.host, self.port, self._error))
         if self._error is not None:
             raise EskinError(f"modbus server ({self.where}): cannot listen: {self._error}")
         return self
