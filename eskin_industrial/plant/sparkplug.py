@@ -29,6 +29,7 @@ import math
 import os
 import threading
 import time
+import unicodedata
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,9 +58,21 @@ REBIRTH = "Node Control/Rebirth"
 _FORBIDDEN = set("+#/")
 
 
+#: An id's length at most, in UTF-8 bytes: three of them make a topic and two the
+#: client id, each an MQTT string of at most 65,535 bytes (a longer one ended paho's
+#: thread); ids are names, not texts.
+MAX_ID_BYTES = 256
+
+
 def check_id(key: str, value: str) -> None:
     if not value or _FORBIDDEN & set(value):
         raise ValueError(f"{key}: {value!r} is not a Sparkplug id (not empty, no '+', '#' or '/')")
+    size = len(value.encode("utf-8", "surrogatepass"))
+    if size > MAX_ID_BYTES:
+        raise ValueError(f"{key}: {size} bytes long (UTF-8); a Sparkplug id here is at most {MAX_ID_BYTES}")
+    bad = next((c for c in value if unicodedata.category(c) in ("Cc", "Cs")), None)
+    if bad is not None:  # MQTT strings: no U+0000, no control characters, valid UTF-8
+        raise ValueError(f"{key}: {value!r} holds the character U+{ord(bad):04X}, which an MQTT topic may not")
 
 
 @dataclass(frozen=True)
