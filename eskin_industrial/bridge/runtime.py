@@ -154,16 +154,22 @@ class Bridge:
         self.stopped = False
         self._switch_interval: float | None = None
         self.failure = ""
+        self._excepthook: Callable[[threading.ExceptHookArgs], Any] | None = None
         self.stop_reason = ""  #: the signal's name, when one stopped the bridge
         self.failed_sources: list[str] = []  #: "node: error" of each source that failed
 
     # -- building: everything is opened before anything runs ----------------------
     def open(self) -> Bridge:
         """Open outputs and sources; an error here stops before any loop runs."""
+        # An output's own thread (paho's, a writer's) that dies of an exception would
+        # otherwise stop that output in silence: it stops the bridge, exit 1.
+        self._excepthook = threading.excepthook
+        threading.excepthook = self._thread_died
         try:
             loops = open_nodes(self.config, self.nodes, self._closers)
         except BaseException:
             self._close_all()
+            threading.excepthook = self._excepthook
             raise
         for node, loop in zip(self.nodes, loops):
             run = NodeRun(node, loop)
@@ -264,6 +270,18 @@ class Bridge:
             self.log.event("loop_failed", level="error", loop=threading.current_thread().name,
                            error=f"{type(exc).__name__}: {exc}")
             self._stop.set()
+
+    def _thread_died(self, args: threading.ExceptHookArgs) -> None:
+        """A thread of the process ended by an exception (the loops catch theirs:
+        this is an output's): logged, and the bridge stops with a failure."""
+        if args.exc_type is SystemExit:
+            return
+        name = args.thread.name if args.thread is not None else "-"
+        error = f"{args.exc_type.__name__}: {args.exc_value}"
+        if not self.failure:
+            self.failure = f"thread {name} died: {error}"
+        self.log.event("thread_failed", level="error", thread=name, error=error)
+        self._stop.set()
 
     def _node_loop(self, run: NodeRun, beat: int) -> None:
         step, stop, beats = run.loop.step, self._stop, self._beats
@@ -457,6 +475,8 @@ class Bridge:
         self._close_all()
         if self._switch_interval is not None:  # the process's setting, as it was
             sys.setswitchinterval(self._switch_interval)
+        if self._excepthook is not None:
+            threading.excepthook = self._excepthook
         self.log.event("stopped", reason=self.stop_reason or ("failure" if self.failure else "end"),
                        offline_written=",".join(offline) or "-")
         self.notifier.close()

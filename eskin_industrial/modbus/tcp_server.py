@@ -182,7 +182,7 @@ class _Connection(asyncio.Protocol):
         if transport is None or transport.is_closing():
             return
         buf = self.buf
-        out = []
+        out: list[bytes] = []
         bad = ""
         limit = self.server.policy.max_batch
         while len(buf) >= mbap.HEADER_BYTES:
