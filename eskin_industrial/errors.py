@@ -22,6 +22,14 @@ class ProfileError(EskinError):
     exit_code = 2
 
 
+class ListenError(EskinError):
+    """A server cannot listen (its port in use, an address not this machine's): a
+    setting to change, which a restart does not mend; exit 2 as a bad configuration
+    (the service unit restarts neither), the same line as ``--check``'s."""
+
+    exit_code = 2
+
+
 class InputFormatError(EskinError):
     """An input file (recording CSV, log) is malformed; the message names the line."""
 

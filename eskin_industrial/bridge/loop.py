@@ -53,6 +53,7 @@ class NodeLoop:
         self.recent_raw: collections.deque[np.ndarray] = collections.deque(maxlen=self.TARE_SCANS)
         self.tares = 0
         self.tares_refused = 0
+        self.commands = 0  #: commands applied (a client-mode ENABLE read back unchanged is none)
         self.publications = 0
         self._last_pub = float("-inf")
         self._last_conditions = -1
@@ -162,6 +163,7 @@ class NodeLoop:
                     # A client-mode PLC's ENABLE is read back every refresh: only a change counts.
                     if (status.enabled, status.latched) == before:
                         continue
+                self.commands += 1
                 if self.on_command is not None:
                     self.on_command(cmd.name)
                 acted = True
@@ -274,7 +276,7 @@ class NodeLoop:
         c = self.pipeline.counters
         out = {"scans": c.scans, "updates": c.updates, "lost_scans": self.lost_scans(),
                "state_changes": c.state_changes, "publications": self.publications, "tares": self.tares,
-               "tares_refused": self.tares_refused}
+               "tares_refused": self.tares_refused, "commands": self.commands}
         out.update(self.pipeline.time_faults())
         out.update(self.source.counters())
         for sink in self.sinks:
