@@ -301,6 +301,22 @@ class OutputSection:
     #: no verdict is valid.  Default: 2.5 scan periods (of the slower of ``[sensor]
     #: rate_hz`` and ``[modbus.node] poll_hz``), so a silent sensor shows within three.
     stale_s: float | None = field(default=None, metadata=positive_at_most(3600.0))
+    #: A sensor fault makes the state no verdict (``docs/plc.md``, FLAGS bits 10-12).
+    #: An invalid reading (open line, short, NaN) is replaced by the taxel's last good
+    #: value for at most ``hold_s`` (on the sensor's clock), and in at most
+    #: ``hold_share`` of the taxels at once; beyond either: DEAD_TAXELS.
+    hold_s: float = field(default=0.25, metadata=in_range(0.0, 60.0))
+    hold_share: float = field(default=0.25, metadata=in_range(0.0, 1.0))
+    #: Raw scans identical to the bit for longer than this: FROZEN (0: not judged).
+    frozen_s: float = field(default=0.5, metadata=in_range(0.0, 3600.0))
+    #: The scans' timestamps showing a rate more than this factor from the detector's:
+    #: RATE (0: not judged).
+    rate_tolerance: float = field(default=2.0, metadata=in_range(0.0, 100.0))
+
+    def __post_init__(self) -> None:
+        if 0 < self.rate_tolerance < 1.1:
+            raise ValueError("rate_tolerance: expected 0 (not judged) or a factor of at least 1.1, "
+                             f"got {self.rate_tolerance:g}")
 
 
 #: Keys that moved, old dotted path -> new one: still read, with a warning.

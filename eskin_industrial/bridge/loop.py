@@ -86,7 +86,7 @@ class NodeLoop:
     def health(self, now: float | None = None) -> Health:
         src = self.source
         return Health(frame_age_s=src.frame_age(now), bus_fault=src.bus_fault,
-                      lost_scans=self.lost_scans(), bus_errors=src.bus_errors())
+                      lost_scans=self.lost_scans(), bus_errors=src.bus_errors(), fault=self.pipeline.fault)
 
     def lost_scans(self) -> int:
         """Gaps the pipeline counted, plus the scans an outage under way has lost so far
@@ -175,13 +175,14 @@ class NodeLoop:
         now = time.monotonic()
         src = self.source
         age, bus_fault = src.frame_age(now), src.bus_fault
-        conditions = self.status.conditions(age, bus_fault)
+        fault = self.pipeline.fault
+        conditions = self.status.conditions(age, bus_fault, fault)
         if not urgent and conditions == self._last_conditions and now - self._last_pub < self._refresh_s:
             return False
         t0 = time.perf_counter()
         if t_event is None:
             t_event = t0
-        snap = self.status.snapshot(Health(age, bus_fault, self.lost_scans(), src.bus_errors()),
+        snap = self.status.snapshot(Health(age, bus_fault, self.lost_scans(), src.bus_errors(), fault),
                                     scans=self.pipeline.counters.scans, t_event=t_event,
                                     # the wall clock of the deciding scan's arrival, not of now
                                     wall_time_s=time.time() - (t0 - t_event),
@@ -269,7 +270,8 @@ class NodeLoop:
         c = self.pipeline.counters
         out = {"scans": c.scans, "updates": c.updates, "lost_scans": self.lost_scans(),
                "state_changes": c.state_changes, "publications": self.publications, "tares": self.tares,
-               "tares_refused": self.tares_refused}
+               "tares_refused": self.tares_refused, "invalid_scans": c.invalid_scans,
+               "saturated_scans": c.saturated_scans, "fault_scans": c.fault_scans, "sensor_faults": c.sensor_faults}
         out.update(self.pipeline.time_faults())
         out.update(self.source.counters())
         for sink in self.sinks:
