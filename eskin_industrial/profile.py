@@ -39,6 +39,8 @@ STALE_PERIODS = 2.5
 #: (15 in 20 s for one node in a busy process: docs/benchmarks.md).  Four switch
 #: intervals; from 125 Hz down the periods decide.
 STALE_FLOOR_S = 0.02
+#: The learnt stale limit's ceiling, in stale_s (``[output] stale_max_s``'s default).
+STALE_MAX_FACTOR = 4.0
 
 # Bounds of the settings, each in docs/profiles.md: past them a value is a typo or a
 # unit mistake, and is refused before the run rather than met in it.
@@ -314,6 +316,10 @@ class OutputSection:
     #: no verdict is valid.  Default: 2.5 scan periods (of the slower of ``[sensor]
     #: rate_hz`` and ``[modbus.node] poll_hz``), so a silent sensor shows within three.
     stale_s: float | None = field(default=None, metadata=in_range(0.001, 3600.0))
+    #: The stale limit learns the sensor's arrivals (``node/staleness.py``): it rises to
+    #: 1.5 times the longest interval between scans seen lately, never above this.
+    #: Default: 4 x ``stale_s``; equal to ``stale_s``: a fixed limit.
+    stale_max_s: float | None = field(default=None, metadata=in_range(0.001, 3600.0))
     #: A sensor fault makes the state no verdict (``docs/plc.md``, FLAGS bits 10-12).
     #: An invalid reading (open line, short, NaN) is replaced by the taxel's last good
     #: value for at most ``hold_s`` (on the sensor's clock), and in at most
@@ -398,6 +404,11 @@ class Profile:
             # Resolved here, once, so every consumer reads a number.
             out = replace(self.output, stale_s=derived_stale_s(self.sensor.rate_hz, self.modbus.node.poll_hz))
             object.__setattr__(self, "output", out)
+        if self.output.stale_max_s is None:
+            object.__setattr__(self, "output", replace(self.output, stale_max_s=STALE_MAX_FACTOR * self.stale_s))
+        elif self.output.stale_max_s < self.stale_s:
+            raise SchemaError("output.stale_max_s", f"expected at least stale_s ({self.stale_s:g} s), "
+                                                    f"got {self.output.stale_max_s:g}")
 
     @property
     def stale_s(self) -> float:
@@ -405,6 +416,13 @@ class Profile:
         stale = self.output.stale_s
         assert stale is not None  # resolved in __post_init__
         return stale
+
+    @property
+    def stale_max_s(self) -> float:
+        """``[output] stale_max_s``, resolved."""
+        stale_max = self.output.stale_max_s
+        assert stale_max is not None  # resolved in __post_init__
+        return stale_max
 
     @property
     def name(self) -> str:

@@ -27,6 +27,7 @@ import numpy as np
 from ..bus.source import Source
 from ..detect.updates import Update
 from ..node import Health, NodeSnapshot, NodeStatus, refusal
+from ..node.staleness import Staleness
 from ..pipeline import Pipeline
 from ..profile import Profile
 from ..sinks.base import Sink
@@ -48,6 +49,8 @@ class NodeLoop:
         chosen = self.pipeline.method
         self.status = NodeStatus(profile.stale_s, chosen.name, chosen.code,
                                  (chosen.scores[0].name, chosen.scores[1].name))
+        #: The stale limit, learnt from the sensor's arrivals (``status.stale_s`` follows it).
+        self.staleness = Staleness(profile.stale_s, profile.stale_max_s)
         #: The newest snapshot published (None before the first).
         self.snapshot: NodeSnapshot | None = None
         self.recent_raw: collections.deque[np.ndarray] = collections.deque(maxlen=self.TARE_SCANS)
@@ -108,6 +111,9 @@ class NodeLoop:
         updates: list[Update] = []
         if scan is not None:
             self.recent_raw.append(scan.raw)
+            # the transport's receipt when it stamps one (a reader thread), else now
+            rx = scan.rx_time if scan.rx_time == scan.rx_time else time.monotonic()
+            self.status.stale_s = self.staleness.observe(rx)
             observe = self.status.observe
             updates = self.pipeline.push(scan)
             for u in updates:
@@ -174,6 +180,8 @@ class NodeLoop:
         fault, enable, latch, validity), or when ``refresh_s`` has passed."""
         now = time.monotonic()
         src = self.source
+        if not urgent and src.pending:
+            return False  # scans wait: the loop, not the sensor, is late; take them first
         age, bus_fault = src.frame_age(now), src.bus_fault
         fault = self.pipeline.fault
         conditions = self.status.conditions(age, bus_fault, fault)

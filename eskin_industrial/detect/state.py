@@ -82,8 +82,9 @@ class ContactRule:
     running RMS about it.  The loaded force is the total minus that baseline.  Contact
     begins once the loaded force has reached ``enter_n`` (and ``noise_k`` noise RMS,
     whichever is higher) for ``dwell_s``, and ends once it has stayed below
-    :data:`STAY_FRACTION` of that (and ``noise_k`` / 2 RMS) for ``dwell_s``; never at a
-    total of zero.  An idle sensor reading 0.15 +- 0.04 N against a 0.2 N threshold
+    :data:`STAY_FRACTION` of that (and ``noise_k`` / 2 RMS) for ``dwell_s``; a clear
+    load (twice the entry level) or a clear release (below half the stay level)
+    changes at once; never in contact at a total of zero.  An idle sensor reading 0.15 +- 0.04 N against a 0.2 N threshold
     thus stays out of contact, where a plain threshold made the PLC's CONTACT flap.
 
     The baseline is bounded so that it can never hide a real load: it learns only out
@@ -146,7 +147,10 @@ class ContactRule:
             self.run = 0
         else:
             self.run += 1
-            if self.run >= self.dwell:
+            # the dwell is for a total about a level; a clear load (twice the entry
+            # level) or a clear release (below half the stay level) changes at once
+            clear = loaded >= 2.0 * enter if want else loaded < 0.5 * stay
+            if self.run >= self.dwell or clear:
                 self.on, self.run = want, 0
         if self.alpha and not self.on and self.run == 0 and loaded < stay:
             self._learn(s)
