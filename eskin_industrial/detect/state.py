@@ -28,11 +28,13 @@ method's own evidence instead (a yes or no: 1 or 0), through the same latch.
 
 Contact has one rule too, :class:`ContactRule`, applied to each frame's total force
 by every method (the paper's indicators included, where it decides whether F_dis and
-the centre of force are defined): contact begins when the total reaches
-``contact_threshold_n`` and lasts while it stays above half of that.  A plain
-threshold would make a first touch that hovers at the threshold toggle the PLC
-between ``no_contact`` and ``stable`` every frame, and restart a detector's warm-up
-each time.
+the centre of force are defined): contact begins when the loaded force (the total
+minus the sensor's unloaded baseline, learnt out of contact) reaches
+``contact_threshold_n`` (and five times the learnt noise), and lasts while it stays
+above half of that, each change held for ``contact_dwell_s``.  A plain threshold
+would make a first touch that hovers at the threshold, or an idle film whose offset
+and noise reach it, toggle the PLC between ``no_contact`` and ``stable`` every few
+frames, and restart a detector's warm-up each time.
 
 What counts as slip evidence is each method's own: :class:`StateMachine` is the paper's
 (R_coe and R_dw against their thresholds, with hysteresis) in front of a
