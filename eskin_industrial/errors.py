@@ -54,6 +54,20 @@ class CanBusError(TransportError):
     """The CAN bus cannot be opened (unknown interface, missing channel, no driver)."""
 
 
+class SocketCanMissing(CanBusError):
+    """The kernel has no SocketCAN (``AF_CAN`` is not supported): no channel name and
+    no interface option can help, only a kernel module or another machine; exit 5."""
+
+    exit_code = 5
+
+
+class NothingReceived(TransportError):
+    """``--idle-exit`` passed with not one scan of the node since the start: a channel
+    nobody sends on, a node that is off, or another node's IDs; exit 6."""
+
+    exit_code = 6
+
+
 class ModbusFault(TransportError):
     """A Modbus transaction failed; ``kind`` is ``timeout``, ``crc``, ``exception`` or
     ``connection``; ``code`` is the exception code for ``exception``."""

@@ -253,9 +253,12 @@ class NodeLoop:
 
     def run(self, duration_s: float | None = None, idle_timeout_s: float | None = None,
             max_scans: int | None = None) -> str:
-        """Step until :meth:`stop`, ``duration_s``, no scan for ``idle_timeout_s`` (after
-        the first), ``max_scans`` scans, or a finite source's end; returns which."""
-        end = None if duration_s is None else time.monotonic() + duration_s
+        """Step until :meth:`stop`, ``duration_s``, no scan for ``idle_timeout_s``
+        (``"idle"``; ``"silent"`` when not one came since the start: a channel nobody
+        sends on ends the run too), ``max_scans`` scans, or a finite source's end;
+        returns which."""
+        start = time.monotonic()
+        end = None if duration_s is None else start + duration_s
         source, counters = self.source, self.pipeline.counters
         while not self._stop.is_set():
             self.step()
@@ -263,6 +266,8 @@ class NodeLoop:
                 return "duration"
             if idle_timeout_s is not None:
                 age = source.frame_age()
+                if age is None and time.monotonic() - start >= idle_timeout_s:
+                    return "silent"
                 if age is not None and age >= idle_timeout_s:
                     return "idle"
             if max_scans is not None and counters.scans >= max_scans:
