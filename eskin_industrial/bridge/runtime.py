@@ -30,6 +30,9 @@ from typing import Any
 from ..bus.source import Feeder, OpenContext, Source
 from ..detect.state import GraspState
 from ..detect.updates import Update
+from ..errors import ListenError
+from ..frames import FrameFlag
+from ..ratelimit import Throttle
 from ..sinks.base import Sink
 from .config import BridgeConfig, ResolvedNode, output_classes
 from .logs import EventLog
@@ -69,7 +72,11 @@ def open_nodes(config: BridgeConfig, nodes: list[ResolvedNode], closers: list[Ca
     context = OpenContext(queue_frames=config.queue_frames, all_frames=all_frames, closers=closers)
     per_node: list[list[Sink]] = [[] for _ in nodes]
     for cls, options in output_classes(config, default_output):
-        for i, sink in enumerate(cls.open_nodes(options, nodes, context)):
+        try:
+            opened = cls.open_nodes(options, nodes, context)
+        except ListenError as exc:  # a port in use: the line --check gives (probe_outputs)
+            raise ListenError(f"{config.source}: [{cls.kind}] port: {exc}") from None
+        for i, sink in enumerate(opened):
             per_node[i].append(sink)
     sources: list[Source | None] = [None] * len(nodes)
     by_kind: dict[type[Source], list[int]] = {}
@@ -132,6 +139,7 @@ class Bridge:
         self.nodes = nodes
         self.log = log
         self.on_update = on_update
+        self._commands_logged = Throttle()
         #: systemd's READY/STOPPING/STATUS and its watchdog (does nothing outside systemd).
         self.notifier = notifier or Notifier(None)
         self.runs: list[NodeRun] = []
@@ -147,16 +155,22 @@ class Bridge:
         self.stopped = False
         self._switch_interval: float | None = None
         self.failure = ""
+        self._excepthook: Callable[[threading.ExceptHookArgs], Any] | None = None
         self.stop_reason = ""  #: the signal's name, when one stopped the bridge
         self.failed_sources: list[str] = []  #: "node: error" of each source that failed
 
     # -- building: everything is opened before anything runs ----------------------
     def open(self) -> Bridge:
         """Open outputs and sources; an error here stops before any loop runs."""
+        # An output's own thread (paho's, a writer's) that dies of an exception would
+        # otherwise stop that output in silence: it stops the bridge, exit 1.
+        self._excepthook = threading.excepthook
+        threading.excepthook = self._thread_died
         try:
             loops = open_nodes(self.config, self.nodes, self._closers)
         except BaseException:
             self._close_all()
+            threading.excepthook = self._excepthook
             raise
         for node, loop in zip(self.nodes, loops):
             run = NodeRun(node, loop)
@@ -206,7 +220,17 @@ class Bridge:
         return hook
 
     def _command_hook(self, run: NodeRun) -> Callable[[str], None]:
-        return lambda name: self.log.event("plc_command", node=run.name, command=name)
+        log, throttle = self.log, self._commands_logged
+
+        def hook(name: str) -> None:
+            # A client may write commands as fast as the link goes: one line per
+            # command and node per LOG_EVERY_S, the next saying how many were held back
+            # (the loop's ``commands`` counter counts every one).
+            held = throttle.passes((run.name, name))
+            if held is not None:
+                log.event("plc_command", node=run.name, command=name, held_back=held)
+
+        return hook
 
     def _sink_event_hook(self, run: NodeRun) -> Callable[[str, str, dict[str, Any]], None]:
         return lambda name, level, fields: self.log.event(name, level, node=run.name, **fields)
@@ -247,6 +271,18 @@ class Bridge:
             self.log.event("loop_failed", level="error", loop=threading.current_thread().name,
                            error=f"{type(exc).__name__}: {exc}")
             self._stop.set()
+
+    def _thread_died(self, args: threading.ExceptHookArgs) -> None:
+        """A thread of the process ended by an exception (the loops catch theirs:
+        this is an output's): logged, and the bridge stops with a failure."""
+        if args.exc_type is SystemExit:
+            return
+        name = args.thread.name if args.thread is not None else "-"
+        error = f"{args.exc_type.__name__}: {args.exc_value}"
+        if not self.failure:
+            self.failure = f"thread {name} died: {error}"
+        self.log.event("thread_failed", level="error", thread=name, error=error)
+        self._stop.set()
 
     def _node_loop(self, run: NodeRun, beat: int) -> None:
         step, stop, beats = run.loop.step, self._stop, self._beats
@@ -291,7 +327,11 @@ class Bridge:
             self.log.event("source_ended", node=",".join(clean), error="-")
         for run in runs:
             source = run.loop.source
-            if source.failed:
+            if not source.failed and not self._stop.is_set():
+                # The node's last image while the bridge runs on: nothing claimed, the
+                # node offline (its heartbeat stops here), never its last "stable".
+                run.loop.shutdown()
+            elif source.failed:
                 self.log.event("source_failed", level="error", node=run.name, error=source.last_error)
                 run.loop.publish_if_due(True)  # BUS_FAULT now, before the loop lets go
                 self.failed_sources.append(f"{run.name}: {source.last_error}")
@@ -374,6 +414,8 @@ class Bridge:
             seen: dict[str, tuple[bool, Sink | None]] = {
                 "stale": (run.loop.status.is_stale(src.frame_age(now)), None),
                 "bus_fault": (src.bus_fault, None),
+                # once per episode (a scan more, or a second kind joining, is no news)
+                "sensor_fault": (bool(run.loop.pipeline.fault), None),
             }
             sink: Sink | None  # (each output, then the one a change is about)
             for sink in run.sinks:
@@ -401,6 +443,14 @@ class Bridge:
             age = source.frame_age()
             self.log.event("sensor_stale" if value else "sensor_fresh", level="warning" if value else "info",
                            node=run.name, frame_age_ms=None if age is None else round(age * 1000, 1))
+        elif key == "sensor_fault":
+            fault = run.loop.pipeline.fault
+            c = run.loop.pipeline.counters
+            if value:
+                self.log.event("sensor_fault", level="warning", node=run.name, why=FrameFlag.describe(fault),
+                               fault_scans=c.fault_scans, invalid_scans=c.invalid_scans)
+            else:
+                self.log.event("sensor_ok", level="info", node=run.name, fault_scans=c.fault_scans)
         elif key == "bus_fault":
             self.log.event("bus_fault" if value else "bus_ok", level="warning" if value else "info",
                            node=run.name, error=source.last_error or "-")
@@ -440,6 +490,8 @@ class Bridge:
         self._close_all()
         if self._switch_interval is not None:  # the process's setting, as it was
             sys.setswitchinterval(self._switch_interval)
+        if self._excepthook is not None:
+            threading.excepthook = self._excepthook
         self.log.event("stopped", reason=self.stop_reason or ("failure" if self.failure else "end"),
                        offline_written=",".join(offline) or "-")
         self.notifier.close()
