@@ -15,6 +15,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from tests.helpers.modbus import free_port, need
@@ -41,6 +42,16 @@ def _classes() -> dict[str, Any]:
     pool.Add(fd)
     return {n: message_factory.GetMessageClass(pool.FindMessageTypeByName(f"spb.{n}"))
             for n in ("Payload", "Metric", "PropertySet", "PropertyValue")}
+
+
+@pytest.fixture(autouse=True)
+def state_home(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Autouse where imported: the edge node's state folder (its bdSeq file, when no
+    store_dir is given) is the test's own, not the user's, and starts empty."""
+    home = tmp_path_factory.mktemp("state")
+    monkeypatch.delenv("STATE_DIRECTORY", raising=False)
+    monkeypatch.setenv("XDG_STATE_HOME", str(home))
+    return home
 
 
 MESSAGES = _classes()
@@ -78,9 +89,14 @@ class Broker:
     def __init__(self, tmp: Path, port: int | None = None, conf_lines: str = "allow_anonymous true\n") -> None:
         self.port = port or free_port()
         conf = tmp / f"mosquitto-{self.port}.conf"
+        #: mosquitto's log: connections ("New client connected ... (p2, c1, k30)"), clean
+        #: disconnects ("Client ID disconnected."), subscriptions ("ID QOS TOPIC")
+        self.log = tmp / f"mosquitto-{self.port}.log"
         # user root: a broker started as root keeps reading the test's own files (no
         # effect when the tests run as another user)
-        conf.write_text(f"listener {self.port} 127.0.0.1\npersistence false\nuser root\n{conf_lines}")
+        conf.write_text(f"listener {self.port} 127.0.0.1\npersistence false\nuser root\n"
+                        f"log_dest file {self.log}\nlog_type notice\nlog_type information\nlog_type subscribe\n"
+                        f"log_type unsubscribe\n{conf_lines}")
         self.proc = subprocess.Popen([need("mosquitto"), "-c", str(conf)], stdout=subprocess.DEVNULL,
                                      stderr=subprocess.DEVNULL)
         try:
@@ -88,6 +104,12 @@ class Broker:
         except BaseException:
             self.kill()
             raise
+
+    def log_lines(self) -> list[str]:
+        """The broker's log, each line without its time stamp."""
+        if not self.log.exists():
+            return []
+        return [line.partition(": ")[2] for line in self.log.read_text(errors="replace").splitlines()]
 
     def kill(self) -> None:
         if self.proc.poll() is None:
@@ -118,19 +140,55 @@ def _wait_port(port: int, proc: subprocess.Popen) -> None:
         time.sleep(0.02)
 
 
-class Capture:
-    """``mosquitto_sub`` (the third-party peer): every message as (topic, payload bytes)."""
+READY = "eskin-test/ready"
 
-    def __init__(self, port: int, out: Path, *args: str) -> None:
+
+class Capture:
+    """``mosquitto_sub`` (the third-party peer): every message as (topic, payload bytes).
+
+    With ``detail`` it subscribes at QoS 1 over MQTT 5 with retain-as-published, so
+    that each message's QoS is the one it was published with (up to 1) and its retain
+    flag the publisher's: :meth:`records` gives (topic, qos, retain, payload).  Ready
+    when a message of its own on :data:`READY` has come back (its subscription is in
+    place), never after a fixed wait."""
+
+    def __init__(self, port: int, out: Path, *args: str, detail: bool = False) -> None:
         self.out = out
+        self.detail = detail
         self._file = open(out, "w")
+        fmt = ["-q", "1", "-V", "mqttv5", "--retain-as-published", "-F", "%t %q %r %x"] if detail else ["-F", "%t %x"]
         self.proc = subprocess.Popen([need("mosquitto_sub"), "-h", "127.0.0.1", "-p", str(port), "-t", "spBv1.0/#",
-                                      "-v", "-F", "%t %x", *args], stdout=self._file, stderr=subprocess.DEVNULL)
-        time.sleep(0.3)  # subscribed before the node connects (no retained messages in Sparkplug)
+                                      "-t", READY, "-v", *fmt, *args], stdout=self._file,
+                                     stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 10
+        while not any(line.startswith(READY) for line in out.read_text().splitlines()):
+            assert self.proc.poll() is None and time.monotonic() < deadline, "mosquitto_sub does not subscribe"
+            subprocess.run([need("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(port), "-t", READY, "-m", "1"],
+                           check=False, timeout=10, capture_output=True)
+            time.sleep(0.05)
+
+    def _lines(self) -> list[str]:
+        """The whole lines written so far (a line being written is left for later)."""
+        text = self.out.read_text()
+        return text.splitlines() if text.endswith("\n") else text.splitlines()[:-1]
+
+    def records(self) -> list[tuple[str, int, bool, bytes]]:
+        """(topic, qos, retain, payload) of every Sparkplug message (``detail`` only)."""
+        out = []
+        for line in self._lines():
+            if line.startswith(READY):
+                continue
+            topic, qos, retain, hexed = (line.split(" ") + ["", "", ""])[:4]
+            out.append((topic, int(qos), retain == "1", bytes.fromhex(hexed)))
+        return out
 
     def messages(self) -> list[tuple[str, bytes]]:
+        if self.detail:
+            return [(t, p) for t, _, _, p in self.records()]
         out = []
-        for line in self.out.read_text().splitlines():
+        for line in self._lines():
+            if line.startswith(READY):
+                continue
             topic, _, hexed = line.partition(" ")
             out.append((topic, bytes.fromhex(hexed)))
         return out
@@ -156,7 +214,7 @@ def send_rebirth(port: int, group: str, edge: str, tmp: Path) -> None:
     cmd.metrics.add(name="Node Control/Rebirth", datatype=11, boolean_value=True)
     f = tmp / "rebirth.bin"
     f.write_bytes(cmd.SerializeToString())
-    subprocess.run([need("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(port), "-q", "1",
+    subprocess.run([need("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(port), "-q", "0",
                     "-t", f"spBv1.0/{group}/NCMD/{edge}", "-f", str(f)], check=True, timeout=10)
 
 
