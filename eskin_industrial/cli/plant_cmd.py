@@ -82,7 +82,7 @@ def plant(broker, group_id, plain, as_json, rebirth, duration_s, ca_file, cert_f
             for e in model.take(msg.topic, msg.payload, time.monotonic()):
                 events.put(e)
                 if rebirth and e["event"] == "unborn":
-                    client.publish(f"spBv1.0/{e['group']}/NCMD/{e['edge']}", rebirth_command(), qos=1)
+                    client.publish(f"spBv1.0/{e['group']}/NCMD/{e['edge']}", rebirth_command(), qos=0)  # NCMD: QoS 0
 
     def on_connect(client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
         if reason.is_failure:
