@@ -742,6 +742,52 @@ NOT_COVERED: dict[str, str] = {
 EDGE_NODE_IDS = sorted({*COVERED, *NOT_APPLICABLE, *NOT_COVERED})
 
 
+#: The specification's other statements (287 tck-ids in all): the host application's and the
+#: MQTT server's own, none of them binding an edge node.
+HOST_OR_SERVER_IDS = (
+    "components-ph-state", "conformance-mqtt-aware-basic", "conformance-mqtt-aware-dbirth-mqtt-retain",
+    "conformance-mqtt-aware-dbirth-mqtt-topic", "conformance-mqtt-aware-nbirth-mqtt-retain",
+    "conformance-mqtt-aware-nbirth-mqtt-topic", "conformance-mqtt-aware-ndeath-timestamp",
+    "conformance-mqtt-aware-store", "conformance-mqtt-qos0", "conformance-mqtt-qos1", "conformance-mqtt-retained",
+    "conformance-mqtt-will-messages", "conformance-primary-host", "host-topic-phid-birth-message",
+    "host-topic-phid-birth-payload", "host-topic-phid-birth-payload-timestamp", "host-topic-phid-birth-qos",
+    "host-topic-phid-birth-required", "host-topic-phid-birth-retain", "host-topic-phid-birth-sub-required",
+    "host-topic-phid-birth-topic", "host-topic-phid-death-payload", "host-topic-phid-death-payload-timestamp-connect",
+    "host-topic-phid-death-payload-timestamp-disconnect-clean",
+    "host-topic-phid-death-payload-timestamp-disconnect-with-no-disconnect-packet", "host-topic-phid-death-qos",
+    "host-topic-phid-death-required", "host-topic-phid-death-retain", "host-topic-phid-death-topic",
+    "message-flow-hid-sparkplug-state-message-delivered", "message-flow-phid-sparkplug-clean-session-311",
+    "message-flow-phid-sparkplug-clean-session-50", "message-flow-phid-sparkplug-state-publish",
+    "message-flow-phid-sparkplug-state-publish-payload",
+    "message-flow-phid-sparkplug-state-publish-payload-timestamp", "message-flow-phid-sparkplug-subscription",
+    "operational-behavior-edge-node-termination-host-action-ddeath-devices-offline",
+    "operational-behavior-edge-node-termination-host-action-ddeath-devices-tags-stale",
+    "operational-behavior-edge-node-termination-host-action-ndeath-devices-offline",
+    "operational-behavior-edge-node-termination-host-action-ndeath-devices-tags-stale",
+    "operational-behavior-edge-node-termination-host-action-ndeath-node-offline",
+    "operational-behavior-edge-node-termination-host-action-ndeath-node-tags-stale",
+    "operational-behavior-host-application-connect-birth",
+    "operational-behavior-host-application-connect-birth-payload",
+    "operational-behavior-host-application-connect-birth-qos",
+    "operational-behavior-host-application-connect-birth-retained",
+    "operational-behavior-host-application-connect-birth-topic", "operational-behavior-host-application-connect-will",
+    "operational-behavior-host-application-connect-will-payload",
+    "operational-behavior-host-application-connect-will-qos",
+    "operational-behavior-host-application-connect-will-retained",
+    "operational-behavior-host-application-connect-will-topic", "operational-behavior-host-application-death-payload",
+    "operational-behavior-host-application-death-qos", "operational-behavior-host-application-death-retained",
+    "operational-behavior-host-application-death-topic",
+    "operational-behavior-host-application-disconnect-intentional", "operational-behavior-host-application-host-id",
+    "operational-behavior-host-application-multi-server-timestamp",
+    "operational-behavior-host-application-termination", "operational-behavior-host-reordering-param",
+    "operational-behavior-host-reordering-rebirth", "operational-behavior-host-reordering-start",
+    "operational-behavior-host-reordering-success",
+    "operational-behavior-primary-application-state-with-multiple-servers-state", "payloads-state-birth",
+    "payloads-state-birth-payload", "payloads-state-subscribe", "payloads-state-will-message",
+    "payloads-state-will-message-payload", "payloads-state-will-message-qos", "payloads-state-will-message-retain",
+)
+
+
 @pytest.mark.parametrize("tck_id", sorted(COVERED))
 def test_edge_node(tck_id: str, request: pytest.FixtureRequest) -> None:
     run_name, fn = COVERED[tck_id]
@@ -752,17 +798,28 @@ def test_edge_node(tck_id: str, request: pytest.FixtureRequest) -> None:
     fn(request.getfixturevalue(run_name))
 
 
+_RUNS = {"default_run": "the default run", "host_run": "the primary-host run",
+         "view_run": "`eskin-bus plant --rebirth` (the host's side)", "": "the configuration's checks"}
+
+
 def table() -> list[str]:
     """The conformance table of ``docs/plant.md`` (Markdown lines)."""
     rows = ["| tck-id | status | how |", "|---|---|---|"]
     for i in EDGE_NODE_IDS:
         if i in COVERED:
-            rows.append(f"| `{i}` | covered | `test_edge_node[{i}]` ({COVERED[i][0].replace('_run', '') or 'unit'}) |")
+            rows.append(f"| `{i}` | covered | {_RUNS[COVERED[i][0]]} |")
         elif i in NOT_APPLICABLE:
             rows.append(f"| `{i}` | not applicable | {NOT_APPLICABLE[i]} |")
         else:
             rows.append(f"| `{i}` | not covered | {NOT_COVERED[i]} |")
     return rows
+
+
+def test_every_statement_of_the_specification_is_accounted_for() -> None:
+    host = {f"tck-id-{i}" for i in HOST_OR_SERVER_IDS}
+    assert len(host) == len(HOST_OR_SERVER_IDS) and not host & set(EDGE_NODE_IDS)
+    assert len(host) + len(EDGE_NODE_IDS) == 287, "the tck-ids of Sparkplug 3.0.0's chapters 3 to 10"
+    assert not set(COVERED) & set(NOT_APPLICABLE) and not set(NOT_COVERED) & (set(COVERED) | set(NOT_APPLICABLE))
 
 
 def test_the_conformance_table_in_the_docs_is_this_module() -> None:

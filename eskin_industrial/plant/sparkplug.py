@@ -24,6 +24,7 @@ publish (a frame is a sample of now: the store keeps the states, not stale frame
 from __future__ import annotations
 
 import collections
+import itertools
 import json
 import math
 import os
@@ -205,6 +206,20 @@ def _ms(age_s: float) -> int:
     return round(age_s * 1000.0) if math.isfinite(age_s) else _FRAME_AGE_NONE
 
 
+def _trailing_seq(data: bytes) -> int | None:
+    """The ``seq`` of a payload this edge node encoded: its last field (key 0x18, a
+    varint of one or two bytes); any other payload is decoded."""
+    n = len(data)
+    if n >= 2 and data[-2] == 0x18 and data[-1] < 0x80:
+        return data[-1]
+    if n >= 3 and data[-3] == 0x18 and data[-2] & 0x80 and data[-1] < 0x80:
+        return (data[-2] & 0x7F) | data[-1] << 7
+    try:
+        return pb.decode(data).seq
+    except EskinError:
+        return None
+
+
 def _now_ms() -> int:
     return int(time.time() * 1000)
 
@@ -364,18 +379,19 @@ class EdgeNode:
 
     def _echo(self, data: bytes) -> None:
         """One of our DDATA back from the broker (paho's thread): it and everything
-        written before it have reached the broker."""
-        try:
-            seq = pb.decode(data).seq
-        except EskinError:
+        written before it have reached the broker.  The echoes come in the order of
+        publishing, so the match is at the front; it is looked for among the first 256
+        (a seq comes back once in 256 messages), never the whole queue."""
+        seq = _trailing_seq(data)
+        if seq is None:
             return
         with self.lock:
             inflight = self.inflight
-            if seq is None or not any(s == seq for _, _, s, _ in inflight):
+            at = next((i for i, entry in enumerate(itertools.islice(inflight, 256)) if entry[2] == seq), None)
+            if at is None:
                 return  # another session's, or already confirmed
-            while inflight:
-                if inflight.popleft()[2] == seq:
-                    return
+            for _ in range(at + 1):
+                inflight.popleft()
 
     def _take_back(self) -> None:
         """The connection is gone: what the broker may not have is held again, to go
@@ -969,5 +985,6 @@ def metric_table() -> list[str]:
     rows.append(f"| base+{FRAME_ALIAS} | `{m.name}` | {_TYPE_NAMES[m.datatype]} | {m.unit} | "
                 f"every `frame_interval_s` (0: not declared) | {m.doc} |")
     for i, c in enumerate(COMMANDS):
-        rows.append(f"| base+{COMMAND_ALIAS + i} | `{c.name}` | Boolean | - | DBIRTH (false); DCMD | {c.doc} |")
+        sent = "DBIRTH and DDATA (as `Enabled`); DCMD" if c.on_false is not None else "DBIRTH (false); DCMD"
+        rows.append(f"| base+{COMMAND_ALIAS + i} | `{c.name}` | Boolean | - | {sent} | {c.doc} |")
     return rows
