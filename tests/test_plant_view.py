@@ -10,6 +10,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
@@ -117,7 +118,7 @@ def test_the_command_shows_what_the_subscriber_received(tmp_path):
     assert [e for e in summary if "device" not in e][0]["seq_gaps"] == 0
 
 
-def test_historical_values_are_history_not_the_live_state():
+def test_historical_values_are_history_not_the_live_state() -> None:
     """After an outage the node sends what it held, is_historical, after its births:
     the view shows it as history (an event with its time) and keeps the births' live
     state; a slip while away is still the last slip."""
@@ -144,7 +145,7 @@ def test_data_before_any_birth_is_an_unborn_node_once():
 
 
 @pytest.mark.slow
-def test_rebirth_asks_a_node_born_before_the_view_started(tmp_path):
+def test_rebirth_asks_a_node_born_before_the_view_started(tmp_path: Path) -> None:
     with spb.broker(tmp_path) as port:
         edge = open_edge(SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e"), [("grip", {})])
         edge.start()

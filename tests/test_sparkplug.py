@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from hypothesis import given, settings
@@ -316,7 +317,7 @@ def _check(*extra: str, env: dict[str, str] | None = None) -> subprocess.Complet
                           env={**os.environ, "PYTHONPATH": os.getcwd(), **(env or {})})
 
 
-def test_qos_1_for_data_is_an_explicit_opt_in_warned_about(tmp_path):
+def test_qos_1_for_data_is_an_explicit_opt_in_warned_about(tmp_path: Path) -> None:
     """Sparkplug's QoS 0 for births and data is the default; ``qos = 1`` is refused in
     one line naming the file and the key and the opt-in; ``nonconforming_qos1`` is
     warned about by ``--check`` (and at start, below)."""
@@ -334,7 +335,7 @@ def test_qos_1_for_data_is_an_explicit_opt_in_warned_about(tmp_path):
     assert loud.returncode == 0 and "eskin-bus: warning: [sparkplug] nonconforming_qos1: " in loud.stderr, loud.stderr
 
 
-def test_a_state_folder_that_cannot_be_written_is_a_warning_not_an_error(tmp_path):
+def test_a_state_folder_that_cannot_be_written_is_a_warning_not_an_error(tmp_path: Path) -> None:
     """bdSeq kept across restarts needs a folder: without one (here the state folder
     is under a file) the run goes on from 0 at each start, and says so."""
     f = tmp_path / "a-file"
@@ -347,7 +348,7 @@ def test_a_state_folder_that_cannot_be_written_is_a_warning_not_an_error(tmp_pat
 
 
 @pytest.mark.slow
-def test_nonconforming_qos1_publishes_at_qos_1_and_says_so(tmp_path):
+def test_nonconforming_qos1_publishes_at_qos_1_and_says_so(tmp_path: Path) -> None:
     broker = spb.Broker(tmp_path)
     cap = spb.Capture(broker.port, tmp_path / "sub.txt", detail=True)
     edge = open_edge(SparkplugOptions(f"mqtt://127.0.0.1:{broker.port}", "g", "e", nonconforming_qos1=True),
@@ -366,3 +367,20 @@ def test_nonconforming_qos1_publishes_at_qos_1_and_says_so(tmp_path):
     assert {(t.split("/")[2], q) for t, q, _, _ in recs} == {("NBIRTH", 1), ("DBIRTH", 1), ("DDATA", 1)}
     (warned,) = [e for e in events if e[0] == "sparkplug_nonconforming"]
     assert warned[1] == "warning" and "QoS 1" in warned[2]["what"]
+
+
+def test_the_bdseq_file_goes_on_from_the_last_connect_and_wraps(tmp_path: Path) -> None:
+    from eskin_industrial.plant.bdseq import BdSeqFile, bdseq_path
+
+    path = bdseq_path(str(tmp_path / "store"), "g", "e")
+    assert path == tmp_path / "store" / "g-e.bdseq"
+    f = BdSeqFile(path)
+    assert f.error is None and f.previous() is None and f.first() == 0, "a first start: 0"
+    assert f.write(7) is None and path.read_text() == "7\n" and BdSeqFile(path).first() == 8
+    assert f.write(255) is None and BdSeqFile(path).first() == 0, "255 wraps to 0"
+    path.write_text("not a number\n")
+    assert BdSeqFile(path).first() == 0, "an unreadable file is a first start"
+    blocked = tmp_path / "a-file"
+    blocked.write_text("")
+    g = BdSeqFile(blocked / "sub" / "g-e.bdseq")
+    assert g.error is not None and "is not a writable folder" in g.error and g.write(1) == g.error

@@ -17,6 +17,7 @@ from eskin_industrial.plant import payload as pb
 from eskin_industrial.plant.commands import COMMAND_ALIAS, COMMANDS, BadCommand, parse_device_command
 from eskin_industrial.plant.sparkplug import DEVICE_METRICS, SparkplugOptions
 from eskin_industrial.node import Command
+from eskin_industrial.profile import Profile
 from tests.helpers import sparkplug as spb
 from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, to_raw, wait_for
@@ -73,7 +74,7 @@ def _config(port: int, node: NodeConfig) -> BridgeConfig:
 
 
 @pytest.mark.slow
-def test_dcmds_are_applied_by_the_loop_and_garbage_is_counted(paper_profile, tmp_path):
+def test_dcmds_are_applied_by_the_loop_and_garbage_is_counted(paper_profile: Profile, tmp_path: Path) -> None:
     ch = channel()
     unloaded = to_raw(paper_profile, np.zeros((400, paper_profile.taxels)))
     dcmd = "spBv1.0/g/DCMD/e/grip"

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import subprocess
 import time
+from pathlib import Path
 
 import pytest
 
@@ -31,7 +32,7 @@ def _kinds(msgs):
 
 
 @pytest.mark.slow
-def test_births_wait_for_the_primary_host_and_come_again_when_it_is_back(tmp_path):
+def test_births_wait_for_the_primary_host_and_come_again_when_it_is_back(tmp_path: Path) -> None:
     with spb.broker(tmp_path) as port:
         cap = spb.Capture(port, tmp_path / "sub.txt")
         try:

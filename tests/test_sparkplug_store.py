@@ -9,6 +9,8 @@ from __future__ import annotations
 import sqlite3
 import threading
 import time
+from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -30,7 +32,7 @@ def publication(i: int) -> NodeSnapshot:
     return made(state=i % 4, slip_events=i)
 
 
-def edge(port: int, tmp_path, **kw) -> EdgeNode:
+def edge(port: int, tmp_path: Path, **kw: Any) -> EdgeNode:
     opts = SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e", reconnect_min_s=2.0, reconnect_max_s=2.0, **kw)
     node = open_edge(opts, [("grip", {})])
     events: list = []
@@ -63,7 +65,7 @@ def births_then_data(msgs) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("qos1", [False, True], ids=["qos0", "nonconforming_qos1"])
-def test_a_broker_killed_mid_run_loses_nothing_within_the_bound(tmp_path, qos1):
+def test_a_broker_killed_mid_run_loses_nothing_within_the_bound(tmp_path: Path, qos1: bool) -> None:
     """Messages flow at ~200/s while broker A is killed and broker B comes up on its
     port: each one arrives once live (at A or B) or as historical at B, after B's births;
     the historical ones in order, each metric with the time it was made, the payload
@@ -141,7 +143,7 @@ def test_a_broker_killed_mid_run_loses_nothing_within_the_bound(tmp_path, qos1):
 
 
 @pytest.mark.slow
-def test_past_the_bound_the_overflow_is_counted_exactly(tmp_path):
+def test_past_the_bound_the_overflow_is_counted_exactly(tmp_path: Path) -> None:
     """50 messages during an outage into a bound of 20: the first 20 arrive as
     historical, in order; 30 are counted (node metric, counter, one log line)."""
     first = spb.Broker(tmp_path)
@@ -188,7 +190,7 @@ def test_past_the_bound_the_overflow_is_counted_exactly(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_queue_on_disk_outlives_the_edge_node(tmp_path):
+def test_the_queue_on_disk_outlives_the_edge_node(tmp_path: Path) -> None:
     """No broker at all: 30 messages held on disk when the node stops; a new node on the
     same folder sends them, as historical, after its births."""
     port = free_port()

@@ -6,9 +6,12 @@ NBIRTH repeats it (tck-id-message-flow-edge-node-birth-publish-will-message-payl
 tck-id-topics-nbirth-bdseq-increment).  A host tells a late will of the last run from
 the death of the current one by it.  A process that starts again must therefore go on
 from the value of its previous run: the value of each CONNECT is written to
-``<folder>/<group_id>-<edge_node_id>.bdseq`` (one line, a decimal number) before the
-CONNECT is sent, written to a temporary file and renamed over the old one, so that a
-crash leaves the old value or the new one, never half of one.
+``<folder>/<group_id>-<edge_node_id>.bdseq`` (one line, a decimal number) just before
+each connection attempt that may send it, to a temporary file renamed over the old
+one, so that a crash leaves the old value or the new one, never half of one.  Written
+before, not after: a run that never reaches its broker may leave one number unused (a
+host matches a death to its birth by equality: a gap is harmless), and no two sessions
+ever carry the same number (a late will would then end the wrong one).
 
 The folder is the store's (``store_dir``) when it is set, else the process's state
 folder: ``$STATE_DIRECTORY`` (systemd's ``StateDirectory=``), ``$XDG_STATE_HOME/eskin-bus``,

@@ -266,6 +266,7 @@ class EdgeNode:
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
         self.client.on_connect_fail = self._on_connect_fail
+        self.client.on_pre_connect = self._on_pre_connect
         self.client.on_message = self._on_message
         self.client.reconnect_delay_set(options.reconnect_min_s, options.reconnect_max_s)
         self._set_will()
@@ -294,13 +295,17 @@ class EdgeNode:
         return pb.encode(pb.Payload(_now_ms(), (pb.Metric("bdSeq", None, _now_ms(), pb.INT64, self.bd_seq),)))
 
     def _set_will(self) -> None:
-        """The will of the next CONNECT, its bdSeq kept on disk first (the next run
-        goes on from it)."""
+        """The will of the next CONNECT."""
+        self.client.will_set(self.topic["NDEATH"], self._death(), qos=1, retain=False)
+
+    def _on_pre_connect(self, client: Any, userdata: Any) -> None:
+        """Just before each connection attempt (paho's thread): the bdSeq its CONNECT
+        carries is kept on disk, so that the next run goes on from the last one used
+        (:mod:`.bdseq`)."""
         error = self.bd_file.write(self.bd_seq)
         if error is not None and error != self.bd_error:
             self.bd_error = error
             self._event("sparkplug_bdseq_not_kept", "warning", file=str(self.bd_file.path), error=error)
-        self.client.will_set(self.topic["NDEATH"], self._death(), qos=1, retain=False)
 
     def _next_seq(self) -> int:
         s = self.seq

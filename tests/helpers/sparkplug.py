@@ -160,12 +160,16 @@ class Capture:
         self.proc = subprocess.Popen([need("mosquitto_sub"), "-h", "127.0.0.1", "-p", str(port), "-t", "spBv1.0/#",
                                       "-t", READY, "-v", *fmt, *args], stdout=self._file,
                                      stderr=subprocess.DEVNULL)
-        deadline = time.monotonic() + 10
-        while not any(line.startswith(READY) for line in out.read_text().splitlines()):
-            assert self.proc.poll() is None and time.monotonic() < deadline, "mosquitto_sub does not subscribe"
-            subprocess.run([need("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(port), "-t", READY, "-m", "1"],
-                           check=False, timeout=10, capture_output=True)
-            time.sleep(0.05)
+        try:  # (``args``: the connection's, TLS and credentials: the probe's publisher takes them too)
+            deadline = time.monotonic() + 10
+            while not any(line.startswith(READY) for line in out.read_text().splitlines()):
+                assert self.proc.poll() is None and time.monotonic() < deadline, "mosquitto_sub does not subscribe"
+                subprocess.run([need("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(port), "-t", READY, "-m", "1",
+                                *args], check=False, timeout=10, capture_output=True)
+                time.sleep(0.05)
+        except BaseException:
+            self.close()
+            raise
 
     def _lines(self) -> list[str]:
         """The whole lines written so far (a line being written is left for later)."""
@@ -203,7 +207,8 @@ class Capture:
             time.sleep(0.05)
 
     def close(self) -> None:
-        os.kill(self.proc.pid, signal.SIGKILL)
+        if self.proc.poll() is None:
+            os.kill(self.proc.pid, signal.SIGKILL)
         self.proc.wait(5)
         self._file.close()
 
