@@ -9,10 +9,18 @@ register image is rendered from, so that the plant and the PLC see the same stat
 The loop's thread only encodes and enqueues: paho-mqtt's network thread
 (``loop_start``) writes to the broker, reconnects, and calls back on connect (births),
 on a command (NCMD rebirth; DCMDs, queued for the loop: :mod:`.commands`) and on the
-primary host's STATE.  While the node cannot publish (no broker, no primary host) its
-data messages go to the store (:mod:`.store`), whose own thread writes them to SQLite
-and sends them, historical, after the next births.  One lock orders the ``seq``
-numbers with the messages.  The connection's security: :mod:`.transport`.
+primary host's STATE (offline: NDEATH, DISCONNECT, a new session), and on our own
+DDATA handed back by the broker (what it has: at QoS 0 the only way to know).  While
+the node cannot publish (no broker, no primary host) its data messages go to the store
+(:mod:`.store`), whose own thread writes them to SQLite and sends them, historical,
+after the next births; so do those a lost connection took with it.  One lock orders the
+``seq`` numbers with the messages.  The connection's security: :mod:`.transport`;
+``bdSeq`` across restarts: :mod:`.bdseq`.
+
+Sparkplug 3.0 to the letter by default (``docs/plant.md``, Conformance, and
+``tests/test_sparkplug_conformance.py``, one test per tck-id): births, data and DDEATH
+at QoS 0, every metric with its timestamp, no datatype after the birth; QoS 1 for them
+only by the opt-in ``nonconforming_qos1``, warned about.
 
 With ``frame_interval_s`` the device also publishes the calibrated taxel frame as a
 ``FloatArray`` metric (``Taxels/Frame``): the node's loop hands it the newest frame
@@ -360,8 +368,9 @@ class EdgeNode:
     def _publish_tracked(self, topic: str, data: bytes, held: Held | None, seq: int) -> bool:
         """Publish a DDATA and track it until the broker has it (under the lock); a
         message paho refuses (the connection went) is held instead.  A frame
-        (``held`` None) is tracked for the order of the echoes, never held."""
-        info = self.client.publish(topic, data, qos=self.qos)
+        (``held`` None) goes at QoS 0 whatever the setting (the next one replaces a
+        frame lost), tracked for the order of the echoes, never held."""
+        info = self.client.publish(topic, data, qos=self.qos if held is not None else 0)
         if info.rc != 0:
             self.dropped += 1
             if held is not None:
