@@ -19,6 +19,7 @@ from .examples_cmd import examples
 from .modbus_cmd import modbus_bridge, modbus_node
 from .monitor_cmd import monitor
 from .node_cmd import node
+from .opcua_cmd import opcua
 from .plant_cmd import plant
 from .plc_cmd import plc
 from .plc_sim_cmd import plc_sim
@@ -83,6 +84,7 @@ main.add_command(receive)
 main.add_command(monitor)
 main.add_command(examples)
 main.add_command(plant)
+main.add_command(opcua)
 # After every command is added: -v/-q on each, and each option also from the
 # environment, ESKIN_<COMMAND>_<OPTION> (docs/cli.md).
 add_verbosity(main)

@@ -53,6 +53,7 @@ SINKS: dict[str, str] = {
     "plc": "eskin_industrial.plc.sink:PlcSink",
     "recorder": "eskin_industrial.sinks.recorder:Recorder",
     "sparkplug": "eskin_industrial.plant.sparkplug:SparkplugDevice",
+    "opcua": "eskin_industrial.opcua.sink:OpcuaSink",
 }
 #: A sink's own events held until a handler is attached (the first ones of a writer
 #: that starts before the bridge's log is wired); beyond it the oldest are dropped.
