@@ -1,15 +1,17 @@
 """The tests' own Sparkplug B decoder and encoder: the ``protobuf`` package with
-message classes built at test time from ``sparkplug_b.proto`` (no protoc: the few
-lines of the schema are read into a ``FileDescriptorProto`` here), and a mosquitto
-broker and ``mosquitto_sub`` capture on a loopback port of the test's own."""
+message classes from the specification's own schema (``sparkplug_b.proto``, as the
+Sparkplug 3.0.0 specification prints it), compiled by ``protoc`` when first needed;
+and a mosquitto broker and ``mosquitto_sub`` capture on a loopback port of the
+test's own."""
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
-import re
 import signal
 import subprocess
+import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,27 +23,38 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from tests.helpers.modbus import free_port, need
 
 PROTO = Path(__file__).with_name("sparkplug_b.proto")
-_TYPES = {"uint64": "TYPE_UINT64", "uint32": "TYPE_UINT32", "string": "TYPE_STRING", "bytes": "TYPE_BYTES",
-          "bool": "TYPE_BOOL", "float": "TYPE_FLOAT", "double": "TYPE_DOUBLE"}
+PACKAGE = "org.eclipse.tahu.protobuf"  #: the schema's own package
 
 
-def _classes() -> dict[str, Any]:
-    text = PROTO.read_text()
-    fd = descriptor_pb2.FileDescriptorProto(name="sparkplug_b_test.proto", package="spb", syntax="proto2")
-    F = descriptor_pb2.FieldDescriptorProto
-    for name, body in re.findall(r"message (\w+) \{(.*?)\}", text, re.S):
-        msg = fd.message_type.add(name=name)
-        for label, typ, fname, num in re.findall(r"(optional|repeated) (\w+) (\w+) = (\d+);", body):
-            f = msg.field.add(name=fname, number=int(num),
-                              label=F.LABEL_REPEATED if label == "repeated" else F.LABEL_OPTIONAL)
-            if typ in _TYPES:
-                f.type = getattr(F, _TYPES[typ])
-            else:
-                f.type, f.type_name = F.TYPE_MESSAGE, f".spb.{typ}"
+@functools.cache
+def classes() -> dict[str, Any]:
+    """The schema's message classes by their short name (``Payload``, ``Metric``,
+    ``PropertySet``, ...): ``protoc`` compiles the specification's file to descriptors,
+    the ``protobuf`` package builds the classes from them (no generated code kept)."""
+    protoc = need("protoc")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "sparkplug_b.pb"
+        subprocess.run([protoc, f"--proto_path={PROTO.parent}", f"--descriptor_set_out={out}", PROTO.name],
+                       check=True, capture_output=True, timeout=60)
+        files = descriptor_pb2.FileDescriptorSet.FromString(out.read_bytes())
     pool = descriptor_pool.DescriptorPool()
-    pool.Add(fd)
-    return {n: message_factory.GetMessageClass(pool.FindMessageTypeByName(f"spb.{n}"))
-            for n in ("Payload", "Metric", "PropertySet", "PropertyValue")}
+    for fd in files.file:
+        pool.Add(fd)
+    payload = pool.FindMessageTypeByName(f"{PACKAGE}.Payload")
+    out_classes = {"Payload": message_factory.GetMessageClass(payload)}
+    for nested in payload.nested_types:
+        out_classes[nested.name] = message_factory.GetMessageClass(nested)
+    return out_classes
+
+
+def __getattr__(name: str) -> Any:
+    """``Payload`` and ``MESSAGES``, built on first use (a test without protoc is
+    skipped, or fails in CI, there and not at import)."""
+    if name == "Payload":
+        return classes()["Payload"]
+    if name == "MESSAGES":
+        return classes()
+    raise AttributeError(name)
 
 
 @pytest.fixture(autouse=True)
@@ -54,12 +67,8 @@ def state_home(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.Mon
     return home
 
 
-MESSAGES = _classes()
-Payload = MESSAGES["Payload"]
-
-
 def parse(data: bytes) -> Any:
-    p = Payload()
+    p = classes()["Payload"]()
     p.ParseFromString(data)
     return p
 
@@ -215,7 +224,7 @@ class Capture:
 
 def send_rebirth(port: int, group: str, edge: str, tmp: Path) -> None:
     """An NCMD ``Node Control/Rebirth`` = true, encoded by protobuf, sent by ``mosquitto_pub``."""
-    cmd = Payload(timestamp=int(time.time() * 1000))
+    cmd = classes()["Payload"](timestamp=int(time.time() * 1000))
     cmd.metrics.add(name="Node Control/Rebirth", datatype=11, boolean_value=True)
     f = tmp / "rebirth.bin"
     f.write_bytes(cmd.SerializeToString())
@@ -252,3 +261,17 @@ def password_file(tmp: Path, users: dict[str, str]) -> Path:
         subprocess.run([need("mosquitto_passwd"), "-b", *(["-c"] if i == 0 else []), str(f), user, pw], check=True,
                        capture_output=True, timeout=10)
     return f
+
+
+TCK_IDS = Path(__file__).with_name("sparkplug_tck_ids.txt")
+
+
+def tck_ids() -> dict[str, str]:
+    """Every tck-id of Sparkplug 3.0.0 -> the requirement words of its statement
+    (``MUST``, ``MUST NOT``, ``SHOULD``, ``SHOULD NOT``, ``MAY``, comma-separated)."""
+    out = {}
+    for line in TCK_IDS.read_text().splitlines():
+        if line and not line.startswith("#"):
+            tck, _, words = line.partition(" ")
+            out[tck] = words
+    return out
