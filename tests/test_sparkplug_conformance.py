@@ -39,6 +39,7 @@ import pytest
 
 from eskin_industrial.plant.sparkplug import SparkplugOptions
 from tests.helpers import sparkplug as spb
+from tests.helpers import sparkplug_lint as lint
 from tests.helpers.modbus import need
 from tests.helpers.paths import PROFILES, ROOT
 
@@ -178,6 +179,36 @@ def default_run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
 
 
 @pytest.fixture(scope="module")
+def plain_run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
+    """``eskin-bus bridge`` given nothing but a profile, a scene and the broker with its
+    two ids (every other setting its default), through the case-2 slide's slip, then
+    stopped (SIGTERM)."""
+    tmp = tmp_path_factory.mktemp("plain")
+    broker = spb.Broker(tmp)
+    cap = spb.Capture(broker.port, tmp / "cap.txt", detail=True)
+    proc = None
+    try:
+        t0 = int(time.time() * 1000)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "eskin_industrial", "bridge", "-p", str(PROFILES / "paper-5x5.toml"),
+             "--source", "scene:case2", "--sparkplug", f"mqtt://127.0.0.1:{broker.port}", "--group-id", G,
+             "--edge-node-id", E], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            env={**os.environ, "PYTHONPATH": str(ROOT), "XDG_STATE_HOME": str(tmp / "state")})
+        _wait("the slip", lambda: any(  # State Code (alias 1001) 3
+            m.kind == "DDATA" and any(x.alias == 1001 and x.int_value == 3 for x in m.p.metrics)
+            for m in _records(cap)), 60)
+        time.sleep(1.0)
+        _stop(proc, signal.SIGTERM)
+        _wait("NDEATH", lambda: _count(cap, "NDEATH") == 1)
+        yield Run(_records(cap), broker.log_lines(), t0, int(time.time() * 1000))
+    finally:
+        if proc is not None:
+            _stop(proc, signal.SIGKILL)
+        cap.close()
+        broker.kill()
+
+
+@pytest.fixture(scope="module")
 def host_run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
     tmp = tmp_path_factory.mktemp("host")
     broker = spb.Broker(tmp)
@@ -286,9 +317,13 @@ def _ndata_topic(run: Run) -> None:
 
 
 @check("topic-structure-namespace-valid-group-id", "topic-structure-namespace-valid-edge-node-id",
-       "topic-structure-namespace-valid-device-id", run="")
+       "topic-structure-namespace-valid-device-id", "intro-group-id-string", "intro-group-id-chars",
+       "intro-edge-node-id-string", "intro-edge-node-id-chars", "intro-device-id-string", "intro-device-id-chars",
+       run="")
 def _ids_refused() -> None:
-    for bad in ("a+b", "a/b", "a#", ""):
+    """An id is a string of characters an MQTT topic level allows (UTF-8 on the wire:
+    NUL, a surrogate or a control character refused) without '/', '+' or '#'."""
+    for bad in ("a+b", "a/b", "a#", "", "a\x00b", "a\tb", "a\x85b", "a\ud800b"):
         with pytest.raises(ValueError, match="is not a Sparkplug id"):
             SparkplugOptions("mqtt://127.0.0.1:1883", bad, "e")
         with pytest.raises(ValueError, match="is not a Sparkplug id"):
@@ -532,7 +567,8 @@ def _rebirth(run: Run) -> None:
     assert [m.kind for m in rest[j:j + 2]] == ["NBIRTH", "DBIRTH"]
 
 
-@check("message-flow-device-birth-publish-nbirth-wait", "payloads-dbirth-order", "payloads-ddata-order")
+@check("message-flow-device-birth-publish-nbirth-wait", "payloads-dbirth-order", "payloads-ddata-order",
+       "principles-birth-certificates-order")
 def _birth_order(run: Run) -> None:
     for session in run.sessions():
         kinds = [m.kind for m in session]
@@ -553,7 +589,7 @@ def _ndata(run: Run) -> None:
     assert any(spb.metric_value(b.p, "Store/Pending") > 0 for b in births[1:]), "the NBIRTH counted what was held"
 
 
-@check("topics-ddata-payload", "operational-behavior-data-publish-dbirth-change")
+@check("topics-ddata-payload", "operational-behavior-data-publish-dbirth-change", "principles-rbe-recommended")
 def _only_changes(run: Run) -> None:
     """Each live DDATA carries metrics whose values differ from the last one sent
     (the birth's, or an earlier DDATA's)."""
@@ -576,7 +612,7 @@ def _chronological(run: Run) -> None:
         assert stamps == sorted(stamps)
 
 
-@check("message-flow-edge-node-birth-publish-connect")
+@check("message-flow-edge-node-birth-publish-connect", "principles-persistence-clean-session-311")
 def _session_first(run: Run) -> None:
     assert any(line.startswith("New client connected") and f" as {CLIENT} (p2, c1," in line for line in run.log), \
         "an MQTT 3.1.1 session, clean, before anything is published"
@@ -590,9 +626,9 @@ def _ncmd_subscribed(run: Run) -> None:
 @check("message-flow-device-dcmd-subscribe", "topics-dcmd-topic")
 def _dcmd_subscribed(run: Run) -> None:
     subs = [line for line in run.log if line.startswith(f"{CLIENT} ") and "/DCMD/" in line]
-    assert f"{CLIENT} 1 spBv1.0/{G}/DCMD/{E}/{D}" in subs and not any(s.endswith("/+") for s in subs)
+    assert f"{CLIENT} 1 spBv1.0/{G}/DCMD/{E}/{D}" in subs and not any(s.endswith("/+") for s in subs), subs
     enabled = [(x.alias, x.boolean_value) for m in run.of("DDATA") for x in m.p.metrics if x.alias in (1008, 1102)]
-    assert enabled[-4:] == [(1008, False), (1102, False), (1008, True), (1102, True)], "the DCMD applied"
+    assert enabled[-4:] == [(1008, False), (1102, False), (1008, True), (1102, True)], ("the DCMD applied", enabled)
 
 
 @check("message-flow-edge-node-birth-publish-will-message", "message-flow-edge-node-birth-publish-will-message-topic",
@@ -712,6 +748,7 @@ NOT_APPLICABLE: dict[str, str] = {
     **{f"tck-id-{i}": "no Quality property is published" for i in (
         "payloads-propertyset-quality-value-type", "payloads-propertyset-quality-value-value")},
     "tck-id-payloads-ndeath-will-message-publisher-disconnect-mqtt50": "the edge node speaks MQTT 3.1.1",
+    "tck-id-principles-persistence-clean-session-50": "the edge node speaks MQTT 3.1.1",
     "tck-id-topic-structure-namespace-duplicate-device-id-across-edge-node": "a MAY: nothing to check (two bridges "
     "may name their nodes alike)",
     "tck-id-payloads-name-cmd-requirement": "a MAY for the host: commands with or without metric timestamps are "
@@ -732,20 +769,21 @@ NOT_COVERED: dict[str, str] = {
     "edge nodes (two bridges with the same ids would take each other's MQTT client id, group_id-edge_node_id, and "
     "the broker disconnects one: visible as reconnects)",
     "tck-id-payloads-nbirth-edge-node-descriptor": "the same: unique ids are the deployment's to give",
+    "tck-id-intro-edge-node-id-uniqueness": "the same: unique ids are the deployment's to give",
     "tck-id-operational-behavior-primary-application-state-with-multiple-servers-walk": "one broker per edge node: "
     "after the primary host goes offline it connects to the same broker again (no list of servers to walk)",
 }
 
 #: Every tck-id of the specification whose subject is an edge node, one of its
-#: devices, or what they publish (chapters 4 to 6); the host application's and the
-#: MQTT server's own statements are left out.
+#: devices, or what they publish; the host application's and the MQTT server's own
+#: statements are left out.
 EDGE_NODE_IDS = sorted({*COVERED, *NOT_APPLICABLE, *NOT_COVERED})
 
 
-#: The specification's other statements (287 tck-ids in all): the host application's and the
-#: MQTT server's own, none of them binding an edge node.
+#: The specification's other statements: the host application's and the MQTT server's
+#: own, none of them binding an edge node.
 HOST_OR_SERVER_IDS = (
-    "components-ph-state", "conformance-mqtt-aware-basic", "conformance-mqtt-aware-dbirth-mqtt-retain",
+    "intro-sparkplug-host-state", "components-ph-state", "conformance-mqtt-aware-basic", "conformance-mqtt-aware-dbirth-mqtt-retain",
     "conformance-mqtt-aware-dbirth-mqtt-topic", "conformance-mqtt-aware-nbirth-mqtt-retain",
     "conformance-mqtt-aware-nbirth-mqtt-topic", "conformance-mqtt-aware-ndeath-timestamp",
     "conformance-mqtt-aware-store", "conformance-mqtt-qos0", "conformance-mqtt-qos1", "conformance-mqtt-retained",
@@ -816,9 +854,13 @@ def table() -> list[str]:
 
 
 def test_every_statement_of_the_specification_is_accounted_for() -> None:
+    """Each of the 299 tck-ids of Sparkplug 3.0.0 (all chapters) is the edge node's
+    (covered, not applicable or not covered) or the host's or the server's; none both."""
     host = {f"tck-id-{i}" for i in HOST_OR_SERVER_IDS}
+    spec = spb.tck_ids()
+    assert len(spec) == 299
     assert len(host) == len(HOST_OR_SERVER_IDS) and not host & set(EDGE_NODE_IDS)
-    assert len(host) + len(EDGE_NODE_IDS) == 287, "the tck-ids of Sparkplug 3.0.0's chapters 3 to 10"
+    assert host | set(EDGE_NODE_IDS) == set(spec), sorted(set(spec) ^ (host | set(EDGE_NODE_IDS)))
     assert not set(COVERED) & set(NOT_APPLICABLE) and not set(NOT_COVERED) & (set(COVERED) | set(NOT_APPLICABLE))
 
 
@@ -828,3 +870,94 @@ def test_the_conformance_table_in_the_docs_is_this_module() -> None:
     counts = re.search(r"(\d+) edge-node statements: (\d+) covered, (\d+) not applicable, (\d+) not covered", text)
     assert counts is not None and tuple(map(int, counts.groups())) == (
         len(EDGE_NODE_IDS), len(COVERED), len(NOT_APPLICABLE), len(NOT_COVERED))
+
+
+# -- the capture as a whole: no MUST, MUST NOT or SHOULD NOT finding ----------------------
+def _lint(run: Run) -> list[str]:
+    return lint.findings([(m.topic, m.qos, m.retain, m.p) for m in run.msgs], run.t0_ms, run.t1_ms)
+
+
+def test_a_default_run_has_no_must_or_should_not_finding(plain_run: Run) -> None:
+    """The issue's measure: a run with the default settings, captured and decoded with
+    the specification's schema, shows nothing against a MUST, MUST NOT or SHOULD NOT."""
+    kinds = [m.kind for m in plain_run.node()]
+    assert kinds[:2] == ["NBIRTH", "DBIRTH"] and kinds[-2:] == ["DDEATH", "NDEATH"] and kinds.count("DDATA") >= 10
+    assert _lint(plain_run) == []
+
+
+@pytest.mark.parametrize("run_name", ["default_run", "host_run", "view_run"])
+def test_the_conformance_runs_have_no_finding(run_name: str, request: pytest.FixtureRequest) -> None:
+    """The same over the suite's runs: a rebirth, a DCMD, a restart, the will, the
+    primary host away and back, the store sent as history, seq wrapping."""
+    assert _lint(request.getfixturevalue(run_name)) == []
+
+
+def test_each_finding_is_a_must_or_should_not_of_the_specification() -> None:
+    words = spb.tck_ids()
+    for tck in lint.RULES:
+        assert {"MUST", "MUST NOT", "SHOULD NOT"} & set(words[tck].split(",")), tck
+
+
+def test_the_findings_are_found(plain_run: Run) -> None:
+    """Each kind of departure, made in a copy of the plain run's capture, is found under
+    its tck-id (the check above cannot pass for want of looking)."""
+    recs = [(m.topic, m.qos, m.retain, m.p) for m in plain_run.msgs]
+    kinds = [m.kind for m in plain_run.msgs]
+    ddata = [i for i, k in enumerate(kinds) if k == "DDATA"]
+    nbirth, dbirth, ndeath = kinds.index("NBIRTH"), kinds.index("DBIRTH"), kinds.index("NDEATH")
+
+    def copy(i: int) -> Any:
+        p = spb.Payload()
+        p.CopyFrom(recs[i][3])
+        return p
+
+    def found(changed: list[lint.Record]) -> set[str]:
+        return {f.split(" ")[0] for f in lint.findings(changed, plain_run.t0_ms, plain_run.t1_ms)}
+
+    def swap(i: int, **kw: Any) -> list[lint.Record]:
+        r = list(recs)
+        t, q, rt, pl = r[i]
+        r[i] = (kw.get("topic", t), kw.get("qos", q), kw.get("retain", rt), kw.get("p", pl))
+        return r
+
+    d = ddata[len(ddata) // 2]
+    typed = copy(d)
+    typed.metrics[0].datatype = 11
+    unstamped = copy(d)
+    unstamped.metrics[0].ClearField("timestamp")
+    aliased = copy(nbirth)
+    next(m for m in aliased.metrics if m.name == "Node Control/Rebirth").alias = 2
+    other_bd = copy(ndeath)
+    other_bd.metrics[0].long_value += 1
+    both = copy(dbirth)  # State: a value and is_null
+    if both.metrics[0].is_null:  # (born before the node's first snapshot)
+        both.metrics[0].string_value = "stable"
+    else:
+        both.metrics[0].is_null = True
+    cases: dict[str, list[lint.Record]] = {
+        "tck-id-topics-ddata-mqtt": swap(d, qos=1),
+        "tck-id-topics-nbirth-mqtt": swap(nbirth, retain=True),
+        "tck-id-payloads-metric-datatype-not-req": swap(d, p=typed),
+        "tck-id-payloads-name-birth-data-requirement": swap(d, p=unstamped),
+        "tck-id-operational-behavior-data-commands-rebirth-name-aliases": swap(nbirth, p=aliased),
+        "tck-id-payloads-ndeath-bdseq": swap(ndeath, p=other_bd),
+        "tck-id-operational-behavior-data-publish-dbirth-values": swap(dbirth, p=both),
+        "tck-id-payloads-sequence-num-incrementing": recs[:d] + recs[d + 1:],
+        "tck-id-principles-birth-certificates-order": [recs[d]] + recs,
+        "tck-id-topic-structure": swap(d, topic=recs[d][0] + "/x"),
+    }
+    for tck, changed in cases.items():
+        assert tck in found(changed), tck
+    # a live DDATA sent again unchanged, with the seq that would follow: by exception no more
+    again = copy(d)
+    again.seq = (recs[d][3].seq + 1) % 256
+    renum = [(t, q, rt, pl) for t, q, rt, pl in recs[d + 1:]]
+    shifted = []
+    for t, q, rt, pl in renum:
+        if pl.HasField("seq") and "/NBIRTH/" not in t:
+            c = spb.Payload()
+            c.CopyFrom(pl)
+            c.seq = (pl.seq + 1) % 256
+            pl = c
+        shifted.append((t, q, rt, pl))
+    assert found(recs[:d + 1] + [(recs[d][0], 0, False, again)] + shifted) == {"tck-id-principles-rbe-recommended"}

@@ -67,9 +67,20 @@ REBIRTH = "Node Control/Rebirth"
 _FORBIDDEN = set("+#/")
 
 
+def _topic_char(c: str) -> bool:
+    """A character an MQTT topic level may hold: not U+0000 nor a surrogate (MQTT
+    3.1.1, 1.5.3: MUST NOT), nor a control character (SHOULD NOT)."""
+    o = ord(c)
+    return not (o < 0x20 or 0x7F <= o <= 0x9F or 0xD800 <= o <= 0xDFFF)
+
+
 def check_id(key: str, value: str) -> None:
-    if not value or _FORBIDDEN & set(value):
-        raise ValueError(f"{key}: {value!r} is not a Sparkplug id (not empty, no '+', '#' or '/')")
+    """A group, edge node or device id: a UTF-8 string of the characters an MQTT topic
+    allows, and no level separator or wildcard (tck-id-intro-group-id-chars and its
+    siblings, tck-id-topic-structure-namespace-valid-group-id and its siblings)."""
+    if not value or _FORBIDDEN & set(value) or not all(map(_topic_char, value)):
+        raise ValueError(f"{key}: {value!r} is not a Sparkplug id (not empty, no '+', '#', '/' or control "
+                         "character)")
 
 
 @dataclass(frozen=True)
