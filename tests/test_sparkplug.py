@@ -8,7 +8,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -384,3 +383,25 @@ def test_the_bdseq_file_goes_on_from_the_last_connect_and_wraps(tmp_path: Path) 
     blocked.write_text("")
     g = BdSeqFile(blocked / "sub" / "g-e.bdseq")
     assert g.error is not None and "is not a writable folder" in g.error and g.write(1) == g.error
+
+
+def test_every_key_but_qos_is_a_command_line_option() -> None:
+    """docs/plant.md: every ``[sparkplug]`` key but ``qos`` (kept for old files) is also
+    an option of the command line, each option sets its key, and none takes the
+    password itself."""
+    import dataclasses
+
+    keys = {f.name for f in dataclasses.fields(SparkplugOptions)}
+    by_option = SparkplugDevice._CLI_KEYS
+    assert keys - set(by_option.values()) == {"broker", "group_id", "edge_node_id", "qos"}
+    dests = {o.dest: o for o in SparkplugDevice.cli_options}
+    assert {"sparkplug", "group_id", "edge_node_id"} <= set(dests) and set(by_option) <= set(dests)
+    assert not any("password" == k for k in keys)
+    sample = {bool: True, int: 7, float: 0.25, str: "x"}
+    for dest, key in by_option.items():
+        if key in ("cert_file", "key_file", "ca_file", "password_file", "password_env", "username", "store_dir"):
+            continue  # (their files and pairs are checked elsewhere; the mapping above covers them)
+        value = sample[dests[dest].type]
+        opts = SparkplugDevice.options_from_cli({"sparkplug": "mqtt://127.0.0.1:1883", "group_id": "g",
+                                                 "edge_node_id": "e", dest: value})
+        assert getattr(opts, key) == value, (dest, key)

@@ -768,8 +768,10 @@ NOT_COVERED: dict[str, str] = {
     "tck-id-topic-structure-namespace-unique-edge-node-descriptor": "the deployment's: the bridge cannot see other "
     "edge nodes (two bridges with the same ids would take each other's MQTT client id, group_id-edge_node_id, and "
     "the broker disconnects one: visible as reconnects)",
-    "tck-id-payloads-nbirth-edge-node-descriptor": "the same: unique ids are the deployment's to give",
-    "tck-id-intro-edge-node-id-uniqueness": "the same: unique ids are the deployment's to give",
+    "tck-id-payloads-nbirth-edge-node-descriptor": "unique group and edge node ids are the deployment's to give "
+    "(as tck-id-topic-structure-namespace-unique-edge-node-descriptor)",
+    "tck-id-intro-edge-node-id-uniqueness": "unique group and edge node ids are the deployment's to give "
+    "(as tck-id-topic-structure-namespace-unique-edge-node-descriptor)",
     "tck-id-operational-behavior-primary-application-state-with-multiple-servers-walk": "one broker per edge node: "
     "after the primary host goes offline it connects to the same broker again (no list of servers to walk)",
 }
@@ -836,7 +838,7 @@ def test_edge_node(tck_id: str, request: pytest.FixtureRequest) -> None:
     fn(request.getfixturevalue(run_name))
 
 
-_RUNS = {"default_run": "the default run", "host_run": "the primary-host run",
+_RUNS = {"default_run": "the scripted run", "host_run": "the primary-host run",
          "view_run": "`eskin-bus plant --rebirth` (the host's side)", "": "the configuration's checks"}
 
 
@@ -961,3 +963,17 @@ def test_the_findings_are_found(plain_run: Run) -> None:
             pl = c
         shifted.append((t, q, rt, pl))
     assert found(recs[:d + 1] + [(recs[d][0], 0, False, again)] + shifted) == {"tck-id-principles-rbe-recommended"}
+
+
+def test_the_sizes_in_the_docs_are_a_default_runs(plain_run: Run) -> None:
+    """docs/plant.md's NBIRTH, DBIRTH and median DDATA sizes, within 2 % of the
+    default run's (a version string or a profile key may change a few bytes)."""
+    text = " ".join((ROOT / "docs" / "plant.md").read_text().split())
+    doc = re.search(r"NBIRTH ([\d,]+) bytes, DBIRTH ([\d,]+) .*? DDATA ([\d,]+) bytes median", text)
+    assert doc is not None
+    nbirth, dbirth, ddata = (int(g.replace(",", "")) for g in doc.groups())
+    sizes = {k: [len(m.p.SerializeToString()) for m in plain_run.of(k)] for k in ("NBIRTH", "DBIRTH", "DDATA")}
+    live = sorted(sizes["DDATA"])
+    for claimed, measured in ((nbirth, sizes["NBIRTH"][0]), (dbirth, sizes["DBIRTH"][0]),
+                              (ddata, live[len(live) // 2])):
+        assert abs(claimed - measured) <= 0.02 * measured, (claimed, measured)

@@ -6,7 +6,10 @@ exactly, and a queue on disk that outlives the edge node."""
 
 from __future__ import annotations
 
+import os
+import signal
 import sqlite3
+import struct
 import threading
 import time
 from pathlib import Path
@@ -140,6 +143,42 @@ def test_a_broker_killed_mid_run_loses_nothing_within_the_bound(tmp_path: Path, 
     names = [e[0] for e in node.events]  # type: ignore[attr-defined]
     assert names.count("sparkplug_store_holding") == 1 and names.count("sparkplug_store_forwarded") == 1
     assert "sparkplug_store_full" not in names
+
+
+@pytest.mark.slow
+def test_frames_a_dying_broker_took_are_counted_not_sent_again(tmp_path: Path) -> None:
+    """A frame is not held (the next one replaces it): what the connection takes with
+    it unconfirmed is counted (``sparkplug_frames_lost``).  The broker is stopped
+    (SIGSTOP: it reads nothing, hands nothing back) while 15 frames are written to it,
+    then killed: those 15 are counted, the 20 before it, seen back, are not."""
+    broker = spb.Broker(tmp_path)
+    cap = spb.Capture(broker.port, tmp_path / "a.txt")
+    node = edge(broker.port, tmp_path, frame_interval_s=0.05)
+    dev = node.devices[0]
+
+    def frames_seen() -> list[bytes]:
+        return [spb.parse(p).metrics[0].bytes_value[:4] for t, p in cap.messages() if "/DDATA/" in t]
+
+    try:
+        node.start()
+        assert node.wait_connected(5)
+        for i in range(20):
+            node.send_frame(dev, struct.pack("<25f", i, *([0.0] * 24)))
+        wait_for(lambda: not node.inflight and len(frames_seen()) == 20, what="20 frames seen back")
+        os.kill(broker.proc.pid, signal.SIGSTOP)
+        for i in range(20, 35):
+            node.send_frame(dev, struct.pack("<25f", i, *([0.0] * 24)))
+        time.sleep(0.2)
+        broker.kill()
+        wait_for(lambda: node.failures == 1, what="the loss seen")
+        counters = dev.counters()
+    finally:
+        node.close()
+        broker.kill()
+        cap.close()
+    assert [struct.unpack("<f", b)[0] for b in frames_seen()] == list(range(20))
+    assert counters["sparkplug_frames"] == 35 and counters["sparkplug_frames_lost"] == 15
+    assert node.forwarder.held == 0, "frames are never held"
 
 
 @pytest.mark.slow

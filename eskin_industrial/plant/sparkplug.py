@@ -298,7 +298,9 @@ class EdgeNode:
         #: DDATA), at QoS 1 when acknowledged.  A lost connection sends the rest
         #: through the store, historical, after the next births (paho would drop them
         #: at QoS 0, and resend them before the births at QoS 1: out of Sparkplug's order).
-        self.inflight: collections.deque[tuple[Any, Held | None, int, float]] = collections.deque()
+        #: A frame's entry names its device instead (never held: counted if the connection
+        #: takes it unconfirmed, ``sparkplug_frames_lost``).
+        self.inflight: collections.deque[tuple[Any, Held | SparkplugDevice, int, float]] = collections.deque()
 
     def _event(self, name: str, level: str = "info", **fields: Any) -> None:
         """An event of the edge node, logged with its first device."""
@@ -370,21 +372,22 @@ class EdgeNode:
             metric = pb.Metric(None, device.base + FRAME_ALIAS, now, pb.FLOAT_ARRAY, data)
             seq = self._next_seq()
             if self._publish_tracked(device.topic["DDATA"],
-                                     pb.encode(pb.Payload(now, (metric,), seq), datatypes=False), None, seq):
+                                     pb.encode(pb.Payload(now, (metric,), seq), datatypes=False), device, seq):
                 device.frames += 1
                 device.frame_sent = data
             else:
                 device.frames_not_sent += 1
 
-    def _publish_tracked(self, topic: str, data: bytes, held: Held | None, seq: int) -> bool:
+    def _publish_tracked(self, topic: str, data: bytes, held: Held | SparkplugDevice, seq: int) -> bool:
         """Publish a DDATA and track it until the broker has it (under the lock); a
-        message paho refuses (the connection went) is held instead.  A frame
-        (``held`` None) goes at QoS 0 whatever the setting (the next one replaces a
-        frame lost), tracked for the order of the echoes, never held."""
-        info = self.client.publish(topic, data, qos=self.qos if held is not None else 0)
+        message paho refuses (the connection went) is held instead.  A frame (``held``
+        its device) goes at QoS 0 whatever the setting (the next one replaces a frame
+        lost), tracked for the order of the echoes and counted if lost, never held."""
+        data_message = isinstance(held, Held)
+        info = self.client.publish(topic, data, qos=self.qos if data_message else 0)
         if info.rc != 0:
             self.dropped += 1
-            if held is not None:
+            if isinstance(held, Held):
                 self.forwarder.hold(held)
             return False
         self.published += 1
@@ -421,10 +424,15 @@ class EdgeNode:
     def _take_back(self) -> None:
         """The connection is gone: what the broker may not have is held again, to go
         out historical after the next births (under the lock).  What was written to the
-        connection is counted (``sparkplug_resent``): it may arrive twice."""
+        connection is counted (``sparkplug_resent``): it may arrive twice.  A frame not
+        seen back is counted as lost (``sparkplug_frames_lost``: it may have arrived)."""
         for info, held, _, _ in self.inflight:
             published = info.is_published()  # QoS 0: written; QoS 1: acknowledged
-            if held is None or (self.qos and published):
+            if not isinstance(held, Held):
+                if not (self.qos and published):  # (with the opt-in a frame written counts as arrived)
+                    held.frames_lost += 1
+                continue
+            if self.qos and published:
                 continue
             if published or self.qos:  # (an unacknowledged QoS 1 message may have been written)
                 self.resent += 1
@@ -789,7 +797,7 @@ class SparkplugDevice(Sink):
         self.frame_every_s = node.options.frame_interval_s or None
         self.frame: bytes | None = None  #: the newest frame handed, packed (births declare it)
         self.frame_sent: bytes | None = None  #: the frame last sent (a DBIRTH or a DDATA)
-        self.frames = self.frames_not_sent = 0
+        self.frames = self.frames_not_sent = self.frames_lost = 0
 
     def command(self, payload: pb.Payload, topic: str) -> None:
         """A DCMD for this device (paho's thread): queued for the loop, or refused as a
@@ -899,6 +907,7 @@ class SparkplugDevice(Sink):
         if self.frame_every_s is not None:
             out["sparkplug_frames"] = self.frames
             out["sparkplug_frames_not_sent"] = self.frames_not_sent
+            out["sparkplug_frames_lost"] = self.frames_lost
         return out
 
     def _close(self) -> None:
