@@ -627,7 +627,10 @@ def _ncmd_subscribed(run: Run) -> None:
 def _dcmd_subscribed(run: Run) -> None:
     subs = [line for line in run.log if line.startswith(f"{CLIENT} ") and "/DCMD/" in line]
     assert f"{CLIENT} 1 spBv1.0/{G}/DCMD/{E}/{D}" in subs and not any(s.endswith("/+") for s in subs), subs
-    enabled = [(x.alias, x.boolean_value) for m in run.of("DDATA") for x in m.p.metrics if x.alias in (1008, 1102)]
+    # the first bridge's (the second's first DDATA may carry Enabled true, when its DBIRTH
+    # went before the node's first snapshot, with every value null)
+    first = [m for m in run.msgs[:run.marks["restart"]] if m.kind == "DDATA"]
+    enabled = [(x.alias, x.boolean_value) for m in first for x in m.p.metrics if x.alias in (1008, 1102)]
     assert enabled[-4:] == [(1008, False), (1102, False), (1008, True), (1102, True)], ("the DCMD applied", enabled)
 
 
