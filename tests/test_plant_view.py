@@ -14,12 +14,12 @@ from pathlib import Path
 
 import pytest
 
+from eskin_industrial.node import NodeSnapshot
 from eskin_industrial.plant.sparkplug import SparkplugOptions, open_edge
 from eskin_industrial.plant.watch import PlantModel
-from eskin_industrial.node import NodeSnapshot
 from eskin_industrial.view.plant_table import plant_lines
-from tests.helpers.snapshots import made
 from tests.helpers import sparkplug as spb
+from tests.helpers.snapshots import made
 from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 
@@ -27,7 +27,7 @@ def _p(seq=None, ts=1000, **metrics) -> bytes:
     p = spb.Payload(timestamp=ts)
     if seq is not None:
         p.seq = seq
-    for key, (kw) in metrics.items():
+    for kw in metrics.values():
         p.metrics.add(**kw)
     return p.SerializeToString()
 

@@ -21,10 +21,10 @@ from eskin_industrial.plant.commands import COMMANDS
 from eskin_industrial.plant.sparkplug import DEVICE_METRICS, SparkplugDevice, SparkplugOptions, open_edge
 from eskin_industrial.sinks.base import SINKS, sink_class
 from tests.helpers import sparkplug as spb
-from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, server_config, slip_raw, wait_for
 from tests.helpers.paths import PROFILES
 from tests.helpers.snapshots import made
+from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 # -- the codec against protobuf ------------------------------------------------------
 _VALUES = {

@@ -31,10 +31,10 @@ from eskin_industrial.profile import load_profile
 from eskin_industrial.scenes import render
 from eskin_industrial.sinks.base import Sink
 from tests.helpers import sparkplug as spb
-from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 from tests.helpers.bridge import PAPER, running_bridge, wait_for
 from tests.helpers.modbus import need
 from tests.helpers.paths import PROFILES
+from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 FLOAT_ARRAY = 30  # Sparkplug 3.0 "FloatArray" (the specification's DataType enum), written out here on purpose
 FRAME = "Taxels/Frame"

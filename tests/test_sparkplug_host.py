@@ -16,9 +16,9 @@ import pytest
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.plant.sparkplug import SparkplugOptions
 from tests.helpers import sparkplug as spb
-from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 from tests.helpers.bridge import PAPER, running_bridge, wait_for
 from tests.helpers.modbus import need
+from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 
 def _state(port: int, online: bool | None, ts: int, raw: bytes | None = None) -> None:

@@ -20,10 +20,10 @@ import pytest
 from eskin_industrial.node import NodeSnapshot
 from eskin_industrial.plant.sparkplug import DEVICE_METRICS, EdgeNode, SparkplugOptions, open_edge
 from tests.helpers import sparkplug as spb
-from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 from tests.helpers.bridge import wait_for
 from tests.helpers.modbus import free_port
 from tests.helpers.snapshots import made
+from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 SLIP_EVENTS = next(i for i, m in enumerate(DEVICE_METRICS) if m.name == "Counters/Slip Events")
 STATE_CODE = next(i for i, m in enumerate(DEVICE_METRICS) if m.name == "State Code")

@@ -32,7 +32,7 @@ from .simulate_cmd import simulate
 class _Group(click.Group):
     """Turn expected errors into one line on stderr and an exit code, never a traceback."""
 
-    def invoke(self, ctx: click.Context):
+    def invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
         except EskinError as exc:

@@ -182,7 +182,7 @@ class Ticker:
         self._end_bar()
         self._on = False
 
-    def __enter__(self) -> "Ticker":
+    def __enter__(self) -> Ticker:
         return self
 
     def __exit__(self, *_exc: object) -> None:
@@ -246,7 +246,7 @@ class Counter:
             sys.stderr.flush()
         self._on = self._shown = False
 
-    def __enter__(self) -> "Counter":
+    def __enter__(self) -> Counter:
         return self
 
     def __exit__(self, *_exc: object) -> None:

@@ -723,7 +723,7 @@ def nonconforming(options: SparkplugOptions, bd_error: str | None, bd_file: str)
     return out
 
 
-class SparkplugDevice(Sink):
+class SparkplugDevice(Sink[SparkplugOptions]):
     """One sensor node as a Sparkplug device of the edge node."""
 
     kind = "sparkplug"
@@ -937,7 +937,7 @@ class SparkplugDevice(Sink):
             raise ValueError(f"{flags[key]}: {rest}" if sep and key in flags else str(exc)) from None
 
     @classmethod
-    def describe(cls, options: SparkplugOptions, node: NodeLike) -> str:
+    def describe(cls, options: SparkplugOptions, node: NodeLike[Any]) -> str:
         host, port, _ = parse_broker(options.broker)
         frames = (f", {FRAME_METRIC.name} every {options.frame_interval_s:g} s ({node.profile.layout.rows} x "
                   f"{node.profile.layout.cols})" if options.frame_interval_s else "")
@@ -945,7 +945,7 @@ class SparkplugDevice(Sink):
                 f"{host}:{port}{frames}")
 
     @classmethod
-    def check(cls, options: SparkplugOptions, nodes: Sequence[NodeLike]) -> None:
+    def check(cls, options: SparkplugOptions, nodes: Sequence[NodeLike[Any]]) -> None:
         seen: dict[str, str] = {}
         for n in nodes:
             check_id("device id (node name)", n.name)
@@ -961,7 +961,7 @@ class SparkplugDevice(Sink):
                 raise ValueError(f"store_dir: {options.store_dir!r}: {str(d)!r} is not a writable folder")
 
     @classmethod
-    def probe(cls, options: SparkplugOptions, nodes: Sequence[NodeLike]) -> None:
+    def probe(cls, options: SparkplugOptions, nodes: Sequence[NodeLike[Any]]) -> None:
         """``--check``: a warning line for each departure from the specification that
         the run will make (the run logs the same as ``sparkplug_nonconforming``)."""
         path = bdseq_path(options.store_dir, options.group_id, options.edge_node_id)
@@ -969,7 +969,7 @@ class SparkplugDevice(Sink):
             sys.stderr.write(f"eskin-bus: warning: [sparkplug] {line}\n")
 
     @classmethod
-    def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
+    def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
         edge = open_edge(options, [(n.name, {METHOD_METRIC: method_properties(n.profile),
                                      LAYOUT_METRIC: layout_properties(n.profile),
                                      FRAME_METRIC.name: frame_properties(n.profile, options.frame_interval_s),
