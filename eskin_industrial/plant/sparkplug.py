@@ -169,11 +169,14 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Total Force", pb.FLOAT, "N", True, "total force of the newest frame"),
     MetricDef("CoF X", pb.FLOAT, "mm", True, "centre of force, x"),
     MetricDef("CoF Y", pb.FLOAT, "mm", True, "centre of force, y"),
-    MetricDef("Frame Age", pb.UINT32, "ms", True, "age of the newest frame, 65535 = none"),
-    MetricDef("Counters/Slip Events", pb.UINT32, "count", True, "entries into slip since start"),
-    MetricDef("Counters/State Changes", pb.UINT32, "count", True, "state changes since start"),
-    MetricDef("Counters/Lost Scans", pb.UINT32, "count", True, "failed polls and sequence gaps"),
-    MetricDef("Counters/Bus Errors", pb.UINT32, "count", True, "timeouts, CRC and exception responses"),
+    # No UInt32: the specification carries it in int_value, Tahu's JavaScript codec and
+    # hosts that followed Tahu before 2022 in long_value; UInt16 and UInt64 read alike
+    # everywhere (docs/plant.md, A second host).
+    MetricDef("Frame Age", pb.UINT16, "ms", True, "age of the newest frame, 65535 = none"),
+    MetricDef("Counters/Slip Events", pb.UINT64, "count", True, "entries into slip since start"),
+    MetricDef("Counters/State Changes", pb.UINT64, "count", True, "state changes since start"),
+    MetricDef("Counters/Lost Scans", pb.UINT64, "count", True, "failed polls and sequence gaps"),
+    MetricDef("Counters/Bus Errors", pb.UINT64, "count", True, "timeouts, CRC and exception responses"),
     MetricDef("Counters/Scans", pb.UINT64, "count", True, "scans the node's loop has taken since start"),
     MetricDef("Score A", pb.FLOAT, "", True, "the deciding method's first score (0 while no state is claimed); "
               "DBIRTH properties: method, score (its name), description"),
@@ -207,8 +210,7 @@ def metric_values(s: NodeSnapshot) -> tuple[Any, ...]:
     return (LABELS[code] if code < len(LABELS) else str(code), code, s.state == _SLIP, s.slip_latched, s.valid,
             s.stale, s.bus_fault, s.contact, s.enabled, _real(s.r_coe), _real(s.r_dw), _real(s.f_sum_n),
             _real(s.xc_mm), _real(s.yc_mm), _FRAME_AGE_NONE if age is None else min(_ms(age), _FRAME_AGE_NONE),
-            s.slip_events & 0xFFFFFFFF, s.state_changes & 0xFFFFFFFF, s.lost_scans & 0xFFFFFFFF,
-            s.bus_errors & 0xFFFFFFFF, s.scans, _real(s.score_a), _real(s.score_b), s.turn_unseen)
+            s.slip_events, s.state_changes, s.lost_scans, s.bus_errors, s.scans, _real(s.score_a), _real(s.score_b), s.turn_unseen)
 
 
 _SLIP = 3  #: GraspState.SLIP
