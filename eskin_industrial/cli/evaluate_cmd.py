@@ -25,7 +25,7 @@ from ..evaluation.suite import (
 )
 from ..methods import method_names
 from .common import open_profile
-from .console import Ticker, echo_json
+from .console import Ticker, echo_json, json_alias
 from .evaluate_families import family_names, leave_one_out, list_families, per_family, slip_episodes
 
 
@@ -85,6 +85,7 @@ def _seeds(value: str) -> tuple[int, ...]:
                    "tuning seeds of the other families, report it on this family's held-out seeds.")
 @click.option("--format", "fmt", type=click.Choice(["md", "json"]), default="md", show_default=True,
               help="Markdown tables, or one JSON document (every figure, per scene too).")
+@json_alias
 def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, rate_hz: float, tolerance_s: float,
                  per_scene: bool, charts_dir: str | None, quick: bool, only_charts: tuple[str, ...], long_holds: bool,
                  profile_path: str | None, conditions: tuple[str, ...], within_ms: tuple[int, ...],

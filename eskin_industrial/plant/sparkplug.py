@@ -39,6 +39,7 @@ import os
 import sys
 import threading
 import time
+import unicodedata
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,6 +49,7 @@ from .. import __version__
 from ..detect.state import LABELS
 from ..errors import EskinError, ProfileError
 from ..node import Command, NodeSnapshot, refusal
+from ..ratelimit import Throttle
 from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Sink, SinkHealth
 from . import payload as pb
@@ -67,20 +69,24 @@ REBIRTH = "Node Control/Rebirth"
 _FORBIDDEN = set("+#/")
 
 
-def _topic_char(c: str) -> bool:
-    """A character an MQTT topic level may hold: not U+0000 nor a surrogate (MQTT
-    3.1.1, 1.5.3: MUST NOT), nor a control character (SHOULD NOT)."""
-    o = ord(c)
-    return not (o < 0x20 or 0x7F <= o <= 0x9F or 0xD800 <= o <= 0xDFFF)
+#: An id's length at most, in UTF-8 bytes: three of them make a topic and two the
+#: client id, each an MQTT string of at most 65,535 bytes (a longer one ended paho's
+#: thread); ids are names, not texts.
+MAX_ID_BYTES = 256
 
 
 def check_id(key: str, value: str) -> None:
     """A group, edge node or device id: a UTF-8 string of the characters an MQTT topic
-    allows, and no level separator or wildcard (tck-id-intro-group-id-chars and its
+    allows, without a level separator or a wildcard (tck-id-intro-group-id-chars and its
     siblings, tck-id-topic-structure-namespace-valid-group-id and its siblings)."""
-    if not value or _FORBIDDEN & set(value) or not all(map(_topic_char, value)):
-        raise ValueError(f"{key}: {value!r} is not a Sparkplug id (not empty, no '+', '#', '/' or control "
-                         "character)")
+    if not value or _FORBIDDEN & set(value):
+        raise ValueError(f"{key}: {value!r} is not a Sparkplug id (not empty, no '+', '#' or '/')")
+    size = len(value.encode("utf-8", "surrogatepass"))
+    if size > MAX_ID_BYTES:
+        raise ValueError(f"{key}: {size} bytes long (UTF-8); a Sparkplug id here is at most {MAX_ID_BYTES}")
+    bad = next((c for c in value if unicodedata.category(c) in ("Cc", "Cs")), None)
+    if bad is not None:  # MQTT strings: no U+0000, no control characters, valid UTF-8
+        raise ValueError(f"{key}: {value!r} holds the character U+{ord(bad):04X}, which an MQTT topic may not")
 
 
 @dataclass(frozen=True)
@@ -282,6 +288,7 @@ class EdgeNode:
         self.unknown_devices = self.commands = self.commands_refused = self.bad_states = 0
         self.resent = self.unconfirmed = self.host_sessions_ended = 0
         self._bad_logged: dict[str, tuple[float, int]] = {}
+        self.commands_logged = Throttle()  #: the DCMD lines, per device and event
         self.last_error = ""
         self.client = client_factory
         self.client.on_connect = self._on_connect
@@ -816,11 +823,19 @@ class SparkplugDevice(Sink[SparkplugOptions]):
             why = refusal(cmd, snapshot)
             if why is not None:
                 node.commands_refused += 1
-                self._event("sparkplug_command_refused", "warning", command=cmd.name, reason=why)
+                self._logged("sparkplug_command_refused", "warning", command=cmd.name, reason=why)
                 return
         node.commands += len(cmds)
         self._commands.extend(cmds)
-        self._event("sparkplug_command", "info", commands=",".join(c.name for c in cmds))
+        self._logged("sparkplug_command", "info", commands=",".join(c.name for c in cmds))
+
+    def _logged(self, name: str, level: str, **fields: Any) -> None:
+        """A DCMD's line: at most one per name per LOG_EVERY_S (a host may send them as
+        fast as the broker goes), the next saying how many were held back; the
+        counters count every one."""
+        held = self.node.commands_logged.passes((self.device_id, name))
+        if held is not None:
+            self._event(name, level, held_back=held, **fields)
 
     def source_ended(self, error: str) -> None:
         """The node's source is gone while the bridge goes on: DDEATH (its last
