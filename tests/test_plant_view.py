@@ -155,7 +155,7 @@ def test_rebirth_asks_a_node_born_before_the_view_started(tmp_path: Path) -> Non
             proc = subprocess.Popen([sys.executable, "-m", "eskin_industrial", "plant", f"mqtt://127.0.0.1:{port}",
                                      "--json", "--rebirth", "--duration", "4"], stdout=subprocess.PIPE,
                                     stderr=subprocess.DEVNULL, text=True, env={**os.environ, "PYTHONPATH": os.getcwd()})
-            first = proc.stdout.readline()  # "connected": its subscription sent, before this line
+            first = proc.stdout.readline()  # "connected": its subscription in place (the SUBACK)
             edge.devices[0].publish(_pub(3, 1))  # data of a node the view has not seen born
             out, _ = proc.communicate(timeout=15)
             out = first + out
