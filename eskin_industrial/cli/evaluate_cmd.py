@@ -10,7 +10,7 @@ from typing import Any
 import click
 import numpy as np
 
-from ..detect.methods import METHODS
+from ..detect.methods import DETECTORS, METHODS
 from ..evaluation.charts import CHARTS
 from ..evaluation.suite import (
     DEFAULT_SETTINGS,
@@ -49,7 +49,7 @@ def _seeds(value: str) -> tuple[int, ...]:
 
 @click.command()
 @click.option("-m", "--method", "methods", multiple=True, type=click.Choice(sorted(METHODS)),
-              help="Method to score (repeatable; default: all).")
+              help="Method to score (repeatable; default: every detector, not the 'none' baseline).")
 @click.option("-s", "--scene", "scenes", multiple=True, help="Scene (repeatable; default: the built-in suite).")
 @click.option("--seeds", default="evaluation", show_default=True,
               help="'evaluation' (held out), 'tuning', or seeds and ranges: 0..4,7,10..59")
@@ -116,7 +116,7 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
         methods = methods or ("cof-track", "paper")
     else:
         seed_set = _seeds(seeds)
-    names = methods or tuple(METHODS)
+    names = methods or DETECTORS
     start = time.perf_counter()
     if "learned" in names:
         names = _prepare_learned(names, explicit=bool(methods))
@@ -173,7 +173,7 @@ def _families(methods, scenes, seeds, rate_hz, tolerance_s, long_holds, profile_
         leave_one_out(methods[0] if methods else settings.method, family_names(hold_out), rate_hz, settings,
                       tolerance_s, fmt, _figures, _delays)
         return
-    names = methods or tuple(METHODS)
+    names = methods or DETECTORS
     if "learned" in names:
         names = _prepare_learned(names, explicit=bool(methods))
     shares = (lambda s: ", ".join(f"{_within(s, ms):.0f} % within {ms} ms" for ms in within_ms)) if within_ms else None

@@ -22,7 +22,7 @@ import numpy as np
 from .cof_track import CofTrack
 from .learned import Learned, Model
 from .paper import PaperDetector, paper_batch
-from .scored import CofVelocity, ForceRate, HfEnergy
+from .scored import CofVelocity, ForceRate, HfEnergy, NoSlip
 from .updates import UpdateTable
 
 
@@ -38,6 +38,7 @@ class Score:
 PAPER_SCORES = (Score("r_coe", "the paper's R_coe again (slip above slip_r_coe)"),
                 Score("r_dw", "the paper's R_dw again (slip above slip_r_dw)"))
 UNUSED = Score("unused", "reads 0 (the method has one score)")
+NO_SCORE = Score("unused", "reads 0 (the method has no score)")
 
 
 @dataclass(frozen=True)
@@ -105,7 +106,15 @@ METHODS: dict[str, Method] = {
     "learned": _method("learned", "accuracy ceiling: a small classifier on the other methods' features (extra: learn)", Learned,
                        8, (Score("p_slip", "the model's slip probability (slip above slip_p, confirm_hops in a row)"),
                            Score("p_variable_force", "the model's varying-force probability")), needs_model=True),
+    # A baseline, not a detector: the closed loop's fixed grip (no slip sensing), with
+    # the state, contact and validity of any other method.
+    "none": _method("none", "baseline: never reports slip (no slip sensing; contact and varying force as the others)",
+                    NoSlip, 9, (NO_SCORE, NO_SCORE)),
 }
+
+#: The methods that detect slip (every method but the ``none`` baseline): what an
+#: evaluation scores unless told otherwise.
+DETECTORS: tuple[str, ...] = tuple(name for name in METHODS if name != "none")
 
 
 def get_method(name: str) -> Method:
