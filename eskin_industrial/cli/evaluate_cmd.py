@@ -48,8 +48,9 @@ def _seeds(value: str) -> tuple[int, ...]:
 
 
 @click.command()
-@click.option("-m", "--method", "methods", multiple=True, type=click.Choice(sorted(METHODS)),
-              help="Method to score (repeatable; default: every detector, not the 'none' baseline).")
+@click.option("-m", "--method", "methods", multiple=True, type=click.Choice(sorted(METHODS) + ["fixed", "oracle"]),
+              help="Method to score (repeatable; default: every detector, not the 'none' baseline; with "
+                   "--closed-loop also the baselines fixed and oracle, and all of them by default).")
 @click.option("-s", "--scene", "scenes", multiple=True, help="Scene (repeatable; default: the built-in suite).")
 @click.option("--seeds", default="evaluation", show_default=True,
               help="'evaluation' (held out), 'tuning', or seeds and ranges: 0..4,7,10..59")
@@ -85,12 +86,47 @@ def _seeds(value: str) -> tuple[int, ...]:
                    "tuning seeds of the other families, report it on this family's held-out seeds.")
 @click.option("--format", "fmt", type=click.Choice(["md", "json"]), default="md", show_default=True,
               help="Markdown tables, or one JSON document (every figure, per scene too).")
+@click.option("--closed-loop", is_flag=True,
+              help="The closed loop instead: each method in the virtual cell, whose gripper reacts (docs/cell.md): "
+                   "objects held, dropped and crushed, distance slid, needless squeezes, grip against the fixed grip; "
+                   "--seeds evaluation and tuning are its own (9000-9399, 8000-8199).")
+@click.option("--plc-cycle", "plc_cycle_ms", type=click.FloatRange(min=1.0, max=100.0), default=10.0, show_default=True,
+              help="With --closed-loop: the PLC's scan cycle (ms).")
+@click.option("--cell", "cell", multiple=True, metavar="NAME=VALUE",
+              help="With --closed-loop: change the cell (repeatable): actuator_rate (N/s), dead_time (ms), latency "
+                   "(ms added), mass, friction, accel (x the recipe's), viscous (s/m).")
+@click.option("--sweep", type=click.Choice(["rate", "plc-cycle", "actuator", "dead-time", "friction", "mass", "latency",
+                                            "viscous"]), default=None,
+              help="With --closed-loop: one sweep of docs/evaluation.md (default controls: fixed, none, the default "
+                   "method, oracle).")
+@click.option("--jobs", type=click.IntRange(min=1, max=64), default=None,
+              help="With --closed-loop: worker processes (default 1; the figures do not depend on it).")
 def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, only_charts, long_holds,
-                 profile_path, conditions, within_ms, show_families, per_family, family_opt, hold_out, fmt) -> None:
+                 profile_path, conditions, within_ms, show_families, per_family, family_opt, hold_out, fmt,
+                 closed_loop, plc_cycle_ms, cell, sweep, jobs) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
     force read as slip, and cost per frame, for each method; then how steady the
     reported state is: varying-force episodes found, their time read as varying force,
-    state changes per episode, per minute in varying force and in still holds."""
+    state changes per episode, per minute in varying force and in still holds.
+
+    With --closed-loop: each method in the virtual cell instead, beside the fixed grip,
+    the light grip with no sensing (none) and the oracle."""
+    from .evaluate_closed_loop import check_options
+
+    plc_cycle_set = click.get_current_context().get_parameter_source("plc_cycle_ms") != \
+        click.core.ParameterSource.DEFAULT
+    check_options(closed_loop, per_family=per_family, hold_out=hold_out, long_holds=long_holds, per_scene=per_scene,
+                  scenes=scenes, conditions=conditions, within_ms=within_ms, only_charts=only_charts, cell=cell,
+                  sweep=sweep, jobs_set=jobs is not None, plc_cycle_set=plc_cycle_set)
+    if closed_loop:
+        from .evaluate_closed_loop import closed_loop as run_closed_loop
+
+        if profile_path:
+            raise click.UsageError("--closed-loop takes each object's built-in profile: leave out --profile")
+        run_closed_loop(methods, seeds, _seeds, rate_hz, plc_cycle_ms, cell, sweep, jobs or 1, charts_dir, fmt)
+        return
+    if any(m in ("fixed", "oracle") for m in methods):
+        raise click.UsageError("fixed and oracle are the closed loop's baselines: give --closed-loop too")
     if show_families:
         list_families()
         return

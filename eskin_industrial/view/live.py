@@ -73,9 +73,11 @@ class Watch:
     def __init__(self, profile: Profile, pipeline: Pipeline, *, method: str,
                  registers: Callable[[], list[int] | None], registers_from: str,
                  counters: Callable[[], Mapping[str, int]], source: str, title: str, started: float,
-                 log_lines: int = 100, tail: Callable[[], Sequence[int]] | None = None) -> None:
+                 log_lines: int = 100, tail: Callable[[], Sequence[int]] | None = None,
+                 extra: Callable[[], Sequence[str]] | None = None) -> None:
         """``registers``: the first published run (STATUS..METHOD_ID); ``tail``: the
-        second (SCORE_A..SCORE_B), shown with them."""
+        second (SCORE_A..SCORE_B), shown with them; ``extra``: lines shown under the
+        state (read on the redraw thread)."""
         self.profile = profile
         self.pipeline = pipeline
         self.scale = indicator_scale(method, profile.detector, pipeline.detector)
@@ -86,6 +88,7 @@ class Watch:
         self.source = source
         self.title = title
         self.started = started
+        self.extra = extra
         self.log: collections.deque[str] = collections.deque(maxlen=log_lines)
         self._rate_mark: tuple[float, int] | None = None
         self._rate: float | None = None
@@ -131,6 +134,7 @@ class Watch:
             source=self.source,
             title=self.title,
             log=tuple(self.log),
+            extra=tuple(self.extra()) if self.extra is not None else (),
         )
 
     def frame(self, now: float, width: int, height: int, color: bool) -> list[str]:
