@@ -12,7 +12,7 @@ from eskin_industrial.sim.cell.policy import GripPolicy, PolicySettings
 from eskin_industrial.sim.cell.recipes import MIN_GRIP_N, crush_cap_n, fixed_grip_n, policy_settings
 
 SETTINGS = PolicySettings(light_n=2.0, step_n=1.0, max_n=6.0, fallback_n=8.0, repeat_s=0.2, repeat_mm=1.0,
-                          quiet_s=1.0, relax_floor=0.0, heartbeat_timeout_s=0.5, grace_s=1.0)
+                          quiet_s=1.0, relax_share=0.25, relax_floor=0.0, heartbeat_timeout_s=0.5, grace_s=1.0)
 HELD = Status.CONTACT | Status.STABLE | Status.DATA_VALID | Status.ENABLED
 SLIP = Status.CONTACT | Status.SLIP | Status.SLIP_LATCHED | Status.DATA_VALID | Status.ENABLED
 
@@ -73,7 +73,7 @@ def test_max_mode_goes_straight_to_the_maximum():
     assert plc.run(0.05, SLIP) == SETTINGS.max_n
 
 
-def test_after_a_quiet_time_it_relaxes_step_by_step_to_the_light_grip_or_its_floor():
+def test_after_a_quiet_time_it_relaxes_by_a_share_to_the_light_grip_or_its_floor():
     from dataclasses import replace
 
     plc = gripping()
@@ -81,8 +81,8 @@ def test_after_a_quiet_time_it_relaxes_step_by_step_to_the_light_grip_or_its_flo
     plc.run(0.3, SLIP, moving_mm_s=30.0)
     assert plc.policy.request_n == 4.0
     assert plc.run(0.9, HELD) == 4.0  # not before quiet_s
-    assert plc.run(0.2, HELD) == 3.0
-    assert plc.run(1.0, HELD) == 2.0 and plc.run(3.0, HELD) == 2.0  # never below the light grip
+    assert plc.run(0.2, HELD) == 3.0  # a quarter of the request
+    assert plc.run(1.0, HELD) == 2.25 and plc.run(3.0, HELD) == 2.0  # never below the light grip
     floored = gripping(replace(SETTINGS, relax_floor=1.25))
     floored.run(0.05, SLIP, moving_mm_s=30.0)
     floored.run(0.3, SLIP, moving_mm_s=30.0)  # last slipped at 3 N: no lower than 3.75 N

@@ -68,14 +68,20 @@ def controls_of(methods: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def closed_loop(methods: tuple[str, ...], seeds_opt: str, parse_seeds: Any, rate_hz: float, plc_cycle_ms: float,
-                conditions: tuple[str, ...], sweep: str | None, jobs: int, charts_dir: str | None, fmt: str) -> None:
+                conditions: tuple[str, ...], sweep: str | None, jobs: int, charts_dir: str | None, fmt: str,
+                tune: bool = False) -> None:
     from ..sim.cell.runner import run_controls
 
+    default = _default_method()
+    if tune:
+        _tune(methods[0] if methods else default, jobs)
+        return
     label, seeds = cell_seeds(seeds_opt, parse_seeds)
     setup = setup_of(rate_hz, plc_cycle_ms, conditions)
-    default = _default_method()
+    header = (f"# eskin-bus evaluate --closed-loop --seeds {seeds_opt} --rate {rate_hz:g} --plc-cycle {plc_cycle_ms:g}"
+              + "".join(f" --cell {c}" for c in conditions))
     if charts_dir is not None:
-        _charts(Path(charts_dir), methods, label, seeds, setup, jobs, default)
+        _charts(Path(charts_dir), methods, label, seeds, setup, jobs, default, header + f" --charts {charts_dir}")
         return
     if sweep is not None:
         _sweep(sweep, methods or ("fixed", "none", default, "oracle"), label, seeds, setup, jobs, fmt)
@@ -92,9 +98,7 @@ def closed_loop(methods: tuple[str, ...], seeds_opt: str, parse_seeds: Any, rate
         echo_json({"seeds": label, "seed_list": list(seeds), "setup": _setup_dict(setup), "seconds": seconds,
                    "default_method": default, "methods": [s.as_dict() for s in scores.values()]})
         return
-    click.echo(f"# eskin-bus evaluate --closed-loop --seeds {seeds_opt} --rate {rate_hz:g} --plc-cycle {plc_cycle_ms:g}"
-               + "".join(f" --cell {c}" for c in conditions)
-               + f"  ({len(seeds)} episodes, {_hours(scores):.2f} h of holding per control, {seconds:.0f} s)")
+    click.echo(header + f"  ({len(seeds)} episodes, {_hours(scores):.2f} h of holding per control, {seconds:.0f} s)")
     _table(scores.values())
     _per_object(scores.values())
     _targets(scores, default)
@@ -207,8 +211,9 @@ def _sweep(name: str, controls: tuple[str, ...], label: str, seeds: tuple[int, .
 
 
 def _charts(out: Path, methods: tuple[str, ...], label: str, seeds: tuple[int, ...], setup: Any, jobs: int,
-            default: str) -> None:
-    """The two charts: the main run's controls, and the latency sweep."""
+            default: str, header: str) -> None:
+    """The table of the main run (as without --charts), then the latency sweep, and the
+    two charts drawn from them."""
     from ..sim.cell.charts import held_vs_latency, held_vs_squeezes
     from ..sim.cell.runner import run_controls
     from ..sim.cell.sweeps import SWEEPS, apply
@@ -217,27 +222,73 @@ def _charts(out: Path, methods: tuple[str, ...], label: str, seeds: tuple[int, .
     controls = controls_of(methods)
     if "oracle" not in controls:
         controls = (*controls, "oracle")
+    start = time.perf_counter()
     with Ticker(len(seeds) * len(controls), "closed loop") as ticker:
         scores = _scores(run_controls(controls, seeds, setup, jobs, ticker))
+    click.echo(f"{header}  ({len(seeds)} episodes, {_hours(scores):.2f} h of holding per control, "
+               f"{time.perf_counter() - start:.0f} s)")
+    _table(scores.values())
+    _per_object(scores.values())
+    _targets(scores, default)
     title = f"the closed loop, {label} seeds ({len(seeds)} episodes), {setup.chain.rate_hz:g} Hz, " \
             f"{setup.chain.plc_cycle_s * 1000:g} ms PLC cycle"
     held_vs_squeezes(list(scores.values()), out / "closed-loop-held-vs-squeezes.png", title)
     click.echo(f"wrote {out / 'closed-loop-held-vs-squeezes.png'}")
     _, values = SWEEPS["latency"]
-    reacting = tuple(c for c in (default, "oracle") if c in controls or c == "oracle")
+    reacting = tuple(c for c in (default, "oracle") if c in controls)
     points: dict[str, list[tuple[float, float]]] = {c: [] for c in reacting}
     dead_ms = setup.chain.actuator.dead_s * 1000
     with Ticker(len(seeds) * len(reacting) * len(values), "latency sweep") as ticker:
         for value in values:
-            sc = _scores(run_controls(reacting, seeds, apply(setup, "latency", value), jobs, ticker))
+            sc = scores if value == 0 else _scores(run_controls(reacting, seeds, apply(setup, "latency", value), jobs,
+                                                                ticker))
             for c in reacting:
                 s = sc[c]
                 points[c].append((s.reaction_p50_s * 1000 + dead_ms, 100 * s.held_share))
-                click.echo(f"# latency +{value:g} ms: {c} held {100 * s.held_share:.1f} %, slide -> raise p50 "
-                           f"{s.reaction_p50_s * 1000:.0f} ms (+ {dead_ms:g} ms dead time)")
+                click.echo(f"# latency +{value:g} ms: {c} held {100 * s.held_share:.1f} % ({s.dropped} dropped, "
+                           f"{s.crushed} crushed), slide -> raise p50 {s.reaction_p50_s * 1000:.0f} ms "
+                           f"(+ {dead_ms:g} ms dead time), slid p90 {s.slid_p90_mm:.1f} mm")
     floors: dict[str, float] = {c: 100 * scores[c].held_share for c in ("fixed", "none") if c in scores}
     held_vs_latency(points, out / "closed-loop-held-vs-latency.png", title, floors)
     click.echo(f"wrote {out / 'closed-loop-held-vs-latency.png'}")
+
+
+def _tune(method: str, jobs: int) -> None:
+    """The recipes' choices, remade on the tuning seeds (sim/cell/tuning.py)."""
+    from ..sim.cell.tuning import POLICY_CANDIDATES as CANDIDATES
+    from ..sim.cell.tuning import (
+        GRIP_LIMIT,
+        SAFETY_CANDIDATES,
+        TUNING_SEEDS,
+        chosen,
+        chosen_safety,
+        fixed_safety,
+        policy_candidates,
+    )
+
+    n = len(TUNING_SEEDS)
+    click.echo(f"# eskin-bus evaluate --closed-loop --tune  ({n} tuning episodes, seeds {TUNING_SEEDS[0]}.."
+               f"{TUNING_SEEDS[-1]}; the default 100 Hz, 10 ms PLC cycle)")
+    with Ticker(n * (len(SAFETY_CANDIDATES) + 2 * len(CANDIDATES)), "tuning") as ticker:
+        rows = fixed_safety(jobs=jobs, progress=ticker)
+        click.echo("| fixed grip: safety factor | held | dropped | crushed |")
+        click.echo("|---|---|---|---|")
+        for safety, s in rows:
+            click.echo(f"| {safety:g} | {s.held} | {s.dropped} | {s.crushed} |")
+        click.echo(f"# chosen: the smallest with nothing dropped: {chosen_safety(rows)}")
+        cands = policy_candidates(method, jobs=jobs, progress=ticker)
+    click.echo(f"| light | step | mode | relax share / floor | {method}: held | needless (per h) | grip / fixed "
+               "| oracle: held | needless | grip / fixed |")
+    click.echo("|---|---|---|---|---|---|---|---|---|---|")
+    for c in cands:
+        f, m, o = c.factors, c.method, c.oracle
+        click.echo(f"| {f.light:g} | {f.step:g} | {f.mode} | {f.relax_share:g} / {f.relax_floor:g} | {m.held} | "
+                   f"{m.needless} ({_num(m.needless_per_hour)}) | {_num(100 * m.grip_vs_fixed, '.0f')} % | {o.held} | "
+                   f"{o.needless} | {_num(100 * o.grip_vs_fixed, '.0f')} % |")
+    best = chosen(cands)
+    click.echo(f"# chosen (the most held, then the fewest needless squeezes, then the lightest grip, gripping at "
+               f"most {100 * GRIP_LIMIT:.0f} % of the fixed grip): {best.factors if best else 'none'}")
+
 
 
 def check_options(closed: bool, **given: Any) -> None:
@@ -250,7 +301,7 @@ def check_options(closed: bool, **given: Any) -> None:
         if bad:
             raise click.UsageError(f"--closed-loop runs the virtual cell: leave out --{option[bad[0]]}")
     else:
-        bad = [k for k, v in given.items() if v and k in ("cell", "sweep", "jobs_set", "plc_cycle_set")]
+        bad = [k for k, v in given.items() if v and k in ("cell", "sweep", "jobs_set", "plc_cycle_set", "tune")]
         if bad:
             name = {"jobs_set": "jobs", "plc_cycle_set": "plc-cycle"}.get(bad[0], bad[0])
             raise click.UsageError(f"--{name} belongs to the closed loop: give --closed-loop too")

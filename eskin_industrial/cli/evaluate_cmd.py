@@ -101,9 +101,12 @@ def _seeds(value: str) -> tuple[int, ...]:
                    "method, oracle).")
 @click.option("--jobs", type=click.IntRange(min=1, max=64), default=None,
               help="With --closed-loop: worker processes (default 1; the figures do not depend on it).")
+@click.option("--tune", is_flag=True,
+              help="With --closed-loop: remake the recipes' choices on the tuning seeds (the fixed grip's safety "
+                   "factor, the grip policy's factors; 20-40 minutes with --jobs 2).")
 def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, only_charts, long_holds,
                  profile_path, conditions, within_ms, show_families, per_family, family_opt, hold_out, fmt,
-                 closed_loop, plc_cycle_ms, cell, sweep, jobs) -> None:
+                 closed_loop, plc_cycle_ms, cell, sweep, jobs, tune) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
     force read as slip, and cost per frame, for each method; then how steady the
     reported state is: varying-force episodes found, their time read as varying force,
@@ -117,13 +120,13 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
         click.core.ParameterSource.DEFAULT
     check_options(closed_loop, per_family=per_family, hold_out=hold_out, long_holds=long_holds, per_scene=per_scene,
                   scenes=scenes, conditions=conditions, within_ms=within_ms, only_charts=only_charts, cell=cell,
-                  sweep=sweep, jobs_set=jobs is not None, plc_cycle_set=plc_cycle_set)
+                  sweep=sweep, jobs_set=jobs is not None, plc_cycle_set=plc_cycle_set, tune=tune)
     if closed_loop:
         from .evaluate_closed_loop import closed_loop as run_closed_loop
 
         if profile_path:
             raise click.UsageError("--closed-loop takes each object's built-in profile: leave out --profile")
-        run_closed_loop(methods, seeds, _seeds, rate_hz, plc_cycle_ms, cell, sweep, jobs or 1, charts_dir, fmt)
+        run_closed_loop(methods, seeds, _seeds, rate_hz, plc_cycle_ms, cell, sweep, jobs or 1, charts_dir, fmt, tune)
         return
     if any(m in ("fixed", "oracle") for m in methods):
         raise click.UsageError("fixed and oracle are the closed loop's baselines: give --closed-loop too")

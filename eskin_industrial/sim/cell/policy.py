@@ -47,6 +47,7 @@ class PolicySettings:
     repeat_s: float = field(default=0.2, metadata=positive())
     repeat_mm: float = field(default=1.0, metadata=non_negative())
     quiet_s: float = field(default=3.0, metadata=positive())
+    relax_share: float = field(default=0.1, metadata=positive())
     #: relax no lower than this share of the force the object last slipped at (0: the light grip)
     relax_floor: float = field(default=0.0, metadata=non_negative())
     heartbeat_timeout_s: float = field(default=0.5, metadata=positive())
@@ -149,7 +150,7 @@ class GripPolicy:
         elif now - max(self._last_calm, self._last_raise) >= cfg.quiet_s:
             floor = max(cfg.light_n, cfg.relax_floor * self._slip_force)
             if self.request_n > floor:
-                self.request_n = max(floor, self.request_n - cfg.step_n)
+                self.request_n = max(floor, self.request_n * (1.0 - cfg.relax_share))
                 self.relaxes += 1
                 self._last_calm = now
                 events.append(f"quiet: grip force request relaxed to {self.request_n:.2f} N")

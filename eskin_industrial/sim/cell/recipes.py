@@ -24,7 +24,7 @@ from .policy import PolicySettings
 DESIGN_ACCEL = 8.0
 #: The catalogue's safety factor the fixed grip uses: the smallest of 1.5, 1.75, ...,
 #: 2.5 with which the fixed grip dropped nothing on the tuning seeds.
-FIXED_SAFETY = 2.0
+FIXED_SAFETY = 1.5
 #: A fragile object is gripped at most at its rated crush force over this.
 CRUSH_MARGIN = 1.25
 #: The lightest grip the policy holds with: below it the skin sees too little of the
@@ -43,7 +43,8 @@ class PolicyFactors:
     mode: Literal["step", "max"] = "step"
     repeat_s: float = 0.2
     quiet_s: float = 3.0
-    relax_floor: float = 1.25
+    relax_share: float = 0.1
+    relax_floor: float = 1.5
 
 
 POLICY = PolicyFactors()
@@ -78,7 +79,8 @@ def policy_settings(kind: CellObject, factors: PolicyFactors = POLICY, safety: f
         top = min(top, cap)
     return PolicySettings(light_n=min(light, top), step_n=step, max_n=max(top, light), fallback_n=fixed,
                           mode=factors.mode,
-                          repeat_s=factors.repeat_s, quiet_s=factors.quiet_s, relax_floor=factors.relax_floor)
+                          repeat_s=factors.repeat_s, quiet_s=factors.quiet_s, relax_share=factors.relax_share,
+                          relax_floor=factors.relax_floor)
 
 
 def with_factors(**changes: float | str) -> PolicyFactors:
