@@ -66,6 +66,15 @@ def test_a_part_that_still_moves_gets_another_step_each_repeat_time_up_to_the_ma
     assert [r.why for r in plc.policy.raises] == ["slip"] + ["still slipping"] * 3
 
 
+def test_the_centre_of_force_moving_while_the_grip_rises_is_not_taken_for_a_slide():
+    # a soft pad's contact grows with the force: the raise itself moves the centre
+    plc = gripping()
+    assert plc.run(0.05, SLIP) == 3.0
+    assert plc.run(0.05, SLIP, moving_mm_s=30.0) == 3.0  # 1.5 mm while the grip settles
+    assert plc.run(0.5, SLIP) == 3.0  # then still: no second step
+    assert [r.why for r in plc.policy.raises] == ["slip"]
+
+
 def test_max_mode_goes_straight_to_the_maximum():
     from dataclasses import replace
 

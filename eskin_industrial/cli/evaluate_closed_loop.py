@@ -19,11 +19,14 @@ BASELINES = ("fixed", "none", "oracle")
 
 
 def cell_seeds(value: str, parse: Any) -> tuple[str, tuple[int, ...]]:
-    """``evaluation`` / ``tuning`` are the closed loop's own seed sets; otherwise ``parse``."""
-    from ..sim.cell.episodes import EVALUATION_SEEDS, TUNING_SEEDS
+    """``evaluation`` / ``fresh`` / ``tuning`` are the closed loop's own seed sets;
+    otherwise ``parse``."""
+    from ..sim.cell.episodes import EVALUATION_SEEDS, FRESH_SEEDS, TUNING_SEEDS
 
     if value == "evaluation":
         return "closed-loop evaluation", EVALUATION_SEEDS
+    if value == "fresh":
+        return "closed-loop fresh", FRESH_SEEDS
     if value == "tuning":
         return "closed-loop tuning", TUNING_SEEDS
     return value, parse(value)

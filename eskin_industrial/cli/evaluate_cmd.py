@@ -89,7 +89,7 @@ def _seeds(value: str) -> tuple[int, ...]:
 @click.option("--closed-loop", is_flag=True,
               help="The closed loop instead: each method in the virtual cell, whose gripper reacts (docs/cell.md): "
                    "objects held, dropped and crushed, distance slid, needless squeezes, grip against the fixed grip; "
-                   "--seeds evaluation and tuning are its own (9000-9399, 8000-8199).")
+                   "--seeds evaluation, fresh and tuning are its own (9000-9399, 9400-9799, 8000-8199).")
 @click.option("--plc-cycle", "plc_cycle_ms", type=click.FloatRange(min=1.0, max=100.0), default=10.0, show_default=True,
               help="With --closed-loop: the PLC's scan cycle (ms).")
 @click.option("--cell", "cell", multiple=True, metavar="NAME=VALUE",

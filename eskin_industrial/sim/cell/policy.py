@@ -3,9 +3,10 @@ scan cycle, as ``FB_SlipGuard`` (docs/plc.md) reads them.
 
 Grip lightly; on a rising SLIP_LATCHED raise the force request by a step (or to the
 maximum); while SLIP stays set, raise by another step each ``repeat_s`` if the centre
-of force (XC, YC) has moved by ``repeat_mm`` over the last ``repeat_s`` (a detector's
-slip state outlasts the slide by some tenths of a second: SLIP alone does not say the
-object still moves); acknowledge the latch once the slip is over; after ``quiet_s`` of trusted data with no slip, relax one
+of force (XC, YC) has moved by ``repeat_mm`` over the last ``repeat_s`` and since
+``settle_s`` after the last raise (a detector's slip state outlasts the slide by some
+tenths of a second: SLIP alone does not say the object still moves; and a soft pad's
+contact grows with the force, so the raise itself moves the centre of force); acknowledge the latch once the slip is over; after ``quiet_s`` of trusted data with no slip, relax one
 step, no lower than the light grip (nor, with ``relax_floor``, than that share of the
 force it last slipped at).
 
@@ -46,6 +47,7 @@ class PolicySettings:
     mode: Literal["step", "max"] = "step"
     repeat_s: float = field(default=0.2, metadata=positive())
     repeat_mm: float = field(default=1.0, metadata=non_negative())
+    settle_s: float = field(default=0.1, metadata=non_negative())
     quiet_s: float = field(default=3.0, metadata=positive())
     relax_share: float = field(default=0.1, metadata=positive())
     #: relax no lower than this share of the force the object last slipped at (0: the light grip)
@@ -119,7 +121,8 @@ class GripPolicy:
         ack = False
         path = self._path
         path.append((now, v.get("XC", 0), v.get("YC", 0)))
-        while now - path[0][0] > cfg.repeat_s:
+        since = max(now - cfg.repeat_s, self._last_raise + cfg.settle_s)
+        while path[0][0] < since and len(path) > 1:
             path.popleft()
         if not self.gripping:
             self._latched_before = latched
@@ -141,7 +144,8 @@ class GripPolicy:
         no_verdict = not trusted and (self._trusted_once or now - self._grip_t >= cfg.grace_s)
         if no_verdict != self.no_verdict:
             self.no_verdict = no_verdict
-            events.append("NO VERDICT: no relaxing, grip raised to the fallback" if no_verdict else "data trusted")
+            events.append(f"NO VERDICT ({_why(alive, status)}): no relaxing, grip raised to the fallback" if no_verdict
+                          else "data trusted")
         if no_verdict:
             if self._raise(now, cfg.fallback_n, "no verdict"):
                 events.append(f"no verdict: grip force request raised to {self.request_n:.2f} N")
@@ -160,3 +164,11 @@ class GripPolicy:
 def _moved_mm(a: tuple[float, int, int], b: tuple[float, int, int]) -> float:
     """Distance between two centres of force as registers (0.01 mm), with their times."""
     return ((a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2) ** 0.5 / 100.0
+
+
+def _why(alive: bool, status: int) -> str:
+    """What makes the data untrustworthy, for the log."""
+    if not alive:
+        return "heartbeat still"
+    names = [b.name for b in (Status.SENSOR_STALE, Status.BUS_FAULT, Status.BRIDGE_OFFLINE) if status & b]
+    return ", ".join(str(n) for n in names) or "DATA_VALID clear"

@@ -51,6 +51,14 @@ from .virtual import ChainSpec, raw_of
 from .world import CellWorld, Episode
 
 
+#: The cell's bridge reads the sensor stale after this long without a scan (the
+#: profile's default is 2.5 scan periods, 25 ms at 100 Hz): the simulated node is a
+#: thread, and on a shared machine it falls tens of milliseconds behind its deadlines
+#: now and then, which a node with its own clock does not; its silence for longer than
+#: this is still "no verdict" to the PLC within a tenth of a second.
+STALE_S = 0.1
+
+
 class CellNode(CanNode):
     """A sensor node whose scans are rendered from the world as it goes, not played
     from a recording; faults act on its frames as on any simulated node's."""
@@ -254,9 +262,10 @@ def run_cell(profile: Profile, episode: Episode, method: str, *, chain: ChainSpe
     fixed = fixed_grip_n(kind) if fixed_n is None else fixed_n
     policy = GripPolicy(settings or replace(policy_settings(kind), fallback_n=fixed))
     world = CellWorld(episode, chain.actuator, chain.rate_hz, chain.viscous_s_per_m)
-    # the bridge's profile: this method, this rate
+    # the bridge's profile: this method, this rate, the node's staleness as above
     prof = replace(profile, detector=replace(profile.detector, method=method),
-                   sensor=replace(profile.sensor, rate_hz=chain.rate_hz))
+                   sensor=replace(profile.sensor, rate_hz=chain.rate_hz),
+                   modbus=replace(profile.modbus, plc=replace(profile.modbus.plc, stale_s=STALE_S)))
     layout = CanLayout.from_profile(prof, fd=False)
     cal = Calibrator.from_section(prof.calibration, prof.taxels)
     requests: collections.deque[tuple[float, float]] = collections.deque()
