@@ -75,3 +75,18 @@ def test_a_sensor_that_falls_silent_is_no_verdict_and_the_plc_grips_at_the_fallb
     assert 4.0 < t < 4.3  # SENSOR_STALE after 0.1 s without a scan (realtime.STALE_S), and the PLC's next cycle
     assert run.result.fallbacks >= 1 and run.result.peak_n >= 10.0  # gripped as the fixed grip would
     assert any("data trusted" in e and float(e.split()[0]) > 5.0 for e in events)  # the node is back
+
+
+@pytest.mark.slow
+def test_the_closed_loops_live_view_shows_the_grip_force_and_the_distance_slid():
+    from tests.test_demo import run_in_terminal
+
+    code, out, err, _ = run_in_terminal(["demo", "--closed-loop"], cols=100, rows=30, timeout_s=120)
+    assert code == 0, err
+    enter, leave = out.find("\x1b[?1049h"), out.find("\x1b[?1049l")
+    assert 0 <= enter < leave
+    plain = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out[enter:leave])
+    assert "eskin-bus demo --closed-loop" in plain and "PLC registers, as the PLC reads them" in plain
+    assert re.search(r"grip +\d+\.\d\d N  request +\d+\.\d\d N  fixed \d+\.\d\d N", plain)
+    assert re.search(r"glass: (held|sliding|on the table), slid +\d+\.\d mm \(drops at 15\)", plain)
+    assert re.search(r"^  glass: held \(slid", out[leave:], re.M)  # the summary, once the view has gone
