@@ -76,7 +76,7 @@ def slip_train_toml(duration_s: float, every_s: float = 1.2) -> str:
 
 def capture_main(port: int, out: str) -> None:
     """Serve the PLC's registers; note (time, STATE) of every write."""
-    from eskin_industrial.bus.modbus.io import RegisterServer, quiet_pymodbus
+    from eskin_industrial.modbus.pymodbus_io import RegisterServer, quiet_pymodbus
     from eskin_industrial.plc.image import IMAGE_COUNT, REG
 
     quiet_pymodbus()
@@ -321,7 +321,7 @@ def run_reference(path: str, decisions: list[tuple[int, int]], scene_file: Path,
     from eskin_industrial import load_profile
     from eskin_industrial.bus.can.layout import CanLayout
     from eskin_industrial.bus.can.reader import open_bus
-    from eskin_industrial.bus.modbus.io import TcpMaster
+    from eskin_industrial.modbus.pymodbus_io import TcpMaster
     from eskin_industrial.plc.image import REG
 
     rate = 1000.0 if path.endswith("1k") else 100.0
@@ -380,7 +380,7 @@ def main() -> None:
         return
     from machine import describe
 
-    from eskin_industrial.bus.modbus.io import quiet_pymodbus
+    from eskin_industrial.modbus.pymodbus_io import quiet_pymodbus
 
     quiet_pymodbus()
     cmd = (f".venv/bin/python benchmarks/bench_bridge.py --paths {args.paths} --duration {args.duration:g}"

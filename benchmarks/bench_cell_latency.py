@@ -35,7 +35,7 @@ sys.path.insert(0, str(ROOT))
 from machine import describe  # noqa: E402  (benchmarks/machine.py)
 
 from eskin_industrial import load_profile  # noqa: E402
-from eskin_industrial.bus.modbus.io import quiet_pymodbus  # noqa: E402
+from eskin_industrial.modbus.pymodbus_io import quiet_pymodbus  # noqa: E402
 from eskin_industrial.sim.cell.episodes import TUNING_SEEDS, episode  # noqa: E402
 from eskin_industrial.sim.cell.latency import PROBS, Quantiles  # noqa: E402
 from eskin_industrial.sim.cell.realtime import run_cell  # noqa: E402

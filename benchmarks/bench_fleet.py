@@ -203,7 +203,7 @@ def bridge_for(n: int, rate: float, per_bus: int, port: int, edge: str, tag: str
     for i in range(n):
         channel, k = f"fleet-{os.getpid()}-{tag}-bus{i // per_bus}", i % per_bus
         nodes.append(NodeConfig.of(f"n{i + 1:02d}", str(PROFILE), "can", interface="virtual", channel=channel, fd=fd,
-                                   rate_hz=rate, base_address=32 * i, node_id=k + 1,
+                                   rate_hz=rate, outputs={"plc": {"base_address": 32 * i}}, node_id=k + 1,
                                    base_id=base + 0x10 * k))
         buses.append((channel, k))
     cfg = BridgeConfig(node=tuple(nodes), outputs={"sparkplug": SparkplugOptions(

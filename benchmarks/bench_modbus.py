@@ -41,14 +41,16 @@ from machine import describe  # noqa: E402  (benchmarks/machine.py)
 from tests.helpers.modbus import free_port, slip_recording  # noqa: E402
 
 from eskin_industrial import load_profile  # noqa: E402
-from eskin_industrial.bus.modbus.io import TcpMaster, quiet_pymodbus, rtu_transaction_s  # noqa: E402
 from eskin_industrial.bus.modbus.rtu import RtuSource  # noqa: E402
 from eskin_industrial.calibration import Calibrator  # noqa: E402
 from eskin_industrial.detect.state import GraspState  # noqa: E402
 from eskin_industrial.frames import RawScan  # noqa: E402
+from eskin_industrial.modbus.pymodbus_io import TcpMaster, quiet_pymodbus  # noqa: E402
+from eskin_industrial.modbus.serial_line import rtu_transaction_s  # noqa: E402
 from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.plc.client import PlcWriter  # noqa: E402
-from eskin_industrial.plc.image import STATUS_COUNT, Health, PlcImage  # noqa: E402
+from eskin_industrial.node import Health, NodeStatus  # noqa: E402
+from eskin_industrial.plc.image import STATUS_COUNT, PlcImage  # noqa: E402
 from eskin_industrial.sim.modbus_node import NodeSimulator  # noqa: E402
 
 PROFILE = ROOT / "profiles" / "paper-5x5.toml"
@@ -95,6 +97,7 @@ def bench_latency(prof, port: int, writes: int, scores: bool = True) -> dict:
 
     writer = PlcWriter(settings, "127.0.0.1", port, poll_commands=False, on_written=on_written).start()
     pipe = Pipeline(prof)
+    status = NodeStatus(prof.stale_s, pipe.method.name, pipe.method.code)
     image = PlcImage(settings)
     lat, slip_lat = [], []
     k = 0
@@ -103,7 +106,10 @@ def bench_latency(prof, port: int, writes: int, scores: bool = True) -> dict:
     span = len(t) * period
     health = Health(frame_age_s=0.0)
     # connect first
-    writer.offer(image.render(health), urgent=True)
+    def rendered() -> list[int]:  # the snapshot, and the PLC's image of it (as the loop and the writer do)
+        return image.render(status.snapshot(health, scans=k, t_event=0.0, wall_time_s=0.0, urgent=True))
+
+    writer.offer(rendered(), urgent=True)
     acked.wait(5)
     while len(lat) < writes:
         i = k % len(t)
@@ -114,16 +120,16 @@ def bench_latency(prof, port: int, writes: int, scores: bool = True) -> dict:
         updates = pipe.push(RawScan(k, t[i] + lap * span, raw[i]))
         if not updates:
             continue
-        was = image.update.state if image.update is not None else None
+        was = status.update.state if status.update is not None else None
         for u in updates:
-            image.observe(u)
+            status.observe(u)
         acked.clear()
-        registers = image.render(health)
+        registers = rendered()
         writer.offer(registers, urgent=True, t_event=t_frame, tail=tuple(image.tail) if scores else ())
         if not acked.wait(2.0):
             raise SystemExit("no acknowledged write within 2 s")
         lat.append(ack_time[0] - t_frame)
-        if image.update.state == GraspState.SLIP and was != GraspState.SLIP:
+        if status.update.state == GraspState.SLIP and was != GraspState.SLIP:
             slip_lat.append(ack_time[0] - t_frame)
     scores_written = writer.stats.score_writes
     writer.stop()

@@ -24,16 +24,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from machine import describe  # noqa: E402  (benchmarks/machine.py)
 
 from eskin_industrial.plant.sparkplug import SparkplugOptions, open_edge  # noqa: E402
-from eskin_industrial.plc.image import PUBLISHED, encode_registers  # noqa: E402
-from eskin_industrial.sinks.base import Publication  # noqa: E402
 from tests.helpers import sparkplug as spb  # noqa: E402
 from tests.helpers.modbus import free_port  # noqa: E402
+from tests.helpers.snapshots import made  # noqa: E402
+from eskin_industrial.node import NodeSnapshot  # noqa: E402
 
 
-def publication(i: int) -> Publication:
-    values = {r.name: 0 for r in PUBLISHED}
-    values.update(STATE=i % 4, SLIP_EVENTS=i)
-    return Publication(encode_registers(values, "big"), None, True, 0.0)  # type: ignore[arg-type]
+def publication(i: int) -> NodeSnapshot:
+    return made(state=i % 4, slip_events=i)
 
 
 def timed(dev, pubs) -> list[float]:
@@ -53,7 +51,7 @@ def run(qos: int, n: int, tmp: Path, store_dir: str | None) -> dict[str, float]:
     port = free_port()
     edge = open_edge(SparkplugOptions(f"mqtt://127.0.0.1:{port}", "bench", f"q{qos}", qos=qos, store_max=n,
                                       store_dir=store_dir, reconnect_min_s=0.1, reconnect_max_s=0.1),
-                     [("grip", 1000.0, "big", {})])
+                     [("grip", {})])
     dev = edge.devices[0]
     pubs = [publication(i) for i in range(n)]
     edge.start()

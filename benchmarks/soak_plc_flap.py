@@ -131,7 +131,7 @@ def main() -> None:
                 next_print += 120
                 c = br.counters()["grip"]
                 print(f"  {time.monotonic() - t0:5.0f} s  outages {c['plc_outages']}  attempts "
-                      f"{c['plc_connect_attempts']}  writes {c['plc_writes']}  slips {br.runs[0].loop.image.slip_events}",
+                      f"{c['plc_connect_attempts']}  writes {c['plc_writes']}  slips {br.runs[0].loop.status.slip_events}",
                       flush=True)
     finally:
         stop.set()
@@ -146,7 +146,7 @@ def main() -> None:
         wall = time.monotonic() - t0
         cpu = time.process_time() - cpu0
         br.stop()  # the offline image, with the last count, is written before the writer lets go
-        bridge_slips = br.runs[0].loop.image.slip_events
+        bridge_slips = br.runs[0].loop.status.slip_events
         c = br.counters()["grip"]
         log.close()
         plc.go_down()

@@ -71,3 +71,8 @@ class Refused(EskinError):
     def __init__(self, code: int, message: str) -> None:
         super().__init__(message)
         self.code = code
+
+
+class DeprecatedKey(FutureWarning):
+    """A configuration key that moved: still read, under its new spelling, with one
+    warning line naming both (shown by the CLI as ``eskin-bus: warning: ...``)."""

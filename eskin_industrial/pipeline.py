@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 
 from .calibration import Calibrator
 from .detect.learned import Model
-from .detect.methods import get_method
 from .detect.updates import Update, state_changed
+from .evaluation.binding import ready_method
 from .frames import Frame, FrameFlag, RawScan
 from .profile import Profile
 
@@ -41,17 +41,8 @@ class Pipeline:
         self.calibrator = Calibrator.from_section(profile.calibration, profile.taxels)
         self.rate_hz = rate_hz or profile.sensor.rate_hz
         x, y = profile.coordinates_mm
-        chosen = get_method(method or profile.detector.method)
-        if chosen.needs_model:
-            if model is None:
-                # imported only here: the training code (and the scenes it renders) is
-                # no part of a bridge that runs any other method
-                from .evaluation.train import default_model
-
-                model = default_model()
-            chosen = chosen.with_model(model)
-        self.method = chosen  #: the deciding method (its code and score names)
-        self.detector = chosen.stream(profile.detector, x, y, self.rate_hz)
+        self.method = ready_method(method, profile.detector, model)  #: the deciding method (its code, its scores)
+        self.detector = self.method.stream(profile.detector, x, y, self.rate_hz)
         self.counters = Counters()
         self.last_frame: Frame | None = None
         self.last_update: Update | None = None

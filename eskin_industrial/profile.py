@@ -51,8 +51,8 @@ MAX_WINDOW_SAMPLES = 1_000_000
 
 
 def derived_stale_s(rate_hz: float, poll_hz: float | None) -> float:
-    """The default ``[modbus.plc] stale_s``: 2.5 periods of the slower of the scan
-    rate and the RTU poll rate, at least :data:`STALE_FLOOR_S`."""
+    """The default ``[output] stale_s``: 2.5 periods of the slower of the scan rate
+    and the RTU poll rate, at least :data:`STALE_FLOOR_S`."""
     return max(STALE_PERIODS / min(rate_hz, poll_hz or rate_hz), STALE_FLOOR_S)
 
 
@@ -246,11 +246,9 @@ class ModbusPlcSection:
     base_address: int = field(default=0, metadata=in_range(0, 65000))
     #: For 32-bit values: which register holds the high word.
     word_order: Literal["big", "little"] = "big"
-    #: Client mode: the PLC's address, and how often the image is written when
-    #: nothing changes (a change is written at once).
+    #: Client mode: the PLC's address.
     host: str = "127.0.0.1"
     port: int = field(default=502, metadata=in_range(1, 65535))
-    refresh_s: float = field(default=0.05, metadata=positive_at_most(60.0))
     #: Client mode: the delay after a failed connection or write (refused, reset, no
     #: answer, an exception reply), doubled after each failure up to the maximum.
     backoff_s: float = field(default=0.1, metadata=in_range(0.01, 60))
@@ -275,16 +273,33 @@ class ModbusPlcSection:
     identity: DeviceIdentitySection = field(default_factory=DeviceIdentitySection)
     #: R_coe and R_dw are sent as round(R x r_scale), saturated at 65535.
     r_scale: float = field(default=100.0, metadata=positive_at_most(MAX_R_SCALE))
-    #: The newest frame older than this sets the sensor-stale bit (and clears data-valid).
-    #: Default: 2.5 scan periods (of the slower of ``[sensor] rate_hz`` and
-    #: ``[modbus.node] poll_hz``), so a silent sensor shows within three periods.
-    stale_s: float | None = field(default=None, metadata=positive_at_most(3600.0))
 
     def __post_init__(self) -> None:
         if self.backoff_max_s < self.backoff_s:
             raise ValueError("backoff_max_s: expected at least backoff_s")
         check_host(self.host, "host")
         check_host(self.bind, "bind")
+
+
+@dataclass(frozen=True)
+class OutputSection:
+    """How every output sees this node (the PLC, Sparkplug, a recorder alike)."""
+
+    #: A snapshot is published at every change of the state or of a health condition,
+    #: and every ``refresh_s`` when nothing changes (a PLC in client mode is written
+    #: that often; a heartbeat advances).
+    refresh_s: float = field(default=0.05, metadata=positive_at_most(60.0))
+    #: The newest scan older than this makes the sensor stale: no state is claimed and
+    #: no verdict is valid.  Default: 2.5 scan periods (of the slower of ``[sensor]
+    #: rate_hz`` and ``[modbus.node] poll_hz``), so a silent sensor shows within three.
+    stale_s: float | None = field(default=None, metadata=positive_at_most(3600.0))
+
+
+#: Keys that moved, old dotted path -> new one: still read, with a warning.
+MOVED_KEYS: dict[str, str] = {
+    "modbus.plc.refresh_s": "output.refresh_s",
+    "modbus.plc.stale_s": "output.stale_s",
+}
 
 
 @dataclass(frozen=True)
@@ -301,6 +316,7 @@ class Profile:
     detector: DetectorSettings = field(default_factory=DetectorSettings)
     can: CanSection = field(default_factory=CanSection)
     modbus: ModbusSection = field(default_factory=ModbusSection)
+    output: OutputSection = field(default_factory=OutputSection)
     #: The file it came from, for messages (not a TOML key).
     source: str = field(default="<profile>", init=False, compare=False)
 
@@ -341,10 +357,17 @@ class Profile:
                 f"(the {self.detector.wavelet} filter length), got {geo.window}",
             )
 
-        if self.modbus.plc.stale_s is None:
+        if self.output.stale_s is None:
             # Resolved here, once, so every consumer reads a number.
-            plc = replace(self.modbus.plc, stale_s=derived_stale_s(self.sensor.rate_hz, self.modbus.node.poll_hz))
-            object.__setattr__(self, "modbus", replace(self.modbus, plc=plc))
+            out = replace(self.output, stale_s=derived_stale_s(self.sensor.rate_hz, self.modbus.node.poll_hz))
+            object.__setattr__(self, "output", out)
+
+    @property
+    def stale_s(self) -> float:
+        """``[output] stale_s``, resolved (a number once loaded)."""
+        stale = self.output.stale_s
+        assert stale is not None  # resolved in __post_init__
+        return stale
 
     @property
     def name(self) -> str:
@@ -395,6 +418,6 @@ def load_profile(path: str | Path, base: Path | None = None) -> Profile:
 
 
 def parse_profile(text: str, source: str = "<profile>") -> Profile:
-    profile = parse_toml(Profile, text, source)
+    profile = parse_toml(Profile, text, source, MOVED_KEYS)
     object.__setattr__(profile, "source", source)
     return profile

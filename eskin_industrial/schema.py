@@ -20,9 +20,11 @@ import math
 import tomllib
 import types
 import typing
+import warnings
+from collections.abc import Mapping
 from typing import Any, Callable, Literal, TypeVar, Union, get_args, get_origin
 
-from .errors import ProfileError
+from .errors import DeprecatedKey, ProfileError
 
 T = TypeVar("T")
 
@@ -249,13 +251,50 @@ def read_toml_file(path, what: str) -> str:
                            f"{exc.object[exc.start:exc.start + 1]!r})") from None
 
 
-def parse_toml(cls: type[T], text: str, source: str) -> T:
+def _spell(dotted: str) -> str:
+    """``modbus.plc.stale_s`` as a reader finds it in a file: ``[modbus.plc] stale_s``."""
+    section, _, key = dotted.rpartition(".")
+    return f"[{section}] {key}" if section else key
+
+
+def move_keys(table: dict[str, Any], moved: Mapping[str, str], source: str) -> None:
+    """Move each deprecated key of ``moved`` (old dotted path -> new dotted path) to its
+    new place in ``table``, with one :class:`~eskin_industrial.errors.DeprecatedKey`
+    warning naming both; a key given under both spellings is a :class:`ProfileError`
+    (which of the two was meant cannot be known)."""
+    for old, new in moved.items():
+        *path, key = old.split(".")
+        here: Any = table
+        for part in path:
+            here = here.get(part) if isinstance(here, dict) else None
+        if not isinstance(here, dict) or key not in here:
+            continue
+        value = here.pop(key)
+        *npath, nkey = new.split(".")
+        there: Any = table
+        for part in npath:
+            if not isinstance(there, dict):
+                break
+            there = there.setdefault(part, {})
+        if not isinstance(there, dict):
+            continue  # the new section is not a table: the schema says so below
+        if nkey in there:
+            raise ProfileError(f"{source}: {_spell(old)}: deprecated, and {_spell(new)} is given too; "
+                               f"keep {_spell(new)} only")
+        there[nkey] = value
+        warnings.warn(DeprecatedKey(f"{source}: {_spell(old)} is deprecated: write {_spell(new)}"), stacklevel=2)
+
+
+def parse_toml(cls: type[T], text: str, source: str, moved: Mapping[str, str] | None = None) -> T:
     """TOML text to ``cls``; any problem is one :class:`ProfileError` line:
-    ``SOURCE: [section] key: what was expected``."""
+    ``SOURCE: [section] key: what was expected``.  ``moved``: keys that moved
+    (:func:`move_keys`), still read under their old spelling."""
     try:
         table = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ProfileError(f"{source}: not valid TOML: {exc}") from None
+    if moved:
+        move_keys(table, moved, source)
     try:
         return build(cls, table)
     except SchemaError as exc:

@@ -4,6 +4,7 @@ opens anything."""
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import subprocess
@@ -32,6 +33,7 @@ name = "left"
 profile = "{profile}"
 interface = "virtual"
 channel = "shared"
+[node.plc]
 base_address = 0
 
 [[node]]
@@ -41,6 +43,7 @@ interface = "virtual"
 channel = "shared"
 base_id = 0x210
 node_id = 2
+[node.plc]
 base_address = 100
 """
 
@@ -79,14 +82,41 @@ def test_a_relative_profile_path_is_taken_from_the_files_folder(tmp_path):
     assert nodes[0].profile.sensor.name == "paper-5x5"
 
 
+def test_keys_that_moved_still_load_with_one_warning_naming_the_new_spelling(tmp_path):
+    """``base_address`` in a ``[[node]]`` is the PLC's now (``[node.plc]``), and the
+    profile's ``[modbus.plc] refresh_s`` / ``stale_s`` every output's (``[output]``):
+    an older file still loads, the same, with one deprecation line per key."""
+    from eskin_industrial.errors import DeprecatedKey
+
+    old = TWO_NODES.replace("[node.plc]\nbase_address = 100", "base_address = 100")
+    with pytest.warns(DeprecatedKey) as seen:
+        nodes = resolve(load_bridge_config(write(tmp_path, old)))
+    assert [n.profile.modbus.plc.base_address for n in nodes] == [0, 100]
+    assert [str(w.message) for w in seen] == [
+        f"{tmp_path / 'bridge.toml'}: [node[1]] base_address is deprecated: write [node.plc] base_address"]
+    both = TWO_NODES.replace("[node.plc]\nbase_address = 100", "base_address = 100\n[node.plc]\nbase_address = 100")
+    with pytest.raises(ProfileError, match=r"\[node\[1\]\] base_address: deprecated, and \[node.plc\] base_address is "
+                                           r"given too; keep \[node.plc\] base_address only"):
+        load_bridge_config(write(tmp_path, both, "both.toml"))
+    profile = Path(PAPER).read_text().replace("\nrefresh_s = 0.05\n", "\n")
+    profile = profile.replace("r_scale = 100.0\n", "r_scale = 100.0\nrefresh_s = 0.2\nstale_s = 0.5\n", 1)
+    (tmp_path / "old.toml").write_text(profile)
+    with pytest.warns(DeprecatedKey) as seen:
+        loaded = load_profile(tmp_path / "old.toml")
+    assert loaded.output.refresh_s == 0.2 and loaded.stale_s == 0.5
+    assert sorted(str(w.message).split(": ", 1)[1] for w in seen) == [
+        "[modbus.plc] refresh_s is deprecated: write [output] refresh_s",
+        "[modbus.plc] stale_s is deprecated: write [output] stale_s"]
+
+
 def test_a_slower_node_than_its_profile_gets_its_own_stale_limit(tmp_path):
     """A node's rate_hz override also moves the stale limit (2.5 periods of the node's
     rate): with the profile's 100 Hz limit (25 ms), a 20 Hz node would read stale
     between every two scans."""
-    path = write(tmp_path, TWO_NODES.replace('base_address = 100', 'base_address = 100\nrate_hz = 20.0'))
+    path = write(tmp_path, TWO_NODES.replace('node_id = 2', 'node_id = 2\nrate_hz = 20.0'))
     left, right = resolve(load_bridge_config(path))
-    assert left.profile.modbus.plc.stale_s == pytest.approx(0.025)
-    assert right.rate_hz == 20.0 and right.profile.modbus.plc.stale_s == pytest.approx(0.125)
+    assert left.profile.stale_s == pytest.approx(0.025)
+    assert right.rate_hz == 20.0 and right.profile.stale_s == pytest.approx(0.125)
 
 
 def test_a_fast_node_is_not_stale_within_the_interpreters_switch_interval(tmp_path):
@@ -94,16 +124,16 @@ def test_a_fast_node_is_not_stale_within_the_interpreters_switch_interval(tmp_pa
     may run another of the bridge's threads: the default limit has a floor of 20 ms
     (from 125 Hz down the periods decide); a limit the profile sets is kept."""
     assert STALE_FLOOR_S >= 4 * sys.getswitchinterval()
-    path = write(tmp_path, TWO_NODES.replace('base_address = 100', 'base_address = 100\nrate_hz = 1000.0'))
+    path = write(tmp_path, TWO_NODES.replace('node_id = 2', 'node_id = 2\nrate_hz = 1000.0'))
     left, right = resolve(load_bridge_config(path))
-    assert left.profile.modbus.plc.stale_s == pytest.approx(0.025)  # 100 Hz: 2.5 periods
-    assert right.rate_hz == 1000.0 and right.profile.modbus.plc.stale_s == pytest.approx(STALE_FLOOR_S)
+    assert left.profile.stale_s == pytest.approx(0.025)  # 100 Hz: 2.5 periods
+    assert right.rate_hz == 1000.0 and right.profile.stale_s == pytest.approx(STALE_FLOOR_S)
     fast = Path(PAPER).read_text().replace("rate_hz = 100.0", "rate_hz = 1000.0", 1)
     assert "rate_hz = 1000.0" in fast
     (tmp_path / "fast.toml").write_text(fast)
-    assert load_profile(tmp_path / "fast.toml").modbus.plc.stale_s == pytest.approx(STALE_FLOOR_S)
-    (tmp_path / "set.toml").write_text(fast.replace("[modbus.plc]\n", "[modbus.plc]\nstale_s = 0.004\n", 1))
-    assert load_profile(tmp_path / "set.toml").modbus.plc.stale_s == pytest.approx(0.004)
+    assert load_profile(tmp_path / "fast.toml").stale_s == pytest.approx(STALE_FLOOR_S)
+    (tmp_path / "set.toml").write_text(fast.replace("[output]\n", "[output]\nstale_s = 0.004\n", 1))
+    assert load_profile(tmp_path / "set.toml").stale_s == pytest.approx(0.004)
 
 
 @pytest.mark.parametrize("old, new, expected", [
@@ -111,9 +141,9 @@ def test_a_fast_node_is_not_stale_within_the_interpreters_switch_interval(tmp_pa
     ('base_id = 0x210', 'base_id = 0x208',
      "bad.toml: [node 'right'] base_id: 0x208 overlaps node 'left' at 0x200 on the same bus"),
     ('base_address = 100', 'base_address = 10',
-     "bad.toml: [node 'right'] base_address: 10 overlaps the block of node 'left' at 0"),
+     "bad.toml: [node 'right'] plc.base_address: 10 overlaps the block of node 'left' at 0"),
     ('name = "right"', 'name = "left"', "bad.toml: [node] name: 'left' is used by two nodes"),
-    ('interface = "virtual"\nchannel = "shared"\nbase_address = 0', 'source = "can-log"\nbase_address = 0',
+    ('interface = "virtual"\nchannel = "shared"\n[node.plc]', 'source = "can-log"\n[node.plc]',
      "bad.toml: [node[0]] path: missing key (source = 'can-log' needs it)"),
     ('profile = "{profile}"', 'profile = "no-such-profile.toml"',
      "bad.toml: [node 'left'] profile: "),
@@ -145,6 +175,7 @@ name = "b"
 profile = "{PAPER}"
 source = "modbus-rtu"
 serial_port = "/dev/ttyS9"
+[node.plc]
 base_address = 100
 """
     path = tmp_path / "rtu.toml"
@@ -206,3 +237,28 @@ def test_command_line_errors(tmp_path):
     assert res.returncode == 2 and "give --config FILE, or --profile P" in res.stderr
     res = cli("-p", PAPER, "--source", "scene:case2", "--plc", "serve:127.0.0.1:1502", "--check")
     assert res.returncode == 0 and "scene case2 -> PLC server block at 0" in res.stdout, res.stderr
+
+
+def test_a_file_with_moved_keys_is_one_warning_line_each_and_runs(tmp_path):
+    """From the command line: ``--check`` says each moved key in one line on stderr and
+    passes; ``profile check`` too; a run logs it as an event in the log's own format."""
+    old_profile = Path(PAPER).read_text().replace("\nrefresh_s = 0.05\n", "\n").replace(
+        "r_scale = 100.0\n", "r_scale = 100.0\nrefresh_s = 0.05\n", 1)
+    (tmp_path / "old.toml").write_text(old_profile)
+    port = free_port()
+    path = write(tmp_path, TWO_NODES.replace("[node.plc]\nbase_address = 100", "base_address = 100").replace(
+        '"{profile}"', '"old.toml"'), port=port)
+    res = cli("--config", str(path), "--check")
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.splitlines() == [
+        f"eskin-bus: warning: {path}: [node[1]] base_address is deprecated: write [node.plc] base_address",
+        f"eskin-bus: warning: {tmp_path / 'old.toml'}: [modbus.plc] refresh_s is deprecated: write [output] refresh_s"]
+    checked = subprocess.run([sys.executable, "-m", "eskin_industrial", "profile", "check", str(tmp_path / "old.toml")],
+                             capture_output=True, text=True, timeout=60)
+    assert checked.returncode == 0 and checked.stdout.startswith(f"{tmp_path / 'old.toml'}: ok")
+    assert checked.stderr == (f"eskin-bus: warning: {tmp_path / 'old.toml'}: [modbus.plc] refresh_s is deprecated: "
+                              "write [output] refresh_s\n")
+    run = cli("--config", str(path), "--duration", "0.2")
+    events = [json.loads(line) for line in run.stderr.splitlines() if line.startswith("{")]
+    moved = [e for e in events if e["event"] == "deprecated_key"]
+    assert len(moved) == 2 and moved[0]["level"] == "warning" and "[node.plc] base_address" in moved[0]["message"]

@@ -16,10 +16,10 @@ from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
 from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.bus.can.reader import open_bus
-from eskin_industrial.bus.modbus.io import TcpMaster
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.frames import RawScan
+from eskin_industrial.modbus.pymodbus_io import TcpMaster
 from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.plc.image import REG, join32
 from eskin_industrial.scenes import render

@@ -14,7 +14,9 @@ from eskin_industrial.bus.can.reader import open_bus
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.frames import RawScan
 from eskin_industrial.pipeline import Pipeline
-from eskin_industrial.plc.image import Health, PlcImage, Status, decode_registers
+from eskin_industrial.node import Health
+from eskin_industrial.plc.image import Status, decode_registers
+from tests.helpers.snapshots import StatusImage
 from tests.helpers.bridge import can_node, channel, hold_raw, running_bridge, server_config, wait_for
 from tests.helpers.can_frames import msg, scans_to_messages
 from tests.helpers.scenes import grasp
@@ -98,7 +100,7 @@ def test_state_changes_is_one_count_in_the_register_and_the_counter(paper_profil
     f[:150] = 0.0
     f[650:] = 0.0
     raw = Calibrator.from_section(paper_profile.calibration, 25).to_raw(f)
-    pipe, image = Pipeline(paper_profile), PlcImage(paper_profile.modbus.plc)
+    pipe, image = Pipeline(paper_profile), StatusImage(paper_profile.modbus.plc, paper_profile.stale_s)
     updates = []
     for k in range(800):
         seq = k + (100 if k >= 400 else 0)  # 1 s missing in the middle of the hold
@@ -119,6 +121,7 @@ def test_lost_scans_grow_while_an_rtu_outage_lasts(paper_profile, tmp_path):
     """Before: the failed polls reached LOST_SCANS only once a poll succeeded again
     (BUS_ERRORS 44 and LOST_SCANS 0 at a frame age of 2.2 s)."""
     from eskin_industrial.bridge.loop import NodeLoop
+    from eskin_industrial.plc.image import PlcImage
     from eskin_industrial.bus.modbus.rtu import RtuSource
     from eskin_industrial.sim.modbus_node import NodeSimulator
     from eskin_industrial.sinks.base import Sink
@@ -128,9 +131,10 @@ def test_lost_scans_grow_while_an_rtu_outage_lasts(paper_profile, tmp_path):
         def __init__(self):
             super().__init__()
             self.values: list[dict[str, int]] = []
+            self.image = PlcImage(paper_profile.modbus.plc)
 
-        def _publish(self, publication):
-            self.values.append(decode_registers(publication.registers, "big"))
+        def _publish(self, snapshot):
+            self.values.append(decode_registers(self.image.render(snapshot), "big"))
 
     f = grasp(300, seed=2)
     with pty_pair(tmp_path) as (a, b):

@@ -154,9 +154,10 @@ profile = "paper-5x5"
 interface = "recording"
 channel = "right-bus"
 fd = true
-base_address = 100
 bus_kwargs = { f_clock_mhz = 40, serial = 12 }
 filter = ["200:7F0"]
+[node.plc]
+base_address = 100
 ''')
     from eskin_industrial.bridge.config import load_bridge_config, resolve
     from eskin_industrial.bus.can.source import CanSource

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from eskin_industrial.bus.modbus.io import RegisterServer, TcpMaster
-from eskin_industrial.bus.modbus.tcp import PipelinedTcpMaster
+from eskin_industrial.modbus.pymodbus_io import RegisterServer, TcpMaster
+from eskin_industrial.modbus.tcp_master import PipelinedTcpMaster
 from eskin_industrial.errors import ModbusFault
 from eskin_industrial.sim.cell.gripper import (
     GREG,

@@ -199,7 +199,7 @@ def test_profile_show_of_a_huge_layout_is_refused_before_anything_is_allocated(t
     ("timeout_s = 0.05", "timeout_s = 3600.0", "[modbus] node.timeout_s: expected a number > 0 and at most 10, got 3600.0"),
     ("bitrate_bps = 1000000", "bitrate_bps = 10000000",
      "[can] bitrate_bps: expected an integer > 0 and at most 1000000, got 10000000"),
-    ("refresh_s = 0.05", "refresh_s = 1e6", "[modbus] plc.refresh_s: expected a number > 0 and at most 60"),
+    ("refresh_s = 0.05", "refresh_s = 1e6", "[output] refresh_s: expected a number > 0 and at most 60"),
 ])
 def test_absurd_values_are_refused_naming_file_section_and_key(tmp_path, old, new, expected):
     prof = paper_with(tmp_path, old, new)

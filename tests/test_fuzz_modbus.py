@@ -1,10 +1,12 @@
-"""Fuzz tests of the Modbus sensor-node path: register words to raw taxel values, the
-poller's handling of whatever a read returns, and the RTU frame check.
+"""Fuzz tests of the Modbus sensor-node path: register words to raw taxel values, and
+the poller's handling of whatever a read returns.
 
-pymodbus does the RTU framing itself; what is ours is fuzzed here without a serial
-line: the codec (:func:`encode_scan` / :func:`decode_scans`), :class:`RtuSource`
-with a stand-in master that answers each read with random words, wrong counts or
-faults, and the CRC check that tells garbled frames from timeouts.
+pymodbus' master does the RTU framing itself; what is ours is fuzzed here without a
+serial line: the codec (:func:`encode_scan` / :func:`decode_scans`), the simulated
+node's register file, and :class:`RtuSource` with a stand-in master that answers each
+read with random words, wrong counts or faults.  The protocol's own pieces are fuzzed
+beside their modules: the 32-bit word split in tests/test_modbus_words.py, the CRC
+check that tells garbled frames from timeouts in tests/test_modbus_rtu_frame.py.
 """
 from __future__ import annotations
 
@@ -14,17 +16,9 @@ import math
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
-from pymodbus.framer.rtu import FramerRTU
 
 from eskin_industrial import load_profile
-from eskin_industrial.bus.modbus.codec import (
-    decode_scans,
-    encode_scan,
-    join32,
-    register_count,
-    split32,
-)
-from eskin_industrial.bus.modbus.io import _valid_frame
+from eskin_industrial.bus.modbus.codec import decode_scans, encode_scan, register_count
 from eskin_industrial.bus.modbus.rtu import RtuSource
 from eskin_industrial.errors import ModbusFault
 from eskin_industrial.profile import ModbusNodeSection
@@ -72,23 +66,6 @@ def test_any_values_encode_to_register_words(node, values):
     want = np.clip(np.rint(np.nan_to_num(np.array(values), nan=0.0)), lo, hi)
     np.testing.assert_array_equal(decode_scans(node, regs), want)
 
-
-
-@fuzz(200)
-@given(values=st.lists(st.integers(-2**40, 2**40) | st.integers(0, 0xFFFFFFFF), min_size=1, max_size=20),
-       word_order=st.sampled_from(["big", "little"]))
-def test_the_word_split_is_one_for_ints_and_arrays(values, word_order):
-    """split32 / join32 are the only 32-bit word split (scan codec and PLC image): two
-    words in 0..65535, in word order, the same for an int as for an array, and back."""
-    arr = np.array(values, dtype=np.int64)
-    pairs = np.stack(split32(arr, word_order), axis=-1)
-    for v, pair in zip(values, pairs.tolist()):
-        words = split32(v, word_order)
-        assert words == pair and all(0 <= w <= 0xFFFF for w in words)
-        hi, lo = words if word_order == "big" else words[::-1]
-        assert (hi << 16) | lo == v & 0xFFFFFFFF
-        assert join32(words, word_order) == v & 0xFFFFFFFF
-    np.testing.assert_array_equal(join32((pairs[:, 0], pairs[:, 1]), word_order), arr & 0xFFFFFFFF)
 
 @fuzz(200)
 @given(node=nodes, address=st.integers(-5, 200), count=st.integers(0, 130),
@@ -161,22 +138,3 @@ def test_the_poller_survives_any_answer_and_counts_every_attempt(data):
     assert all(b > a for a, b in zip(seqs, seqs[1:])), seqs
     if node.counter_register:
         assert all(s.t == s.seq / profile.sensor.rate_hz for s in scans)
-
-
-@fuzz(200)
-@given(body=st.binary(min_size=2, max_size=40), flip=st.integers(0, 10**6))
-def test_the_rtu_frame_check_accepts_intact_frames_and_no_single_bit_error(body, flip):
-    frame = body + FramerRTU.compute_CRC(body).to_bytes(2, "big")
-    assert _valid_frame(frame)
-    bit = flip % (8 * len(frame))
-    garbled = bytearray(frame)
-    garbled[bit // 8] ^= 1 << (bit % 8)
-    assert not _valid_frame(bytes(garbled))  # CRC-16 catches every single-bit error
-
-
-@fuzz(300)
-@given(data=st.binary(max_size=300))
-def test_the_rtu_frame_check_takes_any_bytes(data):
-    assert _valid_frame(data) in (True, False)
-    if len(data) < 4:
-        assert _valid_frame(data) is False

@@ -20,18 +20,19 @@ from eskin_industrial.plc.image import (
     IMAGE_COUNT,
     REG,
     STATUS_COUNT,
-    Command,
-    Health,
-    PlcImage,
     Status,
     parse_coil_write,
     parse_register_write,
 )
+from eskin_industrial.node import Command, Health
 from eskin_industrial.plc.server import PlcRegisterHandler
 from tests.helpers.fuzz import fuzz
 from tests.helpers.paths import PROFILES
+from tests.helpers.snapshots import StatusImage
 
-PLC = load_profile(PROFILES / "paper-5x5.toml").modbus.plc
+PROFILE = load_profile(PROFILES / "paper-5x5.toml")
+PLC = PROFILE.modbus.plc
+STALE_S = PROFILE.stale_s
 COMMAND_NAMES = {"ack", "tare", "enable", "disable"}
 STATE_BITS = {GraspState.STABLE: Status.STABLE, GraspState.VARIABLE_FORCE: Status.VARIABLE_FORCE,
               GraspState.SLIP: Status.SLIP}
@@ -45,7 +46,7 @@ updates = st.builds(
 )
 healths = st.builds(
     Health,
-    frame_age_s=st.none() | st.floats(-1.0, 1e9) | st.sampled_from([0.0, PLC.stale_s, PLC.stale_s * 1.0001]),
+    frame_age_s=st.none() | st.floats(-1.0, 1e9) | st.sampled_from([0.0, STALE_S, STALE_S * 1.0001]),
     bus_fault=st.booleans(), lost_scans=st.integers(0, 2**40), bus_errors=st.integers(0, 2**40),
 )
 commands = st.builds(Command, st.sampled_from(sorted(COMMAND_NAMES)))
@@ -86,7 +87,7 @@ def test_coil_writes_are_refused_or_valid_commands(offset, values):
 @given(steps=st.lists(st.tuples(st.one_of(updates, commands), healths), min_size=1, max_size=25),
        word_order=st.sampled_from(["big", "little"]))
 def test_the_image_is_always_in_range_and_consistent(steps, word_order):
-    image = PlcImage(dataclasses.replace(PLC, word_order=word_order))
+    image = StatusImage(dataclasses.replace(PLC, word_order=word_order), STALE_S)
     for event, health in steps:
         if isinstance(event, Command):
             image.apply(event)
@@ -98,7 +99,7 @@ def test_the_image_is_always_in_range_and_consistent(steps, word_order):
         status = Status(regs[REG["STATUS"].offset])
         state = regs[REG["STATE"].offset]
         u = image.update
-        stale = health.frame_age_s is None or health.frame_age_s > PLC.stale_s
+        stale = health.frame_age_s is None or health.frame_age_s > STALE_S
         assert bool(status & Status.SENSOR_STALE) == stale
         assert bool(status & Status.BUS_FAULT) == health.bus_fault
         assert bool(status & Status.ENABLED) == image.enabled

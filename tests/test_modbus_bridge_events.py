@@ -32,8 +32,14 @@ def test_an_outage_of_a_silent_plc_is_two_lines_with_the_timeout_given(hold_csv:
     with PlcStandIn("silent") as plc:
         proc = subprocess.Popen([sys.executable, "-m", "eskin_industrial", "modbus-bridge", "-p", PAPER,
                                  "--recording", hold_csv, "--plc-host", "127.0.0.1", "--plc-port", str(plc.port),
-                                 "--plc-timeout", "0.05", "--duration", "4"],
+                                 "--plc-timeout", "0.05", "--duration", "6"],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        # the outage counts from the first request the bridge sends, however long the
+        # process takes to start on a loaded machine
+        deadline = time.monotonic() + 30
+        while not plc.seen.requests:
+            assert time.monotonic() < deadline and proc.poll() is None, "no request from the bridge"
+            time.sleep(0.01)
         time.sleep(1.5)
         plc.mode = "ok"  # it answers again: the outage ends
         _, err = proc.communicate(timeout=30)

@@ -39,14 +39,19 @@ def crc16(data: bytes) -> bytes:
 
 
 class RecordingSink(Sink):
-    """Keeps every publication's registers."""
+    """Keeps every publication's registers, rendered as the PLC output renders them."""
 
-    def __init__(self):
+    def __init__(self, settings=None):
         super().__init__()
+        from eskin_industrial import load_profile
+        from eskin_industrial.plc.image import PlcImage
+        from tests.helpers.paths import PROFILES
+
+        self.image = PlcImage(settings or load_profile(PROFILES / "paper-5x5.toml").modbus.plc)
         self.published: list[list[int]] = []
 
-    def _publish(self, publication):
-        self.published.append(list(publication.registers))
+    def _publish(self, snapshot):
+        self.published.append(self.image.render(snapshot))
 
 
 @pytest.mark.parametrize("value_type", ["uint16", "int16", "uint32", "int32"])
@@ -111,7 +116,7 @@ def test_silent_node_sets_stale_and_fault_and_never_stalls(paper_profile, tmp_pa
             budget = (node_cfg.retries + 1) * node_cfg.timeout_s
             t0 = time.monotonic()
             steps = 0
-            while time.monotonic() - t0 < paper_profile.modbus.plc.stale_s + 0.3:
+            while time.monotonic() - t0 < paper_profile.stale_s + 0.3:
                 s0 = time.monotonic()
                 bridge.step()
                 assert time.monotonic() - s0 < budget + 0.1  # never stalls longer than the retry budget
@@ -245,8 +250,7 @@ def test_stale_is_published_at_once_not_at_the_next_refresh(paper_profile):
     """A status bit that changes (here SENSOR_STALE) goes out in the step that sees it."""
     import dataclasses as dc
 
-    slow = dc.replace(paper_profile, modbus=dc.replace(paper_profile.modbus, plc=dc.replace(
-        paper_profile.modbus.plc, refresh_s=60.0, stale_s=0.05)))
+    slow = dc.replace(paper_profile, output=dc.replace(paper_profile.output, refresh_s=60.0, stale_s=0.05))
 
     class Frozen(Source):
         """A source whose one scan came just now, and then nothing."""

@@ -1,6 +1,7 @@
 """Server mode over RTU: our serial-line server, spoken to over a socat pty pair with
 hand-built frames whose CRC is computed by pymodbus (a framer we did not write), and
-read by mbpoll in tests/test_plc_server.py."""
+read by mbpoll in tests/test_plc_server.py.  The framing itself, pure, is
+tests/test_modbus_rtu_frame.py."""
 
 from __future__ import annotations
 
@@ -8,16 +9,13 @@ import struct
 import time
 
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
 from pymodbus.framer.rtu import FramerRTU
 
-from eskin_industrial.bus.modbus import rtu_frame
-from eskin_industrial.bus.modbus.io import SerialSettings
-from eskin_industrial.bus.modbus.server import Policy
+from eskin_industrial.modbus import rtu_frame
+from eskin_industrial.modbus.serial_line import SerialSettings
+from eskin_industrial.modbus.tcp_server import Policy
 from eskin_industrial.plc.image import COIL, REG
 from eskin_industrial.plc.server import PlcServer
-from tests.helpers.fuzz import fuzz
 from tests.helpers.modbus import pty_pair
 
 UNIT = 1
@@ -26,20 +24,6 @@ UNIT = 1
 def rtu(unit: int, pdu: bytes) -> bytes:
     body = bytes((unit,)) + pdu
     return body + FramerRTU.compute_CRC(body).to_bytes(2, "big")
-
-
-@fuzz(300)
-@given(st.binary(min_size=2, max_size=254))
-def test_our_crc_is_pymodbus_crc(body):
-    assert rtu_frame.frame(body[0], body[1:]) == rtu(body[0], body[1:])
-    assert rtu_frame.intact(rtu(body[0], body[1:]))
-
-
-@fuzz(300)
-@given(st.binary(max_size=300))
-def test_request_length_takes_any_bytes(data):
-    n = rtu_frame.request_length(data)
-    assert n is None or 0 <= n <= rtu_frame.MAX_FRAME
 
 
 class Line:

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from eskin_industrial.bridge.loop import NodeLoop
-from eskin_industrial.bus.modbus.server import Policy, networks
 from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
+from eskin_industrial.modbus.tcp_server import Policy, networks
 from eskin_industrial.plc.image import COIL, IMAGE_COUNT, REG, Status
 from eskin_industrial.plc.server import PlcServer, identity_of
 from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, slip_recording
@@ -179,7 +179,7 @@ def test_a_malformed_header_closes_only_that_connection(paper_profile):
 # -- connections --------------------------------------------------------------------
 
 def test_connection_cap_lets_a_polling_plc_in_by_replacing_an_idle_socket(paper_profile, monkeypatch):
-    import eskin_industrial.bus.modbus.server as mod
+    import eskin_industrial.modbus.tcp_server as mod
 
     monkeypatch.setattr(mod, "EVICT_IDLE_S", 0.3)  # the rule as it stands, sooner (1 s in service)
     server = served(paper_profile, Policy(max_connections=3, idle_timeout_s=60))
@@ -376,7 +376,7 @@ def test_a_tare_queued_before_contact_is_refused_when_applied(paper_profile):
     try:
         loop = bridge_on(paper_profile, server, 8.0)
         settle(loop)
-        from eskin_industrial.plc.image import Command
+        from eskin_industrial.node import Command
 
         server.handler.commands.put(Command("tare"))  # as if written just before the contact
         seen = []
@@ -535,15 +535,16 @@ def test_the_servers_events_are_lines_of_the_bridge_log_while_it_is_open():
     import json
 
     from eskin_industrial.bridge.logs import EventLog
-    from eskin_industrial.bus.modbus.server import RateLimitedLog
+    from eskin_industrial.modbus.serving import RateLimitedLog
+    from eskin_industrial.modbus.tcp_server import LOG
 
     stream = io.StringIO()
     log = EventLog(stream, "json", "info")
-    events = RateLimitedLog(every_s=60)
+    events = RateLimitedLog(LOG, every_s=60)
     for i in range(5):
         events.event("modbus_write_denied", peer=f"10.0.0.{i}:502", reason="read_only")
     events.event("modbus_client_idle", level=logging.DEBUG, peer="-")  # below the log's level
-    quick = RateLimitedLog(every_s=0.05)
+    quick = RateLimitedLog(LOG, every_s=0.05)
     quick.event("modbus_unit_refused", unit=7)
     quick.event("modbus_unit_refused", unit=8)
     time.sleep(0.06)
@@ -561,7 +562,7 @@ def test_the_servers_events_are_lines_of_the_bridge_log_while_it_is_open():
 
 
 def test_serving_on_every_interface_without_an_allow_list_is_logged(paper_profile, caplog, monkeypatch):
-    from eskin_industrial.bus.modbus.server import TcpServer
+    from eskin_industrial.modbus.tcp_server import TcpServer
 
     monkeypatch.setattr(TcpServer, "start", lambda self: self)  # the tests listen on loopback only
     with caplog.at_level(logging.WARNING, logger="eskin_industrial"):

@@ -13,10 +13,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from eskin_industrial.bus.modbus import mbap
-from eskin_industrial.bus.modbus.io import RegisterServer
-from eskin_industrial.bus.modbus.tcp import PipelinedTcpMaster
 from eskin_industrial.errors import DecodeError, ModbusFault
+from eskin_industrial.modbus import mbap
+from eskin_industrial.modbus.pymodbus_io import RegisterServer
+from eskin_industrial.modbus.tcp_master import PipelinedTcpMaster
 from eskin_industrial.plc.client import PlcWriter
 from eskin_industrial.plc.image import STATUS_COUNT, Status
 from tests.helpers.modbus import free_port

@@ -15,9 +15,9 @@ import pytest
 
 from eskin_industrial.plant.sparkplug import SparkplugOptions, open_edge
 from eskin_industrial.plant.watch import PlantModel
-from eskin_industrial.plc.image import PUBLISHED, Status, encode_registers
-from eskin_industrial.sinks.base import Publication
+from eskin_industrial.node import NodeSnapshot
 from eskin_industrial.view.plant_table import plant_lines
+from tests.helpers.snapshots import made
 from tests.helpers import sparkplug as spb
 
 
@@ -61,11 +61,9 @@ def test_the_model_follows_births_deaths_aliases_and_seq():
     assert "1 edge node, 1 device" in lines[0] and "OFFLINE" in lines[2] and "  grip" in lines[3]
 
 
-def _pub(state: int, slips: int) -> Publication:
-    values = {r.name: 0 for r in PUBLISHED}
-    values.update(STATE=state, SLIP_EVENTS=slips,
-                  STATUS=int(Status.DATA_VALID | Status.ENABLED | (Status.SLIP if state == 3 else 0)))
-    return Publication(encode_registers(values, "big"), None, True, 0.0)  # type: ignore[arg-type]
+def _pub(state: int, slips: int) -> NodeSnapshot:
+    return made(state=state, slip_events=slips, valid=True, enabled=True, r_coe=0.0, r_dw=0.0, f_sum_n=0.0,
+                xc_mm=0.0, yc_mm=0.0, score_a=0.0, score_b=0.0, frame_age_s=0.0)
 
 
 @pytest.mark.slow
@@ -83,7 +81,7 @@ def test_the_command_shows_what_the_subscriber_received(tmp_path):
             while not any('"connected"' in x for x in lines):
                 assert time.monotonic() < deadline and proc.poll() is None, lines
                 time.sleep(0.05)
-            edge = open_edge(SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e"), [("grip", 1000.0, "big", {})])
+            edge = open_edge(SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e"), [("grip", {})])
             edge.start()
             assert edge.wait_connected(5)
             for state, slips in ((0, 0), (1, 0), (3, 1), (1, 1), (3, 2), (0, 2)):
@@ -128,7 +126,7 @@ def test_data_before_any_birth_is_an_unborn_node_once():
 @pytest.mark.slow
 def test_rebirth_asks_a_node_born_before_the_view_started(tmp_path):
     with spb.broker(tmp_path) as port:
-        edge = open_edge(SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e"), [("grip", 1000.0, "big", {})])
+        edge = open_edge(SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e"), [("grip", {})])
         edge.start()
         try:
             assert edge.wait_connected(5)

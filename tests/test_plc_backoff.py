@@ -337,9 +337,9 @@ def test_an_urgent_images_scores_follow_it_at_once_not_at_the_next_refresh(paper
     """A PLC reacting to a state change reads the scores that made it: after an urgent
     image the scores are written at once (sent by the offering thread or by the
     writer), not refresh_s later (30 s here: only the urgent path can write them)."""
-    settings = replace(paper_profile.modbus.plc, refresh_s=30.0)
+    settings = paper_profile.modbus.plc
     with PlcStandIn("ok") as plc:
-        writer = PlcWriter(settings, "127.0.0.1", plc.port)
+        writer = PlcWriter(settings, "127.0.0.1", plc.port, refresh_s=30.0)
         writer._inline = inline  # (False: the writer thread sends it, as over RTU)
         writer.start()
         try:

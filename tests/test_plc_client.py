@@ -80,7 +80,7 @@ def test_plc_drops_and_comes_back_while_detection_runs(paper_profile):
         plc.stop()  # the PLC goes away before the slip
         while not source.done:
             bridge.step()  # detection goes on: no stall while the PLC is away
-        assert bridge.image.slip_events >= 1 and bridge.image.latched
+        assert bridge.status.slip_events >= 1 and bridge.status.latched
         assert writer.stats.failures >= 1 and not writer.connected
         plc = PlcSimulator(settings, "127.0.0.1", port, echo=None)
         plc.gripper.heartbeat_timeout_s = 10.0
@@ -89,19 +89,19 @@ def test_plc_drops_and_comes_back_while_detection_runs(paper_profile):
         wait_for(lambda: plc.memory.writes > 0, timeout_s=settings.backoff_max_s + 3, step=bridge.step)
         v = decode(plc.memory.regs, settings.word_order)
         # Nothing that could be kept is lost: the latch and the event count survive.
-        assert v["STATUS"] & Status.SLIP_LATCHED and v["SLIP_EVENTS"] == bridge.image.slip_events >= 1
+        assert v["STATUS"] & Status.SLIP_LATCHED and v["SLIP_EVENTS"] == bridge.status.slip_events >= 1
         assert writer.stats.connects == 2
         # The stand-in's gripper logic reacts to the latch and acknowledges it.
         wait_for(lambda: plc.gripper.raises == 1, step=bridge.step)
-        wait_for(lambda: not bridge.image.latched, step=bridge.step)
-        assert bridge.image.update.state != GraspState.SLIP
+        wait_for(lambda: not bridge.status.latched, step=bridge.step)
+        assert bridge.status.update.state != GraspState.SLIP
     finally:
         writer.stop()
         plc.stop()
 
 
 def test_client_mode_over_rtu(paper_profile, tmp_path):
-    from eskin_industrial.bus.modbus.io import SerialSettings
+    from eskin_industrial.modbus.serial_line import SerialSettings
     from tests.helpers.modbus import pty_pair
 
     settings = paper_profile.modbus.plc

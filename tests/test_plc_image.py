@@ -16,9 +16,6 @@ from eskin_industrial.plc.image import (
     REG,
     REGISTERS,
     STATUS_COUNT,
-    Command,
-    Health,
-    PlcImage,
     Status,
     join32,
     map_rows,
@@ -26,7 +23,9 @@ from eskin_industrial.plc.image import (
     parse_register_write,
     split32,
 )
+from eskin_industrial.node import Command, Health
 from tests.helpers.paths import PROFILES
+from tests.helpers.snapshots import StatusImage
 
 FRESH = Health(frame_age_s=0.01)
 
@@ -46,14 +45,14 @@ def test_map_has_no_overlaps_and_the_documented_size(paper_profile):
     used = [o for r in REGISTERS for o in range(r.offset, r.offset + r.words)]
     assert used == sorted(set(used)) == list(range(IMAGE_COUNT))
     assert STATUS_COUNT == REG["COMMAND"].offset
-    image = PlcImage(paper_profile.modbus.plc)
+    image = StatusImage(paper_profile.modbus.plc)
     assert len(image.render(FRESH)) == STATUS_COUNT
 
 
 def test_values_scaling_and_word_order(paper_profile):
     for order in ("big", "little"):
         settings = dataclasses.replace(paper_profile.modbus.plc, word_order=order)
-        image = PlcImage(settings)
+        image = StatusImage(settings)
         image.observe(upd(3, r_coe=4.1234, r_dw=1000.0, f_sum=70000.5))
         regs = image.render(Health(frame_age_s=0.0123, lost_scans=70000, bus_errors=3))
         assert field(regs, "STATE") == 3
@@ -68,18 +67,18 @@ def test_values_scaling_and_word_order(paper_profile):
 
 
 def test_status_bits_tell_no_slip_from_unknown(paper_profile):
-    image = PlcImage(paper_profile.modbus.plc)
-    s = Status(image.status(FRESH))
+    image = StatusImage(paper_profile.modbus.plc)
+    s = Status(image.bits(FRESH))
     assert not s & Status.DATA_VALID  # nothing seen yet
     image.observe(upd(1, valid=False))
-    s = Status(image.status(FRESH))
+    s = Status(image.bits(FRESH))
     assert s & Status.CONTACT and s & Status.STABLE and not s & Status.DATA_VALID  # warm-up: not a verdict
     image.observe(upd(1))
-    assert Status(image.status(FRESH)) & Status.DATA_VALID
-    stale = Status(image.status(Health(frame_age_s=1.0)))
+    assert Status(image.bits(FRESH)) & Status.DATA_VALID
+    stale = Status(image.bits(Health(frame_age_s=1.0)))
     assert stale & Status.SENSOR_STALE and not stale & (Status.DATA_VALID | Status.STABLE | Status.CONTACT)
-    assert Status(image.status(Health(frame_age_s=None))) & Status.SENSOR_STALE
-    fault = Status(image.status(Health(frame_age_s=0.01, bus_fault=True)))
+    assert Status(image.bits(Health(frame_age_s=None))) & Status.SENSOR_STALE
+    fault = Status(image.bits(Health(frame_age_s=0.01, bus_fault=True)))
     assert fault & Status.BUS_FAULT and not fault & Status.DATA_VALID
     r1, r2 = image.render(FRESH), image.render(FRESH)
     assert field(r2, "HEARTBEAT") == field(r1, "HEARTBEAT") + 1
@@ -87,18 +86,18 @@ def test_status_bits_tell_no_slip_from_unknown(paper_profile):
 
 
 def test_slip_latch_ack_and_enable(paper_profile):
-    image = PlcImage(paper_profile.modbus.plc)
+    image = StatusImage(paper_profile.modbus.plc)
     assert image.observe(upd(1))
     assert not image.observe(upd(1))  # nothing new: periodic refresh only
     assert image.observe(upd(3))  # slip: at once
-    assert Status(image.status(FRESH)) & (Status.SLIP | Status.SLIP_LATCHED) == Status.SLIP | Status.SLIP_LATCHED
+    assert Status(image.bits(FRESH)) & (Status.SLIP | Status.SLIP_LATCHED) == Status.SLIP | Status.SLIP_LATCHED
     image.apply(Command("ack"))
     assert image.latched  # still slipping: the ack cannot hide it
     image.observe(upd(1))
-    s = Status(image.status(FRESH))
+    s = Status(image.bits(FRESH))
     assert s & Status.SLIP_LATCHED and not s & Status.SLIP  # the latch outlives the slip
     image.apply(Command("ack"))
-    assert not Status(image.status(FRESH)) & Status.SLIP_LATCHED
+    assert not Status(image.bits(FRESH)) & Status.SLIP_LATCHED
     image.apply(Command("disable"))
     image.observe(upd(3))
     regs = image.render(FRESH)
@@ -106,7 +105,7 @@ def test_slip_latch_ack_and_enable(paper_profile):
     assert not s & (Status.ENABLED | Status.SLIP | Status.SLIP_LATCHED | Status.DATA_VALID)
     assert field(regs, "STATE") == 0 and field(regs, "SLIP_EVENTS") == 2  # counted, not claimed
     image.apply(Command("enable"))
-    assert Status(image.status(FRESH)) & (Status.ENABLED | Status.SLIP) == Status.ENABLED | Status.SLIP
+    assert Status(image.bits(FRESH)) & (Status.ENABLED | Status.SLIP) == Status.ENABLED | Status.SLIP
 
 
 def test_writes_outside_the_command_registers_are_refused(paper_profile):
@@ -127,7 +126,7 @@ def test_writes_outside_the_command_registers_are_refused(paper_profile):
 
 
 def test_non_finite_values_do_not_break_the_image(paper_profile):
-    image = PlcImage(paper_profile.modbus.plc)
+    image = StatusImage(paper_profile.modbus.plc)
     image.observe(upd(2, r_coe=math.nan, r_dw=math.inf, f_sum=math.nan))
     regs = image.render(FRESH)
     assert all(0 <= v <= 0xFFFF for v in regs)
@@ -168,14 +167,14 @@ def test_plc_section_is_checked():
 
 @pytest.mark.parametrize("age", [None, math.nan, 10.0])
 def test_no_frame_a_broken_clock_or_an_old_frame_is_stale_never_a_verdict(paper_profile, age):
-    image = PlcImage(paper_profile.modbus.plc)
+    image = StatusImage(paper_profile.modbus.plc)
     image.observe(upd(1))
-    status = Status(image.status(Health(frame_age_s=age)))
+    status = Status(image.bits(Health(frame_age_s=age)))
     assert status & Status.SENSOR_STALE and not status & (Status.DATA_VALID | Status.STABLE)
 
 
 def test_the_offline_image_claims_nothing_and_keeps_the_counters(paper_profile):
-    image = PlcImage(paper_profile.modbus.plc)
+    image = StatusImage(paper_profile.modbus.plc)
     image.observe(upd(1))
     image.observe(upd(3))
     regs = image.render_offline(FRESH)

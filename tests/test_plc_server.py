@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from eskin_industrial.bridge.loop import NodeLoop
-from eskin_industrial.bus.modbus.io import SerialSettings
 from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
+from eskin_industrial.modbus.serial_line import SerialSettings
 from eskin_industrial.plc.image import IMAGE_COUNT, REG, STATUS_COUNT, Status
 from eskin_industrial.plc.server import PlcServer
 from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
@@ -82,21 +82,21 @@ def test_commands_by_mbpoll_and_refused_writes(paper_profile):
         out = mbpoll(*tcp, "-r", str(REG["ENABLE"].offset + 1), "-1", "127.0.0.1", "0")
         assert out.returncode == 0, out.stderr
         bridge.step()
-        assert not bridge.image.enabled
+        assert not bridge.status.enabled
         assert not Status(server.handler.registers[0]) & (Status.ENABLED | Status.DATA_VALID)
         # Enable again by coil 3.
         out = mbpoll(*tcp, "-t", "0", "-r", "3", "-1", "127.0.0.1", "1")
         assert out.returncode == 0, out.stderr
         bridge.step()
-        assert bridge.image.enabled
+        assert bridge.status.enabled
         # Latch a slip by hand, acknowledge it through COMMAND bit 0.
-        bridge.image.latched = True
+        bridge.status.latched = True
         bridge.publish_if_due(True)
         assert Status(server.handler.registers[0]) & Status.SLIP_LATCHED
         out = mbpoll(*tcp, "-r", str(REG["COMMAND"].offset + 1), "-1", "127.0.0.1", "1")
         assert out.returncode == 0, out.stderr
         bridge.step()
-        assert not bridge.image.latched and not Status(server.handler.registers[0]) & Status.SLIP_LATCHED
+        assert not bridge.status.latched and not Status(server.handler.registers[0]) & Status.SLIP_LATCHED
         out = mbpoll(*tcp, "-r", str(REG["COMMAND"].offset + 1), "-c", "1", "-1", "127.0.0.1")
         assert mbpoll_values(out.stdout)[REG["COMMAND"].offset + 1] == 0  # handshake: done
         # Tare through COMMAND bit 1 while the grasp holds: refused (SERVER DEVICE

@@ -1,7 +1,8 @@
 """The three places the package reaches past a library's public API, pinned: when a
 release moves them, this names what moved (docs/architecture.md says why each is
 used).  The behaviour behind each is tested elsewhere: the SocketCAN drain in
-tests/vcan, the simulators' Modbus server wherever a PLC stand-in or an RTU node runs."""
+tests/vcan, the PLC stand-in's pymodbus TCP server (eskin_industrial/modbus/pymodbus_io.py)
+wherever the PLC client writes to a stand-in."""
 
 from __future__ import annotations
 
@@ -19,11 +20,19 @@ def test_python_cans_socketcan_capture_message() -> None:
     assert can.__version__.startswith(("4.4", "4.5", "4.6"))  # pyproject.toml: python-can>=4.4,<4.7
 
 
-def test_pymodbus_server_context_hooks_of_the_simulators() -> None:
+def test_pymodbus_server_context_hooks_of_the_plc_stand_in() -> None:
+    from eskin_industrial.modbus.pymodbus_io import _HandlerContext
+
+    # The package's context is the one that leans on these hooks.
+    assert issubclass(_HandlerContext, ModbusServerContext)
+    for hook in ("async_getValues", "async_setValues", "device_ids"):
+        assert hook in vars(_HandlerContext)
     get = inspect.signature(ModbusServerContext.async_getValues).parameters
     put = inspect.signature(ModbusServerContext.async_setValues).parameters
     assert list(get) == ["self", "device_id", "func_code", "address", "count"]
     assert list(put) == ["self", "device_id", "func_code", "address", "values"]
+    assert list(inspect.signature(_HandlerContext.async_getValues).parameters) == list(get)
+    assert list(inspect.signature(_HandlerContext.async_setValues).parameters) == list(put)
     assert inspect.iscoroutinefunction(ModbusServerContext.async_getValues)
     assert callable(ModbusServerContext.device_ids)
     # The server reads these two attributes, which only __init__ sets (the package's

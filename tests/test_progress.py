@@ -28,11 +28,11 @@ from click.testing import CliRunner
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from eskin_industrial import recording
+from eskin_industrial import offline, recording
 from eskin_industrial.bus.can import log as can_log
 from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.calibration import full_scale
-from eskin_industrial.cli import detect_cmd, main
+from eskin_industrial.cli import main
 from eskin_industrial.cli.console import Ticker
 from eskin_industrial.detect.methods import get_method
 from eskin_industrial.errors import InputFormatError
@@ -165,8 +165,10 @@ def _candump(path: Path, scans: int) -> Path:
 def test_a_can_log_reports_its_bytes_then_its_scans(tmp_path: Path, suffix: str) -> None:
     log = _candump(tmp_path / f"traffic{suffix}", 600)
     seen = Recorded()
-    with mock.patch.object(can_log, "_PROGRESS_EVERY", 200):
-        table, counters = can_log.detect_log(load_profile(PAPER), log, progress=seen)
+    with mock.patch.object(can_log, "_PROGRESS_EVERY", 200), mock.patch.object(offline, "_PROGRESS_EVERY", 200):
+        found = offline.detect_can_log(load_profile(PAPER), log, progress=seen)
+    table, counters = found.table, found.transport
+    assert counters is not None
     (reading, size, percent), (detecting, scans, _) = seen.stages
     assert reading == f"reading {log}" and percent and size == seen.done(0) == log.stat().st_size
     assert len(seen.steps[1]) > 2  # read as it goes, not only at the end
@@ -183,7 +185,7 @@ def test_detect_in_pieces_gives_the_methods_batch(tmp_path: Path) -> None:
     values, flags = full_scale(back.values, prof.calibration.full_scale_n)
     want = io.StringIO()
     write_updates(want, get_method("cof-track").batch(prof.detector, x, y, 100.0, back.t, values, flags))
-    with mock.patch.object(detect_cmd, "_PIECE_FRAMES", 7):
+    with mock.patch.object(offline, "_PIECE_FRAMES", 7):
         got = CliRunner().invoke(main, ["detect", "-p", PAPER, "--method", "cof-track", "--rate", "100", str(path),
                                         "-q"])
     assert got.exit_code == 0, got.output

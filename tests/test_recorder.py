@@ -108,7 +108,7 @@ def test_recorder_section_in_a_file_and_its_errors(tmp_path):
     body = (f'[recorder]\npath = "{tmp_path}/r-{{node}}.jsonl"\n\n[plc]\nmode = "server"\nport = 15999\n\n'
             f'[[node]]\nname = "a"\nprofile = "{PAPER}"\ninterface = "virtual"\nchannel = "x"\n\n'
             f'[[node]]\nname = "b"\nprofile = "{PAPER}"\ninterface = "virtual"\nchannel = "x"\nbase_id = 0x210\n'
-            f'base_address = 100\n')
+            f'[node.plc]\nbase_address = 100\n')
     cfg.write_text(body)
     config = load_bridge_config(cfg)
     assert list(config.output_kinds()) == ["plc", "recorder"]

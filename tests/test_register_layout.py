@@ -24,8 +24,6 @@ from eskin_industrial.plc.image import (
     TAIL,
     TAIL_AT,
     TAIL_COUNT,
-    Command,
-    PlcImage,
     Status,
     coil_values,
     decode_registers,
@@ -34,12 +32,15 @@ from eskin_industrial.plc.image import (
     encode_tail,
     parse_coil_write,
 )
+from eskin_industrial.node import Command
 from eskin_industrial.plc.server import PlcRegisterHandler
 from tests.helpers.fuzz import fuzz
 from tests.helpers.paths import PROFILES
+from tests.helpers.snapshots import StatusImage
 from tests.test_fuzz_plc import commands, healths, updates
 
-PLC = load_profile(PROFILES / "paper-5x5.toml").modbus.plc
+PROFILE = load_profile(PROFILES / "paper-5x5.toml")
+PLC = PROFILE.modbus.plc
 ORDERS = ["big", "little"]
 OFFLINE = {"STATUS": int(Status.BRIDGE_OFFLINE), "STATE": 0, "R_COE": 0, "R_DW": 0, "F_SUM": 0, "FLAGS": 0,
            "FRAME_AGE": 0xFFFF, "SCORE_A": 0, "SCORE_B": 0}
@@ -49,7 +50,7 @@ OFFLINE = {"STATUS": int(Status.BRIDGE_OFFLINE), "STATE": 0, "R_COE": 0, "R_DW":
 @given(steps=st.lists(st.tuples(st.one_of(updates, commands), healths, st.booleans()), min_size=1, max_size=20),
        word_order=st.sampled_from(ORDERS))
 def test_decoding_a_rendered_image_gives_back_its_named_values(steps, word_order):
-    image = PlcImage(dataclasses.replace(PLC, word_order=word_order))
+    image = StatusImage(dataclasses.replace(PLC, word_order=word_order), PROFILE.stale_s)
     for event, health, offline in steps:
         if isinstance(event, Command):
             image.apply(event)
@@ -80,8 +81,8 @@ def test_any_published_words_decode_and_encode_back(words, word_order):
 @given(steps=st.lists(st.tuples(st.one_of(updates, commands), healths), min_size=1, max_size=15),
        word_order=st.sampled_from(ORDERS))
 def test_the_offline_image_is_the_image_with_the_offline_values(steps, word_order):
-    online = PlcImage(dataclasses.replace(PLC, word_order=word_order))
-    offline = PlcImage(dataclasses.replace(PLC, word_order=word_order))
+    online = StatusImage(dataclasses.replace(PLC, word_order=word_order), PROFILE.stale_s)
+    offline = StatusImage(dataclasses.replace(PLC, word_order=word_order), PROFILE.stale_s)
     for event, health in steps:
         for image in (online, offline):
             image.apply(event) if isinstance(event, Command) else image.observe(event)
@@ -144,7 +145,5 @@ def test_the_server_reads_the_coils_of_the_table(base):
     for enabled in (True, False):
         handler.publish([0] * STATUS_COUNT, enabled)
         assert handler.read("coils", base, COIL_COUNT) == coil_values(enabled)
-        image = PlcImage(PLC, enabled=enabled)
-        assert image.coils() == coil_values(enabled)
     assert handler.write("coils", base + COIL["ENABLE"].offset, [True]) is None
     assert handler.read("coils", base + COIL["ENABLE"].offset, 1) == [True]

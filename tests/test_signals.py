@@ -19,7 +19,8 @@ import time
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from eskin_industrial.sinks.base import Publication, Sink
+from eskin_industrial.node import NodeSnapshot
+from eskin_industrial.sinks.base import Sink
 from tests.helpers.bridge import PAPER, TimedPlc, can_node, channel, client_config, running_bridge, wait_for
 from tests.helpers.modbus import free_port
 from tests.helpers.paths import ROOT
@@ -246,8 +247,8 @@ class _BrokenOutput(Sink):
 
     kind = "broken"
 
-    def _publish(self, publication: Publication) -> None:
-        if publication.offline:
+    def _publish(self, snapshot: NodeSnapshot) -> None:
+        if snapshot.offline:
             raise OSError("the output is gone")
 
     def flush(self, timeout_s: float = 1.0) -> bool:

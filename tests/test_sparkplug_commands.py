@@ -16,7 +16,7 @@ from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.plant import payload as pb
 from eskin_industrial.plant.commands import COMMAND_ALIAS, COMMANDS, BadCommand, parse_device_command
 from eskin_industrial.plant.sparkplug import DEVICE_METRICS, SparkplugOptions
-from eskin_industrial.plc.image import Command
+from eskin_industrial.node import Command
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, to_raw, wait_for
 from tests.helpers.modbus import need
@@ -99,16 +99,16 @@ def test_dcmds_are_applied_by_the_loop_and_garbage_is_counted(paper_profile, tmp
                 wait_for(lambda: c()["sparkplug_bad_commands"] == 4, what="counted")
                 with node_thread(paper_profile, ch, unloaded) as nt:
                     nt.start()
-                    wait_for(lambda: loop.image.update is not None and loop.image.update.valid, timeout_s=10,
+                    wait_for(lambda: loop.status.update is not None and loop.status.update.valid, timeout_s=10,
                              what="a valid no-contact state")
                     _publish(port, dcmd, _dcmd(Tare=True), tmp_path)
                     wait_for(lambda: loop.tares == 1, what="the tare applied by the loop")
                     enable = spb.Payload(timestamp=1)  # by alias, as a host that read the DBIRTH writes
                     enable.metrics.add(alias=1000 + COMMAND_ALIAS + 2, datatype=11, boolean_value=False)
                     _publish(port, dcmd, enable.SerializeToString(), tmp_path)
-                    wait_for(lambda: not loop.image.enabled, what="disabled")
+                    wait_for(lambda: not loop.status.enabled, what="disabled")
                     _publish(port, dcmd, _dcmd(Acknowledge_Slip=True, Enable=True), tmp_path)
-                    wait_for(lambda: loop.image.enabled, what="enabled again")
+                    wait_for(lambda: loop.status.enabled, what="enabled again")
                     msgs = cap.wait(lambda m: [spb.value(x) for t, p in m if "/DDATA/" in t for x in
                                                spb.parse(p).metrics if x.alias == ENABLED][-2:] == [False, True])
                     nt.join(15)
@@ -141,8 +141,8 @@ def test_no_tare_while_something_is_held(tmp_path):
         node = NodeConfig.of("grip", PAPER, "scene", scene="hold")
         with running_bridge(_config(port, node)) as run:
             loop = run.bridge.runs[0].loop
-            wait_for(lambda: loop.image.update is not None and loop.image.update.valid
-                     and loop.image.update.state != 0, timeout_s=10, what="held")
+            wait_for(lambda: loop.status.update is not None and loop.status.update.valid
+                     and loop.status.update.state != 0, timeout_s=10, what="held")
             _publish(port, "spBv1.0/g/DCMD/e/grip", _dcmd(Tare=True), tmp_path)
             wait_for(lambda: run.counters("grip")["sparkplug_commands_refused"] == 1, what="refused")
             time.sleep(0.2)
@@ -173,7 +173,7 @@ def test_a_source_that_ends_is_a_ddeath_while_the_bridge_goes_on(tmp_path):
         cap = spb.Capture(port, tmp_path / "sub.txt")
         try:
             nodes = (NodeConfig.of("short", PAPER, "scene", scene=str(short), loop=False),
-                     NodeConfig.of("long", PAPER, "scene", scene="hold", base_address=100))
+                     NodeConfig.of("long", PAPER, "scene", scene="hold", outputs={"plc": {"base_address": 100}}))
             config = BridgeConfig(nodes, {"sparkplug": SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e",
                                                                         min_interval_s=0.1)},
                                   LogSettings(format="json", status_every_s=0))

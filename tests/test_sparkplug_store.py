@@ -11,30 +11,27 @@ import time
 
 import pytest
 
+from eskin_industrial.node import NodeSnapshot
 from eskin_industrial.plant.sparkplug import DEVICE_METRICS, EdgeNode, SparkplugOptions, open_edge
-from eskin_industrial.plc.image import PUBLISHED, encode_registers
-from eskin_industrial.sinks.base import Publication
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import wait_for
 from tests.helpers.modbus import free_port
+from tests.helpers.snapshots import made
 
 SLIP_EVENTS = next(i for i, m in enumerate(DEVICE_METRICS) if m.name == "Counters/Slip Events")
 STATE_CODE = next(i for i, m in enumerate(DEVICE_METRICS) if m.name == "State Code")
 
 
-def publication(i: int) -> Publication:
+def publication(i: int) -> NodeSnapshot:
     """The i-th publication: a state change every time (a DDATA at once), and ``i`` in
     the slip events counter, by which each message is known."""
-    values = {r.name: 0 for r in PUBLISHED}
-    values["STATE"] = i % 4
-    values["SLIP_EVENTS"] = i
-    return Publication(encode_registers(values, "big"), None, True, 0.0)  # type: ignore[arg-type]
+    return made(state=i % 4, slip_events=i)
 
 
 def edge(port: int, tmp_path, **kw) -> EdgeNode:
     opts = SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e", qos=1, reconnect_min_s=2.0,
                             reconnect_max_s=2.0, **kw)
-    node = open_edge(opts, [("grip", 1000.0, "big", {})])
+    node = open_edge(opts, [("grip", {})])
     events: list = []
     node.events = events  # type: ignore[attr-defined]
     node.devices[0].on_events(lambda name, level, fields: events.append((name, level, fields)))

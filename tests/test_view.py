@@ -8,9 +8,11 @@ import pytest
 
 from eskin_industrial.detect.settings import DetectorSettings, VaryingForceSettings
 from eskin_industrial.detect.updates import Update
-from eskin_industrial.plc.image import Health, PlcImage
+from eskin_industrial.node import Health
+from eskin_industrial.plc.image import read_back, status_names
 from eskin_industrial.profile import ModbusPlcSection
-from eskin_industrial.view import IndicatorScale, Snapshot, decode_registers, indicator_scale, render
+from eskin_industrial.view import IndicatorScale, Snapshot, indicator_scale, render
+from tests.helpers.snapshots import StatusImage
 from eskin_industrial.view.screen import HEAT_COLORS, RAMP, fit_number
 from eskin_industrial.view.terminal import visible_width
 
@@ -20,11 +22,11 @@ ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")
 
 
 def registers(update: Update | None, word_order: str = "big", frame_age_s: float | None = 0.004) -> dict[str, int]:
-    image = PlcImage(ModbusPlcSection(word_order=word_order))
+    image = StatusImage(ModbusPlcSection(word_order=word_order), 0.2)
     if update is not None:
         image.observe(Update(update.t - 0.1, 0.1, 0.1, 1, True, update.f_sum, update.xc, update.yc, 0))
         image.observe(update)
-    return decode_registers(image.render(Health(frame_age_s, False, 2, 1)), word_order)
+    return read_back(image.render(Health(frame_age_s, False, 2, 1)), image.tail, word_order)
 
 
 def snap(forces=None, state="slip", valid=True, stale=False, r_coe=3.1, r_dw=0.2, **kw) -> Snapshot:
@@ -39,6 +41,9 @@ def snap(forces=None, state="slip", valid=True, stale=False, r_coe=3.1, r_dw=0.2
                 source="hand-4x5 | paper | virtual", title="eskin-bus test",
                 log=tuple(f"{t:7.2f} s  stable" for t in range(30)))
     base.update(kw)
+    regs = base["registers"]
+    if "status_bits" not in kw and regs is not None:  # as the caller decodes them beside the registers
+        base["status_bits"] = status_names(regs["STATUS"])
     return Snapshot(**base)
 
 
@@ -204,14 +209,23 @@ def test_a_watch_snapshots_the_newest_values_of_a_running_pipeline(hand_profile)
     from eskin_industrial.calibration import Calibrator
     from eskin_industrial.frames import RawScan
     from eskin_industrial.pipeline import Pipeline
+    from eskin_industrial.plc.kept import KeptRegisters
     from eskin_industrial.view.live import Watch
+    from eskin_industrial.view.snapshot import RegisterTable
     from tests.helpers.scenes import grasp
+    from tests.helpers.snapshots import node_status, snapshot_of
 
     pipe = Pipeline(hand_profile, rate_hz=100.0)
-    image = PlcImage(hand_profile.modbus.plc)
-    published: list[list[int]] = []
-    watch = Watch(hand_profile, pipe, method="cof-track", registers=lambda: published[-1] if published else None,
-                  registers_from="as the bridge would publish them",
+    status = node_status(hand_profile.stale_s)
+    kept = KeptRegisters(hand_profile.modbus.plc)
+    published: list = []
+
+    def table() -> RegisterTable | None:
+        t = kept.table()
+        return None if t is None else RegisterTable(*t)
+
+    watch = Watch(hand_profile, pipe, method="cof-track", snapshot=lambda: published[-1] if published else None,
+                  registers=table, registers_from="as the bridge would publish them",
                   counters=lambda: {"scans": pipe.counters.scans, "lost_scans": pipe.counters.lost_scans, "other": 7},
                   source="hand-4x5", title="eskin-bus monitor", started=100.0)
     empty = watch.snapshot(100.5)
@@ -220,17 +234,18 @@ def test_a_watch_snapshots_the_newest_values_of_a_running_pipeline(hand_profile)
     raw = Calibrator.from_section(hand_profile.calibration, 20).to_raw(f)
     for i, r in enumerate(raw):
         for u in pipe.push(RawScan(i, i / 100.0, r)):
-            image.observe(u)
+            status.observe(u)
     watch.note("    1.00 s  stable")
-    published.append(image.render(Health(0.002, False, 0, 0)))
+    published.append(snapshot_of(status, 0.002))
+    kept.publish(published[-1])
     s = watch.snapshot(101.5)
     assert s.forces.shape == (4, 5) and s.row_names == ("index", "middle", "ring", "little")
     np.testing.assert_allclose(s.forces.ravel(), f[-1], atol=0.01)
-    assert s.state == "stable" and not s.stale and s.registers["STATE"] == 1
+    assert s.state == "stable" and not s.stale and s.registers["STATE"] == 1 and "DATA_VALID" in s.status_bits
     assert s.counters == {"scans": 120, "lost": 0}  # the view's names, in its order; others left out
     assert s.scale.slip == (1.0, 1.0) and s.log == ("    1.00 s  stable",) and s.elapsed_s == 1.5
     assert s.scan_rate_hz == pytest.approx(120.0)  # scans since the first snapshot, a second before
-    published.append(image.render(Health(5.0, False, 0, 0)))  # the node has gone quiet
+    published.append(snapshot_of(status, 5.0))  # the node has gone quiet
     assert watch.snapshot(101.7).stale
 
 
@@ -238,24 +253,25 @@ def test_the_monitor_view_shows_the_deciding_methods_scores_with_the_registers(h
     """SCORE_A and SCORE_B are published in a second run (after COMMAND and ENABLE):
     the view's register block shows them too, as a sink kept them."""
     from eskin_industrial.pipeline import Pipeline
-    from eskin_industrial.sinks.base import Publication
-    from eskin_industrial.view.live import KeptImage, Watch
+    from eskin_industrial.plc.kept import KeptRegisters
+    from eskin_industrial.view.live import Watch
+    from eskin_industrial.view.snapshot import RegisterTable
+    from tests.helpers.snapshots import node_status, snapshot_of
 
-    image = PlcImage(hand_profile.modbus.plc)
-    image.observe(Update(1.0, 0.5, 0.2, 3, True, 6.0, 10.0, 12.0, 0, 2.5, 0.75))
-    regs = image.render(Health(0.002, False, 0, 0))
-    kept = KeptImage()
-    kept._publish(Publication(regs, image, True, 0.0, tail=tuple(image.tail)))
-    assert kept.tail == tuple(image.tail) and len(kept.tail) == 2
+    status = node_status(hand_profile.stale_s)
+    status.observe(Update(1.0, 0.5, 0.2, 3, True, 6.0, 10.0, 12.0, 0, 2.5, 0.75))
+    kept = KeptRegisters(hand_profile.modbus.plc)
+    kept.publish(snapshot_of(status, 0.002))
+    assert len(kept.tail) == 2
     pipe = Pipeline(hand_profile, rate_hz=100.0)
-    watch = Watch(hand_profile, pipe, method="cof-track", registers=lambda: kept.registers,
-                  tail=lambda: kept.tail, registers_from="as the bridge would publish them",
+    watch = Watch(hand_profile, pipe, method="cof-track", snapshot=lambda: None,
+                  registers=lambda: RegisterTable(*kept.table()), registers_from="as the bridge would publish them",
                   counters=lambda: {}, source="hand-4x5", title="eskin-bus monitor", started=0.0)
     s = watch.snapshot(1.0)
     scale = hand_profile.modbus.plc.r_scale
     assert s.registers["SCORE_A"] == round(2.5 * scale) and s.registers["SCORE_B"] == round(0.75 * scale)
     text = ANSI.sub("", "\n".join(render(s, 120, 40, color=False)))
     assert f"SCORE_A {round(2.5 * scale)}" in text and "METHOD_ID" in text
-    without = Watch(hand_profile, pipe, method="cof-track", registers=lambda: kept.registers,
-                    registers_from="", counters=lambda: {}, source="", title="", started=0.0).snapshot(1.0)
-    assert "SCORE_A" not in without.registers
+    without = Watch(hand_profile, pipe, method="cof-track", snapshot=lambda: None, counters=lambda: {}, source="",
+                    title="", started=0.0).snapshot(1.0)
+    assert without.registers is None and without.status_bits == ()

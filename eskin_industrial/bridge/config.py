@@ -8,8 +8,10 @@ each one line naming the file and the key.
 
 Nothing here knows the kinds: a ``[[node]]`` table has the keys every node has
 (:class:`NodeConfig`) plus the keys of its ``source`` kind (that kind's ``Options``,
-see :mod:`eskin_industrial.bus.source`); every other top-level section names an
-output kind (``[plc]``, ``[recorder]``, see :mod:`eskin_industrial.sinks.base`).
+see :mod:`eskin_industrial.bus.source`), and a sub-table per output kind that has
+keys of its own for a node (``[node.plc] base_address``: the kind's ``NodeOptions``);
+every other top-level section names an output kind (``[plc]``, ``[recorder]``, see
+:mod:`eskin_industrial.sinks.base`).
 
 Where a setting can come from, the first that gives it wins: the command line, the
 bridge configuration, the node's profile, the defaults (``bridge --check`` prints
@@ -30,7 +32,6 @@ Example (two grippers on one CAN bus, written into the PLC over Modbus TCP)::
     profile = "paper-5x5"
     interface = "socketcan"
     channel = "can0"
-    base_address = 0
 
     [[node]]
     name = "right"
@@ -39,6 +40,7 @@ Example (two grippers on one CAN bus, written into the PLC over Modbus TCP)::
     channel = "can0"
     base_id = 0x210
     node_id = 2
+    [node.plc]
     base_address = 100
 """
 
@@ -47,15 +49,16 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import tomllib
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
 from ..bus.source import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES, Source, source_class
-from ..errors import ProfileError
+from ..errors import DeprecatedKey, ProfileError
 from ..profile import MAX_RATE_HZ, Profile, derived_stale_s, load_profile
 from ..schema import SchemaError, build, in_range, positive_at_most, read_toml_file
-from ..sinks.base import DEFAULT_OUTPUT, SINKS, Sink, sink_class
+from ..sinks.base import DEFAULT_OUTPUT, Sink, sink_class, sink_kinds
 
 COMMAND_LINE = "<command line>"
 
@@ -74,24 +77,38 @@ class NodeConfig:
     options: Any = None
     #: Scan rate; default: the profile's ``[sensor] rate_hz``.
     rate_hz: float | None = field(default=None, metadata=positive_at_most(MAX_RATE_HZ))
-    #: The node's register block in the PLC; default: the profile's ``[modbus.plc] base_address``.
-    base_address: int | None = field(default=None, metadata=in_range(0, 65000))
+    #: Output kind -> its keys for this node (an instance of its ``NodeOptions``):
+    #: ``[node.plc] base_address``.
+    outputs: dict[str, Any] = field(default_factory=dict)
 
     @staticmethod
     def of(name: str, profile: str, source: str = "can", *, rate_hz: float | None = None,
-           base_address: int | None = None, **keys: Any) -> "NodeConfig":
-        """A node from keyword keys, the kind's ones checked as in a file."""
+           outputs: dict[str, Any] | None = None, **keys: Any) -> "NodeConfig":
+        """A node from keyword keys, the kind's ones checked as in a file; ``outputs``:
+        output kind -> its node keys (a dict, checked as ``[node.KIND]``, or its
+        ``NodeOptions`` already built)."""
         cls = source_class(source)
-        common = {k: v for k, v in (("rate_hz", rate_hz), ("base_address", base_address)) if v is not None}
+        common = {"rate_hz": rate_hz} if rate_hz is not None else {}
         try:
             options = build(cls.Options, keys)
             node = build(NodeConfig, {"name": name, "profile": profile, **common})  # the bounds, as in a file
+            built = {kind: _node_output(kind, value) for kind, value in (outputs or {}).items()}
         except SchemaError as exc:
             raise ProfileError(f"{COMMAND_LINE}: [node {name!r}] {exc}") from None
-        return replace(node, source=cls.kind, options=options)
+        return replace(node, source=cls.kind, options=options, outputs=built)
 
 
-_COMMON = [f.name for f in dataclasses.fields(NodeConfig) if f.name not in ("options",)]
+def _node_output(kind: str, value: Any) -> Any:
+    """An output kind's node keys: built from a table, or as given."""
+    cls = sink_class(kind).NodeOptions
+    if cls is None:
+        raise SchemaError(kind, f"the output kind {kind!r} has no keys of a node")
+    if isinstance(value, dict):
+        return build(cls, value, kind)
+    return value
+
+
+_COMMON = [f.name for f in dataclasses.fields(NodeConfig) if f.name not in ("options", "outputs")]
 
 
 @dataclass(frozen=True)
@@ -128,7 +145,7 @@ class BridgeConfig:
     def output_kinds(self, default_output: bool = True) -> dict[str, Any]:
         """The outputs to open: the configured ones, or the default one."""
         if self.outputs or not default_output:
-            return {k: self.outputs[k] for k in SINKS if k in self.outputs}
+            return {k: self.outputs[k] for k in sink_kinds() if k in self.outputs}
         return {DEFAULT_OUTPUT: sink_class(DEFAULT_OUTPUT).default_options()}
 
 
@@ -176,14 +193,14 @@ def parse_bridge_config(text: str, source: str) -> BridgeConfig:
         raise ProfileError(f"{source}: not valid TOML: {exc}") from None
     nodes_raw = table.pop("node", None)
     outputs: dict[str, Any] = {}
-    for kind in SINKS:
+    for kind in sink_kinds():
         if kind in table:
             outputs[kind] = _section(sink_class(kind).Options, table.pop(kind), kind, source)
     try:
         top = build(_Top, table)
     except SchemaError as exc:
         if exc.message.startswith("unknown key"):
-            valid = ["node", *SINKS, *(f.name for f in dataclasses.fields(_Top))]
+            valid = ["node", *sink_kinds(), *(f.name for f in dataclasses.fields(_Top))]
             near = difflib.get_close_matches(exc.key, valid, n=1, cutoff=0.6)
             hint = f"did you mean {near[0]!r}?" if near else f"valid sections: {', '.join(valid)}"
             raise ProfileError(f"{source}: [{exc.key}]: unknown section; {hint}") from None
@@ -213,6 +230,17 @@ def _node(raw: Any, index: int, source: str) -> NodeConfig:
         kind = source_class(kind_name if isinstance(kind_name, str) else repr(kind_name))
     except ProfileError as exc:  # unknown: the nearest and the valid names
         raise ProfileError(f"{source}: {label} source: {exc}") from None
+    raw = _moved_node_keys(dict(raw), label, source)
+    outputs: dict[str, Any] = {}
+    for out_kind in sink_kinds():
+        if out_kind in raw:
+            table = raw.pop(out_kind)
+            if not isinstance(table, dict):
+                raise ProfileError(f"{source}: {label} {out_kind}: expected a table ([node.{out_kind}])")
+            try:
+                outputs[out_kind] = _node_output(out_kind, table)
+            except SchemaError as exc:
+                raise ProfileError(f"{source}: {label} {exc}") from None
     common = {k: v for k, v in raw.items() if k in _COMMON}
     own = {k: v for k, v in raw.items() if k not in _COMMON}
     try:
@@ -228,9 +256,28 @@ def _node(raw: Any, index: int, source: str) -> NodeConfig:
             raise ProfileError(f"{source}: {label} {exc.key}: missing key (source = {kind_name!r} needs it)") from None
         raise ProfileError(f"{source}: {label} {exc}") from None
     try:  # the keys every node has, checked by NodeConfig's own fields
-        return replace(build(NodeConfig, common), options=options)
+        return replace(build(NodeConfig, common), options=options, outputs=outputs)
     except SchemaError as exc:
         raise ProfileError(f"{source}: {label} {exc}") from None
+
+
+def _moved_node_keys(raw: dict[str, Any], label: str, source: str) -> dict[str, Any]:
+    """``[[node]]`` keys of earlier releases that an output kind now owns
+    (``base_address`` -> ``[node.plc] base_address``): moved, with one warning each."""
+    for kind in sink_kinds():
+        for old, new in sink_class(kind).moved_node_keys.items():
+            if old not in raw:
+                continue
+            table = raw.setdefault(kind, {})
+            if not isinstance(table, dict):
+                continue  # the kind's entry is not a table: said when it is read
+            if new in table:
+                raise ProfileError(f"{source}: {label} {old}: deprecated, and [node.{kind}] {new} is given too; "
+                                   f"keep [node.{kind}] {new} only")
+            table[new] = raw.pop(old)
+            warnings.warn(DeprecatedKey(f"{source}: {label} {old} is deprecated: write [node.{kind}] {new}"),
+                          stacklevel=2)
+    return raw
 
 
 def resolve(config: BridgeConfig) -> list[ResolvedNode]:
@@ -280,31 +327,23 @@ def probe_outputs(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
 
 def _apply_overrides(prof: Profile, nc: NodeConfig) -> Profile:
     prof = source_class(nc.source).adapt_profile(prof, nc.options)
-    plc = prof.modbus.plc
-    if nc.base_address is not None:
-        plc = replace(plc, base_address=nc.base_address)
+    for kind, node_options in nc.outputs.items():
+        prof = sink_class(kind).adapt_profile(prof, node_options)
     if nc.rate_hz is not None:
         # A stale limit the profile did not set was derived from the profile's rate;
         # a node running slower must get its own, or it reads stale between two scans.
         poll = prof.modbus.node.poll_hz
-        if plc.stale_s == derived_stale_s(prof.sensor.rate_hz, poll):
-            plc = replace(plc, stale_s=derived_stale_s(nc.rate_hz, poll))
-    return replace(prof, modbus=replace(prof.modbus, plc=plc))
+        if prof.output.stale_s == derived_stale_s(prof.sensor.rate_hz, poll):
+            prof = replace(prof, output=replace(prof.output, stale_s=derived_stale_s(nc.rate_hz, poll)))
+    return prof
 
 
 def _check_together(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
-    from ..plc.image import IMAGE_COUNT
-
     src = config.source
     names = [n.name for n in nodes]
     for name in names:
         if names.count(name) > 1:
             raise ProfileError(f"{src}: [node] name: {name!r} is used by two nodes")
-    blocks = sorted((n.profile.modbus.plc.base_address, n.name) for n in nodes)
-    for (lo, a), (hi, b) in zip(blocks, blocks[1:]):
-        if hi - lo < IMAGE_COUNT:
-            raise ProfileError(f"{src}: [node {b!r}] base_address: {hi} overlaps the block of node {a!r} at {lo} "
-                               f"(a block takes {IMAGE_COUNT} registers)")
     by_kind: dict[type[Source], list[ResolvedNode]] = {}
     for n in nodes:
         by_kind.setdefault(n.kind, []).append(n)
@@ -316,8 +355,9 @@ def _check_together(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
     for kind, options in config.output_kinds().items():
         try:
             sink_class(kind).check(options, nodes)
-        except ValueError as exc:
-            raise ProfileError(f"{src}: [{kind}] {exc}") from None
+        except ValueError as exc:  # about one node ("[node ...] key: ..."), or the section
+            where = "" if str(exc).startswith("[node ") else f"[{kind}] "
+            raise ProfileError(f"{src}: {where}{exc}") from None
 
 
 def output_classes(config: BridgeConfig, default_output: bool = True) -> list[tuple[type[Sink], Any]]:
@@ -351,9 +391,15 @@ def explain(config: BridgeConfig, node: ResolvedNode) -> list[tuple[str, Any, st
 
     c = node.config
     out.append(("rate_hz", node.rate_hz, given if c.rate_hz is not None else prof))
-    out.append(("base_address", node.profile.modbus.plc.base_address, given if c.base_address is not None else prof))
     out.append(("source", c.source, given))
     add("", c.options, node.kind.profile_keys, given)
+    for kind in sink_kinds():  # the output kinds' keys of this node, as the profile resolves them
+        cls = sink_class(kind)
+        for key, profile_key in cls.node_profile_keys.items():
+            mine = c.outputs.get(kind)
+            value = from_profile(profile_key)
+            set_here = mine is not None and getattr(mine, key, None) is not None
+            out.append((f"node.{kind}.{key}", value, given if set_here else prof))
     for kind, options in config.output_kinds().items():
         add(f"{kind}.", options, sink_class(kind).explain_keys(options, [node]),
             given if kind in config.outputs else "default output")

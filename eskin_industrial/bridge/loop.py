@@ -1,15 +1,17 @@
-"""The per-node loop: source -> pipeline -> register image -> sinks.
+"""The per-node loop: source -> pipeline -> node snapshot -> sinks.
 
 One loop per sensor node, the same in every command (``bridge``, ``modbus-bridge``,
 ``receive``, ``monitor``, ``demo``).  :meth:`NodeLoop.step` polls the source once,
 runs each scan through the pipeline (calibration, detector), hands every update to
 every sink, applies the commands the sinks took (acknowledge, tare, enable), and
-publishes the image when due: a state change at once, a status bit change (stale, bus
-fault) as soon as it happens, otherwise every ``refresh_s``.  A sink that asks for
+publishes the node's snapshot (:class:`~eskin_industrial.node.NodeSnapshot`) when
+due: a state change at once, a change of a health condition (stale, bus fault) as
+soon as it happens, otherwise every ``[output] refresh_s``.  A sink that asks for
 taxel frames (``Sink.frame_every_s``) gets the newest calibrated frame once its
 interval has passed: the loop decides which frames are due, after the publication.
-:meth:`NodeLoop.shutdown` publishes the last image, BRIDGE_OFFLINE with no state
-claimed.  Nothing here knows which kind of source or sink it drives.
+:meth:`NodeLoop.shutdown` publishes the last snapshot, offline, with no state
+claimed.  Nothing here knows which kind of source or sink it drives, nor any
+output's wire format.
 """
 
 from __future__ import annotations
@@ -24,14 +26,10 @@ import numpy as np
 
 from ..bus.source import Source
 from ..detect.updates import Update
+from ..node import Health, NodeSnapshot, NodeStatus, refusal
 from ..pipeline import Pipeline
-from ..plc.image import Health, PlcImage, Status
 from ..profile import Profile
-from ..sinks.base import Publication, Sink
-
-_QUIET = ~int(Status.BRIDGE_ALIVE)  # the life bit changes at every publication
-_BUS_FAULT = int(Status.BUS_FAULT)
-_STALE = int(Status.SENSOR_STALE)
+from ..sinks.base import Sink
 
 
 class NodeLoop:
@@ -47,15 +45,21 @@ class NodeLoop:
         self.profile = profile
         self.source = source
         self.pipeline = Pipeline(profile, rate_hz=rate_hz, method=method)
-        self.image = PlcImage(profile.modbus.plc, method=self.pipeline.method.code)
+        chosen = self.pipeline.method
+        self.status = NodeStatus(profile.stale_s, chosen.name, chosen.code,
+                                 (chosen.scores[0].name, chosen.scores[1].name))
+        #: The newest snapshot published (None before the first).
+        self.snapshot: NodeSnapshot | None = None
         self.recent_raw: collections.deque[np.ndarray] = collections.deque(maxlen=self.TARE_SCANS)
         self.tares = 0
         self.tares_refused = 0
         self.publications = 0
         self._last_pub = float("-inf")
-        self._last_status = -1
+        self._last_conditions = -1
+        self._last_bus_fault = False
+        self._last_stale = False
         self._lost_shown = 0
-        self._refresh_s = profile.modbus.plc.refresh_s
+        self._refresh_s = profile.output.refresh_s
         self._stop = threading.Event()
         self.on_update = on_update
         self.on_command = on_command
@@ -104,13 +108,13 @@ class NodeLoop:
         updates: list[Update] = []
         if scan is not None:
             self.recent_raw.append(scan.raw)
-            observe = self.image.observe
+            observe = self.status.observe
             updates = self.pipeline.push(scan)
             for u in updates:
                 urgent |= observe(u)
         if self._command_sinks and self._apply_commands():
             urgent = True
-        if (scan is None and not urgent and not self._last_status & _BUS_FAULT and not self.source.bus_fault
+        if (scan is None and not urgent and not self._last_bus_fault and not self.source.bus_fault
                 and self._due_in(time.monotonic()) > 0):
             return False  # no scan, no command, nothing due: a frame of a scan under way costs little
         published = self.publish_if_due(urgent, t_event)
@@ -139,23 +143,24 @@ class NodeLoop:
 
     def _apply_commands(self) -> bool:
         acted = False
+        status = self.status
         for sink in self._command_sinks:
             commands = sink.take_commands()
             for cmd in commands:
-                before = (self.image.enabled, self.image.latched)
+                before = (status.enabled, status.latched)
                 if cmd.name == "tare":
-                    if self.image.refusal(cmd) is not None:
-                        # Refused when applied too (the server refuses at write time; a
-                        # client-mode PLC's COMMAND or a contact since then lands here).
+                    if refusal(cmd, self._now_snapshot()) is not None:
+                        # Refused when applied too (an output refuses when it takes the
+                        # command; a client-mode PLC's COMMAND or a contact since then lands here).
                         self.tares_refused += 1
                         if self.on_command is not None:
                             self.on_command("tare_refused")
                         continue
                     self._tare()
                 else:
-                    self.image.apply(cmd)
+                    status.apply(cmd)
                     # A client-mode PLC's ENABLE is read back every refresh: only a change counts.
-                    if (self.image.enabled, self.image.latched) == before:
+                    if (status.enabled, status.latched) == before:
                         continue
                 if self.on_command is not None:
                     self.on_command(cmd.name)
@@ -165,31 +170,45 @@ class NodeLoop:
         return acted
 
     def publish_if_due(self, urgent: bool, t_event: float | None = None) -> bool:
-        """Publish when urgent, when a status bit other than the life bit changed
-        (stale, bus fault, ...), or when ``refresh_s`` has passed."""
+        """Publish when urgent, when a condition the outputs show changed (stale, bus
+        fault, enable, latch, validity), or when ``refresh_s`` has passed."""
         now = time.monotonic()
-        health = self.health(now)
-        status = self.image.status(health) & _QUIET
-        if not urgent and status == self._last_status and now - self._last_pub < self._refresh_s:
+        src = self.source
+        age, bus_fault = src.frame_age(now), src.bus_fault
+        conditions = self.status.conditions(age, bus_fault)
+        if not urgent and conditions == self._last_conditions and now - self._last_pub < self._refresh_s:
             return False
-        image = self.image
-        pub = Publication(image.render(health), image, urgent or status != self._last_status,
-                          time.perf_counter() if t_event is None else t_event, False, self.pipeline.counters.scans,
-                          tuple(image.tail))
+        t0 = time.perf_counter()
+        if t_event is None:
+            t_event = t0
+        snap = self.status.snapshot(Health(age, bus_fault, self.lost_scans(), src.bus_errors()),
+                                    scans=self.pipeline.counters.scans, t_event=t_event,
+                                    # the wall clock of the deciding scan's arrival, not of now
+                                    wall_time_s=time.time() - (t0 - t_event),
+                                    urgent=urgent or conditions != self._last_conditions)
+        self.snapshot = snap
         for sink in self.sinks:
-            sink.publish(pub)
-        self._last_status = status
+            sink.publish(snap)
+        self._last_conditions = conditions
+        self._last_bus_fault = bus_fault
+        self._last_stale = snap.stale
         self._last_pub = now
         self.publications += 1
         return True
+
+    def _now_snapshot(self) -> NodeSnapshot:
+        """A snapshot of this moment, not published (a command judged as it is applied)."""
+        t = time.perf_counter()
+        return self.status.snapshot(self.health(), scans=self.pipeline.counters.scans, t_event=t,
+                                    wall_time_s=time.time(), urgent=False)
 
     def _due_in(self, now: float) -> float:
         """Seconds until a publication falls due with no new scan or command: the next
         refresh, or the moment the newest frame turns stale."""
         due = self._last_pub + self._refresh_s - now
         age = self.source.frame_age(now)
-        if age is not None and not self._last_status & _STALE:  # published fresh: due when it turns stale
-            due = min(due, self.image.stale_limit_s - age + 1e-4)
+        if age is not None and not self._last_stale:  # published fresh: due when it turns stale
+            due = min(due, self.status.stale_s - age + 1e-4)
         return due
 
     def wait_budget(self, now: float | None = None) -> float:
@@ -197,17 +216,18 @@ class NodeLoop:
         return max(min(self.MAX_WAIT_S, self._due_in(time.monotonic() if now is None else now)), 0.0)
 
     def shutdown(self) -> None:
-        """Publish the last image, BRIDGE_OFFLINE with no state claimed (a client-mode
+        """Publish the last snapshot, offline with no state claimed (a client-mode PLC
         writer writes it before it lets go).  Safe to call twice."""
         if self.offline:
             return
         self.offline = True
-        regs = self.image.render_offline(self.health())
-        pub = Publication(regs, self.image, True, time.perf_counter(), True, tail=tuple(self.image.tail))
+        snap = self.status.offline_snapshot(self.health(), scans=self.pipeline.counters.scans,
+                                            t_event=time.perf_counter(), wall_time_s=time.time())
+        self.snapshot = snap
         failed: Exception | None = None
         for sink in self.sinks:
             try:
-                sink.publish(pub)
+                sink.publish(snap)
             except Exception as exc:  # noqa: BLE001 - the other sinks still get the offline image
                 failed = failed or exc
         self.publications += 1

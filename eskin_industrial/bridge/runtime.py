@@ -30,7 +30,6 @@ from typing import Any
 from ..bus.source import Feeder, OpenContext, Source
 from ..detect.state import GraspState
 from ..detect.updates import Update
-from ..plc.image import Status
 from ..sinks.base import Sink
 from .config import BridgeConfig, ResolvedNode, output_classes
 from .logs import EventLog
@@ -371,11 +370,10 @@ class Bridge:
         """Log what changed since the last look: stale, bus fault, each output's connection."""
         now = time.monotonic()
         for run in self.runs:
-            lp = run.loop
-            status = lp.image.status(lp.health(now))
+            src = run.loop.source
             seen: dict[str, tuple[bool, Sink | None]] = {
-                "stale": (bool(status & Status.SENSOR_STALE), None),
-                "bus_fault": (bool(status & Status.BUS_FAULT), None),
+                "stale": (run.loop.status.is_stale(src.frame_age(now)), None),
+                "bus_fault": (src.bus_fault, None),
             }
             sink: Sink | None  # (each output, then the one a change is about)
             for sink in run.sinks:

@@ -8,7 +8,8 @@ a kind overrides one private hook, :meth:`Source._poll`; the receipt time, the f
 age and a safe double :meth:`Source.close` come with the base.
 
 A *kind* is one module plus one entry in :data:`SOURCES` (name -> ``module:Class``,
-imported only when used).  The class declares everything the bridge configuration,
+imported only when used), or a plug-in: an entry point of the group
+``eskin_industrial.sources`` in another distribution (:mod:`eskin_industrial.registry`).  The class declares everything the bridge configuration,
 the command line and ``--check`` need, so that none of them branches on the kind:
 
 - ``kind`` and ``spec``: its name in ``[[node]] source = ...`` and in
@@ -35,7 +36,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from ..frames import RawScan
-from ..registry import load_kind
+from ..registry import SOURCE_GROUP, kinds, load_kind
 
 if TYPE_CHECKING:
     from ..profile import Profile
@@ -278,7 +279,13 @@ class Feeder(Protocol):
     def start(self) -> Any: ...
 
 
+def source_kinds() -> dict[str, str]:
+    """Every source kind: :data:`SOURCES`, then the plug-ins (entry-point group
+    ``eskin_industrial.sources``)."""
+    return kinds(SOURCES, SOURCE_GROUP)
+
+
 def source_class(kind: str) -> type[Source]:
     """The class of a kind by name or alias; an unknown one is one line with the valid names."""
-    cls: type[Source] = load_kind(SOURCES, ALIASES.get(kind, kind), "source kind", Source)
+    cls: type[Source] = load_kind(SOURCES, ALIASES.get(kind, kind), "source kind", Source, SOURCE_GROUP)
     return cls

@@ -4,10 +4,12 @@ wires a source, the pipeline and a sink from a profile and options."""
 from __future__ import annotations
 
 import sys
+import warnings
+from typing import Any, TextIO
 
 import click
 
-from ..errors import EskinError
+from ..errors import DeprecatedKey, EskinError
 from .bridge_cmd import bridge
 from .console import add_envvars, add_verbosity
 from .demo_cmd import demo
@@ -17,6 +19,7 @@ from .examples_cmd import examples
 from .modbus_cmd import modbus_bridge, modbus_node
 from .monitor_cmd import monitor
 from .node_cmd import node
+from .opcua_cmd import opcua
 from .plant_cmd import plant
 from .plc_cmd import plc
 from .plc_sim_cmd import plc_sim
@@ -41,6 +44,18 @@ class _Group(click.Group):
             sys.exit(0)  # `eskin-bus detect ... | head` is not an error
 
 
+_show_warning = warnings.showwarning
+
+
+def _one_line_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                      file: TextIO | None = None, line: str | None = None) -> None:
+    """A key that moved is one line, as an error is (the rest as Python shows them)."""
+    if issubclass(category, DeprecatedKey):
+        click.echo(f"eskin-bus: warning: {message}", err=True)
+        return
+    _show_warning(message, category, filename, lineno, file, line)
+
+
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
 @click.version_option(package_name="eskin-industrial")
@@ -49,6 +64,8 @@ def main(ctx: click.Context, debug: bool) -> None:
     """Electronic-skin tactile arrays on industrial grippers: decode, detect slip, tell the PLC."""
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
+    warnings.showwarning = _one_line_warning
+    warnings.simplefilter("always", DeprecatedKey)  # each moved key of each file, every time
 
 
 main.add_command(bridge)
@@ -67,6 +84,7 @@ main.add_command(receive)
 main.add_command(monitor)
 main.add_command(examples)
 main.add_command(plant)
+main.add_command(opcua)
 # After every command is added: -v/-q on each, and each option also from the
 # environment, ESKIN_<COMMAND>_<OPTION> (docs/cli.md).
 add_verbosity(main)

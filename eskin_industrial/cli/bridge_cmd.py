@@ -11,20 +11,22 @@ counters): bridge/signals.py, and the table in docs/operations.md.
 from __future__ import annotations
 
 import sys
+import warnings
 from typing import Any
 
 import click
 
+from ..errors import DeprecatedKey
 from .can_common import bus_options
 from .console import verbosity
-from .outputs import given_output_options, output_options, outputs_from_cli
+from .outputs import given_output_options, node_outputs_from_cli, output_options, outputs_from_cli
 
 
-def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_address: int | None,
+def node_from_options(profile_path: str, source: str, bus: dict[str, Any], outputs: dict[str, Any],
                       rate_hz: float | None, name: str):
     """One ``[[node]]`` from ``--source KIND:WHERE`` and python-can's bus options."""
     from ..bridge.config import NodeConfig
-    from ..bus.source import SOURCES, source_class
+    from ..bus.source import source_class, source_kinds
     from ..errors import ProfileError
 
     kind, _, where = source.partition(":")
@@ -32,13 +34,13 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_
     try:
         cls = source_class(kind)
     except ProfileError as exc:
-        specs = ", ".join(source_class(k).spec for k in SOURCES)
+        specs = ", ".join(source_class(k).spec for k in source_kinds())
         raise click.BadParameter(f"{exc}; expected {specs}", param_hint="--source") from None
     try:
         keys = cls.options_from_spec(where, bus)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--source") from None
-    return NodeConfig.of(name, profile_path, cls.kind, rate_hz=rate_hz, base_address=base_address, **keys)
+    return NodeConfig.of(name, profile_path, cls.kind, rate_hz=rate_hz, outputs=outputs, **keys)
 
 
 @click.command()
@@ -52,8 +54,6 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_
                    "recording:FILE.csv.")
 @bus_options
 @output_options
-@click.option("--base-address", type=click.IntRange(0, 65000), default=None,
-              help="One node: its register block (default: the profile's).")
 @click.option("--rate", "rate_hz", type=click.FloatRange(min=0.1), default=None,
               help="One node: scan rate in Hz (default: the profile's).")
 @click.option("--name", default="node", show_default=True, help="One node: its name in logs.")
@@ -67,7 +67,7 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], base_
 @click.option("--check", is_flag=True, help="Validate the configuration and profiles, print the plan, exit.")
 @click.option("--explain", is_flag=True,
               help="With --check: also every node's resolved settings and where each came from.")
-def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, bus_extra, base_address, rate_hz,
+def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, bus_extra, rate_hz,
            name, log_format, log_level, status_every, duration_s, check, explain, **output_values) -> None:
     """Run the bridge: decode each node's scans, detect, and keep the outputs (by
     default the PLC's register blocks) up to date, until SIGTERM, SIGINT, SIGHUP or
@@ -81,7 +81,7 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     from ..bridge.notify import Notifier
     from ..bridge.runtime import Bridge
     from ..bridge.signals import EXIT_FAILED, handled_signals
-    from ..bus.modbus.io import quiet_pymodbus
+    from ..modbus.pymodbus_io import quiet_pymodbus
 
     if (config_path is None) == (profile_path is None):
         raise click.UsageError("give --config FILE, or --profile P for one node")
@@ -90,22 +90,31 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
     if config_path is not None:
         given = [opt for opt, value in (("--source", source != "can"), ("-i", interface), ("-c", channel),
                                         ("-b", bitrate), ("--fd", fd is not None), ("--data-bitrate", data_bitrate),
-                                        ("--base-address", base_address is not None),
                                         ("--rate", rate_hz), ("--name", name != "node")) if value]
         given += given_output_options(output_values)
         if given:  # never silently ignored: the file says it all
             raise click.UsageError(f"{', '.join(given)}: one-node options; with --config the file gives them")
-        cfg = load_bridge_config(config_path)
+        with warnings.catch_warnings(record=True) as moved:  # logged once the log is there (below)
+            warnings.simplefilter("always", DeprecatedKey)
+            cfg = load_bridge_config(config_path)
     else:
-        node = node_from_options(profile_path, source, bus, base_address, rate_hz, name)
+        moved = []
+        node = node_from_options(profile_path, source, bus, node_outputs_from_cli(output_values), rate_hz, name)
         cfg = BridgeConfig(node=(node,), outputs=outputs_from_cli(output_values))
     log_level = log_level or {-1: "warning", 1: "debug", 2: "debug"}.get(verbosity())  # -q / -v
     logs = replace(cfg.log, **{k: v for k, v in (("format", log_format), ("level", log_level),
                                                    ("status_every_s", status_every)) if v is not None})
     cfg = replace(cfg, log=logs)
-    nodes = resolve(cfg)  # every profile loads and the nodes fit together, or one line and exit 2
+    with warnings.catch_warnings(record=True) as moved_in_profiles:
+        warnings.simplefilter("always", DeprecatedKey)
+        nodes = resolve(cfg)  # every profile loads and the nodes fit together, or one line and exit 2
+    # once each (two nodes on one profile load it twice)
+    deprecated = list(dict.fromkeys(str(w.message) for w in (*moved, *moved_in_profiles)
+                                    if issubclass(w.category, DeprecatedKey)))
     check_sources(cfg, nodes)  # files and scenes the sources need exist
     if check:
+        for line in deprecated:
+            click.echo(f"eskin-bus: warning: {line}", err=True)
         probe_outputs(cfg, nodes)  # a server's port is free (the run would fail to listen)
         outputs = output_classes(cfg)
         for n in nodes:
@@ -120,6 +129,8 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
         raise click.UsageError("--explain goes with --check")
     quiet_pymodbus()
     log = EventLog(sys.stderr, logs.format, logs.level)
+    for line in deprecated:  # in the log's own format: a JSON log stays JSON
+        log.event("deprecated_key", level="warning", message=line)
     br = Bridge(cfg, nodes, log, notifier=Notifier.from_env())
     # From here on, no signal but KILL ends the process without the offline image
     # (a signal during open stops the bridge as soon as it has started).

@@ -96,9 +96,10 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
 def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> DemoResult:
     """The demo under the live view; the lines it would have printed are kept and
     printed once the view has left the screen."""
-    from ..plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT
+    from ..plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names
     from ..sim.demo import DemoParts, run_demo
     from ..view.live import Watch, live_screen
+    from ..view.snapshot import RegisterTable
     from ..view.terminal import color_wanted
 
     kept: list[str] = []
@@ -111,9 +112,15 @@ def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> De
 
     def view(parts: DemoParts) -> LiveScreen:
         loop, plc = parts.loop, parts.plc
+        word_order = parts.profile.modbus.plc.word_order
+
+        def registers() -> RegisterTable:  # what the PLC stand-in holds, as it reads it
+            regs = plc.memory.regs
+            values = read_back(regs[:STATUS_COUNT], regs[TAIL_AT:TAIL_AT + TAIL_COUNT], word_order)
+            return RegisterTable(values, status_names(values["STATUS"]))
+
         watch = Watch(parts.profile, loop.pipeline, method=parts.profile.detector.method,
-                      registers=lambda: plc.memory.regs[:STATUS_COUNT], registers_from="as the PLC reads them",
-                      tail=lambda: plc.memory.regs[TAIL_AT:TAIL_AT + TAIL_COUNT],
+                      snapshot=lambda: loop.snapshot, registers=registers, registers_from="as the PLC reads them",
                       counters=loop.counters, title="eskin-bus demo",
                       source=f"{rec.name} | {parts.profile.name} | {parts.profile.detector.method}",
                       started=parts.started)
@@ -178,9 +185,10 @@ def _cell_live(objects: tuple[str, ...], seed: int, method: str, chain, profile_
                stdout: TextIO) -> list:
     """The closed loop under the live view, with the cell's lines (grip force, distance
     slid); the lines it would have printed are printed once the view has gone."""
-    from ..plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT
+    from ..plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names
     from ..sim.cell.demo import cell_lines, run_objects
     from ..view.live import Watch, live_screen
+    from ..view.snapshot import RegisterTable
     from ..view.terminal import color_wanted
 
     kept: list[str] = []
@@ -193,9 +201,15 @@ def _cell_live(objects: tuple[str, ...], seed: int, method: str, chain, profile_
 
     def view(parts: CellParts) -> LiveScreen:
         loop, memory = parts.loop, parts.program.memory
-        watch = Watch(parts.profile, loop.pipeline, method=method,
-                      registers=lambda: memory.regs[:STATUS_COUNT], registers_from="as the PLC reads them",
-                      tail=lambda: memory.regs[TAIL_AT:TAIL_AT + TAIL_COUNT], counters=loop.counters,
+        word_order = parts.profile.modbus.plc.word_order
+
+        def registers() -> RegisterTable:  # what the PLC stand-in holds, as its program reads it
+            regs = memory.regs
+            values = read_back(regs[:STATUS_COUNT], regs[TAIL_AT:TAIL_AT + TAIL_COUNT], word_order)
+            return RegisterTable(values, status_names(values["STATUS"]))
+
+        watch = Watch(parts.profile, loop.pipeline, method=method, snapshot=lambda: loop.snapshot,
+                      registers=registers, registers_from="as the PLC reads them", counters=loop.counters,
                       title="eskin-bus demo --closed-loop",
                       source=f"{parts.episode.kind.name} | {parts.profile.name} | {method}", started=parts.started,
                       extra=lambda: cell_lines(parts))

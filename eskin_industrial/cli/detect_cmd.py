@@ -4,19 +4,19 @@ from __future__ import annotations
 
 import json
 import sys
+from typing import cast
 
 import click
 import numpy as np
 
-from ..calibration import Calibrator, full_scale
-from ..detect.hygiene import TIME_FAULTS, rate_problem, time_verdicts
-from ..detect.methods import METHODS, get_method
+from ..detect.methods import METHODS
 from ..detect.state import GraspState
-from ..detect.updates import COLUMNS, UpdateTable
+from ..detect.updates import COLUMNS, Update, UpdateTable
 from ..errors import InputFormatError
 from ..frames import FrameFlag
+from ..offline import Detected, Engine, detect_can_log, detect_live_log, detect_recording
 from ..profile import Profile
-from ..recording import read_recording, write_updates
+from ..recording import update_row, write_updates
 from .common import open_profile, profile_option
 from .console import PROGRESS_DELAY_S, Counter, Ticker
 
@@ -57,88 +57,36 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
         _detect_live(prof, output, rate_hz, method, changes, as_json, quiet)
         return
     with Ticker(own_quiet=quiet, delay_s=PROGRESS_DELAY_S) as ticker:
-        table, name, time_faults = _detect_file(prof, input_path, can_log, rate_hz, method, engine, as_json, quiet,
-                                                ticker)
+        if can_log is not None:  # the live receiver's path, on recorded traffic: same output
+            found = detect_can_log(prof, can_log, rate_hz, method, progress=ticker)
+        else:
+            assert input_path is not None  # exactly one of the two, checked above
+            found = detect_recording(prof, input_path, rate_hz, method, cast(Engine, engine), progress=ticker)
+        ticker.close()
+        if not quiet:
+            _summary(found, as_json)
+    table = found.table
     if changes:
         keep = np.ones(len(table), bool)
         keep[1:] = table.state[1:] != table.state[:-1]
         table = UpdateTable(**{c: getattr(table, c)[keep] for c in COLUMNS})
     write_updates(output, table)
-    refused = sum(time_faults.values())
-    if fail_on_time_faults and refused:
-        raise InputFormatError(f"{name}: {refused} frames refused for their time ({_faults(time_faults)}); "
+    refused = sum(found.time_faults.values())
+    # (a log's scans are timed by the node's counter: its refused times are the transport's)
+    if fail_on_time_faults and refused and found.transport is None:
+        raise InputFormatError(f"{found.name}: {refused} frames refused for their time ({_faults(found.time_faults)}); "
                                "--fail-on-time-faults")
-
-
-def _detect_file(prof: Profile, input_path: str | None, can_log: str | None, rate_hz: float | None,
-                 method: str | None, engine: str, as_json: bool, quiet: bool,
-                 ticker: Ticker) -> tuple[UpdateTable, str, dict[str, int]]:
-    """The updates of a recording or a CAN log file, its name and its refused times;
-    the summary on stderr (after the bar) unless quiet."""
-    time_faults: dict[str, int] = {}
-    name = ""
-    if can_log is not None:  # the live receiver's path, on recorded traffic: same output
-        from ..bus.can.log import detect_log
-
-        table, counters = detect_log(prof, can_log, rate_hz, method, progress=ticker)
-        ticker.close()
-        if not quiet:
-            _summary(can_log, counters["scans"], rate_hz or prof.sensor.rate_hz, method or prof.detector.method,
-                     table, {k: counters[k] for k in TIME_FAULTS.values()}, as_json, counters)
-    else:
-        assert input_path is not None  # exactly one of the two, checked above
-        rec = read_recording(input_path, prof.taxels, progress=ticker)
-        name = rec.name
-        if rate_hz is not None and not (rate_hz > 0 and np.isfinite(rate_hz)):
-            raise InputFormatError(f"--rate: expected a positive sample rate, got {rate_hz}")
-        expected = rate_hz if rate_hz is not None else prof.sensor.rate_hz
-        problem = rate_problem(rec.t, expected, "--rate" if rate_hz is not None else f"profile {prof.name}'s rate_hz")
-        if problem is not None:
-            raise InputFormatError(f"{rec.name}: {problem}")
-        values = rec.values
-        if rec.unit == "raw":
-            values, flags = Calibrator.from_section(prof.calibration, prof.taxels).to_newtons(values)
-        else:  # newtons: the same full-scale rule as a calibrated scan
-            values, flags = full_scale(values, prof.calibration.full_scale_n)
-        verdicts = time_verdicts(rec.t)
-        time_faults = {name: int(np.count_nonzero(verdicts == code)) for code, name in TIME_FAULTS.items()}
-        rate = rate_hz if rate_hz is not None else rec.rate_hz(prof.sensor.rate_hz)
-        settings = prof.detector
-        chosen = get_method(method or settings.method)
-        if chosen.needs_model:  # learned: the default model, trained on the tuning seeds
-            from ..evaluation.train import ready
-
-            chosen = ready(chosen)
-        x, y = prof.coordinates_mm
-        if engine == "batch" and chosen.vectorized:
-            table = chosen.batch(settings, x, y, rate, rec.t, values, flags)
-        else:  # the stream detector, fed in pieces to show progress: the same updates as all at once
-            det = chosen.stream(settings, x, y, rate)
-            ticker.stage("detecting", len(rec.t))
-            updates = []
-            for a in range(0, len(rec.t), _PIECE_FRAMES):
-                b = a + _PIECE_FRAMES
-                updates += det.feed(rec.t[a:b], values[a:b], flags[a:b])
-                ticker.advance(len(rec.t[a:b]))
-            table = UpdateTable.from_updates(updates)
-        ticker.close()
-        if not quiet:
-            _summary(rec.name, len(rec.t), rate, chosen.name, table, time_faults, as_json)
-    return table, name, time_faults
-
-
-#: Frames fed to a stream detector at a time (progress between pieces).
-_PIECE_FRAMES = 10_000
 
 
 def _faults(time_faults: dict[str, int]) -> str:
     return ", ".join(f"{k} {v}" for k, v in time_faults.items() if v)
 
 
-def _summary(name: str, frames: int, rate: float, method: str, table: UpdateTable, time_faults: dict[str, int],
-             as_json: bool, transport: dict[str, int] | None = None) -> None:
+def _summary(found: Detected, as_json: bool) -> None:
     """One line on stderr: prose, or with --json one object; the same figures for a
     recording, a CAN log and a live log."""
+    name, frames, rate, method, table = found.name, found.frames, found.rate_hz, found.method.name, found.table
+    time_faults, transport = found.time_faults, found.transport
     counts = {s.label: int(np.sum(table.state == s)) for s in GraspState}
     # (WARMUP and TURN_UNSEEN say what the update could not do, not what was wrong with a frame)
     flagged = int(np.sum(table.flags & ~int(FrameFlag.WARMUP | FrameFlag.TURN_UNSEEN) != 0))
@@ -162,13 +110,8 @@ def _summary(name: str, frames: int, rate: float, method: str, table: UpdateTabl
     sys.stderr.flush()
 
 
-def _detect_live(prof, output: str, rate_hz: float | None, method: str | None, changes: bool, as_json: bool,
-                 quiet: bool) -> None:
-    from ..bus.can.log import detect_live_log
-    from ..detect.updates import Update
-    from ..recording import update_row
-
-    updates: list[Update] = []
+def _detect_live(prof: Profile, output: str, rate_hz: float | None, method: str | None, changes: bool,
+                 as_json: bool, quiet: bool) -> None:
     last: list[int] = []
 
     # no length to show a share of: a count of the updates, once it has run a second
@@ -178,7 +121,6 @@ def _detect_live(prof, output: str, rate_hz: float | None, method: str | None, c
         out.flush()
 
         def emit(u: Update) -> None:
-            updates.append(u)
             counter.add()
             if changes and last and last[0] == u.state:
                 return
@@ -186,8 +128,6 @@ def _detect_live(prof, output: str, rate_hz: float | None, method: str | None, c
             out.write(update_row(u, GraspState(u.state).label))
             out.flush()  # a pipe's reader sees each row as it comes
 
-        counters = detect_live_log(prof, sys.stdin, emit, rate_hz, method)
+        found = detect_live_log(prof, sys.stdin, emit, rate_hz, method)
     if not quiet:
-        table = UpdateTable.from_updates(updates)
-        _summary("<stdin>", counters["scans"], rate_hz or prof.sensor.rate_hz, method or prof.detector.method,
-                 table, {k: counters[k] for k in TIME_FAULTS.values()}, as_json, counters)
+        _summary(found, as_json)

@@ -32,7 +32,7 @@ def modbus_node(profile_path, port, scene, recording, rate_hz, baudrate, seed, o
 
 def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, duration_s) -> None:
     """The RTU node, shared by ``modbus-node`` and ``node --modbus-rtu``."""
-    from ..bus.modbus.io import quiet_pymodbus
+    from ..modbus.pymodbus_io import quiet_pymodbus
     from ..sim.modbus_node import serve_scene_rtu
 
     quiet_pymodbus()
@@ -82,7 +82,7 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
     from ..bridge.config import BridgeConfig, NodeConfig, resolve
     from ..bridge.runtime import SingleNode
     from ..bridge.signals import EXIT_FAILED, handled_signals
-    from ..bus.modbus.io import quiet_pymodbus
+    from ..modbus.pymodbus_io import quiet_pymodbus
     from ..plc.sink import PlcOptions
 
     quiet_pymodbus()

@@ -33,7 +33,9 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, bus_ext
     from ..bridge.config import BridgeConfig, NodeConfig, resolve
     from ..bridge.runtime import SingleNode
     from ..detect.updates import Update
-    from ..view.live import KeptImage, Watch, change_line, live_screen
+    from ..plc.kept import KeptRegisters
+    from ..view.live import Watch, change_line, live_screen
+    from ..view.snapshot import RegisterTable
     from ..view.terminal import color_wanted
 
     if rate_hz is not None and not rate_hz > 0:
@@ -44,14 +46,19 @@ def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, bus_ext
     (resolved,) = resolve(cfg)
     prof = resolved.profile
     chosen = method or prof.detector.method
-    sink = KeptImage()
+    sink = KeptRegisters(prof.modbus.plc)
     # a bus that cannot be opened: one line, exit 3
     single = SingleNode(cfg, resolved, extra_sinks=[sink], default_output=False, all_frames=True, method=method)
     loop = single.loop
     where = loop.source.describe_where() if channel is None else channel
     stdout = sys.stdout
     live = not plain and stdout.isatty()
-    watch = Watch(prof, loop.pipeline, method=chosen, registers=lambda: sink.registers, tail=lambda: sink.tail,
+
+    def registers() -> RegisterTable | None:
+        table = sink.table()
+        return None if table is None else RegisterTable(*table)
+
+    watch = Watch(prof, loop.pipeline, method=chosen, snapshot=lambda: loop.snapshot, registers=registers,
                   registers_from="as the bridge would publish them", counters=loop.counters,
                   title="eskin-bus monitor", source=f"{prof.name} | {chosen} | {where}", started=time.monotonic())
 

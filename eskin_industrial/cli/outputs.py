@@ -8,16 +8,22 @@ from typing import Any, TypeVar
 
 import click
 
-from ..sinks.base import SINKS, sink_class
+from ..sinks.base import CliOption, sink_class, sink_kinds
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 
+def _all_cli_options(kind: str) -> tuple[CliOption, ...]:
+    cls = sink_class(kind)
+    return cls.cli_options + cls.node_cli_options
+
+
 def output_options(func: F) -> F:
-    """Every output kind's options, in registry order."""
+    """Every output kind's options (its section's and a one-node bridge's node keys),
+    in registry order."""
     opts = []
-    for kind in SINKS:
-        for o in sink_class(kind).cli_options:
+    for kind in sink_kinds():
+        for o in _all_cli_options(kind):
             if o.secret:
                 continue  # secrets come from files or the environment, never argv
             if o.type is bool:
@@ -34,7 +40,7 @@ def output_options(func: F) -> F:
 def outputs_from_cli(values: dict[str, Any]) -> dict[str, Any]:
     """``kind -> options`` for every kind asked for on the command line."""
     out = {}
-    for kind in SINKS:
+    for kind in sink_kinds():
         cls = sink_class(kind)
         try:
             options = cls.options_from_cli(values)
@@ -46,12 +52,27 @@ def outputs_from_cli(values: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def node_outputs_from_cli(values: dict[str, Any]) -> dict[str, Any]:
+    """``kind -> node options`` of a one-node bridge (``--base-address``)."""
+    out = {}
+    for kind in sink_kinds():
+        cls = sink_class(kind)
+        try:
+            options = cls.node_options_from_cli(values)
+        except ValueError as exc:
+            flag, _, rest = str(exc).partition(": ")
+            raise click.BadParameter(rest or str(exc), param_hint=flag if rest else None) from None
+        if options is not None:
+            out[kind] = options
+    return out
+
+
 def given_output_options(values: dict[str, Any]) -> list[str]:
     """The output flags given a value other than their default (for refusing them next
     to ``--config``)."""
     given = []
-    for kind in SINKS:
-        for o in sink_class(kind).cli_options:
+    for kind in sink_kinds():
+        for o in _all_cli_options(kind):
             if values.get(o.dest) not in (None, o.default, False):
                 given.append(o.flag)
     return given

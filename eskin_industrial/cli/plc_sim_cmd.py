@@ -29,7 +29,8 @@ def plc_sim(profile_path: str, host: str, port: int | None, rtu_port: str | None
 
     prof = open_profile(profile_path)
     plc = prof.modbus.plc
-    from ..bus.modbus.io import SerialSettings, quiet_pymodbus
+    from ..modbus.pymodbus_io import quiet_pymodbus
+    from ..modbus.serial_line import SerialSettings
 
     quiet_pymodbus()
     serial = SerialSettings(rtu_port, baudrate) if rtu_port else None

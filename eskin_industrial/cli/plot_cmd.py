@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import click
 import numpy as np
 
-from ..detect.methods import METHODS, get_method
+from ..detect.methods import METHODS
 from ..detect.state import GraspState
 from ..errors import InputFormatError
-from ..recording import read_recording
+from ..offline import detect_can_log, detect_recording
 from .common import open_profile, profile_option
 
 STATE_COLOURS = {GraspState.SLIP: "tab:red", GraspState.VARIABLE_FORCE: "tab:orange"}
@@ -38,36 +40,15 @@ def plot(profile_path: str, input_path: str | None, can_log: str | None, output:
         from ..errors import MissingExtra
 
         raise MissingExtra.of("plot", "matplotlib", "plot") from None
-    from ..calibration import Calibrator
-
     prof = open_profile(profile_path)
-    cal = Calibrator.from_section(prof.calibration, prof.taxels)
-    if can_log is not None:
-        from ..bus.can.log import log_scans, require_scans
-
-        rate = prof.sensor.rate_hz
-        scans, asm = log_scans(prof, can_log, rate)
-        require_scans(prof, {**asm.counters, "scans": len(scans)}, can_log)
-        t = np.array([sc.t for sc in scans])
-        values, _ = cal.to_newtons(np.stack([sc.raw for sc in scans]))
-        name = can_log
+    if can_log is not None:  # the live receiver's decoding, as detect --can-log
+        found = detect_can_log(prof, can_log, method=method, keep_forces=True)
     else:
         assert input_path is not None  # exactly one of the two, checked above
-        rec = read_recording(input_path, prof.taxels)
-        t, values, name = rec.t, rec.values, rec.name
-        if rec.unit == "raw":
-            values, _ = cal.to_newtons(values)
-        rate = rec.rate_hz(prof.sensor.rate_hz)
-    base = get_method(method or prof.detector.method)
-    if base.needs_model:  # the learned method is handed its model by the layer above
-        from ..evaluation.train import ready
-
-        chosen = ready(base)
-    else:
-        chosen = base
-    x, y = prof.coordinates_mm
-    table = chosen.batch(prof.detector, x, y, rate, t, values, None)
-    col_a, col_b = (s.name for s in base.scores)  # the deciding method's own scores
+        found = detect_recording(prof, input_path, method=method)
+    assert found.t is not None and found.forces is not None  # (kept: asked for, or a recording's)
+    t, values, name, rate, chosen, table = found.t, found.forces, found.name, found.rate_hz, found.method, found.table
+    col_a, col_b = (s.name for s in chosen.scores)  # the deciding method's own scores
 
     fig, (ax_f, ax_r) = plt.subplots(2, 1, figsize=(11, 6), sharex=True, gridspec_kw={"height_ratios": [1, 2]})
     ax_f.plot(t, np.nansum(values, axis=1), color="k", lw=0.8)
@@ -100,7 +81,7 @@ def plot(profile_path: str, input_path: str | None, can_log: str | None, output:
                + ", ".join(f"{s.label} {int(np.sum(table.state == s))}" for s in GraspState), err=True)
 
 
-def _shade_labels(ax, path: str) -> None:
+def _shade_labels(ax: Any, path: str) -> None:
     data = np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="utf-8")
     t, labels = np.atleast_1d(data["t"]), np.atleast_1d(data["label"])
     from ..evaluation.metrics import spans

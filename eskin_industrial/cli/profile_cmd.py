@@ -6,10 +6,11 @@ import json
 import shutil
 from pathlib import Path
 from typing import Any
+from warnings import catch_warnings, simplefilter
 
 import click
 
-from ..errors import ProfileError
+from ..errors import DeprecatedKey, ProfileError
 from ..profile import Profile, builtin_profiles, load_profile
 from .common import complete_profile
 from .console import echo_json
@@ -43,11 +44,14 @@ def check(files: tuple[str, ...], fmt: str) -> None:
 
 
 def _check_one(path: str) -> dict[str, Any]:
-    try:
-        p = load_profile(path)
-    except ProfileError as exc:
-        return {"file": path, "ok": False, "error": str(exc), "warnings": [], "summary": None}
-    warnings = []
+    with catch_warnings(record=True) as caught:
+        simplefilter("always", DeprecatedKey)
+        try:
+            p = load_profile(path)
+        except ProfileError as exc:
+            return {"file": path, "ok": False, "error": str(exc), "warnings": [], "summary": None}
+    # a key that moved: said here, with the file's other warnings (each line names the file)
+    warnings = [str(w.message) for w in caught if issubclass(w.category, DeprecatedKey)]
     try:  # the transports' own checks; only the commands that use them refuse
         from ..bus.can.layout import CanLayout
 

@@ -14,8 +14,8 @@ indicator stream.
 The model is handed in (``model=``): anything with ``__call__(x) -> probabilities``;
 :class:`TreeEnsemble` is the numpy-only form the training code fills.  Nothing in
 ``detect/`` trains, loads or imports scikit-learn: the layers that build detectors by
-name (the pipeline, the CLI, the evaluation) see the registry's ``needs_model`` and
-hand the default model over (``eskin_industrial.evaluation.train.ready``).
+name (the pipeline, the offline path, the evaluation) see the registry's ``needs_model``
+and hand the default model over (``eskin_industrial.evaluation.binding``).
 """
 
 from __future__ import annotations

@@ -7,8 +7,8 @@ Each entry gives a streaming factory ``(settings, x_mm, y_mm, rate_hz) -> detect
 
 A method with ``needs_model`` (``learned``) must also be handed ``model=``; the
 registry does not know where models come from.  :meth:`Method.with_model` binds one;
-the layers that build detectors by name do so with the default model
-(``eskin_industrial.evaluation.train.ready``).
+every layer that builds detectors by name does so through one function that hands
+over the default model (``eskin_industrial.evaluation.binding``).
 """
 
 from __future__ import annotations
@@ -129,6 +129,7 @@ def method_of_code(code: int) -> Method | None:
     return next((m for m in METHODS.values() if m.code == code), None)
 
 
-def needs_model(factory: Callable[..., Any]) -> bool:
-    """Whether ``factory`` is a registered method's stream factory that must be handed a model."""
-    return any(m.needs_model and factory is m.stream for m in METHODS.values())
+def method_of_stream(factory: Callable[..., Any]) -> Method | None:
+    """The registered method whose stream factory ``factory`` is (None: no registered
+    method's, such as a bound one or a sweep's own)."""
+    return next((m for m in METHODS.values() if factory is m.stream), None)

@@ -12,9 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
 from ..progress import NO_PROGRESS, Progress
+from .binding import ready_method
 from .families import FAMILIES, evaluate_families
 from .metrics import SceneScore
 from .suite import DEFAULT_SETTINGS, EVALUATION_SEEDS, TUNING_SEEDS, Factory
@@ -60,7 +60,7 @@ CANDIDATES: dict[str, tuple[Candidate, ...]] = {
 
 
 def _factory(method: str, candidate: Candidate, base: DetectorSettings) -> Factory:
-    stream = get_method(method).stream
+    stream = ready_method(method, base).stream
     settings = candidate.apply(base)
     return lambda _settings, x, y, rate: stream(settings, x, y, rate)
 

@@ -6,15 +6,14 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
-
-import numpy as np
+from typing import Callable
 
 from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
 from ..detect.updates import UpdateTable
 from ..progress import NO_PROGRESS, Progress
 from ..scenes import Rendered, SceneSpec, load_scene, render
+from .binding import Factory, ready_factory
 from .corpus import (
     EVALUATION_SEEDS,
     HOLD_EVALUATION_SEEDS,
@@ -26,7 +25,6 @@ from .corpus import (
     coordinates,
 )
 from .metrics import SceneScore, score_scene
-from .train import hand_model
 
 #: Detector settings per layout, from the shipped profiles' [detector] sections.
 DEFAULT_SETTINGS = DetectorSettings()
@@ -48,15 +46,12 @@ class Result:
         return self.seconds / self.frames * 1e6 if self.frames else float("nan")
 
 
-Factory = Callable[[DetectorSettings, np.ndarray, np.ndarray, float], Any]
-
-
 def run_one(factory: Factory, settings: DetectorSettings, rendered: Rendered) -> tuple[UpdateTable, float]:
     """One detector over one rendered scene; its updates and the seconds it took.
     (A method that needs a model is handed the default one: trained, on first use,
     on the tuning seeds.)"""
     x, y = coordinates(rendered)
-    det = hand_model(factory)(settings, x, y, rendered.rate_hz)
+    det = ready_factory(factory)(settings, x, y, rendered.rate_hz)
     t, f = rendered.t, rendered.forces
     push = det.push
     start = time.perf_counter()

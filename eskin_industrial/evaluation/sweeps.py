@@ -7,17 +7,18 @@ from dataclasses import replace
 from functools import partial
 from typing import Any, Callable, Literal
 
+import numpy as np
+
 from ..detect.cof_track import CofTrack
-from ..detect.learned import Learned
 from ..detect.methods import get_method
 from ..detect.paper import PaperDetector
 from ..detect.scored import CofVelocity, ForceRate, HfEnergy
 from ..detect.settings import DetectorSettings
-from .train import default_model
+from .binding import bind
 
 
 def _paper(rule: Literal["both", "coe", "dw"], **changes: Any) -> Callable[..., Any]:
-    def make(settings: DetectorSettings, x, y, rate):
+    def make(settings: DetectorSettings, x: np.ndarray, y: np.ndarray, rate: float) -> PaperDetector:
         return PaperDetector(replace(settings, slip_rule=rule, **changes), x, y, rate)
     return make
 
@@ -54,9 +55,9 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
     for support in (0.0, 3.0, 4.5):
         points.append(("cof-track", f"ramp support z{support:g}", partial(CofTrack, ramp_support_z=support)))
     if importlib.util.find_spec("sklearn") is not None:  # the optional extra: one model, several decision rules
-        model = default_model()  # trained here, once per process
+        learned = bind(get_method("learned")).stream  # the default model, trained here once per process
         for p, hops in ((0.5, 1), (0.7, 1), (0.5, 2), (0.7, 2), (0.5, 3), (0.7, 3)):
-            points.append(("learned", f"p>{p} x{hops} hops", partial(Learned, model=model, slip_p=p, confirm_hops=hops)))
+            points.append(("learned", f"p>{p} x{hops} hops", partial(learned, slip_p=p, confirm_hops=hops)))
     return points
 
 

@@ -14,12 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
 from ..detect.state import ContactRule, GraspState
 from ..detect.updates import UpdateTable
 from ..detect.vforce import force_variation_batch
 from ..scenes import Rendered, render
+from .binding import ready_method
 from .corpus import TUNING_SEEDS
 from .shading import shade_labels
 from .suite import DEFAULT_SETTINGS, run_one
@@ -32,7 +32,7 @@ _STATE_NAMES = [s.label for s in GraspState]
 
 def _traces(rec: Rendered, settings: DetectorSettings) -> tuple[UpdateTable, np.ndarray]:
     """The default method's updates, and the varying-force score of every frame."""
-    table, _ = run_one(get_method(settings.method).stream, settings, rec)
+    table, _ = run_one(ready_method(None, settings).stream, settings, rec)
     s = rec.forces.sum(axis=1)
     contact = ContactRule.from_settings(settings).mask(s)
     score = force_variation_batch(s, contact, np.zeros(len(s), bool), settings.varying_force, rec.rate_hz)

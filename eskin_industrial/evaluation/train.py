@@ -10,13 +10,12 @@ detector neither imports scikit-learn nor pays its per-call overhead.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache, partial
-from typing import Any, Callable
+from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
 from ..detect.learned import CLASSES, FEATURES, Learned, TreeEnsemble
-from ..detect.methods import Method, needs_model
 from ..detect.settings import DetectorSettings
 from ..errors import MissingExtra
 from ..scenes import load_scene, render
@@ -135,21 +134,10 @@ def trees_from_sklearn(clf: Any) -> TreeEnsemble:
 
 @lru_cache(maxsize=4)
 def default_model(config: TrainConfig = TrainConfig()) -> TreeEnsemble:
-    """The model ``learned`` runs with unless given another: trained once per process."""
+    """The model ``learned`` runs with unless given another: trained once per process
+    (methods are handed it by ``binding.bind``)."""
     return fit(config)
 
 
-def ready(method: Method) -> Method:
-    """``method`` ready to build from (settings, x_mm, y_mm, rate_hz): one that needs a
-    model is handed the default one (trained here on first use; :class:`MissingExtra`
-    without scikit-learn); any other is returned as it is."""
-    return method.with_model(default_model()) if method.needs_model else method
-
-
-def hand_model(factory: Callable[..., Any]) -> Callable[..., Any]:
-    """The same for a bare stream factory, such as ``get_method(name).stream``."""
-    return partial(factory, model=default_model()) if needs_model(factory) else factory
-
-
-__all__ = ["FEATURES", "INSTALL_HINT", "TrainConfig", "dataset", "default_model", "fit", "hand_model", "ready",
-           "require_sklearn", "trees_from_sklearn"]
+__all__ = ["FEATURES", "INSTALL_HINT", "TrainConfig", "dataset", "default_model", "fit", "require_sklearn",
+           "trees_from_sklearn"]

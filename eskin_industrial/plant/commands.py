@@ -1,20 +1,17 @@
 """Sparkplug device commands (DCMD) as the bridge's commands: pure, no I/O.
 
 A host application writes a device's command metrics, declared in its DBIRTH; each
-becomes the same :class:`~eskin_industrial.plc.image.Command` a PLC's COMMAND or
-ENABLE write gives, and is refused under the same rule
-(:meth:`~eskin_industrial.plc.image.PlcImage.refusal`: no tare while something is
-held, or while the image cannot say).
+becomes the same :class:`~eskin_industrial.node.Command` a PLC's COMMAND or ENABLE
+write gives, and is refused under the same rule (:func:`~eskin_industrial.node.refusal`:
+no tare while something is held, or while the detector cannot say).
 """
 
 from __future__ import annotations
 
-from typing import Literal, NamedTuple
+from typing import NamedTuple
 
-from ..plc.image import Command
+from ..node import Command, CommandName
 from . import payload as pb
-
-CommandName = Literal["ack", "tare", "enable", "disable"]
 
 
 class CommandDef(NamedTuple):

@@ -3,8 +3,8 @@ configuration, ``--sparkplug mqtt://HOST:PORT`` on the command line).
 
 The bridge process is one edge node (``group_id``, ``edge_node_id``) over one MQTT
 connection; each sensor node is a device named after the node.  The metrics are the
-register image as the PLC reads it (:func:`~eskin_industrial.plc.image.decode_registers`
-of each publication), so that the plant and the PLC see the same state.
+node's snapshot (:class:`~eskin_industrial.node.NodeSnapshot`), the same the PLC's
+register image is rendered from, so that the plant and the PLC see the same state.
 
 The loop's thread only encodes and enqueues: paho-mqtt's network thread
 (``loop_start``) writes to the broker, reconnects, and calls back on connect (births),
@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import collections
 import json
+import math
 import os
 import threading
 import time
@@ -36,10 +37,9 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 from .. import __version__
 from ..detect.state import LABELS
 from ..errors import EskinError, ProfileError
-from ..frames import FrameFlag
-from ..plc.image import Command, PlcImage, Status, decode_registers
+from ..node import Command, NodeSnapshot, refusal
 from ..schema import SchemaError, build, in_range
-from ..sinks.base import CliOption, Publication, Sink, SinkHealth
+from ..sinks.base import CliOption, Sink, SinkHealth
 from . import payload as pb
 from .commands import COMMAND_ALIAS, COMMANDS, BadCommand, birth_metrics, parse_device_command
 from .properties import Property, frame_properties, layout_properties, method_properties, score_properties
@@ -134,8 +134,8 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Bus Fault", pb.BOOLEAN, "", False, "the sensor bus fails"),
     MetricDef("Contact", pb.BOOLEAN, "", False, "total force at or above the contact threshold"),
     MetricDef("Enabled", pb.BOOLEAN, "", False, "detection enabled"),
-    MetricDef("R_coe", pb.FLOAT, "", True, "the paper's R_coe, whatever method decides (R_COE / r_scale)"),
-    MetricDef("R_dw", pb.FLOAT, "", True, "the paper's R_dw, whatever method decides (R_DW / r_scale)"),
+    MetricDef("R_coe", pb.FLOAT, "", True, "the paper's R_coe, whatever method decides (0 while no state is claimed)"),
+    MetricDef("R_dw", pb.FLOAT, "", True, "the paper's R_dw, whatever method decides (0 while no state is claimed)"),
     MetricDef("Total Force", pb.FLOAT, "N", True, "total force of the newest frame"),
     MetricDef("CoF X", pb.FLOAT, "mm", True, "centre of force, x"),
     MetricDef("CoF Y", pb.FLOAT, "mm", True, "centre of force, y"),
@@ -145,9 +145,9 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Counters/Lost Scans", pb.UINT32, "count", True, "failed polls and sequence gaps"),
     MetricDef("Counters/Bus Errors", pb.UINT32, "count", True, "timeouts, CRC and exception responses"),
     MetricDef("Counters/Scans", pb.UINT64, "count", True, "scans the node's loop has taken since start"),
-    MetricDef("Score A", pb.FLOAT, "", True, "the deciding method's first score (SCORE_A / r_scale); DBIRTH "
-              "properties: method, score (its name), description"),
-    MetricDef("Score B", pb.FLOAT, "", True, "the deciding method's second score (SCORE_B / r_scale), likewise"),
+    MetricDef("Score A", pb.FLOAT, "", True, "the deciding method's first score (0 while no state is claimed); "
+              "DBIRTH properties: method, score (its name), description"),
+    MetricDef("Score B", pb.FLOAT, "", True, "the deciding method's second score, likewise"),
     MetricDef("Turn Unseen", pb.BOOLEAN, "", False, "in contact, but a turn about the normal would go unseen: "
               "read stable (FLAGS bit TURN_UNSEEN)"),
 )
@@ -160,28 +160,36 @@ FRAME_ALIAS = 50
 #: the one with the layout (``layout_properties``).
 METHOD_METRIC, LAYOUT_METRIC = "State", "CoF X"
 _ANALOG = tuple(m.analog for m in DEVICE_METRICS)
-_TURN_UNSEEN = int(FrameFlag.TURN_UNSEEN)
 _FLOATS = tuple(m.datatype == pb.FLOAT for m in DEVICE_METRICS)
 #: Node metrics (aliases 1..); a device's metrics start at 1000 x (its index + 1).
 NODE_METRICS = ("bdSeq", REBIRTH, "Node Info/Version", "Node Info/Uptime", "Store/Pending", "Store/Overflow")
 
 
-def metric_values(pub: Publication, r_scale: float, word_order: str) -> tuple[Any, ...]:
-    """The device metrics of one publication, from the registers as the PLC reads them."""
-    v = decode_registers(pub.registers, word_order)  # type: ignore[arg-type]
-    st = v["STATUS"]
-    return (LABELS[v["STATE"]] if v["STATE"] < len(LABELS) else str(v["STATE"]), v["STATE"],
-            bool(st & Status.SLIP), bool(st & Status.SLIP_LATCHED), bool(st & Status.DATA_VALID),
-            bool(st & Status.SENSOR_STALE), bool(st & Status.BUS_FAULT), bool(st & Status.CONTACT),
-            bool(st & Status.ENABLED), v["R_COE"] / r_scale, v["R_DW"] / r_scale, v["F_SUM"] / 1000.0,
-            v["XC"] / 100.0, v["YC"] / 100.0, v["FRAME_AGE"], v["SLIP_EVENTS"], v["STATE_CHANGES"],
-            v["LOST_SCANS"], v["BUS_ERRORS"], pub.scans, *_scores(pub.tail, r_scale),
-            bool(v["FLAGS"] & _TURN_UNSEEN))
+def metric_values(s: NodeSnapshot) -> tuple[Any, ...]:
+    """The device metrics of one snapshot, in :data:`DEVICE_METRICS` order.  While no
+    state is claimed (disabled, stale), State reads ``no_contact`` (code 0), with Data
+    Valid false, and the indicators and scores read 0, as the PLC's registers do."""
+    code = 0 if s.state is None else s.state
+    age = s.frame_age_s
+    return (LABELS[code] if code < len(LABELS) else str(code), code, s.state == _SLIP, s.slip_latched, s.valid,
+            s.stale, s.bus_fault, s.contact, s.enabled, _real(s.r_coe), _real(s.r_dw), _real(s.f_sum_n),
+            _real(s.xc_mm), _real(s.yc_mm), _FRAME_AGE_NONE if age is None else min(_ms(age), _FRAME_AGE_NONE),
+            s.slip_events & 0xFFFFFFFF, s.state_changes & 0xFFFFFFFF, s.lost_scans & 0xFFFFFFFF,
+            s.bus_errors & 0xFFFFFFFF, s.scans, _real(s.score_a), _real(s.score_b), s.turn_unseen)
 
 
-def _scores(tail: tuple[int, ...], r_scale: float) -> tuple[float, float]:
-    """Score A and Score B from the publication's SCORE_A..SCORE_B (0 when it has none)."""
-    return (tail[0] / r_scale, tail[1] / r_scale) if tail else (0.0, 0.0)
+_SLIP = 3  #: GraspState.SLIP
+_FRAME_AGE_NONE = 0xFFFF  #: Frame Age when there is no scan (as the PLC's FRAME_AGE)
+
+
+def _real(v: float | None) -> float:
+    """A metric's float: 0 for none (no state claimed) and for a value that is not
+    finite, so that a host never reads NaN as news at every publication."""
+    return float(v) if v is not None and math.isfinite(v) else 0.0
+
+
+def _ms(age_s: float) -> int:
+    return round(age_s * 1000.0) if math.isfinite(age_s) else _FRAME_AGE_NONE
 
 
 def _now_ms() -> int:
@@ -571,7 +579,7 @@ class SparkplugDevice(Sink):
                  "sparkplug_username": "username", "sparkplug_primary_host_id": "primary_host_id", "sparkplug_password_file": "password_file",
                  "sparkplug_password_env": "password_env"}
 
-    def __init__(self, node: EdgeNode, device_id: str, index: int, r_scale: float, word_order: str,
+    def __init__(self, node: EdgeNode, device_id: str, index: int,
                  properties: dict[str, tuple[Property, ...]] | None = None) -> None:
         super().__init__()
         self.node = node
@@ -580,14 +588,13 @@ class SparkplugDevice(Sink):
         g, e = node.options.group_id, node.options.edge_node_id
         self.topic = {k: f"{NAMESPACE}/{g}/{k}/{e}/{device_id}" for k in ("DBIRTH", "DDATA", "DDEATH")}
         self.base = 1000 * (index + 1)
-        self.r_scale, self.word_order = r_scale, word_order
         #: Metric name -> DBIRTH properties beyond its unit (the layout, the method).
         self.properties = properties or {}
         self.current: tuple[Any, ...] | None = None  #: the newest values (births declare them)
         self.sent: list[Any] = [None] * len(DEVICE_METRICS)  #: the values last sent, per metric
         self.sent_at = [float("-inf")] * len(DEVICE_METRICS)
         self.dead = False
-        self.image: PlcImage | None = None  #: of the newest publication (for a command's refusal)
+        self.snapshot: NodeSnapshot | None = None  #: the newest published (for a command's refusal)
         self._commands: collections.deque[Command] = collections.deque()
         self.frame_every_s = node.options.frame_interval_s or None
         self.frame: bytes | None = None  #: the newest frame handed, packed (births declare it)
@@ -603,9 +610,9 @@ class SparkplugDevice(Sink):
             node.bad_commands += 1
             node._bad("sparkplug_bad_command", topic, str(exc), self)
             return
-        image = self.image
+        snapshot = self.snapshot
         for cmd in cmds:
-            why = "contact_unknown" if image is None else image.refusal(cmd)
+            why = refusal(cmd, snapshot)
             if why is not None:
                 node.commands_refused += 1
                 self._event("sparkplug_command_refused", "warning", command=cmd.name, reason=why)
@@ -655,12 +662,12 @@ class SparkplugDevice(Sink):
             if self.node.connected:
                 self.node.send(self.topic["DDEATH"], pb.Payload(_now_ms()))
 
-    def _publish(self, publication: Publication) -> None:
-        if publication.offline:
+    def _publish(self, snapshot: NodeSnapshot) -> None:
+        if snapshot.offline:
             self.death()
             return
-        self.image = publication.image
-        values = metric_values(publication, self.r_scale, self.word_order)
+        self.snapshot = snapshot
+        values = metric_values(snapshot)
         now = time.monotonic()
         node = self.node
         with node.lock:
@@ -747,8 +754,7 @@ class SparkplugDevice(Sink):
 
     @classmethod
     def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
-        edge = open_edge(options, [(n.name, n.profile.modbus.plc.r_scale, n.profile.modbus.plc.word_order,
-                                    {METHOD_METRIC: method_properties(n.profile),
+        edge = open_edge(options, [(n.name, {METHOD_METRIC: method_properties(n.profile),
                                      LAYOUT_METRIC: layout_properties(n.profile),
                                      FRAME_METRIC.name: frame_properties(n.profile, options.frame_interval_s),
                                      **score_properties(n.profile)})
@@ -760,10 +766,9 @@ class SparkplugDevice(Sink):
         return list(edge.devices)
 
 
-def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, float, str, dict[str, tuple[Property, ...]]]]
+def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, dict[str, tuple[Property, ...]]]]
               ) -> EdgeNode:
-    """An edge node (not started) with one device per ``(name, r_scale, word_order,
-    properties)``."""
+    """An edge node (not started) with one device per ``(name, properties)``."""
     try:
         import paho.mqtt.client as mqtt
     except ImportError:  # pragma: no cover - a runtime dependency
@@ -778,8 +783,8 @@ def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, float, str
     except ValueError as exc:  # a password file emptied since --check
         raise ProfileError(f"[sparkplug] {exc}") from None
     edge = EdgeNode(options, client)
-    for i, (name, r_scale, word_order, props) in enumerate(devices):
-        edge.devices.append(SparkplugDevice(edge, name, i, r_scale, word_order, props))
+    for i, (name, props) in enumerate(devices):
+        edge.devices.append(SparkplugDevice(edge, name, i, props))
     return edge
 
 

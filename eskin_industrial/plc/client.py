@@ -44,12 +44,14 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from ..bus.modbus.io import RtuMaster, SerialSettings
-from ..bus.modbus.tcp import PipelinedTcpMaster
 from ..errors import ModbusFault, Refused
+from ..modbus.pymodbus_io import RtuMaster
+from ..modbus.serial_line import SerialSettings
+from ..modbus.tcp_master import PipelinedTcpMaster
+from ..node import Command, NodeSnapshot
 from ..profile import ModbusPlcSection
-from ..sinks.base import Publication, Sink, SinkHealth
-from .image import REG, TAIL_AT, Command, parse_register_write
+from ..sinks.base import Sink, SinkHealth
+from .image import REG, TAIL_AT, PlcImage, parse_register_write
 
 
 #: Each back-off wait is the current delay less up to this share of it, at random.
@@ -120,9 +122,13 @@ class PlcWriter(Sink):
 
     def __init__(self, settings: ModbusPlcSection, host: str | None = None, port: int | None = None,
                  *, timeout_s: float | None = None, poll_commands: bool = True, serial: SerialSettings | None = None,
-                 on_written: Callable[[float, float], None] | None = None) -> None:
+                 on_written: Callable[[float, float], None] | None = None, refresh_s: float = 0.05) -> None:
+        """``refresh_s``: the node's ``[output] refresh_s``: how often the image is
+        written when nothing changes, and the PLC's commands read."""
         super().__init__()
         self.settings = settings
+        self.refresh_s = refresh_s
+        self.image = PlcImage(settings)  #: the node's register image (its heartbeat)
         self.host = host or settings.host
         self.port = port or settings.port
         self.serial = serial
@@ -167,8 +173,10 @@ class PlcWriter(Sink):
         self._thread.start()
         return self
 
-    def _publish(self, publication: Publication) -> None:
-        self.offer(publication.registers, publication.urgent, publication.t_event, publication.tail)
+    def _publish(self, snapshot: NodeSnapshot) -> None:
+        image = self.image
+        registers = image.render(snapshot)
+        self.offer(registers, snapshot.urgent, snapshot.t_event, tuple(image.tail))
 
     def offer(self, registers: list[int], urgent: bool = False, t_event: float | None = None,
               tail: tuple[int, ...] = ()) -> None:
@@ -257,7 +265,7 @@ class PlcWriter(Sink):
                 if urgent:
                     self._urgent_tail()
             if time.monotonic() >= next_refresh:
-                next_refresh = time.monotonic() + s.refresh_s
+                next_refresh = time.monotonic() + self.refresh_s
                 # (after an image: never scores in a PLC that has no image yet)
                 if self._tail and self._last is not None and self._scores.due():
                     self._write_tail()

@@ -27,17 +27,12 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-from ..bus.modbus.codec import (
-    ILLEGAL_ADDRESS,
-    ILLEGAL_VALUE,
-    WordOrder,
-    join32,
-    split32,
-)
 from ..detect.methods import METHODS
 from ..detect.state import GraspState
-from ..detect.updates import Update, state_changed
 from ..errors import Refused
+from ..modbus.exception_codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE
+from ..modbus.words import WordOrder, join32, split32
+from ..node import Command, NodeSnapshot
 from ..profile import ModbusPlcSection
 
 
@@ -59,6 +54,7 @@ class Status(enum.IntFlag):
 
 _SENSOR_STALE, _BUS_FAULT, _ENABLED = int(Status.SENSOR_STALE), int(Status.BUS_FAULT), int(Status.ENABLED)
 _BRIDGE_ALIVE, _SLIP_LATCHED, _DATA_VALID = int(Status.BRIDGE_ALIVE), int(Status.SLIP_LATCHED), int(Status.DATA_VALID)
+_BRIDGE_OFFLINE = int(Status.BRIDGE_OFFLINE)
 
 #: The STATUS bits of each state code (CONTACT with every state but no contact).
 _STATE_BITS: dict[int, int] = {
@@ -175,21 +171,6 @@ BITS: tuple[Status, ...] = tuple(Status)
 
 
 
-@dataclass(frozen=True)
-class Health:
-    """What the transport side knows, at publication time."""
-
-    frame_age_s: float | None = None  #: None: no frame yet
-    bus_fault: bool = False
-    lost_scans: int = 0
-    bus_errors: int = 0
-
-
-@dataclass(frozen=True)
-class Command:
-    name: Literal["ack", "tare", "enable", "disable"]
-
-
 # -- the kinds: a named value (what the PLC reads) <-> its words -------------------
 #
 # A named value is an int in its kind's range: "bits" and "u16" 0..65535, "i16"
@@ -295,151 +276,78 @@ def decode_registers(registers: Sequence[int], word_order: WordOrder) -> dict[st
 
 @dataclass
 class PlcImage:
-    """State, latch, enable and counters as the PLC sees them."""
+    """The PLC's register image of a node, rendered from its snapshots: the heartbeat
+    and the rendered scores are the image's own; everything else comes from the
+    :class:`~eskin_industrial.node.NodeSnapshot`."""
 
     settings: ModbusPlcSection
-    enabled: bool = True
-    latched: bool = False
     heartbeat: int = 0
-    slip_events: int = 0
-    state_changes: int = 0
-    update: Update | None = None
-    #: The deciding method's code (METHOD_ID; ``detect.methods``): 0 for none.
-    method: int = 0
     #: The second published run of the newest :meth:`render` (SCORE_A, SCORE_B).
     tail: list[int] = dataclasses.field(default_factory=lambda: [0] * TAIL_COUNT)
 
-    # -- input side -------------------------------------------------------------
-    def observe(self, update: Update) -> bool:
-        """Take a detector update; True when the PLC must hear of it at once
-        (the state or the slip bit changed)."""
-        before = self.update
-        self.update = update
-        changed = before is None or before.state != update.state or before.valid != update.valid
-        if state_changed(before, update):  # (a change of validity alone is urgent, but no state change)
-            self.state_changes += 1
-        if update.state == GraspState.SLIP and (before is None or before.state != GraspState.SLIP):
-            self.slip_events += 1
-            if self.enabled and not self.latched:
-                self.latched = True
-                changed = True
-        return changed
-
-    def refusal(self, command: Command) -> str | None:
-        """Why ``command`` must not be applied now (None: it may be).  One rule for
-        every way a command arrives (a PLC register or coil, a Sparkplug DCMD): a tare
-        while something is held would take the held force for the new zero, and the
-        PLC would then read ``no_contact`` with valid data until the next tare."""
-        if command.name != "tare":
-            return None
-        u = self.update
-        if u is None or not u.valid:
-            return "contact_unknown"  # no valid scan yet: nothing says the gripper is open
-        if u.state != GraspState.NO_CONTACT:
-            return "in_contact"
-        return None
-
-    def apply(self, command: Command) -> None:
-        if command.name == "ack":
-            # The latch stays set while the slip lasts: an acknowledge cannot hide it.
-            self.latched = self.enabled and self.update is not None and self.update.state == GraspState.SLIP
-        elif command.name == "enable":
-            self.enabled = True
-        elif command.name == "disable":
-            self.enabled = False
-            self.latched = False
-        # "tare" acts on the calibration: the bridge does it, the image has no part in it.
-
-    # -- output side ------------------------------------------------------------
-    @property
-    def stale_limit_s(self) -> float:
-        """Frame age beyond which the sensor is stale (a profile resolves ``stale_s``
-        from its rate; a bare section, with no rate to derive it from, takes 0.2 s)."""
-        return self.settings.stale_s if self.settings.stale_s is not None else 0.2
-
-    def status(self, health: Health) -> int:
-        u = self.update
-        # plain ints: IntFlag arithmetic costs microseconds a bit, twice per publication
+    def status(self, s: NodeSnapshot) -> int:
+        """STATUS for a snapshot, with the heartbeat as it stands."""
+        if s.offline:
+            return _BRIDGE_OFFLINE
+        # plain ints: IntFlag arithmetic costs microseconds a bit, at every publication
         bits = 0
-        # written so that a NaN age (a broken clock) reads as stale, never as fresh
-        stale = health.frame_age_s is None or not health.frame_age_s <= self.stale_limit_s
-        if stale:
+        if s.stale:
             bits |= _SENSOR_STALE
-        if health.bus_fault:
+        if s.bus_fault:
             bits |= _BUS_FAULT
-        if self.enabled:
+        if s.enabled:
             bits |= _ENABLED
         if self.heartbeat & 1:
             bits |= _BRIDGE_ALIVE
-        if self.latched:
+        if s.slip_latched:
             bits |= _SLIP_LATCHED
-        if u is not None and self.enabled and not stale:
-            bits |= _STATE_BITS.get(int(u.state), 0)
-            if u.valid and not health.bus_fault:
+        if s.state is not None:
+            bits |= _STATE_BITS.get(s.state, 0)
+            if s.valid:
                 bits |= _DATA_VALID
         return bits
 
-    def values(self, health: Health) -> dict[str, int]:
+    def values(self, s: NodeSnapshot) -> dict[str, int]:
         """The named values of the published registers, as the PLC reads them
-        (:func:`decode_registers` of :meth:`render`), for the heartbeat as it stands."""
-        cfg = self.settings
-        status = self.status(health)
-        u = self.update
-        # Disabled or stale: no state is claimed (0, with DATA_VALID clear).
-        shown = u is not None and self.enabled and not status & _SENSOR_STALE
-        age = health.frame_age_s
+        (:func:`decode_registers` of :meth:`render`), for the heartbeat as it stands.
+        Disabled or stale, no state is claimed: STATE, R_COE, R_DW and the scores read
+        0, with DATA_VALID clear.  Offline (the bridge's last image): BRIDGE_OFFLINE
+        alone in STATUS, no state, force or flags, FRAME_AGE 65535; the heartbeat,
+        counters and centre of force are kept."""
+        r = self.settings.r_scale
+        claimed = s.state is not None
+        f, x, y, age = s.f_sum_n, s.xc_mm, s.yc_mm, s.frame_age_s
         return {
-            "STATUS": status,
-            "STATE": u.state if u is not None and shown else 0,  # (shown implies an update)
-            "R_COE": saturate_u16(u.r_coe * cfg.r_scale) if u is not None and shown else 0,
-            "R_DW": saturate_u16(u.r_dw * cfg.r_scale) if u is not None and shown else 0,
+            "STATUS": self.status(s),
+            "STATE": s.state if claimed else 0,  # type: ignore[dict-item]  # (claimed: an int)
+            "R_COE": saturate_u16(s.r_coe * r) if s.r_coe is not None else 0,
+            "R_DW": saturate_u16(s.r_dw * r) if s.r_dw is not None else 0,
             # a non-finite total reads 0; a finite one that overflows once in mN saturates
-            "F_SUM": saturate_u32(u.f_sum * 1000.0) if u is not None and math.isfinite(u.f_sum) else 0,
-            "XC": saturate_i16(u.xc * 100.0) if u is not None else 0,
-            "YC": saturate_i16(u.yc * 100.0) if u is not None else 0,
+            "F_SUM": saturate_u32(f * 1000.0) if f is not None and math.isfinite(f) else 0,
+            "XC": saturate_i16(x * 100.0) if x is not None else 0,
+            "YC": saturate_i16(y * 100.0) if y is not None else 0,
             "HEARTBEAT": self.heartbeat,
             "FRAME_AGE": 0xFFFF if age is None else saturate_u16(age * 1000.0),
             # counters wrap, like the heartbeat: a PLC takes differences
-            "SLIP_EVENTS": self.slip_events & 0xFFFFFFFF,
-            "STATE_CHANGES": self.state_changes & 0xFFFFFFFF,
-            "LOST_SCANS": health.lost_scans & 0xFFFFFFFF,
-            "BUS_ERRORS": health.bus_errors & 0xFFFFFFFF,
-            "FLAGS": u.flags & 0xFFFF if u is not None else 0,
-            "METHOD_ID": self.method,
-            "SCORE_A": saturate_u16(u.score_a * cfg.r_scale) if u is not None and shown else 0,
-            "SCORE_B": saturate_u16(u.score_b * cfg.r_scale) if u is not None and shown else 0,
+            "SLIP_EVENTS": s.slip_events & 0xFFFFFFFF,
+            "STATE_CHANGES": s.state_changes & 0xFFFFFFFF,
+            "LOST_SCANS": s.lost_scans & 0xFFFFFFFF,
+            "BUS_ERRORS": s.bus_errors & 0xFFFFFFFF,
+            "FLAGS": s.flags & 0xFFFF,
+            "METHOD_ID": s.method_code,
+            "SCORE_A": saturate_u16(s.score_a * r) if s.score_a is not None else 0,
+            "SCORE_B": saturate_u16(s.score_b * r) if s.score_b is not None else 0,
         }
 
-    def offline_values(self, health: Health) -> dict[str, int]:
-        """:meth:`values` of a bridge that stops: BRIDGE_OFFLINE and nothing else in
-        STATUS (no state bit, DATA_VALID clear), no state, force or flags, FRAME_AGE
-        65535 (no frame); the heartbeat, counters and centre of force are kept."""
-        return {**self.values(health), **_OFFLINE}
-
-    def render(self, health: Health) -> list[int]:
+    def render(self, s: NodeSnapshot) -> list[int]:
         """The STATUS..METHOD_ID registers (``STATUS_COUNT`` values), and the scores in
-        :attr:`tail`; one publication: the heartbeat advances."""
+        :attr:`tail`; one publication: the heartbeat advances.  A client-mode PLC keeps
+        what was written last, so the offline snapshot renders what it must read then,
+        never the last "stable"."""
         self.heartbeat = (self.heartbeat + 1) & 0xFFFF
-        values = self.values(health)
+        values = self.values(s)
         self.tail = _TAIL.encode(values)
         return _LAYOUTS[self.settings.word_order].encode(values)
-
-    def render_offline(self, health: Health) -> list[int]:
-        """The last image of a bridge that stops (:meth:`offline_values`); a
-        publication too: the heartbeat advances.  A client-mode PLC keeps what was
-        written last, so this is what it must read, never the last "stable"."""
-        self.heartbeat = (self.heartbeat + 1) & 0xFFFF
-        values = self.offline_values(health)
-        self.tail = _TAIL.encode(values)
-        return _LAYOUTS[self.settings.word_order].encode(values)
-
-    def coils(self) -> list[bool]:
-        """What the coils read, from the base address."""
-        return coil_values(self.enabled)
-
-
-_OFFLINE: dict[str, int] = {"STATUS": int(Status.BRIDGE_OFFLINE), "STATE": 0, "R_COE": 0, "R_DW": 0,
-                            "F_SUM": 0, "FLAGS": 0, "FRAME_AGE": 0xFFFF, "SCORE_A": 0, "SCORE_B": 0}
 
 
 def coil_values(enabled: bool) -> list[bool]:
@@ -540,3 +448,16 @@ def _ref(prefix: int, address: int) -> str:
     beyond 9999)."""
     n = address + 1
     return f"{prefix}{n:04d}" if n <= 9999 else f"{prefix}{n:05d}"
+
+
+def status_names(status: int) -> tuple[str, ...]:
+    """The STATUS bits that are set, by name, in bit order."""
+    return tuple(str(b.name) for b in Status if status & b)
+
+
+def read_back(registers: Sequence[int], tail: Sequence[int], word_order: WordOrder) -> dict[str, int]:
+    """Named values of both published runs as a PLC reads them: STATUS..METHOD_ID from
+    the base (``registers``) and SCORE_A..SCORE_B (``tail``, from ``TAIL_AT``)."""
+    values = decode_registers(registers, word_order)
+    values.update(decode_tail(tail))
+    return values

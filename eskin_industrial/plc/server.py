@@ -5,12 +5,13 @@ as input registers), coils ``base .. base + 2`` and discrete inputs ``base .. ba
 (see ``docs/plc.md``).  A write anywhere but COMMAND, ENABLE and the coils is refused
 with ILLEGAL DATA ADDRESS; a read outside the image too.  A tare is refused at once
 with SERVER DEVICE FAILURE (04) while the image says something is held, or cannot
-say (:meth:`PlcImage.refusal`).  Accepted commands are queued for the bridge loop,
-which applies them to the image (the server thread never changes it).
+say (:func:`~eskin_industrial.node.refusal`, the rule every output uses).  Accepted
+commands are queued for the bridge loop, which applies them (the server thread never
+changes the node's state).
 
-The servers are our own, with one PDU handler (:mod:`..bus.modbus.pdu`): over TCP
-:mod:`..bus.modbus.server` (connection cap, idle timeout, allow-lists, read-only
-mode, unit ids), over RTU :mod:`..bus.modbus.rtu_server` (our unit id, read-only
+The servers are our own, with one PDU handler (:mod:`..modbus.pdu`): over TCP
+:mod:`..modbus.tcp_server` (connection cap, idle timeout, allow-lists, read-only
+mode, unit ids), over RTU :mod:`..modbus.rtu_server` (our unit id, read-only
 mode).
 """
 
@@ -24,14 +25,16 @@ import threading
 import time
 from collections.abc import Sequence
 
-from ..bus.modbus.codec import DEVICE_FAILURE, ILLEGAL_ADDRESS
-from ..bus.modbus.io import SerialSettings
-from ..bus.modbus.pdu import Identity
-from ..bus.modbus.rtu_server import RtuServer
-from ..bus.modbus.server import PEER, Policy, RateLimitedLog, TcpServer, networks
 from ..errors import Refused
+from ..modbus.exception_codes import DEVICE_FAILURE, ILLEGAL_ADDRESS
+from ..modbus.pdu import Identity
+from ..modbus.rtu_server import RtuServer
+from ..modbus.serial_line import SerialSettings
+from ..modbus.serving import RateLimitedLog
+from ..modbus.tcp_server import PEER, Policy, TcpServer, networks
+from ..node import Command, NodeSnapshot, refusal
 from ..profile import ModbusPlcSection
-from ..sinks.base import Publication, Sink
+from ..sinks.base import Sink
 from .image import (
     BITS,
     COILS,
@@ -39,7 +42,6 @@ from .image import (
     REG,
     STATUS_COUNT,
     TAIL_COUNT,
-    Command,
     PlcImage,
     bits_of,
     coil_values,
@@ -62,18 +64,18 @@ class PlcRegisterHandler:
         self.refused = 0
         self.tares_refused = 0
         self.reads = 0
-        self.image: PlcImage | None = None  #: the image of the newest publication (for the tare rule)
+        self.snapshot: NodeSnapshot | None = None  #: the newest published (for the tare rule)
         self.log = RateLimitedLog(logging.getLogger(__name__))
         self._lock = threading.Lock()
 
-    def publish(self, registers: list[int], enabled: bool, image: PlcImage | None = None,
+    def publish(self, registers: list[int], enabled: bool, snapshot: NodeSnapshot | None = None,
                 tail: Sequence[int] = ()) -> None:
         self.registers = list(registers)
         if tail:
             self.tail = list(tail)
         self.enabled = enabled
-        if image is not None:
-            self.image = image
+        if snapshot is not None:
+            self.snapshot = snapshot
 
     def done(self) -> None:
         """The bridge has applied the queued commands: COMMAND reads 0 again."""
@@ -115,9 +117,9 @@ class PlcRegisterHandler:
         for cmd in cmds:
             if cmd.name != "tare":
                 continue
-            # The image of the newest publication: its update is replaced (never changed
-            # in place) by the loop's thread, so this thread reads one whole update.
-            why = "contact_unknown" if self.image is None else self.image.refusal(cmd)
+            # The newest snapshot: replaced (never changed in place) by the loop's
+            # thread, so this thread reads one whole snapshot.
+            why = refusal(cmd, self.snapshot)
             if why is not None:
                 # Refused as a whole, at once: nothing of this write is applied.
                 self.tares_refused += 1
@@ -216,9 +218,8 @@ class PlcServer:
             time.sleep(self.linger_s)
 
     # One block: the server answers for its block's sink.
-    def publish(self, registers: list[int], image: PlcImage, urgent: bool = False,
-                t_event: float | None = None) -> None:
-        self._blocks[0].publish(Publication(registers, image, urgent, t_event or 0.0, tail=tuple(image.tail)))
+    def publish(self, snapshot: NodeSnapshot) -> None:
+        self._blocks[0].publish(snapshot)
 
     def take_commands(self) -> list[Command]:
         return self._blocks[0].take_commands()
@@ -277,10 +278,12 @@ class PlcBlockSink(Sink):
         super().__init__()
         self.server = server
         self.handler = handler
+        self.image = PlcImage(handler.settings)  #: this block's register image (its heartbeat)
         self.where = f"{server.where}, base address {handler.base}"
 
-    def _publish(self, publication: Publication) -> None:
-        self.handler.publish(publication.registers, publication.image.enabled, publication.image, publication.tail)
+    def _publish(self, snapshot: NodeSnapshot) -> None:
+        image = self.image
+        self.handler.publish(image.render(snapshot), snapshot.enabled, snapshot, image.tail)
 
     def take_commands(self) -> list[Command]:
         out = []

@@ -16,9 +16,10 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from ..netaddr import check_host, listen_problem, parse_endpoint
 from ..preflight import check_serial
-from ..profile import ModbusPlcSection
+from ..profile import ModbusPlcSection, Profile
 from ..schema import in_range, ip_network, positive
 from ..sinks.base import CliOption, Sink
+from .image import IMAGE_COUNT
 
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
@@ -69,6 +70,14 @@ class PlcOptions:
         keys = ("timeout_s", "backoff_s", "backoff_max_s")
         given = {k: getattr(self, k) for k in keys if getattr(self, k) is not None}
         return replace(plc, **given) if given else plc
+
+
+@dataclass(frozen=True)
+class PlcNodeOptions:
+    """``[node.plc]`` of one ``[[node]]``: where that node's block lies."""
+
+    #: The node's register block in the PLC; default: the profile's ``[modbus.plc] base_address``.
+    base_address: int | None = field(default=None, metadata=in_range(0, 65000))
 
 
 #: The ``[plc]`` keys that override the first node's ``[modbus.plc]`` for the server.
@@ -126,6 +135,11 @@ class PlcSink(Sink):
 
     kind = "plc"
     Options = PlcOptions
+    NodeOptions = PlcNodeOptions
+    moved_node_keys = {"base_address": "base_address"}
+    node_profile_keys = {"base_address": "modbus.plc.base_address"}
+    node_cli_options = (CliOption("--base-address", "base_address", "One node: its register block (default: the "
+                                  "profile's [modbus.plc] base_address).", type=int, metavar="N"),)
     profile_keys = {"mode": "modbus.plc.mode", "host": "modbus.plc.host", "port": "modbus.plc.port",
                     "timeout_s": "modbus.plc.timeout_s", "backoff_s": "modbus.plc.backoff_s",
                     "backoff_max_s": "modbus.plc.backoff_max_s", **{k: f"modbus.plc.{k}" for k in SERVER_KEYS}}
@@ -151,11 +165,32 @@ class PlcSink(Sink):
         return options
 
     @classmethod
+    def node_options_from_cli(cls, values: dict[str, Any]) -> PlcNodeOptions | None:
+        base = values.get("base_address")
+        if base is None:
+            return None
+        if not 0 <= base <= 65000:
+            raise ValueError(f"--base-address: expected 0 to 65000, got {base}")
+        return PlcNodeOptions(base)
+
+    @classmethod
+    def adapt_profile(cls, profile: Profile, node_options: PlcNodeOptions | None) -> Profile:
+        if node_options is None or node_options.base_address is None:
+            return profile
+        plc = replace(profile.modbus.plc, base_address=node_options.base_address)
+        return replace(profile, modbus=replace(profile.modbus, plc=plc))
+
+    @classmethod
     def describe(cls, options: PlcOptions, node: NodeLike) -> str:
         return f"PLC {plc_mode(options, [node])} block at {node.profile.modbus.plc.base_address}"
 
     @classmethod
     def check(cls, options: PlcOptions, nodes: Sequence[NodeLike]) -> None:
+        blocks = sorted((n.profile.modbus.plc.base_address, n.name) for n in nodes)
+        for (lo, a), (hi, b) in zip(blocks, blocks[1:]):
+            if hi - lo < IMAGE_COUNT:
+                raise ValueError(f"[node {b!r}] plc.base_address: {hi} overlaps the block of node {a!r} at {lo} "
+                                 f"(a block takes {IMAGE_COUNT} registers)")
         if options.transport == "rtu" and plc_mode(options, nodes) == "client" and len(nodes) > 1:
             raise ValueError("transport: a PLC on a serial line takes one node in client mode "
                              "(use server mode, or TCP)")
@@ -185,7 +220,7 @@ class PlcSink(Sink):
 
     @classmethod
     def open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
-        from ..bus.modbus.io import SerialSettings
+        from ..modbus.serial_line import SerialSettings
         from .client import PlcWriter
         from .server import PlcServer, identity_of, policy_of
 
@@ -206,7 +241,7 @@ class PlcSink(Sink):
         sinks: list[Sink] = []
         for n in nodes:
             w = PlcWriter(options.client_settings(n.profile.modbus.plc), options.host, options.port,
-                          serial=serial).start()
+                          serial=serial, refresh_s=n.profile.output.refresh_s).start()
             context.closers.append(w.close)
             sinks.append(w)
         return sinks

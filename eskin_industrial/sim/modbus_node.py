@@ -1,11 +1,15 @@
-"""The sensor node's Modbus register layout, and a node simulator that serves a scene.
+"""A sensor node simulator that serves a scene as a Modbus RTU slave.
 
 The node keeps its newest scan in ``taxels x words`` registers from the profile's
 ``[modbus.node] start_address`` (input registers for function 4, holding registers
 for function 3), row-major, each the calibration's raw value as ``value_type``;
 with ``counter_register`` the node's scan counter comes first.
-:func:`encode_scan` / :func:`decode_scans` are the pure codec; the poller
-(``modbus_source``) and the simulator here share them.
+:func:`encode_scan` / :func:`decode_scans` are the pure codec; the RTU source
+(``bus/modbus/rtu.py``) and the simulator here share them.
+
+It serves through the package's own RTU server (:mod:`eskin_industrial.modbus.rtu_server`):
+the RTU source polls with pymodbus' master, so that a Modbus stack we did not write
+stands on the other side of the server, and ours on the other side of the master.
 """
 
 from __future__ import annotations
@@ -16,10 +20,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..bus.modbus.codec import ILLEGAL_ADDRESS, ILLEGAL_FUNCTION, encode_scan, register_count
-from ..bus.modbus.io import RegisterServer, SerialSettings
+from ..bus.modbus.codec import encode_scan, register_count
 from ..calibration import Calibrator
+from ..modbus.exception_codes import ILLEGAL_ADDRESS, ILLEGAL_FUNCTION
+from ..modbus.pdu import Identity, Table
+from ..modbus.rtu_server import RtuServer
+from ..modbus.serial_line import SerialSettings
 from ..profile import ModbusNodeSection, Profile
+
+#: What the simulated node answers to report server id and device identification.
+IDENTITY = Identity(vendor_name="eskin-industrial", product_code="modbus-node", revision="simulator")
 
 
 @dataclass
@@ -31,7 +41,7 @@ class NodeRegisters:
     scan: list[int] = field(default_factory=list)
     reads: int = 0
 
-    def read(self, table, address, count):
+    def read(self, table: Table, address: int, count: int) -> list[int] | int:
         wanted = "input" if self.node.function == 4 else "holding"
         if table != wanted:
             return ILLEGAL_FUNCTION if table in ("coils", "discrete") else ILLEGAL_ADDRESS
@@ -42,7 +52,7 @@ class NodeRegisters:
         self.reads += 1
         return scan[address - start: address - start + count]
 
-    def write(self, table, address, values):
+    def write(self, table: Table, address: int, values: list[int] | list[bool]) -> int | None:
         return ILLEGAL_ADDRESS  # the node's registers are read-only
 
 
@@ -66,7 +76,7 @@ class NodeSimulator:
         self.counter = node.counter_register
         self.registers = NodeRegisters(node, register_count(node, profile.taxels), self._content(0, 0))
         serial = SerialSettings(port, baudrate or node.baudrate, node.parity, node.stopbits)
-        self.server = RegisterServer(self.registers, serial=serial, unit_ids=[node.unit_id])
+        self.server = RtuServer(self.registers, serial, node.unit_id, IDENTITY)
         self.index = 0
         self.started: float | None = None  #: perf_counter when scan 0 went out
         self._stop = threading.Event()
@@ -106,7 +116,7 @@ class NodeSimulator:
     def __enter__(self) -> "NodeSimulator":
         return self.start()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
 

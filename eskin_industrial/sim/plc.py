@@ -15,10 +15,13 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from ..bus.modbus.codec import ILLEGAL_ADDRESS
-from ..bus.modbus.io import RegisterServer, SerialSettings
 from ..detect.state import GraspState
 from ..frames import FrameFlag
+from ..modbus.exception_codes import ILLEGAL_ADDRESS
+from ..modbus.pdu import Identity, Table
+from ..modbus.pymodbus_io import RegisterServer
+from ..modbus.rtu_server import RtuServer
+from ..modbus.serial_line import SerialSettings
 from ..plc.image import (
     CMD_ACK,
     IMAGE_COUNT,
@@ -32,6 +35,9 @@ from ..plc.image import (
 )
 from ..profile import ModbusPlcSection
 
+#: What the stand-in answers, over RTU, to report server id and device identification.
+IDENTITY = Identity(vendor_name="eskin-industrial", product_code="plc-sim", revision="simulator")
+
 
 @dataclass
 class PlcMemory:
@@ -42,13 +48,13 @@ class PlcMemory:
     writes: int = 0
     on_write: Callable[[float], None] | None = None
 
-    def read(self, table, address, count):
+    def read(self, table: Table, address: int, count: int) -> list[int] | int:
         off = address - self.base
         if table != "holding" or off < 0 or off + count > IMAGE_COUNT:
             return ILLEGAL_ADDRESS
         return self.regs[off: off + count]
 
-    def write(self, table, address, values):
+    def write(self, table: Table, address: int, values: list[int] | list[bool]) -> int | None:
         off = address - self.base
         if table != "holding" or off < 0 or off + len(values) > IMAGE_COUNT:
             return ILLEGAL_ADDRESS
@@ -119,7 +125,13 @@ class Gripper:
 
 
 class PlcSimulator:
-    """Serve the PLC memory over TCP; a scan thread prints changes and runs the logic."""
+    """Serve the PLC memory over TCP (or RTU); a scan thread prints changes and runs the logic.
+
+    Over TCP the memory is served by pymodbus: the bridge's client mode writes with
+    its own master and framing (``modbus/tcp_master.py``), so a Modbus stack we did not
+    write decodes every request.  Over RTU the bridge's master is pymodbus', and the
+    stand-in serves with our own RTU server: again two stacks, one of them not ours.
+    """
 
     def __init__(self, settings: ModbusPlcSection, host: str, port: int, *, scan_s: float = 0.01,
                  echo: Callable[[str], None] | None = print, gripper: Gripper | None = None,
@@ -127,8 +139,9 @@ class PlcSimulator:
         self.settings = settings
         self.memory = PlcMemory(settings.base_address, on_write=self._on_write)
         self.memory.regs[REG["ENABLE"].offset] = 1  # the PLC program enables detection
+        self.server: RtuServer | RegisterServer
         if serial is not None:  # an RTU slave with the profile's unit id
-            self.server = RegisterServer(self.memory, serial=serial, unit_ids=[settings.unit_id])
+            self.server = RtuServer(self.memory, serial, settings.unit_id, IDENTITY)
         else:
             self.server = RegisterServer(self.memory, tcp=(host, port))
         self.scan_s = scan_s

@@ -3,11 +3,13 @@
 A node's loop hands each of its sinks every detector update (:meth:`Sink.on_update`,
 cheap, for a recorder), the calibrated taxel frame at the interval the sink asks for
 (:attr:`Sink.frame_every_s`, :meth:`Sink.on_frame`; most sinks ask for none), and every
-publication of the register image
-(:meth:`Sink.publish`: the registers as rendered, the image they came from, whether
-it is urgent, and when the deciding scan arrived).  A sink that can be commanded (the
-PLC: acknowledge, tare, enable) hands the commands back through
-:meth:`Sink.take_commands`.  Each sink reports :meth:`Sink.health` (connected,
+publication of the node's snapshot (:meth:`Sink.publish`: a
+:class:`~eskin_industrial.node.NodeSnapshot`, the state, validity, health, scores,
+force, counts and times in named fields and SI units, with whether it is urgent; the
+PLC renders its registers from it, nothing else does).  A sink that can be commanded
+(the PLC, Sparkplug: acknowledge, tare, enable) hands the commands back through
+:meth:`Sink.take_commands`, each a :class:`~eskin_industrial.node.Command` it has
+judged under :func:`~eskin_industrial.node.refusal`, the one rule.  Each sink reports :meth:`Sink.health` (connected,
 failures, last error) and :meth:`Sink.counters`; a sink that knows when its own
 episodes start and end (the PLC writer's outages) says so with :meth:`Sink._event`,
 which the bridge routes to its log (:meth:`Sink.on_events`).  :meth:`Sink.flush` /
@@ -17,7 +19,8 @@ The public methods are written once here over private hooks (``_publish``,
 ``_close``), as python-can's ``BusABC.send`` over its backend's hook.
 
 An *output kind* is one module plus one entry in :data:`SINKS` (section name ->
-``module:Class``, imported on first use).  The class declares what the bridge
+``module:Class``, imported on first use), or a plug-in: an entry point of the group
+``eskin_industrial.sinks`` in another distribution (:mod:`eskin_industrial.registry`).  The class declares what the bridge
 configuration (its own ``[SECTION]`` of ``bridge.toml``), the command line
 (:attr:`Sink.cli_options`) and ``--check`` need, and opens one sink per node
 (:meth:`Sink.open_nodes`; a kind may share one connection between its nodes, as the
@@ -33,15 +36,16 @@ import collections
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
+from typing import TYPE_CHECKING, Any, ClassVar
 
-from ..registry import load_kind
+from ..registry import SINK_GROUP, kinds, load_kind
 
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
+    from ..profile import Profile
     from ..detect.updates import Update
     from ..frames import Frame
-    from ..plc.image import Command, PlcImage
+    from ..node import Command, NodeSnapshot
 
 #: section name -> "module:Class", imported on first use.  The order is the order of
 #: the outputs in logs and ``--check``.
@@ -49,6 +53,7 @@ SINKS: dict[str, str] = {
     "plc": "eskin_industrial.plc.sink:PlcSink",
     "recorder": "eskin_industrial.sinks.recorder:Recorder",
     "sparkplug": "eskin_industrial.plant.sparkplug:SparkplugDevice",
+    "opcua": "eskin_industrial.opcua.sink:OpcuaSink",
 }
 #: A sink's own events held until a handler is attached (the first ones of a writer
 #: that starts before the bridge's log is wired); beyond it the oldest are dropped.
@@ -59,20 +64,6 @@ EventHandler = Callable[[str, str, dict[str, Any]], None]
 #: With no output configured at all, the bridge publishes to this one (the PLC as
 #: each node's profile describes it).
 DEFAULT_OUTPUT = "plc"
-
-
-class Publication(NamedTuple):
-    """One publication of a node's register image (a named tuple: built at every
-    publication, up to once a scan)."""
-
-    registers: list[int]  #: STATUS..METHOD_ID as rendered (``plc.image.STATUS_COUNT`` values)
-    image: PlcImage  #: the image they were rendered from (enable, latch, newest update)
-    urgent: bool  #: a state or status change: to be written at once
-    t_event: float  #: ``time.perf_counter()`` when the deciding scan arrived
-    offline: bool = False  #: the bridge's last image (BRIDGE_OFFLINE)
-    scans: int = 0  #: scans the node's loop has taken since start (0 in the offline image)
-    #: SCORE_A..SCORE_B as rendered (``plc.image.TAIL_COUNT`` values from ``TAIL_AT``)
-    tail: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -111,6 +102,17 @@ class Sink(abc.ABC):
     #: The sink logs its connection's ups and downs itself (:meth:`_event`): the
     #: bridge does not infer them from :meth:`health`.
     logs_connection: ClassVar[bool] = False
+    #: The kind's own keys of one node (a frozen dataclass): ``[node.KIND]`` under a
+    #: ``[[node]]`` table of ``bridge.toml`` (the PLC: the node's ``base_address``);
+    #: None: the kind has none.  Applied to the node's profile by :meth:`adapt_profile`.
+    NodeOptions: ClassVar[type | None] = None
+    #: The options of a one-node bridge's command line that fill :attr:`NodeOptions`.
+    node_cli_options: ClassVar[tuple[CliOption, ...]] = ()
+    #: ``[[node]]`` keys of earlier releases that are now this kind's (old -> its key):
+    #: still read, with a deprecation warning naming ``[node.KIND] key``.
+    moved_node_keys: ClassVar[dict[str, str]] = {}
+    #: A key of :attr:`NodeOptions` -> the profile key (dotted) it overrides, for ``--explain``.
+    node_profile_keys: ClassVar[dict[str, str]] = {}
 
     def __init__(self) -> None:
         self._closed = False
@@ -134,11 +136,13 @@ class Sink(abc.ABC):
         the last one handed, on the loop's thread: never block.  The frame is the one
         the detector saw, not a copy: never change its arrays."""
 
-    def publish(self, publication: Publication) -> None:
-        """A publication of the register image, on the loop's thread: never block."""
-        self._publish(publication)
+    def publish(self, snapshot: NodeSnapshot) -> None:
+        """A publication of the node's snapshot, on the loop's thread: never block.
+        ``snapshot.urgent``: a change to send at once; ``snapshot.offline``: the
+        bridge's last one."""
+        self._publish(snapshot)
 
-    def _publish(self, publication: Publication) -> None:
+    def _publish(self, snapshot: NodeSnapshot) -> None:
         """The kind's hook for :meth:`publish`; default: nothing."""
 
     def take_commands(self) -> list[Command]:
@@ -205,6 +209,17 @@ class Sink(abc.ABC):
         return None
 
     @classmethod
+    def node_options_from_cli(cls, values: dict[str, Any]) -> Any | None:
+        """The kind's :attr:`NodeOptions` from a one-node command line (None: none given)."""
+        return None
+
+    @classmethod
+    def adapt_profile(cls, profile: Profile, node_options: Any) -> Profile:
+        """The node's profile with the kind's node options laid over it (a node's
+        ``[node.plc] base_address`` over its profile's ``[modbus.plc]``)."""
+        return profile
+
+    @classmethod
     def default_options(cls) -> Any:
         """The options when the kind is the default output and nothing was given."""
         return cls.Options()
@@ -241,5 +256,11 @@ class Sink(abc.ABC):
 
 def sink_class(kind: str) -> type[Sink]:
     """The class of an output kind by name; an unknown one is one line with the valid names."""
-    cls: type[Sink] = load_kind(SINKS, kind, "output kind", Sink)
+    cls: type[Sink] = load_kind(SINKS, kind, "output kind", Sink, SINK_GROUP)
     return cls
+
+
+def sink_kinds() -> dict[str, str]:
+    """Every output kind: :data:`SINKS`, then the plug-ins (entry-point group
+    ``eskin_industrial.sinks``), in the order of logs, ``--check`` and the options."""
+    return kinds(SINKS, SINK_GROUP)

@@ -6,10 +6,8 @@
 - :mod:`.live`: snapshots from a running chain's newest values.
 """
 
-from ..plc.image import decode_registers
 from .screen import render
-from .snapshot import IndicatorScale, Snapshot, indicator_scale, status_names
+from .snapshot import IndicatorScale, RegisterTable, Snapshot, indicator_scale
 from .terminal import LiveScreen, color_wanted
 
-__all__ = ["IndicatorScale", "LiveScreen", "Snapshot", "color_wanted", "decode_registers", "indicator_scale",
-           "render", "status_names"]
+__all__ = ["IndicatorScale", "LiveScreen", "RegisterTable", "Snapshot", "color_wanted", "indicator_scale", "render"]

@@ -2,8 +2,8 @@
 the redraw thread builds from it.
 
 The data path does nothing for the view but what it already does (the pipeline keeps
-its newest frame and update; the bridge its counters) plus one ``deque.append`` per
-state change.  :meth:`Watch.snapshot` runs on the redraw thread and only reads:
+its newest frame and update; the loop its newest snapshot; the bridge its counters)
+plus one ``deque.append`` per state change.  :meth:`Watch.snapshot` runs on the redraw thread and only reads:
 attribute reads and list copies, atomic under the interpreter lock.
 """
 
@@ -18,12 +18,11 @@ import numpy as np
 
 from ..detect.state import GraspState
 from ..detect.updates import Update
+from ..node import NodeSnapshot
 from ..pipeline import Pipeline
-from ..plc.image import decode_registers, decode_tail
 from ..profile import Profile
-from ..sinks.base import Publication, Sink
 from .screen import render
-from .snapshot import Snapshot, indicator_scale, status_names
+from .snapshot import RegisterTable, Snapshot, indicator_scale
 from .terminal import DEFAULT_FPS, LiveScreen
 
 #: Counters the view shows, in this order, under these names.
@@ -45,25 +44,6 @@ def change_line(u: Update) -> str:
             f"F={u.f_sum:6.2f} N  scores {u.score_a:6.2f} {u.score_b:6.2f}  R_coe {u.r_coe:6.2f} R_dw {u.r_dw:6.2f}")
 
 
-class KeptImage(Sink):
-    """A sink that keeps the newest register image instead of sending it: the
-    registers the bridge would publish, with no PLC connected (``monitor``)."""
-
-    kind = "view"
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.where = "the live view"
-        self.registers: list[int] | None = None
-        self.tail: tuple[int, ...] = ()  #: the newest SCORE_A..SCORE_B
-        self.publications = 0
-
-    def _publish(self, publication: Publication) -> None:
-        self.registers = list(publication.registers)
-        self.tail = publication.tail
-        self.publications += 1
-
-
 class Watch:
     """Newest values of one chain -> :class:`Snapshot` (on the redraw thread)."""
 
@@ -71,24 +51,24 @@ class Watch:
     RATE_WINDOW_S = 1.0
 
     def __init__(self, profile: Profile, pipeline: Pipeline, *, method: str,
-                 registers: Callable[[], list[int] | None], registers_from: str,
-                 counters: Callable[[], Mapping[str, int]], source: str, title: str, started: float,
-                 log_lines: int = 100, tail: Callable[[], Sequence[int]] | None = None,
+                 snapshot: Callable[[], NodeSnapshot | None], counters: Callable[[], Mapping[str, int]],
+                 source: str, title: str, started: float, log_lines: int = 100,
+                 registers: Callable[[], RegisterTable | None] | None = None, registers_from: str = "",
                  extra: Callable[[], Sequence[str]] | None = None) -> None:
-        """``registers``: the first published run (STATUS..METHOD_ID); ``tail``: the
-        second (SCORE_A..SCORE_B), shown with them; ``extra``: lines shown under the
-        state (read on the redraw thread)."""
+        """``snapshot``: the node's newest published snapshot; ``registers``, when
+        given: a register table to show beside it (the PLC's, decoded by the caller);
+        ``extra``: lines shown under the state (read on the redraw thread)."""
         self.profile = profile
         self.pipeline = pipeline
         self.scale = indicator_scale(method, profile.detector, pipeline.detector)
+        self.newest = snapshot
         self.registers = registers
-        self.tail = tail
         self.registers_from = registers_from
+        self.extra = extra
         self.counters = counters
         self.source = source
         self.title = title
         self.started = started
-        self.extra = extra
         self.log: collections.deque[str] = collections.deque(maxlen=log_lines)
         self._rate_mark: tuple[float, int] | None = None
         self._rate: float | None = None
@@ -102,11 +82,8 @@ class Watch:
         frame = self.pipeline.last_frame
         u = self.pipeline.last_update
         forces = None if frame is None else np.array(frame.forces, dtype=np.float64).reshape(lay.rows, lay.cols)
-        raw = self.registers()
-        regs = None if raw is None else decode_registers(raw, self.profile.modbus.plc.word_order)
-        if regs is not None and self.tail is not None:
-            regs.update(decode_tail(self.tail()))
-        bits = status_names(regs["STATUS"]) if regs is not None else ()
+        published = self.newest()
+        table = self.registers() if self.registers is not None else None
         counters = dict(self.counters())
         scans = int(counters.get("scans", 0))
         if self._rate_mark is None:
@@ -123,10 +100,11 @@ class Watch:
             scale=self.scale,
             state=None if u is None else GraspState(u.state).label,
             valid=False if u is None else bool(u.valid),
-            stale=frame is None or "SENSOR_STALE" in bits,
+            stale=frame is None or (published is not None and published.stale),
             f_sum=None if u is None else u.f_sum,
             cof=None if u is None else (u.xc, u.yc),
-            registers=regs,
+            registers=None if table is None else table.values,
+            status_bits=() if table is None else table.bits,
             registers_from=self.registers_from,
             counters=short_counters(counters),
             elapsed_s=now - self.started,

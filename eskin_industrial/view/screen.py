@@ -19,7 +19,7 @@ import numpy as np
 
 from ..detect.state import GraspState
 from ..frames import FrameFlag
-from .snapshot import IndicatorScale, Snapshot, status_names
+from .snapshot import IndicatorScale, Snapshot
 
 #: Plain heat map: light to heavy.
 RAMP = " .:-=+*#%@"
@@ -251,7 +251,7 @@ def register_block(s: Snapshot, width: int) -> list[Line]:
         return [[(title, "1")], [("none published yet", "2")]]
     regs: Mapping[str, int] = s.registers
     status = regs.get("STATUS", 0)
-    bits = status_names(status)
+    bits = s.status_bits
     head: list[Line] = [[(f"STATUS 0x{status:04x}", "1")]] + [[(b, _BIT_STYLE.get(b, ""))] for b in bits]
     if "DATA_VALID" not in bits:
         head.append([("(no DATA_VALID)", "2")])

@@ -1,10 +1,10 @@
 """What one screen of the live view shows, as plain values: :class:`Snapshot`.
 
 Pure code, no I/O and no clock.  The glue that reads a running chain
-(:mod:`eskin_industrial.view.live`) builds snapshots, decoding the registers with
-:func:`~eskin_industrial.bus.plc_image.decode_registers` so the view shows exactly the
-numbers :meth:`PlcImage.render` produced; the renderer
-(:mod:`eskin_industrial.view.screen`) draws them.
+(:mod:`eskin_industrial.view.live`) builds snapshots from the node's snapshot (the
+one every output reads) and, when the caller hands one, a table of named registers
+(:class:`RegisterTable`: the PLC's, as a PLC reads them; the view decodes no wire
+format itself); the renderer (:mod:`eskin_industrial.view.screen`) draws them.
 """
 
 from __future__ import annotations
@@ -14,8 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from typing import NamedTuple
+
 from ..detect.settings import DetectorSettings
-from ..plc.image import Status
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,9 +63,12 @@ def indicator_scale(method: str, settings: DetectorSettings, detector: object | 
     return IndicatorScale((columns[0], columns[1]), f"{method} scores", (slip_a, slip_b))
 
 
-def status_names(status: int) -> tuple[str, ...]:
-    """The STATUS bits that are set, by name, in bit order."""
-    return tuple(str(b.name) for b in Status if status & b)
+class RegisterTable(NamedTuple):
+    """Named register values and the names of the status bits that are set, as an
+    output's wire format holds them (handed to the view by whoever decodes it)."""
+
+    values: Mapping[str, int]
+    bits: tuple[str, ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,8 +90,10 @@ class Snapshot:
     f_sum: float | None = None
     #: Centre of force in mm.
     cof: tuple[float, float] | None = None
-    #: Decoded registers as :meth:`PlcImage.render` made them; None before the first.
+    #: Named registers (STATUS first), as the caller decoded them; None: none (yet).
     registers: Mapping[str, int] | None = None
+    #: The STATUS bits that are set, by name, in bit order.
+    status_bits: tuple[str, ...] = ()
     #: Where the registers come from ("as the PLC reads them", "as the bridge would publish").
     registers_from: str = ""
     counters: Mapping[str, int] = field(default_factory=dict)

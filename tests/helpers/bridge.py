@@ -21,8 +21,8 @@ from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
 from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.bus.can.reader import open_bus
-from eskin_industrial.bus.modbus.io import RegisterServer
 from eskin_industrial.calibration import Calibrator
+from eskin_industrial.modbus.pymodbus_io import RegisterServer
 from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
 from eskin_industrial.plc.image import decode_registers as decode
 from eskin_industrial.plc.sink import PlcOptions
@@ -52,7 +52,7 @@ def wait_for(cond: Callable[[], object], timeout_s: float = 5.0, what: str = "co
 
 def can_node(name: str, ch: str, *, base_id: int | None = None, base_address: int = 0, **kw) -> NodeConfig:
     return NodeConfig.of(name, PAPER, "can", interface="virtual", channel=ch, base_id=base_id,
-                         base_address=base_address, **kw)
+                         outputs={"plc": {"base_address": base_address}}, **kw)
 
 
 def server_config(*nodes: NodeConfig, port: int | None = None, linger_s: float = 0.0,

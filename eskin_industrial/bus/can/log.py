@@ -1,5 +1,9 @@
-"""CAN logs: read any format python-can reads, replay one in real time as if received,
-and decode a node's scans from one through the live path's assembler and pipeline."""
+"""CAN logs: read any format python-can reads, replay one in real time as if received
+(the can-log source), and a node's scans from a whole log or a live candump stream
+through the live path's assembler, with its counters and the log's checks.
+
+Reading only: what is detected from the scans is the offline path's business
+(``eskin_industrial.offline``), which hands them to the pipeline."""
 
 from __future__ import annotations
 
@@ -12,11 +16,10 @@ from typing import Any, TextIO
 
 import can
 
-from ...detect.updates import Update, UpdateTable
 from ...errors import EskinError, InputFormatError
 from ...frames import RawScan
-from ...pipeline import Pipeline
 from ...preflight import check_readable
+from ...profile import Profile
 from ...progress import NO_PROGRESS, Progress
 from ...schema import in_range
 from ..source import DEFAULT_QUEUE_FRAMES, NodeLike, OpenContext
@@ -143,48 +146,21 @@ def _at_byte(reader: object) -> str:
         return ""
 
 
-def replay(scans: list[RawScan], pipeline: Pipeline, progress: Progress = NO_PROGRESS) -> list[Update]:
-    updates: list[Update] = []
-    progress.stage("detecting", len(scans))
-    for i, scan in enumerate(scans, start=1):
-        updates += pipeline.push(scan)
-        if i % _PROGRESS_EVERY == 0:
-            progress.advance(_PROGRESS_EVERY)
-    progress.advance(len(scans) % _PROGRESS_EVERY)
-    return updates
-
-
-def log_scans(profile, path: str | Path, rate_hz: float | None = None,
-              progress: Progress = NO_PROGRESS) -> tuple[list[RawScan], ScanAssembler]:
-    """The node's scans in a CAN log, through the live path's assembler (the FD layout
-    when the node's frames are FD frames)."""
+def log_scans(profile: Profile, path: str | Path, rate_hz: float | None = None,
+              progress: Progress = NO_PROGRESS) -> tuple[list[RawScan], dict[str, int]]:
+    """The node's complete scans in a CAN log, through the live path's assembler (the
+    FD layout when the node's frames are FD frames), and the assembler's counters; a
+    log of another layout on the node's IDs is refused in one line (never scans read
+    with the wrong layout).  ``progress``: a stage over the file's bytes."""
     messages = list(read_can_log(path, progress))
     lo = profile.can.base_id
     fd = any(m.is_fd for m in messages[:10_000] if lo <= m.arbitration_id < lo + ID_RANGE)
     layout = CanLayout.from_profile(profile, fd=fd or profile.can.fd)
-    return decode_messages(layout, messages, rate_hz or profile.sensor.rate_hz)
-
-
-def detect_log(profile, path: str | Path, rate_hz: float | None = None, method: str | None = None,
-               progress: Progress = NO_PROGRESS) -> tuple[UpdateTable, dict[str, int]]:
-    """A CAN log through the live path's assembler and pipeline: the updates as a
-    table, and the counters (the pipeline's, the refused times, the assembler's);
-    ``progress``: a stage reading the file, one detecting."""
-    rate = rate_hz or profile.sensor.rate_hz
-    scans, asm = log_scans(profile, path, rate, progress)
+    scans, asm = decode_messages(layout, messages, rate_hz or profile.sensor.rate_hz)
     mismatch = layout_mismatch(asm.counters, _ids(profile))
-    if mismatch is not None:  # never "valid" verdicts from frames read with the wrong layout
+    if mismatch is not None:
         raise InputFormatError(f"{path}: {mismatch}")
-    pipeline = Pipeline(profile, rate_hz=rate, method=method)
-    table = UpdateTable.from_updates(replay(scans, pipeline, progress))
-    counters = _log_counters(pipeline, asm)
-    require_scans(profile, counters, str(path))
-    return table, counters
-
-
-def _log_counters(pipeline: Pipeline, asm: ScanAssembler) -> dict[str, int]:
-    c = pipeline.counters
-    return {k: v for k, v in vars(c).items() if k != "extra"} | pipeline.time_faults() | asm.counters
+    return scans, asm.counters
 
 
 #: How often a live log's layout is checked (messages): early enough to refuse a log
@@ -192,56 +168,68 @@ def _log_counters(pipeline: Pipeline, asm: ScanAssembler) -> dict[str, int]:
 _CHECK_EVERY = 256
 
 
-def detect_live_log(profile, stream: TextIO, emit: Callable[[Update], None], rate_hz: float | None = None,
-                    method: str | None = None, name: str = "<stdin>") -> dict[str, int]:
-    """A candump-format log (``candump -L``: ``(time) iface ID#DATA``) read as it comes,
-    each update handed to ``emit`` as soon as its scan is complete; the counters at
-    the end.  The same assembler, checks and pipeline as :func:`detect_log`."""
-    rate = rate_hz or profile.sensor.rate_hz
-    pipeline = Pipeline(profile, rate_hz=rate, method=method)
-    lo = profile.can.base_id
-    asm: ScanAssembler | None = None
-    before = 0  # frames of other IDs before the node's first (the assembler counts the rest)
-    count = 0
-    messages = iter(can.io.CanutilsLogReader(stream))
-    while True:
-        try:  # only the reading: what emit raises (a closed pipe downstream) is not the log's fault
-            msg = next(messages, None)
-        except READ_ERRORS as exc:
-            raise InputFormatError(f"{name}: message {count + 1}: not a valid candump -L line: "
-                                   f"{_detail(exc)}") from None
-        if msg is None:
-            break
-        count += 1
-        if asm is None:
-            if not lo <= msg.arbitration_id < lo + ID_RANGE:
-                before += 1
-                continue
-            # the node's first frame tells classic from FD, as a whole log's first frames do
-            asm = ScanAssembler(CanLayout.from_profile(profile, fd=msg.is_fd or profile.can.fd), rate)
-        scan = asm.feed(msg)
-        if scan is not None:
-            for u in pipeline.push(scan):
-                emit(u)
-        if count % _CHECK_EVERY == 0:
-            mismatch = layout_mismatch(asm.counters, _ids(profile))
-            if mismatch is not None:
-                raise InputFormatError(f"{name}: {mismatch}")
-    if asm is None:
-        counters = {**_log_counters(pipeline, ScanAssembler(CanLayout.from_profile(profile), rate)),
-                    "foreign_frames": before}
-    else:
-        asm.flush()
-        mismatch = layout_mismatch(asm.counters, _ids(profile))
+class LiveLogScans:
+    """The node's scans in a candump-format log (``candump -L``: ``(time) iface
+    ID#DATA``) read as it comes, each yielded as soon as it is complete: the same
+    assembler and layout checks as :func:`log_scans`.  Iterate once; then
+    :meth:`counters`.  What the consumer of a scan raises (a closed pipe downstream)
+    passes through untouched: only the reading is the log's fault."""
+
+    def __init__(self, profile: Profile, stream: TextIO, rate_hz: float | None = None,
+                 name: str = "<stdin>") -> None:
+        self.profile, self.name = profile, name
+        self.rate_hz = rate_hz or profile.sensor.rate_hz
+        self._stream = stream
+        self._asm: ScanAssembler | None = None
+        self._before = 0  # frames of other IDs before the node's first (the assembler counts the rest)
+
+    def __iter__(self) -> Iterator[RawScan]:
+        profile, name = self.profile, self.name
+        lo = profile.can.base_id
+        count = 0
+        messages = iter(can.io.CanutilsLogReader(self._stream))
+        while True:
+            try:
+                msg = next(messages, None)
+            except READ_ERRORS as exc:
+                raise InputFormatError(f"{name}: message {count + 1}: not a valid candump -L line: "
+                                       f"{_detail(exc)}") from None
+            if msg is None:
+                break
+            count += 1
+            if self._asm is None:
+                if not lo <= msg.arbitration_id < lo + ID_RANGE:
+                    self._before += 1
+                    continue
+                # the node's first frame tells classic from FD, as a whole log's first frames do
+                self._asm = ScanAssembler(CanLayout.from_profile(profile, fd=msg.is_fd or profile.can.fd),
+                                          self.rate_hz)
+            scan = self._asm.feed(msg)
+            if scan is not None:
+                yield scan
+            if count % _CHECK_EVERY == 0:
+                self._check(self._asm)
+        if self._asm is not None:
+            self._asm.flush()
+            self._check(self._asm)
+
+    def _check(self, asm: ScanAssembler) -> None:
+        mismatch = layout_mismatch(asm.counters, _ids(self.profile))
         if mismatch is not None:
-            raise InputFormatError(f"{name}: {mismatch}")
-        counters = _log_counters(pipeline, asm)
-        counters["foreign_frames"] += before
-    require_scans(profile, counters, name)
-    return counters
+            raise InputFormatError(f"{self.name}: {mismatch}")
+
+    def counters(self) -> dict[str, int]:
+        """The assembler's counters, the frames of other IDs before the node's first
+        among ``foreign_frames`` (all zero but those when the node never spoke)."""
+        if self._asm is None:
+            return {**ScanAssembler(CanLayout.from_profile(self.profile), self.rate_hz).counters,
+                    "foreign_frames": self._before}
+        counters = dict(self._asm.counters)
+        counters["foreign_frames"] += self._before
+        return counters
 
 
-def require_scans(profile, counters: dict[str, int], name: str) -> None:
+def require_scans(profile: Profile, counters: dict[str, int], name: str) -> None:
     """A log with no complete scan of the node is refused in one line (another node's
     log, a wrong base_id): never an empty output that looks like a quiet sensor."""
     if counters["scans"] == 0:
@@ -252,7 +240,7 @@ def require_scans(profile, counters: dict[str, int], name: str) -> None:
             f"{counters.get('foreign_frames', 0)} of other IDs): another node's log, or set base_id")
 
 
-def _ids(profile) -> str:
+def _ids(profile: Profile) -> str:
     lo = profile.can.base_id
     return f"IDs {lo:#x}-{lo + ID_RANGE - 1:#x} (profile {profile.name})"
 

@@ -1,2 +1,2 @@
-"""Modbus: every pymodbus call (:mod:`.io`), the pure scan register codec and
-exception codes (:mod:`.codec`), and the RTU sensor-node source (:mod:`.rtu`)."""
+"""The Modbus RTU sensor-node source (:mod:`.rtu`) and its pure scan register codec
+(:mod:`.codec`); the protocol itself is :mod:`eskin_industrial.modbus`."""

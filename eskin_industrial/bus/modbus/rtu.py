@@ -21,12 +21,13 @@ from typing import Any
 
 from ...errors import ModbusFault
 from ...frames import RawScan
+from ...modbus.pymodbus_io import RtuMaster
+from ...modbus.serial_line import SerialSettings
 from ...preflight import check_serial
 from ...profile import Profile
 from ...schema import in_range, positive
 from ..source import NodeLike, OpenContext, Source
 from .codec import decode_scans, register_count
-from .io import RtuMaster, SerialSettings
 
 
 @dataclass

@@ -4,8 +4,8 @@ holds an object (the object status says "stopped on contact", or "at position: n
 object / object lost"; it is no slip detector).  The table is docs/cell.md's.
 
 :data:`GRIPPER_REGISTERS` is the one description of the map; :class:`GripperRegisters`
-answers a server's reads and writes from it (``bus.modbus.io.RegisterServer``, the
-pymodbus server the simulators use).  The drive itself is ``actuator.py``: the device
+answers a server's reads and writes from it (``modbus.pymodbus_io.RegisterServer``,
+the pymodbus server the PLC stand-in uses over TCP).  The drive itself is ``actuator.py``: the device
 hands every accepted request to ``on_request`` with its arrival time, and reads the
 state it reports from :class:`GripperState`, which the world updates.
 """
@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ...bus.modbus.codec import ILLEGAL_ADDRESS, ILLEGAL_VALUE
+from ...modbus.exception_codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE
 
 #: The force registers' unit: 0.01 N.
 FORCE_SCALE = 100.0

@@ -32,11 +32,11 @@ from ...bridge.loop import NodeLoop
 from ...bridge.runtime import SingleNode
 from ...bus.can.layout import CanLayout
 from ...bus.can.reader import open_bus
-from ...bus.modbus.io import RegisterServer
-from ...bus.modbus.tcp import PipelinedTcpMaster
 from ...calibration import Calibrator
 from ...detect.updates import Update
 from ...errors import ModbusFault
+from ...modbus.pymodbus_io import RegisterServer
+from ...modbus.tcp_master import PipelinedTcpMaster
 from ...plc.image import CMD_ACK, REG, STATUS_COUNT, TAIL_AT, TAIL_COUNT, decode_registers, decode_tail
 from ...plc.sink import PlcOptions
 from ...profile import ModbusPlcSection, Profile
@@ -265,7 +265,7 @@ def run_cell(profile: Profile, episode: Episode, method: str, *, chain: ChainSpe
     # the bridge's profile: this method, this rate, the node's staleness as above
     prof = replace(profile, detector=replace(profile.detector, method=method),
                    sensor=replace(profile.sensor, rate_hz=chain.rate_hz),
-                   modbus=replace(profile.modbus, plc=replace(profile.modbus.plc, stale_s=STALE_S)))
+                   output=replace(profile.output, stale_s=STALE_S))
     layout = CanLayout.from_profile(prof, fd=False)
     cal = Calibrator.from_section(prof.calibration, prof.taxels)
     requests: collections.deque[tuple[float, float]] = collections.deque()

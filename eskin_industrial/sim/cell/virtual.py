@@ -5,10 +5,12 @@ measured on it (``latency.py``), deterministically from the episode's seed.
 What happens, in time order:
 
 - a scan every ``1 / rate_hz``: the world renders a frame (``CellWorld.frame``), the
-  node's integers as the CAN node sends them, the bridge's pipeline and register image
-  (``PlcImage``) as its loop runs them; an image goes out when the loop would publish
-  one (a state change at once, a status bit change, else every ``refresh_s``) and
-  lands in the PLC's memory ``SCAN_TO_PLC`` later (in order, as on one connection);
+  node's integers as the CAN node sends them, the bridge's pipeline, the node's status
+  (``NodeStatus``: latch, counts) and the PLC's register image rendered from its
+  snapshot (``PlcImage``), as its loop runs them; an image goes out when the loop
+  would publish one (a state change at once, a change of what the outputs show, else
+  every ``refresh_s``) and lands in the PLC's memory ``SCAN_TO_PLC`` later (in order,
+  as on one connection);
 - a PLC cycle every ``plc_cycle_s`` from a random phase: the program (``policy.py``)
   reads its memory, and a new force request reaches the gripper ``PLC_TO_GRIPPER``
   later, whose drive takes it up after its dead time (``actuator.py``); an acknowledge
@@ -34,7 +36,8 @@ from ...detect.state import GraspState
 from ...detect.updates import Update
 from ...frames import RawScan
 from ...pipeline import Pipeline
-from ...plc.image import Command, Health, PlcImage, Status, decode_registers
+from ...node import Command, Health, NodeStatus
+from ...plc.image import PlcImage, decode_registers
 from ...profile import Profile
 from .actuator import ActuatorSpec
 from .gripper import from_register, to_register
@@ -44,7 +47,6 @@ from .policy import GripPolicy, PolicySettings
 from .recipes import fixed_grip_n, policy_settings
 from .world import TICK_S, CellWorld, Episode
 
-_QUIET = ~int(Status.BRIDGE_ALIVE)
 #: The baselines that are no detection method.
 FIXED, ORACLE = "fixed", "oracle"
 
@@ -70,33 +72,40 @@ def raw_of(calibrator: Calibrator, forces: np.ndarray, max_raw: int) -> np.ndarr
 
 
 class _Bridge:
-    """The bridge's loop for one node, in virtual time: pipeline, image, publications."""
+    """The bridge's loop for one node, in virtual time: pipeline, node status, the
+    PLC's image, publications (a fresh frame always: the virtual node never falls
+    silent)."""
+
+    HEALTH = Health(frame_age_s=0.0)
 
     def __init__(self, profile: Profile, rate_hz: float, method: str) -> None:
         self.pipeline = Pipeline(profile, rate_hz=rate_hz, method=method)
-        self.image = PlcImage(profile.modbus.plc, method=self.pipeline.method.code)
-        self.refresh_s = profile.modbus.plc.refresh_s
+        chosen = self.pipeline.method
+        self.status = NodeStatus(profile.stale_s, chosen.name, chosen.code,
+                                 (chosen.scores[0].name, chosen.scores[1].name))
+        self.image = PlcImage(profile.modbus.plc)
+        self.refresh_s = profile.output.refresh_s
         self.word_order = profile.modbus.plc.word_order
         self.last_pub = float("-inf")
-        self.last_status = -1
+        self.last_conditions = -1
 
     def observe(self, updates: list[Update]) -> bool:
         urgent = False
         for u in updates:
-            urgent |= self.image.observe(u)
+            urgent |= self.status.observe(u)
         return urgent
 
     def publish_if_due(self, now: float, urgent: bool) -> tuple[dict[str, int], bool] | None:
         """The published values (and whether they were a refresh) when due, as
         ``NodeLoop.publish_if_due`` decides."""
-        health = Health(frame_age_s=0.0)
-        status = self.image.status(health) & _QUIET
-        if not urgent and status == self.last_status and now - self.last_pub < self.refresh_s:
+        conditions = self.status.conditions(0.0, False)
+        changed = conditions != self.last_conditions
+        if not urgent and not changed and now - self.last_pub < self.refresh_s:
             return None
-        refresh = not urgent and status == self.last_status
-        values = decode_registers(self.image.render(health), self.word_order)
-        self.last_status, self.last_pub = status, now
-        return values, refresh
+        snap = self.status.snapshot(self.HEALTH, scans=0, t_event=now, wall_time_s=now, urgent=urgent or changed)
+        values = decode_registers(self.image.render(snap), self.word_order)
+        self.last_conditions, self.last_pub = conditions, now
+        return values, not urgent and not changed
 
 
 def run_episode(episode: Episode, control: str, profile: Profile, chain: ChainSpec = ChainSpec(),
@@ -164,9 +173,9 @@ def run_episode(episode: Episode, control: str, profile: Profile, chain: ChainSp
         urgent = False
         if ack_taken:
             ack_taken = False
-            before = bridge.image.latched
-            bridge.image.apply(Command("ack"))
-            urgent = bridge.image.latched != before
+            before = bridge.status.latched
+            bridge.status.apply(Command("ack"))
+            urgent = bridge.status.latched != before
         if oracle:
             urgent |= bridge.observe([_truth(world, t_scan)])
         elif not world.renderer.lost(j):

@@ -19,8 +19,8 @@ moves the bytes and applies the :class:`Policy`.
 
 Every refusal is counted (:attr:`TcpServer.counters`) and logged; the log lines (and
 whatever asyncio reports) go to the standard logger :data:`LOG` as structured events,
-at most one line per event name per :data:`LOG_EVERY_S`, the next line saying how
-many were held back.
+at most one line per event name per :data:`.serving.LOG_EVERY_S`, the next line saying
+how many were held back.
 """
 
 from __future__ import annotations
@@ -35,17 +35,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from ...errors import DecodeError, EskinError
-from ...netaddr import listen_error
+from ..errors import DecodeError, EskinError
+from ..netaddr import listen_error
 from . import mbap, pdu
-from .codec import DEVICE_FAILURE, ILLEGAL_FUNCTION
+from .exception_codes import GATEWAY_TARGET_FAILED, ILLEGAL_FUNCTION
+from .serving import RateLimitedLog, answer
 
 Network = ipaddress.IPv4Network | ipaddress.IPv6Network
 Address = ipaddress.IPv4Address | ipaddress.IPv6Address
 
 LOG = logging.getLogger(__name__)
-#: One log line per event name in this time at most; the rest are counted.
-LOG_EVERY_S = 10.0
 #: At the connection cap, a connection quiet this long may be replaced by a new one.
 EVICT_IDLE_S = 1.0
 #: The client whose request is being answered (for a handler's log line).
@@ -97,41 +96,6 @@ def _peer_ip(peer: Any) -> Address | None:
         return None
     mapped = getattr(ip, "ipv4_mapped", None)  # a dual-stack socket's IPv4 client
     return mapped if mapped is not None else ip
-
-
-def answer(req: bytes, handler: Any, identity: Any, server_id: int, log: "RateLimitedLog", counters: Any) -> bytes:
-    """The response PDU to a request (TCP and RTU alike): a handler that raises is a
-    bug, answered SERVER DEVICE FAILURE, counted and logged, never the end of the server."""
-    try:
-        return pdu.handle(req, handler, identity, server_id)
-    except Exception as exc:  # noqa: BLE001 - a handler's bug must not end the server
-        counters.handler_errors += 1
-        log.event("modbus_handler_error", level=logging.ERROR, function=req[0], error=f"{type(exc).__name__}: {exc}")
-        return pdu.exception(req[0], DEVICE_FAILURE)
-
-
-class RateLimitedLog:
-    """Structured events on ``logger``, at most one per name per ``every_s``."""
-
-    def __init__(self, logger: logging.Logger = LOG, every_s: float = LOG_EVERY_S) -> None:
-        self.logger = logger
-        self.every_s = every_s
-        self._last: dict[str, float] = {}
-        self._held: dict[str, int] = {}
-        self._lock = threading.Lock()
-
-    def event(self, name: str, level: int = logging.WARNING, **fields: Any) -> None:
-        now = time.monotonic()
-        with self._lock:
-            last = self._last.get(name)
-            if last is not None and now - last < self.every_s:
-                self._held[name] = self._held.get(name, 0) + 1
-                return
-            self._last[name] = now
-            held = self._held.pop(name, 0)
-        if held:
-            fields["held_back"] = held
-        self.logger.log(level, name, extra={"fields": fields})
 
 
 @dataclass
@@ -224,7 +188,7 @@ class TcpServer:
         self.policy = policy or Policy()
         self.server_id = server_id
         self.counters = Counters()
-        self.log = RateLimitedLog()
+        self.log = RateLimitedLog(LOG)
         self.conns: set[_Connection] = set()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopping: asyncio.Event | None = None
@@ -274,7 +238,7 @@ class TcpServer:
         if units is not None and unit not in units:
             c.wrong_unit += 1
             self.log.event("modbus_unit_refused", peer=conn.peer, unit=unit, served=",".join(map(str, sorted(units))))
-            return mbap.frame(tid, unit, pdu.exception(fc, pdu.GATEWAY_TARGET_FAILED))
+            return mbap.frame(tid, unit, pdu.exception(fc, GATEWAY_TARGET_FAILED))
         if fc in pdu.WRITES and not conn.may_write:
             c.denied_writes += 1
             self.log.event("modbus_write_denied", peer=conn.peer, function=fc,

@@ -15,8 +15,9 @@ import threading
 import time
 from collections.abc import Sequence
 
-from ...errors import DecodeError, ModbusFault
+from ..errors import DecodeError, ModbusFault
 from . import mbap
+from .exception_codes import exception_name
 
 
 class PipelinedTcpMaster:
@@ -44,10 +45,6 @@ class PipelinedTcpMaster:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.sock = sock
         self._rx.clear()
-
-    @property
-    def connected(self) -> bool:
-        return self.sock is not None
 
     def close(self) -> None:
         sock, self.sock = self.sock, None
@@ -96,7 +93,7 @@ class PipelinedTcpMaster:
                 continue
             if resp.exception:
                 raise ModbusFault("exception", f"{self.where} answered exception {resp.exception:02d} "
-                                  f"({mbap.exception_name(resp.exception)}) to function {resp.function}",
+                                  f"({exception_name(resp.exception)}) to function {resp.function}",
                                   resp.exception)
             return resp
 

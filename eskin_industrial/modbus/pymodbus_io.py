@@ -1,14 +1,17 @@
 """Every pymodbus call of the package, in one place (pymodbus changes its API between
 minor releases; the tested range is pinned in ``pyproject.toml``).
 
-- :class:`RegisterServer` serves a :class:`RegisterHandler` over Modbus TCP or RTU
-  from a background thread; the handler answers every read and write itself, so
-  it decides which addresses exist and which exception a refused request gets.
-  The simulators (the sensor node, the PLC stand-in) use it: a server that someone
-  else wrote.  The bridge's server mode has its own (:mod:`.server`, :mod:`.rtu_server`),
-  for answers that follow the specification and an access policy.
-- :class:`TcpMaster` / :class:`RtuMaster`: synchronous clients that raise
-  :class:`ModbusFault` instead of returning error objects.
+- :class:`RtuMaster`: the synchronous RTU client of the RTU source and of the PLC
+  client over RTU; it raises :class:`ModbusFault` instead of returning error objects
+  and tells timeouts, garbled frames and exception responses apart.
+- :class:`RegisterServer` and :class:`TcpMaster`: a Modbus TCP server and client that
+  someone else wrote, for what stands on the other side of the bridge's own TCP code.
+  The PLC stand-in (``plc-sim``, the demo, the tests' PLCs) serves through
+  :class:`RegisterServer`, so that the PLC client's own master (:mod:`.tcp_master`,
+  :mod:`.mbap`) is checked against a third-party decoder, not against our framing
+  on both ends; the tests and benchmarks read the bridge's own server
+  (:mod:`.tcp_server`) with :class:`TcpMaster`.  The product serves with its own
+  servers only (:mod:`.tcp_server`, :mod:`.rtu_server`).
 
 Addresses here are 0-based protocol addresses.
 """
@@ -20,25 +23,24 @@ import logging
 import socket
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Literal
+from typing import Any
 
 from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.constants import ExcCodes
 from pymodbus.datastore import ModbusServerContext
-from pymodbus.exceptions import ModbusException, NoSuchIdException
-from pymodbus.framer.rtu import FramerRTU
-from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.exceptions import ModbusException
+from pymodbus.pdu import ModbusPDU
+from pymodbus.server import ModbusTcpServer
 
-from ...errors import EskinError, ModbusFault
-from ...netaddr import listen_problem
+from ..errors import EskinError, ModbusFault
+from ..netaddr import listen_problem
 from .pdu import RegisterHandler, Table
-
+from .rtu_frame import intact
+from .serial_line import SerialSettings
 
 _TABLE_OF_FC: dict[int, Table] = {1: "coils", 5: "coils", 15: "coils", 2: "discrete", 3: "holding", 6: "holding",
                                   16: "holding", 22: "holding", 23: "holding", 4: "input"}
-
 
 
 def quiet_pymodbus() -> None:
@@ -49,84 +51,63 @@ def quiet_pymodbus() -> None:
 
 
 class _HandlerContext(ModbusServerContext):
-    """The server's datastore, answered by a handler (pymodbus' hook for a custom store)."""
+    """The server's datastore, answered by a handler (pymodbus' hook for a custom
+    store); every unit id is answered, as usual over TCP."""
 
-    def __init__(self, handler: RegisterHandler, unit_ids: Sequence[int] | None) -> None:  # no super(): no store
+    def __init__(self, handler: RegisterHandler) -> None:  # no super(): no store
         self.handler = handler
-        self.unit_ids = None if unit_ids is None else set(unit_ids)
+        # The two attributes pymodbus' server reads, which only its __init__ sets
+        # (pinned by tests/test_private_apis.py).
         self.old_simulator = True
         self.simdevices = []
 
-    def _check(self, device_id: int) -> None:
-        if self.unit_ids is not None and device_id not in self.unit_ids:
-            raise NoSuchIdException(f"unit {device_id}")
-
-    async def async_getValues(self, device_id, func_code, address, count=1):  # noqa: N802 (pymodbus name)
-        self._check(device_id)
+    async def async_getValues(self, device_id: int, func_code: int, address: int,  # noqa: N802 (pymodbus name)
+                              count: int = 1) -> list[int] | list[bool] | ExcCodes:
         table = _TABLE_OF_FC.get(func_code)
         if table is None:
             return ExcCodes.ILLEGAL_FUNCTION
         result = self.handler.read(table, address, count)
         return ExcCodes(result) if isinstance(result, int) else result
 
-    async def async_setValues(self, device_id, func_code, address, values):  # noqa: N802
-        self._check(device_id)
+    async def async_setValues(self, device_id: int, func_code: int, address: int,  # noqa: N802
+                              values: Sequence[int] | Sequence[bool]) -> ExcCodes | None:
         table = _TABLE_OF_FC.get(func_code)
         if table is None:
             return ExcCodes.ILLEGAL_FUNCTION
-        if not isinstance(values, list):
-            values = [values]
-        result = self.handler.write(table, address, values)
+        listed: Any = values if isinstance(values, list) else [values]  # a list from pymodbus 3.16
+        result = self.handler.write(table, address, listed)
         return None if result is None else ExcCodes(result)
 
-    def device_ids(self):
-        return sorted(self.unit_ids) if self.unit_ids is not None else [0]
-
-
-@dataclass(frozen=True)
-class SerialSettings:
-    port: str
-    baudrate: int = 115200
-    parity: Literal["N", "E", "O"] = "N"
-    stopbits: int = 1
+    def device_ids(self) -> list[int]:
+        return [0]
 
 
 class RegisterServer:
-    """A Modbus TCP or RTU server on its own thread; ``start()`` returns once it listens.
+    """A pymodbus Modbus TCP server on its own thread, every read and write answered
+    by ``handler`` (which decides which addresses exist and which exception a refused
+    request gets); ``start()`` returns once it listens."""
 
-    ``unit_ids``: the unit ids answered (RTU: others are ignored, as on a shared line);
-    ``None`` answers every id (usual for TCP).
-    """
-
-    def __init__(self, handler: RegisterHandler, *, tcp: tuple[str, int] | None = None,
-                 serial: SerialSettings | None = None, unit_ids: Sequence[int] | None = None) -> None:
-        if (tcp is None) == (serial is None):
-            raise ValueError("RegisterServer: give exactly one of tcp= or serial=")
+    def __init__(self, handler: RegisterHandler, *, tcp: tuple[str, int]) -> None:
         self.handler = handler
         self.tcp = tcp
-        self.serial = serial
-        self.unit_ids = unit_ids
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._server: ModbusTcpServer | ModbusSerialServer | None = None
+        self._server: ModbusTcpServer | None = None
         self._thread: threading.Thread | None = None
         self._ready = threading.Event()
         self._error: BaseException | None = None
 
     @property
     def where(self) -> str:
-        if self.tcp is not None:
-            return f"tcp {self.tcp[0]}:{self.tcp[1]}"
-        assert self.serial is not None
-        return f"rtu {self.serial.port} at {self.serial.baudrate} baud"
+        return f"tcp {self.tcp[0]}:{self.tcp[1]}"
 
-    def start(self, timeout_s: float = 5.0) -> "RegisterServer":
+    def start(self, timeout_s: float = 5.0) -> RegisterServer:
         self._thread = threading.Thread(target=self._run, name="modbus-server", daemon=True)
         self._thread.start()
         if not self._ready.wait(timeout_s):
             raise EskinError(f"modbus server ({self.where}): did not start within {timeout_s:g} s")
         if self._error is not None:
             # pymodbus says only "please check address": try the bind ourselves for why
-            problem = listen_problem(*self.tcp) if self.tcp is not None else None
+            problem = listen_problem(*self.tcp)
             if problem:
                 raise EskinError(f"modbus server: {problem}")
             raise EskinError(f"modbus server ({self.where}): cannot listen: {self._error}")
@@ -141,24 +122,7 @@ class RegisterServer:
 
     async def _main(self) -> None:
         self._loop = asyncio.get_running_loop()
-        context = _HandlerContext(self.handler, self.unit_ids)
-        if self.tcp is not None:
-            self._server = ModbusTcpServer(context, address=self.tcp)
-        else:
-            s = self.serial
-            assert s is not None
-            # The server's serial transport opens the port itself; check it first for
-            # a clear message (pymodbus only logs a failed open).
-            import serial  # pyserial, a pymodbus dependency for RTU
-
-            try:
-                serial.Serial(s.port, s.baudrate).close()
-            except (serial.SerialException, OSError) as exc:
-                raise EskinError(f"cannot open serial port {s.port}: {exc}") from None
-            self._server = ModbusSerialServer(
-                context, framer=FramerType.RTU, port=s.port, baudrate=s.baudrate, parity=s.parity,
-                stopbits=s.stopbits, ignore_missing_devices=True, reconnect_delay=0.5,
-            )
+        self._server = ModbusTcpServer(_HandlerContext(self.handler), address=self.tcp)
         try:
             await self._server.serve_forever(background=True)
         except RuntimeError as exc:
@@ -178,14 +142,14 @@ class RegisterServer:
             self._thread.join(timeout=5)
         self._server = None
 
-    def __enter__(self) -> "RegisterServer":
+    def __enter__(self) -> RegisterServer:
         return self.start()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
 
-def _raise_on_error(response, what: str):
+def _raise_on_error(response: ModbusPDU, what: str) -> ModbusPDU:
     if response.isError():
         code = int(getattr(response, "exception_code", 0) or 0)
         raise ModbusFault("exception", f"{what}: exception response, code {code}", code)
@@ -210,10 +174,6 @@ class TcpMaster:
             raise ModbusFault("connection", f"cannot connect to {self.host}:{self.port}: {exc}") from None
         if not ok:
             raise ModbusFault("connection", f"cannot connect to {self.host}:{self.port}")
-
-    @property
-    def connected(self) -> bool:
-        return self._client.socket is not None
 
     def write_registers(self, address: int, values: Sequence[int]) -> None:
         try:
@@ -264,7 +224,7 @@ class RtuMaster:
         try:
             r = call(address, count=count, device_id=self.unit_id)
         except (ModbusException, OSError) as exc:
-            kind = "crc" if self._rx and not _valid_frame(bytes(self._rx)) else "timeout"
+            kind = "crc" if self._rx and not intact(bytes(self._rx)) else "timeout"
             if not self._client.connected:
                 kind = "connection"
             raise ModbusFault(kind, f"{self.settings.port}: {kind}: {exc}") from None
@@ -280,10 +240,6 @@ class RtuMaster:
     def read_holding(self, address: int, count: int) -> list[int]:
         return self.read(3, address, count)
 
-    @property
-    def connected(self) -> bool:
-        return bool(self._client.connected)
-
     def reset_input(self) -> None:
         """Drop whatever is pending on the line (after garbage)."""
         sock = getattr(self._client, "socket", None)
@@ -295,17 +251,3 @@ class RtuMaster:
 
     def close(self) -> None:
         self._client.close()
-
-
-def _valid_frame(data: bytes) -> bool:
-    return len(data) >= 4 and FramerRTU.compute_CRC(data[:-2]) == int.from_bytes(data[-2:], "big")
-
-
-def rtu_transaction_s(count: int, baudrate: int, bits_per_char: int = 11) -> float:
-    """The theoretical time of one read of ``count`` registers: an 8-byte request, a
-    5 + 2·count byte response, each preceded by the 3.5-character silence (1.75 ms
-    fixed above 19200 baud, as the Modbus serial line specification says)."""
-    chars = 8 + 5 + 2 * count
-    char_s = bits_per_char / baudrate
-    gap = 1.75e-3 if baudrate > 19200 else 3.5 * char_s
-    return chars * char_s + 2 * gap

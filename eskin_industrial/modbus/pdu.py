@@ -1,6 +1,6 @@
 """A Modbus server's answers, pure: one request PDU in, its response PDU out.
 
-No socket and no framing here: :mod:`.server` (TCP, MBAP framing from :mod:`.mbap`)
+No socket and no framing here: :mod:`.tcp_server` (TCP, MBAP framing from :mod:`.mbap`)
 moves the bytes and applies the access policy (who may write, which unit ids).  The
 register contents come from a :class:`RegisterHandler`, which decides which
 addresses exist and which exception a refused request gets.
@@ -28,7 +28,7 @@ import struct
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
-from .codec import ILLEGAL_ADDRESS, ILLEGAL_FUNCTION, ILLEGAL_VALUE
+from .exception_codes import ILLEGAL_ADDRESS, ILLEGAL_FUNCTION, ILLEGAL_VALUE
 
 Table = Literal["coils", "discrete", "holding", "input"]
 
@@ -39,9 +39,6 @@ ENCAPSULATED = 43
 MEI_DEVICE_ID = 0x0E
 #: The function codes that change something: refused as a whole by a read-only policy.
 WRITES = frozenset({WRITE_COIL, WRITE_REGISTER, WRITE_COILS, WRITE_REGISTERS})
-#: Gateway target device failed to respond: what a Modbus TCP server answers for a
-#: unit id it does not serve.
-GATEWAY_TARGET_FAILED = 0x0B
 
 _TABLE: dict[int, Table] = {READ_COILS: "coils", READ_DISCRETE: "discrete", READ_HOLDING: "holding",
                             READ_INPUT: "input"}

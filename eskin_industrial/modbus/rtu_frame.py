@@ -1,6 +1,8 @@
-"""Modbus RTU framing for a server, pure: where a request ends, its CRC, a response
-framed.  Layout (Modbus over Serial Line V1.02, section 2.5.1): unit id (1 byte),
-the PDU, the CRC-16 (polynomial 0xA001 reflected, initial 0xFFFF), low byte first.
+"""Modbus RTU framing, pure: where a request ends, its CRC, a response framed, and
+whether a frame is intact (our server's check of a request, and the RTU master's of
+an answer, which tells a garbled frame from a timeout).  Layout (Modbus over Serial
+Line V1.02, section 2.5.1): unit id (1 byte), the PDU, the CRC-16 (polynomial 0xA001
+reflected, initial 0xFFFF), low byte first.
 
 A request's length follows from its function code (and, for 15 and 16, its byte
 count), so a frame is found without timing the 3.5-character silence, which a

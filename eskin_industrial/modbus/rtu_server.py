@@ -19,11 +19,11 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
-from ...errors import EskinError
+from ..errors import EskinError
 from . import pdu, rtu_frame
-from .codec import ILLEGAL_FUNCTION
-from .io import SerialSettings
-from .server import RateLimitedLog, answer
+from .exception_codes import ILLEGAL_FUNCTION
+from .serial_line import SerialSettings
+from .serving import RateLimitedLog, answer
 
 #: After a failure of the port, how long before opening it again.
 REOPEN_S = 0.5

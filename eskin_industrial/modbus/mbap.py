@@ -2,11 +2,11 @@
 
 The client side: what the PLC client sends, write multiple registers (FC16) and read
 holding registers (FC3), and their answers, including exception responses.  The
-server side (:mod:`.server`): a request frame split into its header and PDU
+server side (:mod:`.tcp_server`): a request frame split into its header and PDU
 (:func:`split_request`), and a response framed (:func:`frame`).  No socket here:
-:mod:`.tcp` and :mod:`.server` move the bytes.  Layout (Modbus Messaging on TCP/IP, section 3.1.3):
-transaction id (2 bytes), protocol id 0 (2), length of what follows (2), unit id
-(1), then the PDU; big-endian.
+:mod:`.tcp_master` and :mod:`.tcp_server` move the bytes.  Layout (Modbus Messaging
+on TCP/IP, section 3.1.3): transaction id (2 bytes), protocol id 0 (2), length of
+what follows (2), unit id (1), then the PDU; big-endian.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import struct
 from collections.abc import Sequence
 from typing import NamedTuple
 
-from ...errors import DecodeError
+from ..errors import DecodeError
 
 HEADER = struct.Struct(">HHHB")
 HEADER_BYTES = HEADER.size  # 7
@@ -25,16 +25,6 @@ FC_WRITE_MULTIPLE = 16
 MAX_PDU = 253
 MAX_WRITE = 123  #: registers in one FC16 request
 MAX_READ = 125  #: registers in one FC3 response
-
-
-#: Exception codes (Modbus Application Protocol v1.1b3, section 7), for messages.
-EXCEPTIONS = {1: "illegal function", 2: "illegal data address", 3: "illegal data value",
-              4: "server device failure", 5: "acknowledge", 6: "server device busy", 8: "memory parity error",
-              10: "gateway path unavailable", 11: "gateway target device failed to respond"}
-
-
-def exception_name(code: int) -> str:
-    return EXCEPTIONS.get(code, "unknown exception")
 
 
 class Response(NamedTuple):

@@ -1,0 +1,35 @@
+"""The register image a node would publish, kept instead of sent: what ``monitor``
+shows beside the node's snapshot when no PLC is connected."""
+
+from __future__ import annotations
+
+from ..node import NodeSnapshot
+from ..profile import ModbusPlcSection
+from ..sinks.base import Sink
+from .image import PlcImage, read_back, status_names
+
+
+class KeptRegisters(Sink):
+    """Renders every snapshot into the node's register image, as the PLC output
+    would, and keeps the newest (read by a view's redraw thread)."""
+
+    kind = "plc"
+
+    def __init__(self, settings: ModbusPlcSection) -> None:
+        super().__init__()
+        self.where = "the live view"
+        self.image = PlcImage(settings)
+        self.registers: list[int] | None = None
+        self.tail: tuple[int, ...] = ()
+
+    def _publish(self, snapshot: NodeSnapshot) -> None:
+        self.registers = self.image.render(snapshot)
+        self.tail = tuple(self.image.tail)
+
+    def table(self) -> tuple[dict[str, int], tuple[str, ...]] | None:
+        """The newest registers by name, and the STATUS bits set (None before the first)."""
+        regs = self.registers
+        if regs is None:
+            return None
+        values = read_back(regs, self.tail, self.image.settings.word_order)
+        return values, status_names(values["STATUS"])
