@@ -41,6 +41,21 @@ def test_json_has_a_record_per_control_and_the_same_figures_with_two_worker_proc
     assert doc["setup"]["rate_hz"] == 100 and doc["setup"]["plc_cycle_ms"] == 10
 
 
+@pytest.mark.slow
+def test_a_sweep_has_every_point_with_every_control_and_a_slower_plc_cycle_answers_later():
+    res = evaluate("--closed-loop", "--sweep", "plc-cycle", "--seeds", "9400,9405", "-m", "none", "--format", "json")
+    assert res.returncode == 0, res.stderr
+    doc = json.loads(res.stdout)
+    assert doc["sweep"] == "plc-cycle" and doc["unit"] == "ms"
+    points = {p["value"]: {r["control"]: r for r in p["methods"]} for p in doc["points"]}
+    assert list(points) == [4.0, 10.0, 20.0]
+    for rows in points.values():
+        assert list(rows) == ["none", "oracle"] and all(r["episodes"] == 2 for r in rows.values())
+        assert rows["none"]["raises"] == 0  # no slip sensing: nothing to react to
+    # the oracle hears of a slide at once; what is left is the transport and the PLC's cycle
+    assert points[4.0]["oracle"]["reaction_p50_ms"] < points[20.0]["oracle"]["reaction_p50_ms"]
+
+
 @pytest.mark.parametrize("args, message", [
     (["--closed-loop", "--cell", "nope=1"], "--cell"),
     (["--closed-loop", "--cell", "mass=-1"], "positive"),

@@ -6,9 +6,10 @@ maximum); while SLIP stays set, raise by another step each ``repeat_s`` if the c
 of force (XC, YC) has moved by ``repeat_mm`` over the last ``repeat_s`` and since
 ``settle_s`` after the last raise (a detector's slip state outlasts the slide by some
 tenths of a second: SLIP alone does not say the object still moves; and a soft pad's
-contact grows with the force, so the raise itself moves the centre of force); acknowledge the latch once the slip is over; after ``quiet_s`` of trusted data with no slip, relax one
-step, no lower than the light grip (nor, with ``relax_floor``, than that share of the
-force it last slipped at).
+contact grows with the force, so the raise itself moves the centre of force);
+acknowledge the latch once the slip is over; after ``quiet_s`` of trusted data with no
+slip, relax by ``relax_share`` of the request, no lower than the light grip (nor, with
+``relax_floor``, than that multiple of the force it last slipped at).
 
 "No slip" and "I don't know" are not the same: while the data is not trusted (the
 heartbeat still, DATA_VALID clear, SENSOR_STALE, BUS_FAULT or BRIDGE_OFFLINE) nothing
@@ -50,7 +51,7 @@ class PolicySettings:
     settle_s: float = field(default=0.1, metadata=non_negative())
     quiet_s: float = field(default=3.0, metadata=positive())
     relax_share: float = field(default=0.1, metadata=positive())
-    #: relax no lower than this share of the force the object last slipped at (0: the light grip)
+    #: relax no lower than this multiple of the force the object last slipped at (0: the light grip)
     relax_floor: float = field(default=0.0, metadata=non_negative())
     heartbeat_timeout_s: float = field(default=0.5, metadata=positive())
     grace_s: float = field(default=1.2, metadata=non_negative())

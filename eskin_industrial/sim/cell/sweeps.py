@@ -43,7 +43,7 @@ CONDITIONS: dict[str, tuple[str, str, Condition]] = {
 SWEEPS: dict[str, tuple[str, tuple[float, ...]]] = {
     "rate": ("rate", (100.0, 1000.0)),
     "plc-cycle": ("plc_cycle", (4.0, 10.0, 20.0)),
-    "actuator": ("actuator_rate", (200.0, 500.0, 1000.0)),
+    "actuator": ("actuator_rate", (20.0, 50.0, 200.0, 500.0, 1000.0)),
     "dead-time": ("dead_time", (5.0, 10.0, 20.0, 40.0)),
     "friction": ("friction", (0.7, 0.85, 1.0, 1.15)),
     "mass": ("mass", (0.8, 1.0, 1.25, 1.5)),
