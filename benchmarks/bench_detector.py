@@ -25,7 +25,7 @@ import time
 from dataclasses import replace
 
 import numpy as np
-from machine import describe  # noqa: E402  (benchmarks/machine.py)
+from machine import describe
 
 from eskin_industrial.detect import PaperDetector, paper_batch
 from eskin_industrial.detect.cof_track import CofTrack

@@ -432,7 +432,7 @@ def main() -> None:
                     "or the bridge at 90 %% of a core")
     args = ap.parse_args()
     logging.getLogger("can").setLevel(logging.ERROR)  # python-can's note on a bus closed by the collector
-    cmd = (f".venv/bin/python benchmarks/bench_fleet.py" + (f" --only {args.only}" if args.only else "")
+    cmd = (".venv/bin/python benchmarks/bench_fleet.py" + (f" --only {args.only}" if args.only else "")
            + (f" --nodes-100 {args.nodes_100} --nodes-1k {args.nodes_1k} --per-bus {args.per_bus} "
               f"--duration {args.duration:g}" if args.only != "latency" else "")
            + (f" --latency-duration {args.latency_duration:g}" if args.only != "fleet" else "")

@@ -38,7 +38,6 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from machine import describe  # noqa: E402  (benchmarks/machine.py)
-from tests.helpers.modbus import free_port, slip_recording  # noqa: E402
 
 from eskin_industrial import load_profile  # noqa: E402
 from eskin_industrial.bus.modbus.rtu import RtuSource  # noqa: E402
@@ -47,11 +46,12 @@ from eskin_industrial.detect.state import GraspState  # noqa: E402
 from eskin_industrial.frames import RawScan  # noqa: E402
 from eskin_industrial.modbus.pymodbus_io import TcpMaster, quiet_pymodbus  # noqa: E402
 from eskin_industrial.modbus.serial_line import rtu_transaction_s  # noqa: E402
-from eskin_industrial.pipeline import Pipeline
-from eskin_industrial.plc.client import PlcWriter  # noqa: E402
 from eskin_industrial.node import Health, NodeStatus  # noqa: E402
+from eskin_industrial.pipeline import Pipeline  # noqa: E402
+from eskin_industrial.plc.client import PlcWriter  # noqa: E402
 from eskin_industrial.plc.image import STATUS_COUNT, PlcImage  # noqa: E402
 from eskin_industrial.sim.modbus_node import NodeSimulator  # noqa: E402
+from tests.helpers.modbus import free_port, slip_recording  # noqa: E402
 
 PROFILE = ROOT / "profiles" / "paper-5x5.toml"
 
@@ -77,7 +77,7 @@ def start_plc_sim(port: int) -> subprocess.Popen:
         except Exception:  # noqa: BLE001 - not up yet
             if time.monotonic() > deadline:
                 proc.kill()
-                raise SystemExit("plc-sim did not start")
+                raise SystemExit("plc-sim did not start") from None
             time.sleep(0.1)
 
 

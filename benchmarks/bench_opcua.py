@@ -32,13 +32,13 @@ from __future__ import annotations
 import argparse
 import asyncio
 import dataclasses
-import json
 import os
 import subprocess
 import sys
 import tempfile
 import threading
 import time
+from datetime import UTC
 from pathlib import Path
 from typing import Any
 
@@ -145,15 +145,15 @@ class BareServer:
 
     def write(self, value: int, wall_time_s: float) -> None:
         """From the loop's thread: the value, with its source timestamp, written on the server's loop."""
-        from datetime import datetime, timezone
+        from datetime import datetime
 
         from asyncua import ua
 
         async def write() -> None:
-            now = datetime.now(timezone.utc)
+            now = datetime.now(UTC)
             await self.server.write_attribute_value(self.nodeid, ua.DataValue(
                 ua.Variant(value, ua.VariantType.Int32), ua.StatusCode(0),
-                datetime.fromtimestamp(wall_time_s, timezone.utc), now))
+                datetime.fromtimestamp(wall_time_s, UTC), now))
 
         assert self.loop is not None
         self.loop.call_soon_threadsafe(lambda: asyncio.ensure_future(write()))

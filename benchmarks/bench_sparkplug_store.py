@@ -21,13 +21,13 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from machine import describe  # noqa: E402  (benchmarks/machine.py)
+from machine import describe
 
-from eskin_industrial.plant.sparkplug import SparkplugOptions, open_edge  # noqa: E402
-from tests.helpers import sparkplug as spb  # noqa: E402
-from tests.helpers.modbus import free_port  # noqa: E402
-from tests.helpers.snapshots import made  # noqa: E402
-from eskin_industrial.node import NodeSnapshot  # noqa: E402
+from eskin_industrial.node import NodeSnapshot
+from eskin_industrial.plant.sparkplug import SparkplugOptions, open_edge
+from tests.helpers import sparkplug as spb
+from tests.helpers.modbus import free_port
+from tests.helpers.snapshots import made
 
 
 def publication(i: int) -> NodeSnapshot:

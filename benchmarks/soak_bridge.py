@@ -63,10 +63,10 @@ def main() -> None:
     args = ap.parse_args()
 
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
-    from eskin_industrial.plc.sink import PlcOptions
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
     from eskin_industrial.modbus.pymodbus_io import quiet_pymodbus
+    from eskin_industrial.plc.sink import PlcOptions
     from eskin_industrial.scenes import render
 
     quiet_pymodbus()

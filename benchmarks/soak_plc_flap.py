@@ -208,7 +208,7 @@ def main() -> None:
           f"plc_superseded {c['plc_superseded']}; process CPU {cpu / wall * 100:.1f} % of one core")
     ok = (alternating and len(starts) == len(ends) == len(downs) and max(attempts, default=0) <= bound
           and unlatched == 0 and prev == bridge_slips and max(per_up, default=0) <= 1)
-    print(f"{dt.datetime.now(dt.timezone.utc):%Y-%m-%d %H:%M} UTC: {'PASS' if ok else 'FAIL'}")
+    print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC: {'PASS' if ok else 'FAIL'}")
     sys.exit(0 if ok else 1)
 
 

@@ -43,7 +43,7 @@ class Calibrator:
     full_scale_n: float
 
     @classmethod
-    def from_section(cls, cal: CalibrationSection, taxels: int) -> "Calibrator":
+    def from_section(cls, cal: CalibrationSection, taxels: int) -> Calibrator:
         zero = np.broadcast_to(np.asarray(cal.zero, dtype=np.float64), (taxels,)).copy()
         per_n = np.broadcast_to(np.asarray(cal.per_newton, dtype=np.float64), (taxels,)).copy()
         for index, override in cal.overrides.items():
@@ -87,7 +87,7 @@ class Calibrator:
         a node rounds them to its integer unit)."""
         return (self.zero + self.per_newton * np.asarray(forces, dtype=np.float64)) / self.raw_scale
 
-    def tared(self, unloaded_raw: np.ndarray) -> "Calibrator":
+    def tared(self, unloaded_raw: np.ndarray) -> Calibrator:
         """A copy whose zero is each taxel's mean reading over an unloaded recording.
 
         ``unloaded_raw`` has shape ``(scans, taxels)``; invalid readings are ignored.

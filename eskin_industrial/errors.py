@@ -40,7 +40,7 @@ class MissingExtra(EskinError):
     exit_code = 4
 
     @classmethod
-    def of(cls, what: str, package: str, extra: str) -> "MissingExtra":
+    def of(cls, what: str, package: str, extra: str) -> MissingExtra:
         return cls(f"{what} needs {package}: pip install 'eskin-industrial[{extra}]'")
 
 

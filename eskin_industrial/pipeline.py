@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 from .calibration import Calibrator
 from .detect.learned import Model
+from .detect.protocol import Detector
 from .detect.updates import Update, state_changed
 from .evaluation.binding import ready_method
 from .frames import Frame, FrameFlag, RawScan
@@ -42,7 +43,8 @@ class Pipeline:
         self.rate_hz = rate_hz or profile.sensor.rate_hz
         x, y = profile.coordinates_mm
         self.method = ready_method(method, profile.detector, model)  #: the deciding method (its code, its scores)
-        self.detector = self.method.stream(profile.detector, x, y, self.rate_hz)
+        #: Whichever method decides, only :class:`~eskin_industrial.detect.protocol.Detector`'s surface is used.
+        self.detector: Detector = self.method.stream(profile.detector, x, y, self.rate_hz)
         self.counters = Counters()
         self.last_frame: Frame | None = None
         self.last_update: Update | None = None

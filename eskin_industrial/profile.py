@@ -19,8 +19,16 @@ import numpy as np
 from .detect.settings import DetectorSettings
 from .errors import ProfileError
 from .netaddr import check_host
-from .schema import (SchemaError, in_range, ip_network, non_negative, parse_toml, positive, positive_at_most,
-                     read_toml_file, to_table)
+from .schema import (
+    SchemaError,
+    in_range,
+    ip_network,
+    parse_toml,
+    positive,
+    positive_at_most,
+    read_toml_file,
+    to_table,
+)
 
 #: A sensor silent for this many scan periods is stale (the PLC must see it within three).
 STALE_PERIODS = 2.5
@@ -333,10 +341,10 @@ class Profile:
         for index in cal.overrides:
             if int(index) >= n:
                 raise SchemaError(f"calibration.overrides.{index}", f"expected a taxel index below {n}")
-        from .detect.methods import METHODS  # the registry imports detectors, not profiles
+        from .methods import method_names  # the registry imports detectors, not profiles
 
-        if self.detector.method not in METHODS:
-            raise SchemaError("detector.method", f"expected one of {', '.join(sorted(METHODS))}, got {self.detector.method!r}")
+        if self.detector.method not in (known := method_names()):
+            raise SchemaError("detector.method", f"expected one of {', '.join(sorted(known))}, got {self.detector.method!r}")
         try:
             geo = self.detector.geometry(self.sensor.rate_hz)
         except (ValueError, OverflowError):

@@ -21,8 +21,9 @@ import tomllib
 import types
 import typing
 import warnings
-from collections.abc import Mapping
-from typing import Any, Callable, Literal, TypeVar, Union, get_args, get_origin
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, Literal, TypeVar, Union, get_args, get_origin
 
 from .errors import DeprecatedKey, ProfileError
 
@@ -239,7 +240,7 @@ def to_table(obj: Any) -> Any:
     return obj
 
 
-def read_toml_file(path, what: str) -> str:
+def read_toml_file(path: Path, what: str) -> str:
     """The text of a TOML file; one :class:`ProfileError` line when it cannot be read
     (``what``: "profile", "scene", ... for the message)."""
     try:

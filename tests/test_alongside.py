@@ -9,7 +9,7 @@ import pytest
 
 from eskin_industrial.detect import METHODS, PaperDetector, get_method, paper_batch
 from eskin_industrial.detect.alongside import PaperAlongside
-from eskin_industrial.detect.methods import method_of_code
+from eskin_industrial.methods import method_of_code
 from eskin_industrial.scenes import render
 from tests.test_stream_equals_batch import faulty_recording
 

@@ -13,13 +13,13 @@ from eskin_industrial.bus.can.layout import ERROR_RUN_FAULT, CanLayout, ScanAsse
 from eskin_industrial.bus.can.reader import open_bus
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.frames import RawScan
-from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.node import Health
+from eskin_industrial.pipeline import Pipeline
 from eskin_industrial.plc.image import Status, decode_registers
-from tests.helpers.snapshots import StatusImage
 from tests.helpers.bridge import can_node, channel, hold_raw, running_bridge, server_config, wait_for
 from tests.helpers.can_frames import msg, scans_to_messages
 from tests.helpers.scenes import grasp
+from tests.helpers.snapshots import StatusImage
 
 BUS_OFF = 0x040  # linux/can/error.h CAN_ERR_BUSOFF
 
@@ -52,7 +52,7 @@ def test_the_assembler_faults_on_bus_off_or_a_run_of_error_frames_until_the_node
 
 def send_scans(bus: can.BusABC, layout: CanLayout, seqs: np.ndarray, raw: np.ndarray, period_s: float) -> None:
     start = time.monotonic()
-    for i, (seq, scan) in enumerate(zip(seqs, layout.encode(seqs, raw))):
+    for i, (_seq, scan) in enumerate(zip(seqs, layout.encode(seqs, raw))):
         time.sleep(max(0.0, start + i * period_s - time.monotonic()))
         for can_id, data in scan:
             bus.send(msg(can_id, data))
@@ -121,8 +121,8 @@ def test_lost_scans_grow_while_an_rtu_outage_lasts(paper_profile, tmp_path):
     """Before: the failed polls reached LOST_SCANS only once a poll succeeded again
     (BUS_ERRORS 44 and LOST_SCANS 0 at a frame age of 2.2 s)."""
     from eskin_industrial.bridge.loop import NodeLoop
-    from eskin_industrial.plc.image import PlcImage
     from eskin_industrial.bus.modbus.rtu import RtuSource
+    from eskin_industrial.plc.image import PlcImage
     from eskin_industrial.sim.modbus_node import NodeSimulator
     from eskin_industrial.sinks.base import Sink
     from tests.helpers.modbus import pty_pair

@@ -13,7 +13,7 @@ import can
 import numpy as np
 import pytest
 
-from eskin_industrial.bus.can.layout import CanLayout, ScanAssembler
+from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.bus.can.reader import BusReader, open_bus
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect import get_method
@@ -109,7 +109,7 @@ def test_recorded_traffic_replays_to_the_live_output(paper_profile, tmp_path, su
     res = cli("detect", "--profile", PAPER, "--can-log", str(log_path), "-o", str(tmp_path / "replay.csv"), "--json")
     assert res.returncode == 0, res.stderr
     assert (tmp_path / "replay.csv").read_text() == live.read_text()
-    assert '"lost_scans": %d' % source.pipeline.counters.lost_scans in res.stderr
+    assert f'"lost_scans": {source.pipeline.counters.lost_scans}' in res.stderr
 
 
 class FlakyBus(can.BusABC):
@@ -161,7 +161,7 @@ def test_a_slow_consumer_drops_frames_and_counts_them(hand_profile):
     ch = channel()
     reader = BusReader(lambda: open_bus("virtual", ch), queue_frames=100).start()
     with open_bus("virtual", ch) as tx:
-        for i in range(300):
+        for _ in range(300):
             tx.send(can.Message(arbitration_id=0x123, data=bytes(8), is_extended_id=False))
     deadline = time.monotonic() + 5
     while len(reader.queue) + reader.counters["rx_queue_drops"] < 300 and time.monotonic() < deadline:

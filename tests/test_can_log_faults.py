@@ -15,8 +15,8 @@ from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
 from eskin_industrial.bus.can.layout import CanLayout
-from eskin_industrial.plc.image import Status
 from eskin_industrial.plant.sparkplug import DEVICE_METRICS
+from eskin_industrial.plc.image import Status
 from eskin_industrial.plc.sink import PlcOptions
 from tests.helpers.bridge import PAPER, LogCapture, TimedPlc, hold_raw
 from tests.helpers.can_frames import scans_to_messages

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
+from eskin_industrial.errors import ModbusFault
 from eskin_industrial.modbus.pymodbus_io import RegisterServer, TcpMaster
 from eskin_industrial.modbus.tcp_master import PipelinedTcpMaster
-from eskin_industrial.errors import ModbusFault
 from eskin_industrial.sim.cell.gripper import (
     GREG,
     GRIPPER_COUNT,

@@ -13,7 +13,7 @@ from eskin_industrial.scenes.physics import footprint_forces, sampled_forces
 from eskin_industrial.sim.cell.actuator import Actuator, ActuatorSpec
 from eskin_industrial.sim.cell.episodes import TUNING_SEEDS, episode
 from eskin_industrial.sim.cell.objects import OBJECT, OBJECTS, Specimen
-from eskin_industrial.sim.cell.physics import DROP_MM, G, Contact, Friction
+from eskin_industrial.sim.cell.physics import DROP_MM, Contact, Friction, G
 from eskin_industrial.sim.cell.render import FrameRenderer
 from eskin_industrial.sim.cell.world import TICK_S, CellWorld
 

@@ -14,6 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 from eskin_industrial.cli import main
+from tests.helpers.modbus import free_port
 
 
 def _leaves(group: click.Group, path: tuple[str, ...] = ()):
@@ -132,3 +133,76 @@ def test_bridge_quiet_and_verbose_set_its_log_level() -> None:
     def events(log: str) -> list[str]:
         return [line.split()[2] for line in log.splitlines() if " info " in line and line.split()[2] != "state"]
     assert events(run("-q", "--log-level", "info")) == events(normal)
+
+
+def _all_commands(group: click.Group, path: tuple[str, ...] = ()):
+    for name, cmd in group.commands.items():
+        yield (*path, name), cmd
+        if isinstance(cmd, click.Group):
+            yield from _all_commands(cmd, (*path, name))
+
+
+def test_every_help_page_ends_with_examples_and_its_variables() -> None:
+    from tests.helpers.doc_commands import invocations
+    from tests.test_docs_claims import CHECKOUT_PATH, _check_invocation
+
+    for path, cmd in _all_commands(main):
+        page = CliRunner().invoke(main, [*path, "--help"]).output
+        tail = page[page.rindex("-h, --help"):]
+        assert "Examples:\n    eskin-bus " + " ".join(path) in tail, (path, tail)
+        examples = [line.strip() for line in tail.split("Examples:\n", 1)[1].split("\n\n")[0].splitlines()]
+        for line in examples:
+            assert not CHECKOUT_PATH.search(line), line
+            for args in invocations(line):
+                _check_invocation(args)
+        names = [p.envvar for p in cmd.params if isinstance(p, click.Option) and p.envvar]
+        env = " ".join(tail.split("Environment:", 1)[1].split()) if names else ""
+        for name in names:
+            assert name in env, (path, name)
+
+
+def test_options_before_the_command(tmp_path: Path) -> None:
+    """-q and -v are the program's as well as each command's: before the command they
+    act on it (a -q there used to be refused)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("ESKIN_")}
+    here = str(Path(__file__).resolve().parents[1])
+    env["PYTHONPATH"] = here
+    recording = tmp_path / "case2.csv"
+    CliRunner().invoke(main, ["examples", "copy", "case2.csv", str(tmp_path)])
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "eskin_industrial", *args], capture_output=True, text=True,
+                              timeout=120, env=env, cwd=tmp_path)
+
+    loud = run("detect", "-p", "paper-5x5", str(recording), "-o", os.devnull)
+    assert loud.returncode == 0 and "1400 frames" in loud.stderr
+    quiet = run("-q", "detect", "-p", "paper-5x5", str(recording), "-o", os.devnull)
+    assert quiet.returncode == 0 and quiet.stderr == ""
+    plan = run("-q", "bridge", "-p", "paper-5x5", "--source", "scene:case2", "--plc",
+               f"serve:127.0.0.1:{free_port()}", "--check")
+    assert plan.returncode == 0 and "case2" in plan.stdout, plan.stderr
+    told = run("-v", "profile", "list")
+    assert told.returncode == 0 and "paper-5x5" in told.stdout
+
+
+def test_json_is_json_everywhere_and_numbers_are_numbers() -> None:
+    """Every command that offers JSON takes --json (--format json kept where it was),
+    and gives the same document either way; the map's addresses are integers."""
+    runner = CliRunner()
+    offering = [" ".join(p) for p, cmd in _leaves(main)
+                if any(isinstance(prm, click.Option) and isinstance(prm.type, click.Choice) and "json" in prm.type.choices
+                       and "--format" in prm.opts for prm in cmd.params)]
+    assert {"plc map", "profile check", "profile show", "evaluate"} <= set(offering)
+    for path in offering:
+        cmd = main
+        for word in path.split():
+            cmd = cmd.commands[word]  # type: ignore[attr-defined]
+        assert "--json" in {o for prm in cmd.params for o in getattr(prm, "opts", [])}, path
+    for args in (["plc", "map", "-p", "paper-5x5"], ["profile", "show", "strip-1x5"], ["profile", "check", "hand-4x5"]):
+        a = runner.invoke(main, [*args, "--json"])
+        b = runner.invoke(main, [*args, "--format", "json"])
+        assert a.exit_code == 0 and json.loads(a.output) == json.loads(b.output), args
+    rows = {r["name"]: r for r in json.loads(runner.invoke(main, ["plc", "map", "-p", "hand-4x5", "--json"]).output)
+            if r["table"] == "holding register"}
+    assert rows["F_SUM"]["address"] == 104 and rows["F_SUM"]["words"] == 2 and rows["F_SUM"]["ref"] == 40105
+    assert all(isinstance(r[k], int) for r in rows.values() for k in ("address", "ref", "words"))

@@ -15,6 +15,7 @@ from eskin_industrial import load_profile
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.detect.updates import Update
 from eskin_industrial.errors import Refused
+from eskin_industrial.node import Command, Health
 from eskin_industrial.plc.image import (
     COILS,
     IMAGE_COUNT,
@@ -24,7 +25,6 @@ from eskin_industrial.plc.image import (
     parse_coil_write,
     parse_register_write,
 )
-from eskin_industrial.node import Command, Health
 from eskin_industrial.plc.server import PlcRegisterHandler
 from tests.helpers.fuzz import fuzz
 from tests.helpers.paths import PROFILES

@@ -10,12 +10,12 @@ import pytest
 
 pytest.importorskip("sklearn")
 
-from eskin_industrial.detect import GraspState, get_method  # noqa: E402
-from eskin_industrial.detect.learned import CLASSES, FEATURES, Learned  # noqa: E402
-from eskin_industrial.evaluation.suite import EVALUATION_SEEDS, SUITE, TUNING_SEEDS, evaluate  # noqa: E402
-from eskin_industrial.evaluation.train import TrainConfig, default_model  # noqa: E402
-from tests.helpers.paths import PROFILES  # noqa: E402
-from tests.helpers.scenes import grasp  # noqa: E402
+from eskin_industrial.detect import GraspState, get_method
+from eskin_industrial.detect.learned import CLASSES, FEATURES, Learned
+from eskin_industrial.evaluation.suite import EVALUATION_SEEDS, SUITE, TUNING_SEEDS, evaluate
+from eskin_industrial.evaluation.train import TrainConfig, default_model
+from tests.helpers.paths import PROFILES
+from tests.helpers.scenes import grasp
 
 RATE = 100.0
 
@@ -100,8 +100,8 @@ def test_classes_and_features_are_named():
 def test_without_scikit_learn_the_cli_names_the_extra(tmp_path):
     # a site directory whose sklearn cannot be imported stands in for a missing extra
     (tmp_path / "sklearn.py").write_text("raise ImportError('no scikit-learn here')\n")
-    code = ("import sys; sys.path.insert(0, %r); from eskin_industrial.cli import main; "
-            "main(['evaluate', '-m', 'learned', '-s', 'case2', '--seeds', '1000'])") % str(tmp_path)
+    code = (f"import sys; sys.path.insert(0, {str(tmp_path)!r}); from eskin_industrial.cli import main; "
+            "main(['evaluate', '-m', 'learned', '-s', 'case2', '--seeds', '1000'])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 4  # every missing extra: one format, one exit code (tests/test_cli_conventions.py)
     assert out.stderr.strip().splitlines() == [

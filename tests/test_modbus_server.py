@@ -488,9 +488,8 @@ def test_a_bad_allow_list_in_bridge_toml_is_one_line_and_exit_2(tmp_path):
 
 @pytest.mark.slow
 def test_refusals_and_asyncio_reports_reach_the_bridge_log_rate_limited(capfd):
-    from tests.helpers.bridge import can_node, channel, hold_raw, node_thread, running_bridge, server_config, wait_for
-
     from eskin_industrial import load_profile
+    from tests.helpers.bridge import can_node, channel, hold_raw, node_thread, running_bridge, server_config, wait_for
     from tests.helpers.paths import PROFILES
 
     profile = load_profile(PROFILES / "paper-5x5.toml")

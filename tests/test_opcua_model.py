@@ -6,14 +6,21 @@ from __future__ import annotations
 
 import pytest
 
+from eskin_industrial.detect.updates import Update
 from eskin_industrial.node import Command, Health, NodeStatus, refusal
 from eskin_industrial.opcua import model, status
 from eskin_industrial.opcua.alarm import AlarmState
 from eskin_industrial.opcua.handover import URGENT_MAX, Handover, Waker
 from eskin_industrial.opcua.options import POLICIES, SECURE_POLICIES, OpcuaOptions, is_loopback, parse_endpoint_url
-from eskin_industrial.opcua.users import (Directory, UserEntry, add_user, hash_password, parse_users_env,
-                                          parse_users_file, verify_password)
-from eskin_industrial.detect.updates import Update
+from eskin_industrial.opcua.users import (
+    Directory,
+    UserEntry,
+    add_user,
+    hash_password,
+    parse_users_env,
+    parse_users_file,
+    verify_password,
+)
 
 S = status
 

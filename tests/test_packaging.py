@@ -29,8 +29,9 @@ def _run(cmd: list[str], cwd: Path, timeout: float = 300) -> subprocess.Complete
 
 
 def _pins(path: Path) -> dict[str, str]:
+    """The runtime pins: those above the extras' section."""
     pins = {}
-    for line in path.read_text().splitlines():
+    for line in path.read_text().split("# --- the extras")[0].splitlines():
         line = line.split("#", 1)[0].strip()
         if line:
             name, _, version = line.partition("==")

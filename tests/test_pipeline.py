@@ -78,10 +78,15 @@ ROOT = Path(__file__).resolve().parent.parent / "eskin_industrial"
 
 
 def _imports(path: Path, module: str) -> set[str]:
-    """Modules of the package ``path`` imports, anywhere in it (functions too), resolved."""
+    """Modules of the package ``path`` imports, anywhere in it (functions too), resolved;
+    not those under ``if TYPE_CHECKING:`` (a name for the type checker loads nothing)."""
     package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
     found = set()
-    for node in ast.walk(ast.parse(path.read_text())):
+    tree = ast.parse(path.read_text())
+    for block in ast.walk(tree):
+        if isinstance(block, ast.If) and isinstance(block.test, ast.Name) and block.test.id == "TYPE_CHECKING":
+            block.body = []
+    for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom):
             base = package[:len(package) - node.level + 1] if node.level else []
             name = ".".join(base + ([node.module] if node.module else []))

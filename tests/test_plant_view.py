@@ -13,19 +13,19 @@ import time
 
 import pytest
 
+from eskin_industrial.node import NodeSnapshot
 from eskin_industrial.plant.sparkplug import SparkplugOptions, open_edge
 from eskin_industrial.plant.watch import PlantModel
-from eskin_industrial.node import NodeSnapshot
 from eskin_industrial.view.plant_table import plant_lines
-from tests.helpers.snapshots import made
 from tests.helpers import sparkplug as spb
+from tests.helpers.snapshots import made
 
 
 def _p(seq=None, ts=1000, **metrics) -> bytes:
     p = spb.Payload(timestamp=ts)
     if seq is not None:
         p.seq = seq
-    for key, (kw) in metrics.items():
+    for kw in metrics.values():
         p.metrics.add(**kw)
     return p.SerializeToString()
 

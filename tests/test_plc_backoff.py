@@ -55,7 +55,7 @@ class Offering:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
-    def __enter__(self) -> "Offering":
+    def __enter__(self) -> Offering:
         self._thread.start()
         return self
 

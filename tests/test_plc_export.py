@@ -18,7 +18,16 @@ from click.testing import CliRunner
 from eskin_industrial import load_profile
 from eskin_industrial.cli import main
 from eskin_industrial.plc.export import TIA_COLUMNS, codesys_st, flat_csv, slip_guard_st, tia_xlsx
-from eskin_industrial.plc.image import BITS, COILS, IMAGE_COUNT, REGISTERS, STATUS_COUNT, Status, encode_registers, encode_tail
+from eskin_industrial.plc.image import (
+    BITS,
+    COILS,
+    IMAGE_COUNT,
+    REGISTERS,
+    STATUS_COUNT,
+    Status,
+    encode_registers,
+    encode_tail,
+)
 from tests.helpers.paths import PROFILES, ROOT
 
 PROFILE = load_profile(PROFILES / "paper-5x5.toml")

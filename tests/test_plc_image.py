@@ -9,6 +9,7 @@ from click.testing import CliRunner
 from eskin_industrial.cli import main
 from eskin_industrial.detect.updates import Update
 from eskin_industrial.errors import Refused
+from eskin_industrial.node import Command, Health
 from eskin_industrial.plc.image import (
     COIL,
     COILS,
@@ -23,7 +24,6 @@ from eskin_industrial.plc.image import (
     parse_register_write,
     split32,
 )
-from eskin_industrial.node import Command, Health
 from tests.helpers.paths import PROFILES
 from tests.helpers.snapshots import StatusImage
 

@@ -12,8 +12,8 @@ import pytest
 
 from eskin_industrial.detect.profile_shift import (
     ProfileShift,
-    chi2_threshold,
     chi2_tail,
+    chi2_threshold,
     profile_batch,
     profile_groups,
 )

@@ -36,9 +36,9 @@ from eskin_industrial.cli import main
 from eskin_industrial.cli.console import Ticker
 from eskin_industrial.detect.methods import get_method
 from eskin_industrial.errors import InputFormatError
+from eskin_industrial.evaluation.families import FAMILIES
 from eskin_industrial.evaluation.holdout import CANDIDATES, hold_out
 from eskin_industrial.evaluation.metrics import SceneScore
-from eskin_industrial.evaluation.families import FAMILIES
 from eskin_industrial.evaluation.suite import by_name, evaluate
 from eskin_industrial.profile import load_profile
 from eskin_industrial.recording import read_recording, write_recording, write_updates

@@ -10,6 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from eskin_industrial import load_profile
+from eskin_industrial.node import Command
 from eskin_industrial.plc.image import (
     COIL,
     COIL_COUNT,
@@ -32,7 +33,6 @@ from eskin_industrial.plc.image import (
     encode_tail,
     parse_coil_write,
 )
-from eskin_industrial.node import Command
 from eskin_industrial.plc.server import PlcRegisterHandler
 from tests.helpers.fuzz import fuzz
 from tests.helpers.paths import PROFILES

@@ -31,7 +31,8 @@ def test_film_creep_rises_with_its_time_constant_and_lags_on_unloading():
     t = np.arange(0, 60, 0.01)
     load = np.where((t >= 1) & (t < 31), 2.0, 0.0)[:, None] * np.ones((1, 3))
     out = sensor.film_creep(load, t, 0.1, 5.0, 15.0)
-    at = lambda s: out[np.searchsorted(t, s), 0]
+    def at(s):
+        return out[np.searchsorted(t, s), 0]
     assert at(1.0) == pytest.approx(2.0, rel=1e-2)  # no creep at the step itself
     assert at(6.0) == pytest.approx(2.0 * (1 + 0.1 * (1 - np.exp(-1))), rel=2e-3)  # one time constant
     assert at(30.99) == pytest.approx(2.2, rel=2e-3)  # settled: + 10 %
@@ -91,7 +92,8 @@ def test_torsional_slip_turns_the_footprint_and_leaves_the_centre():
     spec = parse_scene('[scene]\nname = "t"\nduration_s = 4.0\n[[events]]\nkind = "press"\nt_s = 0.5\nforce_n = 6.0\n'
                        '[[events]]\nkind = "rotate"\nt_s = 2.0\nangle_deg = -20.0\nangular_speed_deg_s = 40.0\n', "t.toml")
     rec = render(spec, 100.0, 0)
-    at = lambda s: rec.labels[np.searchsorted(rec.t, s)]
+    def at(s):
+        return rec.labels[np.searchsorted(rec.t, s)]
     assert (at(1.5), at(2.2), at(2.6)) == ("stable", "slip", "stable")
 
 
@@ -126,7 +128,8 @@ def test_sampled_footprint_matches_the_exact_rectangle():
 
 
 def test_line_and_point_contacts():
-    one = lambda foot: sampled_forces(A5, foot, np.array([[10.0, 10.0]]), np.zeros(1), np.zeros((1, 2)), np.array([6.0]))[0]
+    def one(foot):
+        return sampled_forces(A5, foot, np.array([[10.0, 10.0]]), np.zeros(1), np.zeros((1, 2)), np.array([6.0]))[0]
     line = one(Footprint((3.0, 20.0), shape="cylinder"))
     assert line.sum() == pytest.approx(6.0) and line[X != 10.0].max() == 0.0  # one column carries it all
     np.testing.assert_allclose(line[(X == 10.0) & (Y > 0) & (Y < 20)], 1.5)  # uniform along the line

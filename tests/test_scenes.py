@@ -80,7 +80,8 @@ def test_each_sensor_effect_alone(effect):
 
 def test_labels_of_the_paper_case2():
     rec = render("case2", 100.0, 3)
-    at = lambda t: rec.labels[np.searchsorted(rec.t, t)]
+    def at(t):
+        return rec.labels[np.searchsorted(rec.t, t)]
     assert (at(0.5), at(1.2), at(5.0), at(9.6), at(12.0)) == ("no_contact", "transition", "stable", "slip", "stable")
 
 

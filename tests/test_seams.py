@@ -1,6 +1,6 @@
-"""The two seams as docs/architecture.md shows them: its example source kind and its
-example output kind, taken from the page itself, are each one module plus one
-registry entry, and the bridge configuration and the runtime take them with no other
+"""The seams as docs/architecture.md shows them: its example source kind, output kind
+and method, taken from the page itself, are each one module plus one registry entry,
+and the bridge configuration, the profile and the runtime take them with no other
 change."""
 
 from __future__ import annotations
@@ -8,60 +8,54 @@ from __future__ import annotations
 import re
 import sys
 
+import numpy as np
 import pytest
 
 from eskin_industrial.bridge.config import output_classes, parse_bridge_config, resolve
 from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
 from eskin_industrial.bus.source import SOURCES
+from eskin_industrial.detect.methods import METHODS
+from eskin_industrial.detect.settings import DetectorSettings
+from eskin_industrial.detect.state import GraspState
 from eskin_industrial.errors import ProfileError
 from eskin_industrial.sinks.base import SINKS
 from tests.helpers.bridge import LogCapture, wait_for
-from tests.helpers.paths import PROFILES, ROOT
-
-#: What the page's examples take as given.
-PRELUDE = '''
-import time
-from dataclasses import dataclass
-
-import numpy as np
-
-from eskin_industrial.bus.source import Source
-from eskin_industrial.detect.state import GraspState
-from eskin_industrial.frames import RawScan
-from eskin_industrial.sinks.base import CliOption, Sink
-'''
-
-
-def page_examples() -> str:
-    """The Python blocks of docs/architecture.md, less their registry lines (the test
-    makes those entries itself)."""
-    text = (ROOT / "docs" / "architecture.md").read_text()
-    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
-    assert len(blocks) == 2, "the page shows one source and one output"
-    return PRELUDE + "\n".join(re.sub(r"^(SOURCES|SINKS)\[.*$", "", b, flags=re.M) for b in blocks)
+from tests.helpers.page_kinds import page_examples
+from tests.helpers.paths import PROFILES
 
 
 @pytest.fixture
 def kinds(tmp_path, monkeypatch):
     (tmp_path / "pagekinds.py").write_text(page_examples())
     monkeypatch.syspath_prepend(str(tmp_path))
+    import pagekinds  # type: ignore[import-not-found]
+
     monkeypatch.setitem(SOURCES, "const", "pagekinds:ConstSource")  # the one registry entry each
     monkeypatch.setitem(SINKS, "state-log", "pagekinds:StateLog")
-    yield
+    monkeypatch.setitem(METHODS, "peak-shift", pagekinds.METHOD)
+    yield pagekinds
     sys.modules.pop("pagekinds", None)
 
 
-def config(log_path) -> str:
+def peak_shift_profile(tmp_path) -> str:
+    path = tmp_path / "peak.toml"
+    text = (PROFILES / "paper-5x5.toml").read_text()
+    path.write_text(re.sub(r'(?m)^method = "[^"]*"', 'method = "peak-shift"', text, count=1))
+    return str(path)
+
+
+def config(log_path, profile: str = str(PROFILES / "paper-5x5.toml")) -> str:
     # 600 ohm on every taxel: about 4.4 N each, a firm still grasp
     return (f'[log]\nformat = "json"\nstatus_every_s = 0\n\n[state-log]\npath = "{log_path}"\n\n'
-            f'[[node]]\nname = "g"\nprofile = "{PROFILES / "paper-5x5.toml"}"\nsource = "const"\nvalue = 600.0\n')
+            f'[[node]]\nname = "g"\nprofile = "{profile}"\nsource = "const"\nvalue = 600.0\n')
 
 
 def test_the_page_examples_run_in_the_bridge(kinds, tmp_path):
     log_path = tmp_path / "states.log"
-    cfg = parse_bridge_config(config(log_path), str(tmp_path / "b.toml"))
+    cfg = parse_bridge_config(config(log_path, peak_shift_profile(tmp_path)), str(tmp_path / "b.toml"))
     (node,) = resolve(cfg)
+    assert node.profile.detector.method == "peak-shift"
     assert node.options.value == 600.0 and [c.kind for c, _ in output_classes(cfg)] == ["state-log"]
     capture = LogCapture()
     log = EventLog(capture, "json", "debug")
@@ -72,8 +66,10 @@ def test_the_page_examples_run_in_the_bridge(kinds, tmp_path):
     finally:
         bridge.stop()
         log.close()
-    lines = log_path.read_text().splitlines()
-    assert lines and lines[-1].startswith("g ") and lines[-1].endswith(" stable"), lines
+    lines = [line.split() for line in log_path.read_text().splitlines()]
+    # warm-up (no verdict), the still grasp, and the stopped bridge's last snapshot
+    assert [(n, m, said) for n, _, m, said in lines] == [
+        ("g", "peak-shift", "unknown"), ("g", "peak-shift", "stable"), ("g", "peak-shift", "unknown")], lines
     start = capture.events("start")[0]
     assert start["sources"] == "const" and start["outputs"] == str(log_path)
 
@@ -86,3 +82,15 @@ def test_the_new_kinds_keys_are_checked_like_every_section(kinds, tmp_path):
         parse_bridge_config(text.replace("path =", "paht =", 1), "b.toml")
     with pytest.raises(ProfileError, match=r"\[node\[0\]\] value: expected a number"):
         parse_bridge_config(text.replace("600.0", '"600"'), "b.toml")
+
+
+def test_the_page_method_finds_its_slip(kinds):
+    """The page's method decides: a press that moves from one taxel to the next is a slip."""
+    x, y = np.tile(np.arange(5) * 5.0, 5), np.repeat(np.arange(5) * 5.0, 5)
+    det = kinds.METHOD.stream(DetectorSettings(), x, y, 100.0)
+    forces = np.zeros((200, 25))
+    forces[:, 12] = 4.0
+    forces[100:, 12], forces[100:, 13] = 1.0, 4.0
+    states = [u.state for u in det.feed(np.arange(200) / 100.0, forces)]
+    assert int(GraspState.SLIP) not in states[:8] and int(GraspState.SLIP) in states
+    assert kinds.METHOD.scores[0].name == "peak_moves" == det.columns[0]

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
+from eskin_industrial.node import Command
 from eskin_industrial.plant import payload as pb
 from eskin_industrial.plant.commands import COMMAND_ALIAS, COMMANDS, BadCommand, parse_device_command
 from eskin_industrial.plant.sparkplug import DEVICE_METRICS, SparkplugOptions
-from eskin_industrial.node import Command
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, to_raw, wait_for
 from tests.helpers.modbus import need
@@ -163,8 +163,8 @@ def _props(metric) -> dict:
 def test_a_source_that_ends_is_a_ddeath_while_the_bridge_goes_on(tmp_path):
     """Two nodes; one's scene ends after 2 s: its DDEATH, while the other's DDATA goes on;
     DBIRTH carries the layout and the method with its thresholds; a scans counter."""
-    from eskin_industrial.profile import load_profile
     from eskin_industrial import scenes
+    from eskin_industrial.profile import load_profile
 
     short = tmp_path / "short.toml"
     hold = Path(scenes.__file__).parent / "builtin" / "hold.toml"

@@ -44,7 +44,7 @@ class Listener:
             self.sock.settimeout(left)
             try:
                 data = self.sock.recv(4096)
-            except (TimeoutError, socket.timeout):
+            except TimeoutError:
                 return
             self.messages.append((time.monotonic(), data.decode().split("\n")))
 

@@ -15,8 +15,8 @@ from eskin_industrial.detect.torsion import TurnFlow, grid_of, turn_batch, turn_
 from eskin_industrial.evaluation import conditions
 from eskin_industrial.evaluation.families import evaluate_families
 from eskin_industrial.evaluation.suite import DEFAULT_SETTINGS
-from eskin_industrial.scenes import load_scene, render
 from eskin_industrial.profile import find_profile
+from eskin_industrial.scenes import load_scene, render
 from eskin_industrial.scenes.physics import sampled_forces
 from eskin_industrial.scenes.spec import Footprint
 

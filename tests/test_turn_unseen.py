@@ -15,7 +15,6 @@ import pytest
 from eskin_industrial.bridge.loop import NodeLoop
 from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
-
 from eskin_industrial.detect.cof_track import CofTrack
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.detect.updates import Update

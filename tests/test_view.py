@@ -12,9 +12,9 @@ from eskin_industrial.node import Health
 from eskin_industrial.plc.image import read_back, status_names
 from eskin_industrial.profile import ModbusPlcSection
 from eskin_industrial.view import IndicatorScale, Snapshot, indicator_scale, render
-from tests.helpers.snapshots import StatusImage
 from eskin_industrial.view.screen import HEAT_COLORS, RAMP, fit_number
 from eskin_industrial.view.terminal import visible_width
+from tests.helpers.snapshots import StatusImage
 
 FINGERS = ("index", "middle", "ring", "little")
 PAPER_SCALE = IndicatorScale(("R_coe", "R_dw"), "paper", (2.5, 2.5), (0.5, 0.5))

@@ -117,7 +117,7 @@ def test_a_drawing_failure_is_raised_once_the_terminal_is_restored():
 
 def test_frame_text_never_scrolls_or_wraps():
     full = frame_text(["a" * 10, "b" * 4, "c" * 10], 10, 3)
-    assert full.count("\r\n") == 2 and not full.rstrip("\x1b[?2026l").endswith("\n")
+    assert full.count("\r\n") == 2 and not full.removesuffix("\x1b[?2026l").endswith("\n")
     # a line that fills the width is not erased after (that would remove its last character)
     assert "a" * 10 + "\r\n" in full and "b" * 4 + "\x1b[K" in full
     assert "\x1b[J" not in full

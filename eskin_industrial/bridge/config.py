@@ -83,7 +83,7 @@ class NodeConfig:
 
     @staticmethod
     def of(name: str, profile: str, source: str = "can", *, rate_hz: float | None = None,
-           outputs: dict[str, Any] | None = None, **keys: Any) -> "NodeConfig":
+           outputs: dict[str, Any] | None = None, **keys: Any) -> NodeConfig:
         """A node from keyword keys, the kind's ones checked as in a file; ``outputs``:
         output kind -> its node keys (a dict, checked as ``[node.KIND]``, or its
         ``NodeOptions`` already built)."""

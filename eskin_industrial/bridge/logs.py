@@ -29,7 +29,7 @@ QUEUE_RECORDS = 10_000
 
 
 def _utc(record: logging.LogRecord) -> str:
-    t = dt.datetime.fromtimestamp(record.created, dt.timezone.utc)
+    t = dt.datetime.fromtimestamp(record.created, dt.UTC)
     return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
 
 
@@ -61,7 +61,7 @@ class JsonFormatter(logging.Formatter):
 class _DroppingQueueHandler(logging.handlers.QueueHandler):
     """Never blocks the caller: a full queue drops the record and counts it."""
 
-    def __init__(self, q: queue.Queue, log: "EventLog") -> None:
+    def __init__(self, q: queue.Queue, log: EventLog) -> None:
         super().__init__(q)
         self._log = log
 

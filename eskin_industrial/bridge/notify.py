@@ -31,7 +31,7 @@ class Notifier:
         self._sock: socket.socket | None = None
 
     @classmethod
-    def from_env(cls, env: Mapping[str, str] | None = None, pid: int | None = None) -> "Notifier":
+    def from_env(cls, env: Mapping[str, str] | None = None, pid: int | None = None) -> Notifier:
         """From ``$NOTIFY_SOCKET`` and ``$WATCHDOG_USEC`` (the latter only when
         ``$WATCHDOG_PID`` is unset or this process's, as sd_watchdog_enabled does)."""
         env = os.environ if env is None else env

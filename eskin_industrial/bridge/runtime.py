@@ -104,7 +104,7 @@ class SingleNode:
             self.loop.add_sink(sink)
         self.source = self.loop.source
 
-    def __enter__(self) -> "SingleNode":
+    def __enter__(self) -> SingleNode:
         self._switch_interval = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)  # the reader thread, not the loop, comes first
         self.source.start()
@@ -151,7 +151,7 @@ class Bridge:
         self.failed_sources: list[str] = []  #: "node: error" of each source that failed
 
     # -- building: everything is opened before anything runs ----------------------
-    def open(self) -> "Bridge":
+    def open(self) -> Bridge:
         """Open outputs and sources; an error here stops before any loop runs."""
         try:
             loops = open_nodes(self.config, self.nodes, self._closers)
@@ -212,7 +212,7 @@ class Bridge:
         return lambda name, level, fields: self.log.event(name, level, node=run.name, **fields)
 
     # -- running --------------------------------------------------------------------
-    def start(self) -> "Bridge":
+    def start(self) -> Bridge:
         self._switch_interval = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         self.log.event("start", nodes=",".join(r.name for r in self.runs), outputs=self.where,

@@ -14,10 +14,10 @@ from ..calibration import Calibrator
 from ..errors import EskinError
 from ..frames import RawScan
 from ..profile import Profile
-from .source import NodeLike, OpenContext, Source
+from .source import NodeLike, OpenContext, OptionsT, Source
 
 
-class ReplaySource(Source):
+class ReplaySource(Source[OptionsT]):
     """Raw scans played at ``rate_hz`` (any speed), as if polled; scan times are the
     recording's (each loop continues them)."""
 
@@ -60,7 +60,7 @@ class SceneOptions:
     loop: bool = True
 
 
-class SceneSource(ReplaySource):
+class SceneSource(ReplaySource["SceneOptions"]):
     kind = "scene"
     spec = "scene:NAME"
     Options = SceneOptions
@@ -72,11 +72,11 @@ class SceneSource(ReplaySource):
         return {"scene": where}
 
     @classmethod
-    def describe(cls, node: NodeLike) -> str:
+    def describe(cls, node: NodeLike[SceneOptions]) -> str:
         return f"scene {node.options.scene}"
 
     @classmethod
-    def check(cls, node: NodeLike, base_dir: str) -> None:
+    def check(cls, node: NodeLike[SceneOptions], base_dir: str) -> None:
         from ..scenes import load_scene
 
         try:
@@ -89,7 +89,7 @@ class SceneSource(ReplaySource):
                              f"for profile {spec.scene.profile}), profile {node.profile.name} has {node.profile.taxels}")
 
     @classmethod
-    def open_node(cls, node: NodeLike, context: OpenContext) -> "SceneSource":
+    def open_node(cls, node: NodeLike[SceneOptions], context: OpenContext) -> SceneSource:
         from ..scenes import render
 
         o, prof = node.options, node.profile
@@ -110,7 +110,7 @@ class RecordingOptions:
     loop: bool = True
 
 
-class RecordingSource(ReplaySource):
+class RecordingSource(ReplaySource["RecordingOptions"]):
     kind = "recording"
     spec = "recording:FILE.csv"
     Options = RecordingOptions
@@ -122,11 +122,11 @@ class RecordingSource(ReplaySource):
         return {"path": where}
 
     @classmethod
-    def describe(cls, node: NodeLike) -> str:
+    def describe(cls, node: NodeLike[RecordingOptions]) -> str:
         return f"recording {node.options.path}"
 
     @classmethod
-    def check(cls, node: NodeLike, base_dir: str) -> None:
+    def check(cls, node: NodeLike[RecordingOptions], base_dir: str) -> None:
         from ..recording import read_recording
 
         try:
@@ -135,7 +135,7 @@ class RecordingSource(ReplaySource):
             raise ValueError(f"path: {exc}") from None
 
     @classmethod
-    def open_node(cls, node: NodeLike, context: OpenContext) -> "RecordingSource":
+    def open_node(cls, node: NodeLike[RecordingOptions], context: OpenContext) -> RecordingSource:
         from ..recording import read_recording
 
         prof = node.profile

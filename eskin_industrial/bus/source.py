@@ -33,7 +33,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypeVar
 
 from ..frames import RawScan
 from ..registry import SOURCE_GROUP, kinds, load_kind
@@ -79,10 +79,15 @@ class SourceHealth:
     done: bool = False  #: a finite source (a log, a recording played once) has ended
 
 
-class NodeLike(Protocol):
+#: A source kind's options (its ``Options``, the ``[[node]]`` keys of its own).
+OptionsT = TypeVar("OptionsT")
+OptionsT_co = TypeVar("OptionsT_co", covariant=True)
+
+
+class NodeLike(Protocol[OptionsT_co]):
     """What a kind is handed to open a node: a resolved ``[[node]]`` (see
-    :class:`eskin_industrial.bridge.config.ResolvedNode`).  Read-only: a resolved
-    node is frozen."""
+    :class:`eskin_industrial.bridge.config.ResolvedNode`), its source options of type
+    ``OptionsT_co``.  Read-only: a resolved node is frozen."""
 
     @property
     def name(self) -> str: ...
@@ -94,7 +99,7 @@ class NodeLike(Protocol):
     def rate_hz(self) -> float: ...
 
     @property
-    def options(self) -> Any: ...
+    def options(self) -> OptionsT_co: ...
 
 
 @dataclass
@@ -108,8 +113,9 @@ class OpenContext:
     closers: list[Callable[[], None]] = field(default_factory=list)
 
 
-class Source(abc.ABC):
-    """Raw scans from one sensor node, polled by one loop thread."""
+class Source(abc.ABC, Generic[OptionsT]):
+    """Raw scans from one sensor node, polled by one loop thread; a kind is generic
+    over its ``Options``, which its class methods are handed (``node.options``)."""
 
     #: The kind's name (``[[node]] source``, ``--source KIND:...``).
     kind: ClassVar[str] = ""
@@ -121,7 +127,7 @@ class Source(abc.ABC):
     profile_keys: ClassVar[dict[str, str]] = {}
 
     #: Set when this source is fed by a transport shared with other nodes' sources.
-    feeder: "Feeder | None" = None
+    feeder: Feeder | None = None
 
     def __init__(self) -> None:
         self._last_rx: float | None = None
@@ -188,7 +194,7 @@ class Source(abc.ABC):
         """Where the scans come from, for the start log line."""
         return self.kind
 
-    def start(self) -> "Source":
+    def start(self) -> Source:
         """Start what runs in the background (a reader thread); default: nothing."""
         return self
 
@@ -202,7 +208,7 @@ class Source(abc.ABC):
     def _close(self) -> None:
         pass
 
-    def __enter__(self) -> "Source":
+    def __enter__(self) -> Source:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -217,34 +223,34 @@ class Source(abc.ABC):
         return {}
 
     @classmethod
-    def adapt_profile(cls, profile: Profile, options: Any) -> Profile:
+    def adapt_profile(cls, profile: Profile, options: OptionsT) -> Profile:
         """The node's profile with the kind's overrides applied (a CAN node's
         ``base_id``, an RTU node's ``unit_id``); ValueError when they break it."""
         return profile
 
     @classmethod
-    def describe(cls, node: NodeLike) -> str:
+    def describe(cls, node: NodeLike[OptionsT]) -> str:
         """One line for ``--check`` and the start log: where this node's scans come from."""
         return cls.kind
 
     @classmethod
-    def check(cls, node: NodeLike, base_dir: str) -> None:
+    def check(cls, node: NodeLike[OptionsT], base_dir: str) -> None:
         """Problems found before anything opens (a missing file, an unknown scene);
         ValueError ``key: what is wrong``."""
 
     @classmethod
-    def check_together(cls, nodes: Sequence[NodeLike]) -> None:
+    def check_together(cls, nodes: Sequence[NodeLike[OptionsT]]) -> None:
         """Problems between the nodes of this kind (one serial line, two nodes);
         ValueError ``key: what is wrong``."""
 
     @classmethod
-    def share_key(cls, node: NodeLike) -> tuple | None:
+    def share_key(cls, node: NodeLike[OptionsT]) -> tuple[object, ...] | None:
         """Nodes of this kind with the same key share one transport (one CAN bus); None:
         each node has its own."""
         return None
 
     @classmethod
-    def open_nodes(cls, nodes: Sequence[NodeLike], context: OpenContext) -> list["Source"]:
+    def open_nodes(cls, nodes: Sequence[NodeLike[OptionsT]], context: OpenContext) -> list[Source[OptionsT]]:
         """Open one source per node (a kind that shares a transport overrides this)."""
         out = []
         for n in nodes:
@@ -254,7 +260,7 @@ class Source(abc.ABC):
         return out
 
     @classmethod
-    def open_node(cls, node: NodeLike, context: OpenContext) -> "Source":
+    def open_node(cls, node: NodeLike[OptionsT], context: OpenContext) -> Source[OptionsT]:
         raise NotImplementedError(f"source kind {cls.kind!r} opens no single node")
 
 
@@ -285,7 +291,7 @@ def source_kinds() -> dict[str, str]:
     return kinds(SOURCES, SOURCE_GROUP)
 
 
-def source_class(kind: str) -> type[Source]:
+def source_class(kind: str) -> type[Source[Any]]:
     """The class of a kind by name or alias; an unknown one is one line with the valid names."""
-    cls: type[Source] = load_kind(SOURCES, ALIASES.get(kind, kind), "source kind", Source, SOURCE_GROUP)
+    cls: type[Source[Any]] = load_kind(SOURCES, ALIASES.get(kind, kind), "source kind", Source, SOURCE_GROUP)
     return cls

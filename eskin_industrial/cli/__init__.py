@@ -11,11 +11,12 @@ import click
 
 from ..errors import DeprecatedKey, EskinError
 from .bridge_cmd import bridge
-from .console import add_envvars, add_verbosity
+from .console import add_envvars, add_global_verbosity, add_verbosity
 from .demo_cmd import demo
 from .detect_cmd import detect
 from .evaluate_cmd import evaluate_cmd
 from .examples_cmd import examples
+from .help_tail import add_help_tail
 from .modbus_cmd import modbus_bridge, modbus_node
 from .monitor_cmd import monitor
 from .node_cmd import node
@@ -32,7 +33,7 @@ from .simulate_cmd import simulate
 class _Group(click.Group):
     """Turn expected errors into one line on stderr and an exit code, never a traceback."""
 
-    def invoke(self, ctx: click.Context):
+    def invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
         except EskinError as exc:
@@ -88,4 +89,6 @@ main.add_command(opcua)
 # After every command is added: -v/-q on each, and each option also from the
 # environment, ESKIN_<COMMAND>_<OPTION> (docs/cli.md).
 add_verbosity(main)
+add_global_verbosity(main)  # and before the command: eskin-bus -q bridge ...
 add_envvars(main, "ESKIN")
+add_help_tail(main)  # each help page ends with examples and its ESKIN_* names

@@ -12,18 +12,21 @@ from __future__ import annotations
 
 import sys
 import warnings
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 import click
 
 from ..errors import DeprecatedKey
+
+if TYPE_CHECKING:
+    from ..bridge.config import NodeConfig
 from .can_common import bus_options
 from .console import verbosity
 from .outputs import given_output_options, node_outputs_from_cli, output_options, outputs_from_cli
 
 
 def node_from_options(profile_path: str, source: str, bus: dict[str, Any], outputs: dict[str, Any],
-                      rate_hz: float | None, name: str):
+                      rate_hz: float | None, name: str) -> NodeConfig:
     """One ``[[node]]`` from ``--source KIND:WHERE`` and python-can's bus options."""
     from ..bridge.config import NodeConfig
     from ..bus.source import source_class, source_kinds
@@ -67,8 +70,9 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], outpu
 @click.option("--check", is_flag=True, help="Validate the configuration and profiles, print the plan, exit.")
 @click.option("--explain", is_flag=True,
               help="With --check: also every node's resolved settings and where each came from.")
-def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, data_bitrate, bus_extra, rate_hz,
-           name, log_format, log_level, status_every, duration_s, check, explain, **output_values) -> None:
+def bridge(config_path: str | None, profile_path: str | None, source: str, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None, data_bitrate: int | None, bus_extra: dict[str, Any],
+           rate_hz: float | None, name: str, log_format: str | None, log_level: str | None, status_every: float | None,
+           duration_s: float | None, check: bool, explain: bool, **output_values: Any) -> None:
     """Run the bridge: decode each node's scans, detect, and keep the outputs (by
     default the PLC's register blocks) up to date, until SIGTERM, SIGINT, SIGHUP or
     SIGQUIT (then every block reads BRIDGE_OFFLINE; SIGUSR1 logs the counters).  With no output given, the PLC as the profile
@@ -98,12 +102,18 @@ def bridge(config_path, profile_path, source, interface, channel, bitrate, fd, d
             warnings.simplefilter("always", DeprecatedKey)
             cfg = load_bridge_config(config_path)
     else:
+        assert profile_path is not None  # one of the two, checked above
         moved = []
         node = node_from_options(profile_path, source, bus, node_outputs_from_cli(output_values), rate_hz, name)
         cfg = BridgeConfig(node=(node,), outputs=outputs_from_cli(output_values))
     log_level = log_level or {-1: "warning", 1: "debug", 2: "debug"}.get(verbosity())  # -q / -v
-    logs = replace(cfg.log, **{k: v for k, v in (("format", log_format), ("level", log_level),
-                                                   ("status_every_s", status_every)) if v is not None})
+    logs = cfg.log
+    if log_format is not None:
+        logs = replace(logs, format=cast(Literal["plain", "json"], log_format))
+    if log_level is not None:
+        logs = replace(logs, level=cast(Literal["debug", "info", "warning", "error"], log_level))
+    if status_every is not None:
+        logs = replace(logs, status_every_s=status_every)
     cfg = replace(cfg, log=logs)
     with warnings.catch_warnings(record=True) as moved_in_profiles:
         warnings.simplefilter("always", DeprecatedKey)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 import click
 import numpy as np
@@ -11,6 +13,8 @@ from ..calibration import Calibrator, full_scale
 from ..errors import InputFormatError
 from ..profile import Profile, load_profile
 from ..recording import read_recording
+
+FC = TypeVar("FC", bound=Callable[..., object])
 
 
 def complete_profile(ctx: click.Context, param: click.Parameter, incomplete: str) -> list:
@@ -23,7 +27,7 @@ def complete_profile(ctx: click.Context, param: click.Parameter, incomplete: str
     return names + [CompletionItem(incomplete, type="file")]
 
 
-def profile_option(required: bool = True):
+def profile_option(required: bool = True) -> Callable[[FC], FC]:
     return click.option(
         "-p", "--profile", "profile_path", type=click.Path(dir_okay=False), required=required,
         shell_complete=complete_profile,

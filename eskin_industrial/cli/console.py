@@ -9,12 +9,13 @@ pipe or a log file never sees them.
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import shutil
 import sys
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from typing import Any, TypeVar
 
@@ -50,9 +51,26 @@ def _set_quiet(ctx: click.Context, _param: click.Parameter, value: bool) -> None
 
 
 def _remember_quiet(ctx: click.Context, _param: click.Parameter, value: bool) -> bool:
-    """A command's own exposed ``-q``: still recorded, so that progress honours it."""
+    """A command's own exposed ``-q``: still recorded, so that progress honours it;
+    set too by a ``-q`` before the command (``eskin-bus -q detect ...``)."""
     _set_quiet(ctx, _param, value)
-    return value
+    return value or verbosity() < 0
+
+
+def _verbose_option() -> click.Option:
+    return click.Option(["-v", "--verbose"], count=True, expose_value=False, callback=_set_verbose,
+                        help="More on stderr: -v the package's logs, -vv python-can's and pymodbus' too.")
+
+
+def _quiet_option() -> click.Option:
+    return click.Option(["-q", "--quiet"], is_flag=True, expose_value=False, callback=_set_quiet,
+                        help="Only errors on stderr: no progress, no summary.")
+
+
+def add_global_verbosity(root: click.Group) -> None:
+    """``-v``/``-q`` before the command too (``eskin-bus -q bridge ...``): the group's
+    own options, recorded where every command of the invocation reads them."""
+    root.params.extend([_verbose_option(), _quiet_option()])
 
 
 def add_verbosity(cmd: click.Command) -> None:
@@ -67,12 +85,22 @@ def add_verbosity(cmd: click.Command) -> None:
         if "-q" in getattr(p, "opts", []) and p.callback is None:
             p.callback = _remember_quiet
     if "-v" not in taken:
-        cmd.params.append(click.Option(["-v", "--verbose"], count=True, expose_value=False, callback=_set_verbose,
-                                       help="More on stderr: -v the package's logs, -vv python-can's and "
-                                            "pymodbus' too."))
+        cmd.params.append(_verbose_option())
     if "-q" not in taken:
-        cmd.params.append(click.Option(["-q", "--quiet"], is_flag=True, expose_value=False, callback=_set_quiet,
-                                       help="Only errors on stderr: no progress, no summary."))
+        cmd.params.append(_quiet_option())
+
+
+def json_alias(f: Callable[..., Any]) -> Callable[..., Any]:
+    """``--json`` beside a command's ``--format`` (its ``fmt`` parameter): the same as
+    ``--format json``, so that every command that offers JSON takes ``--json``."""
+
+    @functools.wraps(f)
+    def with_json(*args: Any, as_json: bool = False, **kwargs: Any) -> Any:
+        if as_json:
+            kwargs["fmt"] = "json"
+        return f(*args, **kwargs)
+
+    return click.option("--json", "as_json", is_flag=True, help="JSON: the same as --format json.")(with_json)
 
 
 def add_envvars(root: click.Group, prefix: str) -> None:
@@ -182,7 +210,7 @@ class Ticker:
         self._end_bar()
         self._on = False
 
-    def __enter__(self) -> "Ticker":
+    def __enter__(self) -> Ticker:
         return self
 
     def __exit__(self, *_exc: object) -> None:
@@ -246,7 +274,7 @@ class Counter:
             sys.stderr.flush()
         self._on = self._shown = False
 
-    def __enter__(self) -> "Counter":
+    def __enter__(self) -> Counter:
         return self
 
     def __exit__(self, *_exc: object) -> None:

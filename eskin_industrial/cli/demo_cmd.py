@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING, TextIO
 
@@ -14,7 +15,8 @@ from .common import open_profile
 if TYPE_CHECKING:
     from ..profile import Profile
     from ..scenes import Rendered
-    from ..sim.cell.realtime import CellParts
+    from ..sim.cell.realtime import CellParts, CellRun
+    from ..sim.cell.virtual import ChainSpec
     from ..sim.demo import DemoResult
     from ..view.terminal import LiveScreen
 
@@ -181,8 +183,8 @@ def _closed_loop(objects: tuple[str, ...], profile_path: str | None, rate_hz: fl
             f"PLC writes {c.get('plc_writes', 0)}")
 
 
-def _cell_live(objects: tuple[str, ...], seed: int, method: str, chain, profile_for, plc_log: bool,
-               stdout: TextIO) -> list:
+def _cell_live(objects: tuple[str, ...], seed: int, method: str, chain: ChainSpec,
+               profile_for: Callable[[str], Profile], plc_log: bool, stdout: TextIO) -> list[CellRun]:
     """The closed loop under the live view, with the cell's lines (grip force, distance
     slid); the lines it would have printed are printed once the view has gone."""
     from ..plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names

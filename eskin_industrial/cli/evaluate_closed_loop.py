@@ -10,7 +10,7 @@ from typing import Any
 
 import click
 
-from ..detect.methods import DETECTORS
+from ..methods import detector_names
 from .console import Ticker, echo_json
 
 #: The baselines beside the methods: the cautious fixed grip (no skin, no program), the
@@ -58,7 +58,7 @@ def controls_of(methods: tuple[str, ...]) -> tuple[str, ...]:
     and it was not asked for."""
     if methods:
         return tuple(dict.fromkeys(methods))
-    names: tuple[str, ...] = ("fixed", "none", *DETECTORS, "oracle")
+    names: tuple[str, ...] = ("fixed", "none", *detector_names(), "oracle")
     from ..errors import MissingExtra
     from ..evaluation.train import INSTALL_HINT, require_sklearn
 
@@ -258,7 +258,6 @@ def _charts(out: Path, methods: tuple[str, ...], label: str, seeds: tuple[int, .
 
 def _tune(method: str, jobs: int) -> None:
     """The recipes' choices, remade on the tuning seeds (sim/cell/tuning.py)."""
-    from ..sim.cell.tuning import POLICY_CANDIDATES as CANDIDATES
     from ..sim.cell.tuning import (
         GRIP_LIMIT,
         SAFETY_CANDIDATES,
@@ -268,6 +267,7 @@ def _tune(method: str, jobs: int) -> None:
         fixed_safety,
         policy_candidates,
     )
+    from ..sim.cell.tuning import POLICY_CANDIDATES as CANDIDATES
 
     n = len(TUNING_SEEDS)
     click.echo(f"# eskin-bus evaluate --closed-loop --tune  ({n} tuning episodes, seeds {TUNING_SEEDS[0]}.."

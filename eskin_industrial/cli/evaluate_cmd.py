@@ -10,7 +10,6 @@ from typing import Any
 import click
 import numpy as np
 
-from ..detect.methods import DETECTORS, METHODS
 from ..evaluation.charts import CHARTS
 from ..evaluation.suite import (
     DEFAULT_SETTINGS,
@@ -24,8 +23,9 @@ from ..evaluation.suite import (
     by_name,
     evaluate,
 )
+from ..methods import detector_names, method_names
 from .common import open_profile
-from .console import Ticker, echo_json
+from .console import Ticker, echo_json, json_alias
 from .evaluate_families import family_names, leave_one_out, list_families, per_family, slip_episodes
 
 
@@ -48,7 +48,8 @@ def _seeds(value: str) -> tuple[int, ...]:
 
 
 @click.command()
-@click.option("-m", "--method", "methods", multiple=True, type=click.Choice(sorted(METHODS) + ["fixed", "oracle"]),
+@click.option("-m", "--method", "methods", multiple=True,
+              type=click.Choice(sorted(method_names()) + ["fixed", "oracle"]),
               help="Method to score (repeatable; default: every detector, not the 'none' baseline; with "
                    "--closed-loop also the baselines fixed and oracle, and all of them by default).")
 @click.option("-s", "--scene", "scenes", multiple=True, help="Scene (repeatable; default: the built-in suite).")
@@ -104,9 +105,13 @@ def _seeds(value: str) -> tuple[int, ...]:
 @click.option("--tune", is_flag=True,
               help="With --closed-loop: remake the recipes' choices on the tuning seeds (the fixed grip's safety "
                    "factor, the grip policy's factors; 20-40 minutes with --jobs 2).")
-def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts_dir, quick, only_charts, long_holds,
-                 profile_path, conditions, within_ms, show_families, per_family, family_opt, hold_out, fmt,
-                 closed_loop, plc_cycle_ms, cell, sweep, jobs, tune) -> None:
+@json_alias
+def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, rate_hz: float, tolerance_s: float,
+                 per_scene: bool, charts_dir: str | None, quick: bool, only_charts: tuple[str, ...], long_holds: bool,
+                 profile_path: str | None, conditions: tuple[str, ...], within_ms: tuple[int, ...],
+                 show_families: bool, per_family: bool, family_opt: tuple[str, ...], hold_out: tuple[str, ...],
+                 fmt: str, closed_loop: bool, plc_cycle_ms: float, cell: tuple[str, ...], sweep: str | None,
+                 jobs: int | None, tune: bool) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
     force read as slip, and cost per frame, for each method; then how steady the
     reported state is: varying-force episodes found, their time read as varying force,
@@ -155,7 +160,7 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
         methods = methods or ("cof-track", "paper")
     else:
         seed_set = _seeds(seeds)
-    names = methods or DETECTORS
+    names = methods or detector_names()
     start = time.perf_counter()
     if "learned" in names:
         names = _prepare_learned(names, explicit=bool(methods))
@@ -197,8 +202,9 @@ def evaluate_cmd(methods, scenes, seeds, rate_hz, tolerance_s, per_scene, charts
             click.echo(f"# {name}: of {r.score.events} slip events, {shares}")
 
 
-def _families(methods, scenes, seeds, rate_hz, tolerance_s, long_holds, profile_path, per_family_, family_opt,
-              hold_out, fmt, per_scene, within_ms) -> None:
+def _families(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, rate_hz: float, tolerance_s: float,
+              long_holds: bool, profile_path: str | None, per_family_: bool, family_opt: tuple[str, ...],
+              hold_out: tuple[str, ...], fmt: str, per_scene: bool, within_ms: tuple[int, ...]) -> None:
     if scenes or long_holds:
         raise click.UsageError("--per-family and --hold-out-family take the families' scenes; leave out "
                                "--scene and --long-holds")
@@ -212,7 +218,7 @@ def _families(methods, scenes, seeds, rate_hz, tolerance_s, long_holds, profile_
         leave_one_out(methods[0] if methods else settings.method, family_names(hold_out), rate_hz, settings,
                       tolerance_s, fmt, _figures, _delays)
         return
-    names = methods or DETECTORS
+    names = methods or detector_names()
     if "learned" in names:
         names = _prepare_learned(names, explicit=bool(methods))
     shares = (lambda s: ", ".join(f"{_within(s, ms):.0f} % within {ms} ms" for ms in within_ms)) if within_ms else None

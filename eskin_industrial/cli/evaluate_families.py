@@ -4,7 +4,8 @@ families (``evaluation/families.py``) and leave-one-family-out (``evaluation/hol
 from __future__ import annotations
 
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import click
 

@@ -7,10 +7,15 @@ import logging
 import sys
 import threading
 import time
+from typing import TYPE_CHECKING
 
 import click
 
 from .common import host_port, host_value, open_profile, profile_option, scene_or_recording
+
+if TYPE_CHECKING:
+    from ..bridge.loop import NodeLoop
+    from ..profile import Profile
 
 
 @click.command("modbus-node")
@@ -25,12 +30,14 @@ from .common import host_port, host_value, open_profile, profile_option, scene_o
 @click.option("--once", is_flag=True, help="Play the scene once and keep its last scan (default: loop).")
 @click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,
               help="Stop after this many seconds (default: until interrupted).")
-def modbus_node(profile_path, port, scene, recording, rate_hz, baudrate, seed, once, duration_s) -> None:
+def modbus_node(profile_path: str, port: str, scene: str | None, recording: str | None, rate_hz: float | None,
+                baudrate: int | None, seed: int, once: bool, duration_s: float | None) -> None:
     """Serve a scene as the sensor node: a Modbus RTU slave with the profile's register map."""
     run_rtu_node(open_profile(profile_path), port, scene, recording, rate_hz, baudrate, seed, once, duration_s)
 
 
-def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, duration_s) -> None:
+def run_rtu_node(prof: Profile, port: str, scene: str | None, recording: str | None, rate_hz: float | None,
+                 baudrate: int | None, seed: int, once: bool, duration_s: float | None) -> None:
     """The RTU node, shared by ``modbus-node`` and ``node --modbus-rtu``."""
     from ..modbus.pymodbus_io import quiet_pymodbus
     from ..sim.modbus_node import serve_scene_rtu
@@ -72,8 +79,10 @@ def run_rtu_node(prof, port, scene, recording, rate_hz, baudrate, seed, once, du
               help="Stop after this many seconds (default: until interrupted).")
 @click.option("--status-every", type=click.FloatRange(min=0.0), default=0.0,
               help="Print counters every N seconds (0: only at the end).")
-def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_port, plc_rtu, plc_baud, plc_timeout,
-                  serve, serve_rtu, serve_baud, duration_s, status_every) -> None:
+def modbus_bridge(profile_path: str, rtu_port: str | None, recording: str | None, baudrate: int | None,
+                  plc_host: str | None, plc_port: int | None, plc_rtu: str | None, plc_baud: int,
+                  plc_timeout: float | None, serve: str | None, serve_rtu: str | None, serve_baud: int,
+                  duration_s: float | None, status_every: float) -> None:
     """Poll the node over Modbus RTU, detect, and publish the PLC register image:
     written to the PLC (client mode, the default when the profile says so) or served
     (--serve / --serve-rtu).  The same loop as ``eskin-bus bridge --source rtu:PORT``,
@@ -146,7 +155,7 @@ def modbus_bridge(profile_path, rtu_port, recording, baudrate, plc_host, plc_por
         sys.exit(EXIT_FAILED)
 
 
-def _counters(loop) -> str:
+def _counters(loop: NodeLoop) -> str:
     return "modbus-bridge: " + " ".join(f"{k}={v}" for k, v in loop.counters().items())
 
 

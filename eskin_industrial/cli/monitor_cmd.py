@@ -5,10 +5,11 @@ from __future__ import annotations
 import sys
 import time
 from contextlib import nullcontext
+from typing import Any
 
 import click
 
-from ..detect.methods import METHODS
+from ..methods import method_names
 from .can_common import bus_options
 from .common import profile_option
 
@@ -17,15 +18,16 @@ from .common import profile_option
 @profile_option()
 @bus_options
 @click.option("--rate", "rate_hz", type=float, default=None, help="The node's scan rate in Hz (default: the profile's).")
-@click.option("--method", type=click.Choice(sorted(METHODS)), default=None,
+@click.option("--method", type=click.Choice(sorted(method_names())), default=None,
               help="Detection method (default: the profile's).")
 @click.option("--duration", "duration_s", type=float, default=None, help="Stop after this many seconds.")
 @click.option("--idle-exit", "idle_s", type=float, default=None,
               help="Stop once no scan came for this many seconds (after the first).")
 @click.option("--plain", is_flag=True,
               help="One line per state change instead of the live view (the default when stdout is not a terminal).")
-def monitor(profile_path, interface, channel, bitrate, fd, data_bitrate, bus_extra, rate_hz, method, duration_s, idle_s,
-            plain) -> None:
+def monitor(profile_path: str, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None, data_bitrate: int | None, bus_extra: dict[str, Any],
+            rate_hz: float | None, method: str | None, duration_s: float | None, idle_s: float | None,
+            plain: bool) -> None:
     """Watch a sensor node on a CAN bus: its scans decoded and detected, shown live
     (taxel heat map, scores against their thresholds, state, the register image the
     bridge would publish, counters) until Ctrl-C, --duration or --idle-exit; then one

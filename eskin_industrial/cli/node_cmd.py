@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import click
 
@@ -33,9 +34,11 @@ from .common import open_profile, profile_option, scene_or_recording
               help="Be a Modbus RTU node on this serial port instead of a CAN node (the profile's [modbus.node] map).")
 @click.option("--baud", "baudrate", type=int, default=None, help="With --modbus-rtu: baud rate (default: the profile's).")
 @click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
-def node(profile_path, interface, channel, bitrate, fd, data_bitrate, bus_extra, scene, recording, rate_hz, burst, repeat,
-         duration_s, seed, drop, duplicate, reorder, corrupt, silent_at_s, silent_for_s, modbus_rtu, baudrate,
-         quiet) -> None:
+def node(profile_path: str, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None, data_bitrate: int | None, bus_extra: dict[str, Any],
+         scene: str | None, recording: str | None, rate_hz: float | None, burst: bool, repeat: int,
+         duration_s: float | None, seed: int, drop: float, duplicate: float, reorder: float, corrupt: float,
+         silent_at_s: float | None, silent_for_s: float, modbus_rtu: str | None, baudrate: int | None,
+         quiet: bool) -> None:
     """Send scans as the profile's sensor node: one scan every 1/rate seconds (absolute
     deadlines, no drift), with the node's heartbeat and optional faults; or, with
     --modbus-rtu PORT, serve them as a Modbus RTU slave (the scene loops until

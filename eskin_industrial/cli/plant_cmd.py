@@ -48,8 +48,9 @@ def _line(e: dict[str, Any]) -> str:
 @click.option("--username", default=None, help="MQTT username.")
 @click.option("--password-file", default=None, metavar="FILE", help="MQTT password: the first line of this file.")
 @click.option("--password-env", default=None, metavar="NAME", help="MQTT password: this environment variable.")
-def plant(broker, group_id, plain, as_json, rebirth, duration_s, ca_file, cert_file, key_file, username, password_file,
-          password_env) -> None:
+def plant(broker: str, group_id: str, plain: bool, as_json: bool, rebirth: bool, duration_s: float | None,
+          ca_file: str | None, cert_file: str | None, key_file: str | None, username: str | None,
+          password_file: str | None, password_env: str | None) -> None:
     """Watch every Sparkplug B edge node and device on a broker: online or offline (from
     births and deaths), state, data valid, last slip, slip count, message rate, seq gaps.
     Live on a terminal; one line (--plain) or one JSON object (--json) per event

@@ -9,7 +9,7 @@ import click
 
 from ..plc.image import map_rows
 from .common import open_profile, profile_option
-from .console import echo_json
+from .console import echo_json, json_alias
 
 _COLUMNS = ("table", "name", "address", "ref", "type", "unit", "access", "description")
 _HEAD = ("table", "name", "address (0-based)", "reference (1-based)", "type", "unit", "access", "description")
@@ -23,7 +23,9 @@ def plc() -> None:
 @plc.command("map")
 @profile_option()
 @click.option("--format", "fmt", type=click.Choice(["csv", "md", "json"]), default="md", show_default=True,
-              help="A table (CSV or Markdown), or JSON: a list of rows with the same keys.")
+              help="A table (CSV or Markdown), or JSON: a list of rows with the same keys (and words), "
+                   "the numbers as numbers.")
+@json_alias
 def map_cmd(profile_path: str, fmt: str) -> None:
     """Print the register map (holding registers, coils, discrete inputs) with the
     profile's base address: 0-based protocol addresses and 1-based references
@@ -33,7 +35,7 @@ def map_cmd(profile_path: str, fmt: str) -> None:
     prof = open_profile(profile_path)
     rows = map_rows(prof.modbus.plc, prof.detector.method)
     if fmt == "json":
-        echo_json([{c: r[c] for c in _COLUMNS} for r in rows])
+        echo_json([_json_row(r) for r in rows])
         return
     if fmt == "csv":
         w = csv.writer(sys.stdout, lineterminator="\n")
@@ -42,6 +44,18 @@ def map_cmd(profile_path: str, fmt: str) -> None:
             w.writerow([r[c] for c in _COLUMNS])
         return
     click.echo(markdown(rows))
+
+
+def _json_row(row: dict[str, str]) -> dict[str, str | int]:
+    """A row with its numbers as numbers: ``address`` and ``ref`` those of the first
+    word (the reference as the integer it reads, 40005; a coil's 00001 is 1), and
+    ``words``, how many it takes (2 for a 32-bit pair, whose text reads "4-5")."""
+    first, _, last = row["address"].partition("-")
+    out: dict[str, str | int] = {c: row[c] for c in _COLUMNS}
+    out["address"] = int(first)
+    out["ref"] = int(row["ref"].partition("-")[0])
+    out["words"] = int(last) - int(first) + 1 if last else 1
+    return out
 
 
 def markdown(rows: list[dict[str, str]]) -> str:

@@ -29,7 +29,7 @@ class _Block:
 
 @click.command("export")
 @click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False),
-              help="Sensor profile (TOML), e.g. profiles/paper-5x5.toml.")
+              help="Sensor profile: a TOML file, or a built-in name (eskin-bus profile list), e.g. paper-5x5.")
 @click.option("--config", "config_path", type=click.Path(dir_okay=False),
               help="A bridge configuration: one file per node, tags prefixed with the node's name, each at its "
                    "base_address (instead of -p; needs -o).")

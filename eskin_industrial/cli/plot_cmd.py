@@ -7,9 +7,9 @@ from typing import Any
 import click
 import numpy as np
 
-from ..detect.methods import METHODS
 from ..detect.state import GraspState
 from ..errors import InputFormatError
+from ..methods import method_names
 from ..offline import detect_can_log, detect_recording
 from .common import open_profile, profile_option
 
@@ -22,7 +22,7 @@ STATE_COLOURS = {GraspState.SLIP: "tab:red", GraspState.VARIABLE_FORCE: "tab:ora
 @click.option("--can-log", default=None, type=click.Path(dir_okay=False),
               help="Plot a CAN log of the node's traffic instead (candump .log, .asc, .blf, ...).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="PNG file to write.")
-@click.option("--method", type=click.Choice(sorted(METHODS)), default=None, help="Detection method (default: the profile's).")
+@click.option("--method", type=click.Choice(sorted(method_names())), default=None, help="Detection method (default: the profile's).")
 @click.option("--labels", "labels_path", type=click.Path(dir_okay=False, exists=True), default=None,
               help="Ground truth (t,label, from `eskin-bus simulate --labels`) drawn under the states.")
 def plot(profile_path: str, input_path: str | None, can_log: str | None, output: str, method: str | None,

@@ -13,7 +13,7 @@ import click
 from ..errors import DeprecatedKey, ProfileError
 from ..profile import Profile, builtin_profiles, load_profile
 from .common import complete_profile
-from .console import echo_json
+from .console import echo_json, json_alias
 from .toml_out import dumps
 
 
@@ -26,6 +26,7 @@ def profile() -> None:
 @click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False), shell_complete=complete_profile)
 @click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text", show_default=True,
               help="One line per profile, or one JSON document (a list: file, ok, error, warnings, summary).")
+@json_alias
 def check(files: tuple[str, ...], fmt: str) -> None:
     """Validate profiles; one line each, exit 2 if any is refused."""
     results = [_check_one(path) for path in files]
@@ -64,6 +65,7 @@ def _check_one(path: str) -> dict[str, Any]:
 @profile.command()
 @click.argument("file", type=click.Path(dir_okay=False), shell_complete=complete_profile)
 @click.option("--format", "fmt", type=click.Choice(["toml", "json"]), default="toml", show_default=True)
+@json_alias
 def show(file: str, fmt: str) -> None:
     """Print the profile as loaded: every key with its default filled in, plus the
     values derived from it (taxel coordinates, detector sizes in samples)."""

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import click
 
@@ -30,8 +30,9 @@ if TYPE_CHECKING:
 @click.option("--queue-frames", type=click.IntRange(min=1, max=MAX_QUEUE_FRAMES), default=DEFAULT_QUEUE_FRAMES, show_default=True,
               help="Frames the reader may queue ahead of the detector before dropping.")
 @click.option("-q", "--quiet", is_flag=True, help="Nothing on stderr (no start line, no counters).")
-def receive(profile_path, interface, channel, bitrate, fd, data_bitrate, bus_extra, output, log_path, rate_hz, duration_s,
-            idle_s, max_scans, queue_frames, quiet) -> None:
+def receive(profile_path: str, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None, data_bitrate: int | None, bus_extra: dict[str, Any],
+            output: str | None, log_path: str | None, rate_hz: float | None, duration_s: float | None,
+            idle_s: float | None, max_scans: int | None, queue_frames: int, quiet: bool) -> None:
     """Receive scans from a CAN bus until stopped (Ctrl-C, --duration, --idle-exit,
     --scans), run the detector, and report the transport counters as JSON on stderr.
     The same source and loop as ``eskin-bus bridge --source can``."""

@@ -44,6 +44,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Any
+
+import numpy as np
 
 from .profile_shift import ProfileShift, profile_groups
 from .ramp import RampBank
@@ -52,7 +55,6 @@ from .scored import ScoredDetector
 from .settings import DetectorSettings
 from .state import GraspState
 from .torsion import TurnFlow, grid_of
-
 
 _SLIP = int(GraspState.SLIP)
 
@@ -64,7 +66,8 @@ class CofTrack(ScoredDetector):
     history_s = 0.35
     settle_s = 0.15
 
-    def __init__(self, settings: DetectorSettings, x_mm, y_mm, rate_hz: float, **overrides) -> None:
+    def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
+                 **overrides: Any) -> None:
         """Settings from ``settings.cof_track``; keyword arguments override single
         fields (for parameter sweeps)."""
         c = replace(settings.cof_track, **overrides) if overrides else settings.cof_track
@@ -142,7 +145,7 @@ class CofTrack(ScoredDetector):
         the learnt noise), for a subclass that sets :attr:`_keeps_steps`: the learned
         method's feature (cof-track itself no longer votes on it: docs/evaluation.md)."""
 
-    def score(self, t, f, s, xc, yc):
+    def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
         # (hot path: one call per frame at any rate, ten per paper hop at 100 Hz; so
         # attributes are read once into locals, and each (x, y, S) is one tuple)
         # running means of the last m centres and totals (the total is smoothed too,

@@ -15,7 +15,8 @@ or a bus delivers; the input paths clamp at the profile's ``full_scale_n`` first
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 

@@ -102,7 +102,7 @@ class Learned(CofTrack):
     name = "learned"
     columns = ("p_slip", "p_variable_force")
 
-    def __init__(self, settings: DetectorSettings, x_mm, y_mm, rate_hz: float, *, model: Model,
+    def __init__(self, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float, *, model: Model,
                  **overrides: Any) -> None:
         c = replace(settings.learned, **overrides) if overrides else settings.learned
         self.model = model
@@ -141,7 +141,7 @@ class Learned(CofTrack):
         ring[slot] = step2
         self._vib_count += 1
 
-    def score(self, t, f, s, xc, yc):
+    def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
         _, b, _slip, _varying = super().score(t, f, s, xc, yc)
         a = self.fast_score
         rate, _, _, _ = self._rate_score.score(t, f, s, xc, yc)

@@ -13,16 +13,20 @@ over the default model (``eskin_industrial.evaluation.binding``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
-from typing import Any, Callable
+from typing import Any, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .cof_track import CofTrack
 from .learned import Learned, Model
 from .paper import PaperDetector, paper_batch
+from .protocol import Detector
 from .scored import CofVelocity, ForceRate, HfEnergy, NoSlip
+from .settings import DetectorSettings
 from .updates import UpdateTable
 
 
@@ -45,8 +49,10 @@ NO_SCORE = Score("unused", "reads 0 (the method has no score)")
 class Method:
     name: str
     summary: str
-    stream: Callable[..., Any]
-    batch: Callable[..., Any]
+    #: ``(settings, x_mm, y_mm, rate_hz) -> Detector`` (and ``model=`` with ``needs_model``)
+    stream: Callable[..., Detector]
+    #: ``(settings, x_mm, y_mm, rate_hz, t, forces, flags=None) -> UpdateTable``
+    batch: Callable[..., UpdateTable]
     #: The factories also need ``model=`` (see :meth:`with_model`).
     needs_model: bool = False
     #: ``batch`` is a computation of its own over the whole recording; otherwise it
@@ -58,24 +64,25 @@ class Method:
     #: What ``score_a`` and ``score_b`` hold.
     scores: tuple[Score, Score] = PAPER_SCORES
 
-    def with_model(self, model: Model) -> "Method":
+    def with_model(self, model: Model) -> Method:
         """This method with ``model`` bound into both factories."""
         stream = partial(self.stream, model=model)
         return replace(self, stream=stream, batch=batch_via_stream(stream))
 
 
-def batch_via_stream(factory: Callable[..., Any]) -> Callable[..., UpdateTable]:
+def batch_via_stream(factory: Callable[..., Detector]) -> Callable[..., UpdateTable]:
     """A batch function for a method that only streams: feed the whole recording."""
 
-    def batch(settings, x_mm, y_mm, rate_hz, t, forces, flags=None) -> UpdateTable:
+    def batch(settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float, t: ArrayLike,
+              forces: ArrayLike, flags: np.ndarray | None = None) -> UpdateTable:
         det = factory(settings, x_mm, y_mm, rate_hz)
         return UpdateTable.from_updates(det.feed(np.asarray(t, float), np.asarray(forces, float), flags))
 
     return batch
 
 
-def _paper_rule(rule: str) -> Callable[..., Any]:
-    def make(settings, x_mm, y_mm, rate_hz):
+def _paper_rule(rule: Literal["both", "coe", "dw"]) -> Callable[..., Detector]:
+    def make(settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float) -> Detector:
         return PaperDetector(replace(settings, slip_rule=rule), x_mm, y_mm, rate_hz)
 
     return make
@@ -112,24 +119,12 @@ METHODS: dict[str, Method] = {
                     NoSlip, 9, (NO_SCORE, NO_SCORE)),
 }
 
-#: The methods that detect slip (every method but the ``none`` baseline): what an
-#: evaluation scores unless told otherwise.
-DETECTORS: tuple[str, ...] = tuple(name for name in METHODS if name != "none")
-
 
 def get_method(name: str) -> Method:
+    """The built-in method ``name`` (``eskin_industrial.methods.get_method`` also finds
+    the plug-ins)."""
     try:
         return METHODS[name]
     except KeyError:
         raise KeyError(f"unknown detection method {name!r}; known: {', '.join(sorted(METHODS))}") from None
 
-
-def method_of_code(code: int) -> Method | None:
-    """The method with this METHOD_ID register value (None: 0 or unknown)."""
-    return next((m for m in METHODS.values() if m.code == code), None)
-
-
-def method_of_stream(factory: Callable[..., Any]) -> Method | None:
-    """The registered method whose stream factory ``factory`` is (None: no registered
-    method's, such as a bound one or a sweep's own)."""
-    return next((m for m in METHODS.values() if factory is m.stream), None)

@@ -187,7 +187,7 @@ class NoSlip(ScoredDetector):
     name = "none"
     columns = ("unused", "unused")
 
-    def score(self, t, f, s, xc, yc):
+    def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
         return 0.0, 0.0, False, False
 
 
@@ -229,7 +229,7 @@ class ForceRate(ScoredDetector):
     def reset_scores(self) -> None:
         self._ring = _Lagged(max(1, round(self.lag_s * self.rate_hz)), None)
 
-    def score(self, t, f, s, xc, yc):
+    def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
         old = self._ring.swap(s)
         if old is None:
             return 0.0, 0.0, False, False
@@ -254,7 +254,7 @@ class CofVelocity(ScoredDetector):
     def reset_scores(self) -> None:
         self._ring = _Lagged(max(1, round(self.lag_s * self.rate_hz)), None)
 
-    def score(self, t, f, s, xc, yc):
+    def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
         old = self._ring.swap((xc, yc))
         if old is None:
             return 0.0, 0.0, False, False
@@ -291,14 +291,14 @@ class HfEnergy(ScoredDetector):
         self._a_base = 1.0 / max(1.0, self.baseline_s * self.rate_hz)
         self._n_seen = 0
 
-    def score(self, t, f, s, xc, yc):
+    def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
         p1, p2 = self._p1, self._p2
         cur = s if self.total else f
         self._p2, self._p1 = p1, cur
         if p1 is None or p2 is None:  # p2 set implies p1 set
             return 0.0, 0.0, False, False
         d = cur - 2.0 * p1 + p2
-        e = float(d * d if self.total else d @ d) / (s * s)
+        e = float(d * d if self.total else d @ d) / (s * s)  # type: ignore[operator]  # (total: floats; else arrays)
         self._fast += self._a_fast * (e - self._fast)
         self._n_seen += 1
         if self._n_seen < 5:

@@ -290,7 +290,7 @@ class DetectorSettings:
         if self.variable_r_coe > self.slip_r_coe or self.variable_r_dw > self.slip_r_dw:
             raise ValueError("variable_r_coe: expected the varying-force thresholds below the slip thresholds")
 
-    def geometry(self, rate_hz: float) -> "Geometry":
+    def geometry(self, rate_hz: float) -> Geometry:
         return _geometry(self.window_s, self.hop_s, self.lag_s, self.wavelet, self.max_gap_s, rate_hz)
 
 

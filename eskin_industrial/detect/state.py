@@ -63,7 +63,7 @@ class GraspState(enum.IntEnum):
         return self.name.lower()
 
     @classmethod
-    def from_label(cls, label: str) -> "GraspState":
+    def from_label(cls, label: str) -> GraspState:
         return cls[label.upper()]
 
 
@@ -89,7 +89,7 @@ class ContactRule:
         self.stay_n = self.STAY_FRACTION * enter_n
 
     @classmethod
-    def from_settings(cls, settings: DetectorSettings) -> "ContactRule":
+    def from_settings(cls, settings: DetectorSettings) -> ContactRule:
         return cls(settings.contact_threshold_n)
 
     def touching(self, s: float, was: bool) -> bool:
@@ -119,7 +119,7 @@ class VaryingLatch:
         self.clear()
 
     @classmethod
-    def from_settings(cls, c: VaryingForceSettings) -> "VaryingLatch":
+    def from_settings(cls, c: VaryingForceSettings) -> VaryingLatch:
         return cls(c.exit_fraction, c.exit_s, c.min_dwell_s)
 
     def clear(self) -> None:
@@ -165,7 +165,7 @@ class Decision:
         self.slip_run = 0  #: consecutive valid updates with slip evidence
 
     @classmethod
-    def from_settings(cls, settings: DetectorSettings, confirm: int | None = None) -> "Decision":
+    def from_settings(cls, settings: DetectorSettings, confirm: int | None = None) -> Decision:
         return cls(settings.hold_s, settings.slip_confirm_updates if confirm is None else confirm,
                    VaryingLatch.from_settings(settings.varying_force), settings.hold_from)
 

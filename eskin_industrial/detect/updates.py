@@ -65,7 +65,7 @@ class UpdateTable:
         return len(self.t)
 
     @classmethod
-    def from_updates(cls, updates: list[Update]) -> "UpdateTable":
+    def from_updates(cls, updates: list[Update]) -> UpdateTable:
         cols = {}
         for name in Update._fields:
             dtype = np.int64 if name in ("state", "flags") else bool if name == "valid" else np.float64

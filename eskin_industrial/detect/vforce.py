@@ -269,7 +269,7 @@ class _Weights(NamedTuple):
     a_noise: float  #: the noise learner's least gain
 
     @classmethod
-    def of(cls, settings: VaryingForceSettings, rate_hz: float) -> "_Weights":
+    def of(cls, settings: VaryingForceSettings, rate_hz: float) -> _Weights:
         horizons, base = _geometry(settings, rate_hz)
         g, sd, _ = ramp_weights(horizons, base)
         n = g.shape[1]

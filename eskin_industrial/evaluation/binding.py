@@ -18,13 +18,15 @@ a bridge that runs any other method never loads it.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from ..detect.learned import Model
-from ..detect.methods import Method, get_method, method_of_stream
+from ..detect.methods import Method
 from ..detect.settings import DetectorSettings
+from ..methods import get_method, method_of_stream
 
 #: A stream factory: (settings, x_mm, y_mm, rate_hz) -> a detector.
 Factory = Callable[[DetectorSettings, np.ndarray, np.ndarray, float], Any]

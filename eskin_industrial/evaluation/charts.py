@@ -161,7 +161,7 @@ def failure_map(out: Path, seeds: tuple[int, ...], log: Any,
                    * len(seeds) * len(methods))
     progress = Prefixed(progress, "failure map: ")
     table: dict[str, dict[str, list[float]]] = {}
-    for cond, (axis, values, factory) in CONDITIONS.items():
+    for cond, (_axis, values, factory) in CONDITIONS.items():
         table[cond] = {m: [] for m in methods}
         table[cond][_VF] = []
         for v in values:

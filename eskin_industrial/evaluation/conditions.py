@@ -3,8 +3,8 @@ rest as the scene defines it."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
-from typing import Callable
 
 from ..scenes import SceneSpec
 

@@ -100,7 +100,7 @@ class SceneScore:
     missed_unseen: int = 0  #: missed events flagged unseen (the module's doc)
     unseen_s: float = 0.0  #: holding time with TURN_UNSEEN in effect
 
-    def __iadd__(self, other: "SceneScore") -> "SceneScore":
+    def __iadd__(self, other: SceneScore) -> SceneScore:
         self.events += other.events
         self.found += other.found
         self.false_alarms += other.false_alarms

@@ -5,12 +5,12 @@ in the docs rests on.  Which scenes and seeds (tuning, held out) is ``corpus.py`
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
-from ..detect.methods import get_method
 from ..detect.settings import DetectorSettings
 from ..detect.updates import UpdateTable
+from ..methods import get_method
 from ..progress import NO_PROGRESS, Progress
 from ..scenes import Rendered, SceneSpec, load_scene, render
 from .binding import Factory, ready_factory

@@ -3,17 +3,18 @@
 from __future__ import annotations
 
 import importlib.util
+from collections.abc import Callable
 from dataclasses import replace
 from functools import partial
-from typing import Any, Callable, Literal
+from typing import Any, Literal
 
 import numpy as np
 
 from ..detect.cof_track import CofTrack
-from ..detect.methods import get_method
 from ..detect.paper import PaperDetector
 from ..detect.scored import CofVelocity, ForceRate, HfEnergy
 from ..detect.settings import DetectorSettings
+from ..methods import get_method
 from .binding import bind
 
 

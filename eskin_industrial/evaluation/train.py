@@ -61,7 +61,7 @@ class _Recorder(Learned):
 
         super().__init__(*args, model=model)
 
-    def score(self, t, f, s, xc, yc):
+    def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
         n = len(self.rows)
         out = super().score(t, f, s, xc, yc)
         if len(self.rows) > n:

@@ -61,7 +61,7 @@ class _HandlerContext(ModbusServerContext):
         self.old_simulator = True
         self.simdevices = []
 
-    async def async_getValues(self, device_id: int, func_code: int, address: int,  # noqa: N802 (pymodbus name)
+    async def async_getValues(self, device_id: int, func_code: int, address: int,
                               count: int = 1) -> list[int] | list[bool] | ExcCodes:
         table = _TABLE_OF_FC.get(func_code)
         if table is None:
@@ -69,7 +69,7 @@ class _HandlerContext(ModbusServerContext):
         result = self.handler.read(table, address, count)
         return ExcCodes(result) if isinstance(result, int) else result
 
-    async def async_setValues(self, device_id: int, func_code: int, address: int,  # noqa: N802
+    async def async_setValues(self, device_id: int, func_code: int, address: int,
                               values: Sequence[int] | Sequence[bool]) -> ExcCodes | None:
         table = _TABLE_OF_FC.get(func_code)
         if table is None:

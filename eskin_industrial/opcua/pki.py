@@ -43,7 +43,7 @@ def default_application_uri() -> str:
 
 def thumbprint(der: bytes) -> str:
     """The certificate's SHA-1 thumbprint in hex (OPC UA's name for a certificate)."""
-    return hashlib.sha1(der).hexdigest()  # noqa: S324 - OPC UA's thumbprint is SHA-1 by definition
+    return hashlib.sha1(der).hexdigest()
 
 
 def make_certificate(pki_dir: str | Path, application_uri: str, name: str, hosts: list[str],
@@ -105,7 +105,7 @@ def certificate_problem(pki_dir: str | Path, application_uri: str) -> str | None
     if application_uri not in uris:
         return (f"pki_dir: {cert_path}: the certificate is for {', '.join(uris) or 'no URI'}, not {application_uri!r} "
                 f"(eskin-bus opcua cert --force makes a new one)")
-    if cert.not_valid_after_utc < datetime.datetime.now(datetime.timezone.utc):
+    if cert.not_valid_after_utc < datetime.datetime.now(datetime.UTC):
         return f"pki_dir: {cert_path}: expired on {cert.not_valid_after_utc:%Y-%m-%d} (eskin-bus opcua cert --force)"
     return None
 

@@ -56,7 +56,7 @@ _OFFLINE = model.INDEX["Health/Offline"]
 _GROUP_INDEX = {"decision": 0, "measurement": 1, "fact": 2}
 _GROUPS = tuple(_GROUP_INDEX[g] for g in model.GROUPS)
 _VTYPES = tuple(variant_type(v.datatype) for v in model.VARIABLES)
-_UTC = datetime.timezone.utc
+_UTC = datetime.UTC
 _VARIANT_NONE = ua.Variant(None)
 _REQUESTS = {ua.ObjectIds.CallRequest_Encoding_DefaultBinary: "Call",
              ua.ObjectIds.WriteRequest_Encoding_DefaultBinary: "Write"}
@@ -198,7 +198,7 @@ class OpcuaServer:
             while not self._stopping:
                 try:  # a change at once; the periodic refreshes at every tick
                     await asyncio.wait_for(wake.wait(), tick)
-                except asyncio.TimeoutError:
+                except TimeoutError:
                     pass
                 wake.clear()
                 await self._turn()

@@ -41,9 +41,9 @@ def need_asyncua(what: str = "the opcua output") -> None:
         raise MissingExtra.of(what, "asyncua", "opcua") from None
 
 
-def node_info(node: NodeLike, frame_interval_s: float) -> NodeInfo:
+def node_info(node: NodeLike[Any], frame_interval_s: float) -> NodeInfo:
     """What the model says about a node, from its profile and the package."""
-    from ..detect.methods import get_method
+    from ..methods import get_method
     from .build import NodeInfo
 
     p = node.profile
@@ -65,7 +65,7 @@ def node_info(node: NodeLike, frame_interval_s: float) -> NodeInfo:
                     (p.layout.rows, p.layout.cols) if frame_interval_s else None, (0.0, per_taxel))
 
 
-class OpcuaSink(Sink):
+class OpcuaSink(Sink[OpcuaOptions]):
     """One node's object on the bridge's OPC UA server."""
 
     kind = "opcua"
@@ -154,7 +154,7 @@ class OpcuaSink(Sink):
         return options
 
     @classmethod
-    def describe(cls, options: OpcuaOptions, node: NodeLike) -> str:
+    def describe(cls, options: OpcuaOptions, node: NodeLike[Any]) -> str:
         frames = (f", Taxels every {options.frame_interval_s:g} s ({node.profile.layout.rows} x "
                   f"{node.profile.layout.cols})" if options.frame_interval_s else "")
         users = ("users from " + (options.users_file or f"${options.users_env}")
@@ -166,7 +166,7 @@ class OpcuaSink(Sink):
                 f"{anonymous}{frames}){warn}")
 
     @classmethod
-    def check(cls, options: OpcuaOptions, nodes: Sequence[NodeLike]) -> None:
+    def check(cls, options: OpcuaOptions, nodes: Sequence[NodeLike[Any]]) -> None:
         for n in nodes:
             if _NAME_FORBIDDEN & set(n.name) or n.name == "Machines":
                 raise ValueError(f"node {n.name!r}: an OPC UA object's name here holds no '.' or '/'")
@@ -182,13 +182,13 @@ class OpcuaSink(Sink):
                 raise ValueError(problem)
 
     @classmethod
-    def probe(cls, options: OpcuaOptions, nodes: Sequence[NodeLike]) -> None:
+    def probe(cls, options: OpcuaOptions, nodes: Sequence[NodeLike[Any]]) -> None:
         problem = listen_problem(options.host, options.port)
         if problem:
             raise ValueError(f"endpoint: {problem}")
 
     @classmethod
-    def open_nodes(cls, options: OpcuaOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
+    def open_nodes(cls, options: OpcuaOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
         need_asyncua()
         from .server import OpcuaServer
         from .users import load_users

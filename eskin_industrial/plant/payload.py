@@ -258,7 +258,7 @@ _PROPERTY_KIND = {f: k for k, f in _PROPERTY_VALUE.items()}
 def _decode_properties(data: bytes) -> tuple[tuple[str, tuple[int, Value]], ...]:
     keys: list[str] = []
     values: list[tuple[int, Value]] = []
-    for field, wire, v in _fields(data):
+    for field, _wire, v in _fields(data):
         if field == 1:
             keys.append(_text(v))
         elif field == 2:

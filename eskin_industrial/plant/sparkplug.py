@@ -536,7 +536,7 @@ class EdgeNode:
                 "sparkplug_bad_states": self.bad_states, "sparkplug_host_online": int(self.host_online)}
 
 
-class SparkplugDevice(Sink):
+class SparkplugDevice(Sink[SparkplugOptions]):
     """One sensor node as a Sparkplug device of the edge node."""
 
     kind = "sparkplug"
@@ -733,7 +733,7 @@ class SparkplugDevice(Sink):
             raise ValueError(f"{flags[key]}: {rest}" if sep and key in flags else str(exc)) from None
 
     @classmethod
-    def describe(cls, options: SparkplugOptions, node: NodeLike) -> str:
+    def describe(cls, options: SparkplugOptions, node: NodeLike[Any]) -> str:
         host, port, _ = parse_broker(options.broker)
         frames = (f", {FRAME_METRIC.name} every {options.frame_interval_s:g} s ({node.profile.layout.rows} x "
                   f"{node.profile.layout.cols})" if options.frame_interval_s else "")
@@ -741,7 +741,7 @@ class SparkplugDevice(Sink):
                 f"{host}:{port}{frames}")
 
     @classmethod
-    def check(cls, options: SparkplugOptions, nodes: Sequence[NodeLike]) -> None:
+    def check(cls, options: SparkplugOptions, nodes: Sequence[NodeLike[Any]]) -> None:
         for n in nodes:
             check_id("device id (node name)", n.name)
         check_files(options)
@@ -753,7 +753,7 @@ class SparkplugDevice(Sink):
                 raise ValueError(f"store_dir: {options.store_dir!r}: {str(d)!r} is not a writable folder")
 
     @classmethod
-    def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
+    def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
         edge = open_edge(options, [(n.name, {METHOD_METRIC: method_properties(n.profile),
                                      LAYOUT_METRIC: layout_properties(n.profile),
                                      FRAME_METRIC.name: frame_properties(n.profile, options.frame_interval_s),

@@ -43,6 +43,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from ..errors import ModbusFault, Refused
 from ..modbus.pymodbus_io import RtuMaster
@@ -53,6 +54,8 @@ from ..profile import ModbusPlcSection
 from ..sinks.base import Sink, SinkHealth
 from .image import REG, TAIL_AT, PlcImage, parse_register_write
 
+if TYPE_CHECKING:
+    from .sink import PlcOptions  # noqa: F401 - named in the base class (a string: no import cycle at run time)
 
 #: Each back-off wait is the current delay less up to this share of it, at random.
 JITTER = 0.25
@@ -114,7 +117,7 @@ def _by_code(now: collections.Counter[int], before: dict[int, int]) -> str:
     return ",".join(f"{c:02d}:{n - before.get(c, 0)}" for c, n in sorted(now.items()) if n > before.get(c, 0)) or "-"
 
 
-class PlcWriter(Sink):
+class PlcWriter(Sink["PlcOptions"]):
     # A sink of the "plc" output kind, opened by plc.sink.PlcSink: not a subclass of
     # it, so that the two modules do not import each other.
     kind = "plc"
@@ -168,7 +171,7 @@ class PlcWriter(Sink):
         else:
             self.where = f"tcp {self.host}:{self.port} (client)"
 
-    def start(self) -> "PlcWriter":
+    def start(self) -> PlcWriter:
         self._thread = threading.Thread(target=self._run, name="plc-writer", daemon=True)
         self._thread.start()
         return self

@@ -30,6 +30,7 @@ from typing import Literal
 from ..detect.methods import METHODS
 from ..detect.state import GraspState
 from ..errors import Refused
+from ..methods import get_method
 from ..modbus.exception_codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE
 from ..modbus.words import WordOrder, join32, split32
 from ..node import Command, NodeSnapshot
@@ -408,7 +409,7 @@ def register_docs(method: str | None) -> dict[str, str]:
     code and what its two scores are (the table's generic words with None)."""
     if method is None:
         return {}
-    m = METHODS[method]
+    m = get_method(method)
     a, b = m.scores
     return {"METHOD_ID": f"the deciding method: {m.code} = {m.name} here ({METHOD_CODES})",
             "SCORE_A": f"{m.name}'s {a.name} x r_scale, saturated at 65535: {a.doc}",

@@ -9,7 +9,7 @@ from ..sinks.base import Sink
 from .image import PlcImage, read_back, status_names
 
 
-class KeptRegisters(Sink):
+class KeptRegisters(Sink[None]):
     """Renders every snapshot into the node's register image, as the PLC output
     would, and keeps the newest (read by a view's redraw thread)."""
 

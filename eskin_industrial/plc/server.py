@@ -24,10 +24,11 @@ import queue
 import threading
 import time
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from ..errors import Refused
 from ..modbus.exception_codes import DEVICE_FAILURE, ILLEGAL_ADDRESS
-from ..modbus.pdu import Identity
+from ..modbus.pdu import Identity, Table
 from ..modbus.rtu_server import RtuServer
 from ..modbus.serial_line import SerialSettings
 from ..modbus.serving import RateLimitedLog
@@ -48,6 +49,9 @@ from .image import (
     parse_coil_write,
     parse_register_write,
 )
+
+if TYPE_CHECKING:
+    from .sink import PlcOptions  # noqa: F401 - named in the base class (a string: no import cycle at run time)
 
 
 class PlcRegisterHandler:
@@ -86,7 +90,7 @@ class PlcRegisterHandler:
     def _holding(self) -> list[int]:
         return [*self.registers, self.command_pending, int(self.enabled), *self.tail]
 
-    def read(self, table, address, count):
+    def read(self, table: Table, address: int, count: int) -> list[int] | list[bool] | int:
         off = address - self.base
         if table in ("holding", "input"):  # input registers: a read-only mirror (FC4)
             size = IMAGE_COUNT
@@ -102,7 +106,7 @@ class PlcRegisterHandler:
         self.reads += 1
         return values[off: off + count]
 
-    def write(self, table, address, values):
+    def write(self, table: Table, address: int, values: list[int] | list[bool]) -> int | None:
         off = address - self.base
         try:
             if table == "holding":
@@ -157,11 +161,11 @@ class PlcBlocks:
                 return h
         return None
 
-    def read(self, table, address, count):
+    def read(self, table: Table, address: int, count: int) -> list[int] | list[bool] | int:
         h = self._find(table, address, count)
         return ILLEGAL_ADDRESS if h is None else h.read(table, address, count)
 
-    def write(self, table, address, values):
+    def write(self, table: Table, address: int, values: list[int] | list[bool]) -> int | None:
         h = self._find(table, address, len(values))
         return ILLEGAL_ADDRESS if h is None else h.write(table, address, values)
 
@@ -192,14 +196,14 @@ class PlcServer:
         self._lingered = False
         self._blocks = [PlcBlockSink(self, h) for h in self.handlers]  # built once: used at every scan
 
-    def block(self, index: int) -> "PlcBlockSink":
+    def block(self, index: int) -> PlcBlockSink:
         return self._blocks[index]
 
     @property
     def where(self) -> str:
         return self.server.where
 
-    def start(self) -> "PlcServer":
+    def start(self) -> PlcServer:
         self.server.start()
         server = self.server
         if isinstance(server, TcpServer) and _every_interface(server.host) and not (
@@ -267,7 +271,7 @@ def identity_of(settings: ModbusPlcSection, model_name: str = "") -> Identity:
                     product_name=ident.product_name, model_name=ident.model_name or model_name)
 
 
-class PlcBlockSink(Sink):
+class PlcBlockSink(Sink["PlcOptions"]):
     """One node's block of a shared :class:`PlcServer`, as that node's sink."""
 
     # A sink of the "plc" output kind, opened by plc.sink.PlcSink: not a subclass of

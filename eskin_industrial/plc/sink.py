@@ -84,18 +84,18 @@ class PlcNodeOptions:
 SERVER_KEYS = ("max_connections", "idle_timeout_s", "allow_read", "allow_write", "read_only", "unit_ids")
 
 
-def server_settings(options: PlcOptions, nodes: Sequence[NodeLike]) -> ModbusPlcSection:
+def server_settings(options: PlcOptions, nodes: Sequence[NodeLike[Any]]) -> ModbusPlcSection:
     """The first node's ``[modbus.plc]`` with what ``[plc]`` sets of :data:`SERVER_KEYS`."""
     given = {k: getattr(options, k) for k in SERVER_KEYS if getattr(options, k) is not None}
     return replace(nodes[0].profile.modbus.plc, **given)
 
 
-def plc_mode(options: PlcOptions, nodes: Sequence[NodeLike]) -> Literal["client", "server"]:
+def plc_mode(options: PlcOptions, nodes: Sequence[NodeLike[Any]]) -> Literal["client", "server"]:
     mode = options.mode or nodes[0].profile.modbus.plc.mode
     return "client" if mode == "client" else "server"
 
 
-def serve_address(options: PlcOptions, nodes: Sequence[NodeLike]) -> tuple[str, int]:
+def serve_address(options: PlcOptions, nodes: Sequence[NodeLike[Any]]) -> tuple[str, int]:
     """Server mode over TCP: where to listen (``[plc]`` / ``--plc``, else the first
     node's ``[modbus.plc] bind`` and ``port``)."""
     first = nodes[0].profile.modbus.plc
@@ -129,7 +129,7 @@ def parse_host_port(text: str, require_port: bool = False) -> tuple[str | None, 
     return parse_endpoint(text, require_port)
 
 
-class PlcSink(Sink):
+class PlcSink(Sink[PlcOptions]):
     """The output kind "plc"; its sinks are :class:`PlcWriter` (client mode) and
     :class:`PlcBlockSink` (one node's block of the server)."""
 
@@ -181,11 +181,11 @@ class PlcSink(Sink):
         return replace(profile, modbus=replace(profile.modbus, plc=plc))
 
     @classmethod
-    def describe(cls, options: PlcOptions, node: NodeLike) -> str:
+    def describe(cls, options: PlcOptions, node: NodeLike[Any]) -> str:
         return f"PLC {plc_mode(options, [node])} block at {node.profile.modbus.plc.base_address}"
 
     @classmethod
-    def check(cls, options: PlcOptions, nodes: Sequence[NodeLike]) -> None:
+    def check(cls, options: PlcOptions, nodes: Sequence[NodeLike[Any]]) -> None:
         blocks = sorted((n.profile.modbus.plc.base_address, n.name) for n in nodes)
         for (lo, a), (hi, b) in zip(blocks, blocks[1:]):
             if hi - lo < IMAGE_COUNT:
@@ -198,13 +198,13 @@ class PlcSink(Sink):
             options.client_settings(n.profile.modbus.plc)  # the back-off bounds, with the profile's
 
     @classmethod
-    def explain_keys(cls, options: PlcOptions, nodes: Sequence[NodeLike]) -> dict[str, str]:
+    def explain_keys(cls, options: PlcOptions, nodes: Sequence[NodeLike[Any]]) -> dict[str, str]:
         if plc_mode(options, nodes) == "server":  # a server listens on the profile's bind, not its PLC host
             return {**cls.profile_keys, "host": "modbus.plc.bind"}
         return cls.profile_keys
 
     @classmethod
-    def probe(cls, options: PlcOptions, nodes: Sequence[NodeLike]) -> None:
+    def probe(cls, options: PlcOptions, nodes: Sequence[NodeLike[Any]]) -> None:
         """Server mode: the port can be listened on, the serial device is there.  (A
         client's PLC may be down at ``--check``; the writer waits for it.)"""
         if plc_mode(options, nodes) != "server":
@@ -219,7 +219,7 @@ class PlcSink(Sink):
             raise ValueError(f"port: {problem}")
 
     @classmethod
-    def open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
+    def open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
         from ..modbus.serial_line import SerialSettings
         from .client import PlcWriter
         from .server import PlcServer, identity_of, policy_of
@@ -238,7 +238,7 @@ class PlcSink(Sink):
                                ).start()
             context.closers.append(server.stop)
             return [server.block(i) for i in range(len(nodes))]
-        sinks: list[Sink] = []
+        sinks: list[Sink[Any]] = []
         for n in nodes:
             w = PlcWriter(options.client_settings(n.profile.modbus.plc), options.host, options.port,
                           serial=serial, refresh_s=n.profile.output.refresh_s).start()

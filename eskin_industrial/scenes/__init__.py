@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from importlib import resources
+from importlib.resources.abc import Traversable
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +34,7 @@ class Rendered:
     spec: SceneSpec
 
 
-def _builtin_dir():
+def _builtin_dir() -> Traversable:
     return resources.files(__package__) / "builtin"
 
 

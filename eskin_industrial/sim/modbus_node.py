@@ -82,7 +82,7 @@ class NodeSimulator:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
-    def start(self) -> "NodeSimulator":
+    def start(self) -> NodeSimulator:
         self.server.start()
         self._thread = threading.Thread(target=self._step, name="node-scene", daemon=True)
         self._thread.start()
@@ -113,7 +113,7 @@ class NodeSimulator:
             self._thread.join(timeout=2)
         self.server.stop()
 
-    def __enter__(self) -> "NodeSimulator":
+    def __enter__(self) -> NodeSimulator:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:

@@ -166,7 +166,7 @@ class PlcSimulator:
                 return t
         return None
 
-    def start(self) -> "PlcSimulator":
+    def start(self) -> PlcSimulator:
         self.server.start()
         self._thread = threading.Thread(target=self._scan, name="plc-sim", daemon=True)
         self._thread.start()

@@ -36,16 +36,16 @@ import collections
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar, cast
 
 from ..registry import SINK_GROUP, kinds, load_kind
 
 if TYPE_CHECKING:
     from ..bus.source import NodeLike, OpenContext
-    from ..profile import Profile
     from ..detect.updates import Update
     from ..frames import Frame
     from ..node import Command, NodeSnapshot
+    from ..profile import Profile
 
 #: section name -> "module:Class", imported on first use.  The order is the order of
 #: the outputs in logs and ``--check``.
@@ -88,8 +88,13 @@ class CliOption:
     secret: bool = False  #: never taken from the command line (files or environment only)
 
 
-class Sink(abc.ABC):
-    """Where one node's results go."""
+#: An output kind's options (its ``Options``, its ``[section]`` of ``bridge.toml``).
+OptionsT = TypeVar("OptionsT")
+
+
+class Sink(abc.ABC, Generic[OptionsT]):
+    """Where one node's results go; a kind is generic over its ``Options``, which its
+    class methods are handed."""
 
     #: The output kind: its ``[SECTION]`` in the bridge configuration, its log events.
     kind: ClassVar[str] = ""
@@ -203,7 +208,7 @@ class Sink(abc.ABC):
 
     # -- what the configuration, the CLI and --check ask of a kind ---------------------
     @classmethod
-    def options_from_cli(cls, values: dict[str, Any]) -> Any | None:
+    def options_from_cli(cls, values: dict[str, Any]) -> OptionsT | None:
         """The kind's options from its command-line values (None: not asked for);
         ValueError / click's BadParameter-like one line for a bad value."""
         return None
@@ -220,32 +225,32 @@ class Sink(abc.ABC):
         return profile
 
     @classmethod
-    def default_options(cls) -> Any:
+    def default_options(cls) -> OptionsT:
         """The options when the kind is the default output and nothing was given."""
-        return cls.Options()
+        return cast(OptionsT, cls.Options())
 
     @classmethod
-    def describe(cls, options: Any, node: NodeLike) -> str:
+    def describe(cls, options: OptionsT, node: NodeLike[Any]) -> str:
         """One line for ``--check``: where this node's results go."""
         return cls.kind
 
     @classmethod
-    def check(cls, options: Any, nodes: Sequence[NodeLike]) -> None:
+    def check(cls, options: OptionsT, nodes: Sequence[NodeLike[Any]]) -> None:
         """Problems across nodes found before anything opens; ValueError ``key: what``."""
 
     @classmethod
-    def explain_keys(cls, options: Any, nodes: Sequence[NodeLike]) -> dict[str, str]:
+    def explain_keys(cls, options: OptionsT, nodes: Sequence[NodeLike[Any]]) -> dict[str, str]:
         """:attr:`profile_keys` as they apply to these options (``--explain``)."""
         return cls.profile_keys
 
     @classmethod
-    def probe(cls, options: Any, nodes: Sequence[NodeLike]) -> None:
+    def probe(cls, options: OptionsT, nodes: Sequence[NodeLike[Any]]) -> None:
         """``--check`` only: what can be found by trying on this machine (a port to
         listen on is free); the run meets the same at open, with the same message.
         ValueError ``key: what``."""
 
     @classmethod
-    def open_nodes(cls, options: Any, nodes: Sequence[NodeLike], context: OpenContext) -> list["Sink"]:
+    def open_nodes(cls, options: OptionsT, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
         """One sink per node (in order); what must be closed goes to ``context.closers``.
 
         Every registered kind overrides it.  Not abstract: the sinks a kind opens may
@@ -254,9 +259,9 @@ class Sink(abc.ABC):
         raise NotImplementedError(f"{cls.__name__} is opened by its output kind {cls.kind!r}")
 
 
-def sink_class(kind: str) -> type[Sink]:
+def sink_class(kind: str) -> type[Sink[Any]]:
     """The class of an output kind by name; an unknown one is one line with the valid names."""
-    cls: type[Sink] = load_kind(SINKS, kind, "output kind", Sink, SINK_GROUP)
+    cls: type[Sink[Any]] = load_kind(SINKS, kind, "output kind", Sink, SINK_GROUP)
     return cls
 
 

@@ -45,7 +45,7 @@ class RecorderOptions:
         return "jsonl" if Path(self.path).suffix in (".jsonl", ".ndjson") else "csv"
 
 
-class Recorder(Sink):
+class Recorder(Sink[RecorderOptions]):
     kind = "recorder"
     Options = RecorderOptions
     cli_options = (
@@ -133,11 +133,11 @@ class Recorder(Sink):
         return RecorderOptions(path=path, format=values.get("record_format"))
 
     @classmethod
-    def describe(cls, options: RecorderOptions, node: NodeLike) -> str:
+    def describe(cls, options: RecorderOptions, node: NodeLike[Any]) -> str:
         return f"record {options.resolved_format} {_path_for(options.path, node.name)}"
 
     @classmethod
-    def check(cls, options: RecorderOptions, nodes: Sequence[NodeLike]) -> None:
+    def check(cls, options: RecorderOptions, nodes: Sequence[NodeLike[Any]]) -> None:
         paths = [_path_for(options.path, n.name) for n in nodes]
         if len(nodes) > 1 and len(set(paths)) < len(paths):
             raise ValueError("path: several nodes would write one file; put {node} in the path")
@@ -148,10 +148,10 @@ class Recorder(Sink):
                     raise ValueError(f"path: {p}: is a folder, not a file")
 
     @classmethod
-    def open_nodes(cls, options: RecorderOptions, nodes: Sequence[NodeLike], context: OpenContext) -> list[Sink]:
+    def open_nodes(cls, options: RecorderOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
         from ..errors import EskinError
 
-        out: list[Sink] = []
+        out: list[Sink[Any]] = []
         for n in nodes:
             path = _path_for(options.path, n.name)
             if path == "-":

@@ -11,10 +11,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
-
-from typing import NamedTuple
 
 from ..detect.settings import DetectorSettings
 
@@ -49,9 +48,12 @@ def indicator_scale(method: str, settings: DetectorSettings, detector: object | 
         # (varying force: the total force's own test, not these indicators: detect/vforce.py)
         return IndicatorScale(("R_coe", "R_dw"), f"{method}: slip > | ({rule})",
                               (settings.slip_r_coe, settings.slip_r_dw))
-    from ..detect.methods import METHODS
+    from ..methods import get_method
 
-    known = METHODS.get(method)
+    try:
+        known = get_method(method)
+    except KeyError:  # a detector of no registered method (a test's own)
+        known = None
     columns = tuple(s.name for s in known.scores) if known is not None else tuple(
         getattr(detector, "columns", ("score", "unused")))
     if method == "cof-track":

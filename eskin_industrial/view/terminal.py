@@ -87,7 +87,7 @@ class LiveScreen:
         self._thread = threading.Thread(target=self._run, name="live-view", daemon=True)
         self._old_term: Callable[[int, FrameType | None], object] | int | None = None
 
-    def __enter__(self) -> "LiveScreen":
+    def __enter__(self) -> LiveScreen:
         self._write(ENTER)
         if threading.current_thread() is threading.main_thread():
             # SIGTERM would end the process without unwinding: the shell would be left

@@ -172,7 +172,7 @@ class NodeThread:
     def __post_init__(self) -> None:
         self.thread = threading.Thread(target=self.node.run, name="can-node", daemon=True)
 
-    def start(self) -> "NodeThread":
+    def start(self) -> NodeThread:
         self.thread.start()
         return self
 
@@ -219,7 +219,7 @@ class TimedPlc:
         with self._lock:
             self.writes.append((t, decode(regs, "big")))
 
-    def start(self) -> "TimedPlc":
+    def start(self) -> TimedPlc:
         self.server.start()
         return self
 

@@ -133,7 +133,7 @@ class Snapshot:
     sockets: dict[int, int] = field(default_factory=_socket_inodes)
     buses: dict[int, tuple[str, object]] = field(default_factory=_virtual_queues)
 
-    def leaks_since(self, before: "Snapshot") -> list[str]:
+    def leaks_since(self, before: Snapshot) -> list[str]:
         """What is open now and was not in ``before``, one line each; empty when nothing."""
         out: list[str] = []
         threads = [t for t in self.threads if t not in before.threads and t is not threading.current_thread()]

@@ -52,7 +52,7 @@ class PlcStandIn:
         self._conns: list[socket.socket] = []
 
     # -- up and down ------------------------------------------------------------------
-    def start(self) -> "PlcStandIn":
+    def start(self) -> PlcStandIn:
         sock = socket.socket()
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.bind(("127.0.0.1", self.port))
@@ -83,7 +83,7 @@ class PlcStandIn:
 
     stop = go_down
 
-    def __enter__(self) -> "PlcStandIn":
+    def __enter__(self) -> PlcStandIn:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from eskin_industrial import Calibrator, load_profile
-from eskin_industrial.bus.can.layout import CanLayout, NodeState, NodeStatus, ScanAssembler, decode_messages
+from eskin_industrial.bus.can.layout import CanLayout, NodeState, NodeStatus, decode_messages
 from eskin_industrial.bus.can.log import read_can_log
 from eskin_industrial.bus.can.reader import BusReader, open_bus
 from eskin_industrial.detect import get_method

@@ -68,7 +68,7 @@ class CanGroup:
             self.lock.release()
         return True
 
-    def start(self) -> "CanGroup":
+    def start(self) -> CanGroup:
         """Start the reader (once: several sources share it)."""
         if not self._started:
             self._started = True

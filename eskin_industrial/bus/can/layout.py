@@ -19,10 +19,12 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Literal
 
+import can
 import numpy as np
 
 from ...errors import DecodeError, ProfileError
@@ -98,7 +100,7 @@ class CanLayout:
         object.__setattr__(self, "segments", segments)
 
     @classmethod
-    def from_profile(cls, profile: Profile, fd: bool | None = None) -> "CanLayout":
+    def from_profile(cls, profile: Profile, fd: bool | None = None) -> CanLayout:
         """The profile's layout; ``fd`` overrides ``[can] fd``.  Refuses a profile whose
         raw values do not fit ``taxel_bits`` (they would be clipped silently)."""
         can, cal = profile.can, profile.calibration
@@ -307,7 +309,7 @@ class ScanAssembler:
         # half the counter's period, in seconds: beyond it, receipt times count wraps
         self._horizon = (SEQ_MODULO / 2) / self.rate_hz
 
-    def feed(self, msg) -> RawScan | None:
+    def feed(self, msg: can.Message) -> RawScan | None:
         c = self.counters
         if msg.is_error_frame:
             c["error_frames"] += 1
@@ -424,7 +426,8 @@ class ScanAssembler:
             self._cur = None
 
 
-def decode_messages(layout: CanLayout, messages, rate_hz: float) -> tuple[list[RawScan], ScanAssembler]:
+def decode_messages(layout: CanLayout, messages: Iterable[can.Message], rate_hz: float
+                    ) -> tuple[list[RawScan], ScanAssembler]:
     """All complete scans in a sequence of messages (a log), and the assembler with its
     counters."""
     asm = ScanAssembler(layout, rate_hz)

@@ -122,7 +122,7 @@ def _position(reader: object) -> Callable[[], int] | None:
     descriptor's offset, which counts what was read from disk whatever the format,
     buffering or compression above it (asked only while the reader is still reading)."""
     try:
-        fd = getattr(reader, "file").fileno()
+        fd = reader.file.fileno()  # type: ignore[attr-defined]  # (an AttributeError is the answer "no file")
         os.lseek(fd, 0, os.SEEK_CUR)
     except (AttributeError, OSError, ValueError):  # (io.UnsupportedOperation is both)
         return None
@@ -272,20 +272,20 @@ class CanLogSource(CanSource):
         return {"path": where, **({"fd": bus["fd"]} if bus.get("fd") is not None else {})}
 
     @classmethod
-    def describe(cls, node: NodeLike) -> str:
+    def describe(cls, node: NodeLike[Any]) -> str:
         return f"log {node.options.path}"
 
     @classmethod
-    def check(cls, node: NodeLike, base_dir: str) -> None:
+    def check(cls, node: NodeLike[Any], base_dir: str) -> None:
         check_readable(node.options.path, "path")
         cls.check_layout(node)
 
     @classmethod
-    def share_key(cls, node: NodeLike) -> tuple:
+    def share_key(cls, node: NodeLike[Any]) -> tuple:
         return ("can-log", node.options.path)
 
     @classmethod
-    def _reader(cls, node: NodeLike, context: OpenContext) -> FrameThread:
+    def _reader(cls, node: NodeLike[Any], context: OpenContext) -> FrameThread:
         path = node.options.path
         return LogPlayer(path, read_can_log(path), context.queue_frames)
 

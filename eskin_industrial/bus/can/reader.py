@@ -18,13 +18,16 @@ import select
 import socket
 import threading
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any, Self
 
 import can
 
 from ...errors import CanBusError, EskinError
 from ..source import DEFAULT_QUEUE_FRAMES
 from .busargs import NO_BITRATE, configured, make_timing, parse_filters
+
+if TYPE_CHECKING:
+    from ...profile import Profile
 
 #: Socket receive buffer asked for on SocketCAN (the kernel default holds a few
 #: hundred frames: a 1 Mbit/s bus fills it in tens of milliseconds).
@@ -59,9 +62,9 @@ def open_bus(interface: str | None = None, channel: str | None = None, bitrate: 
     return bus
 
 
-def bus_kwargs(profile, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None,
+def bus_kwargs(profile: Profile, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None,
                data_bitrate: int | None, timing: dict[str, int] | None = None,
-               filters: Sequence[str] = (), extra: dict[str, Any] | None = None) -> dict:
+               filters: Sequence[str] = (), extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """Arguments for :func:`open_bus` from python-can's options (the command line's
     ``-i/-c/-b/--fd/--timing/--filter/--bus-kwargs``, or a bridge node's keys).
 
@@ -127,7 +130,7 @@ class FrameThread:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=self.thread_name, daemon=True)
 
-    def start(self):
+    def start(self) -> Self:
         """Start the thread (once: a second call does nothing)."""
         if self._thread.ident is None:
             self._thread.start()

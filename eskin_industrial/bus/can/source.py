@@ -23,9 +23,9 @@ from ...preflight import check_writable_dir
 from ...profile import MAX_BITRATE_BPS, MAX_DATA_BITRATE_BPS, Profile
 from ...schema import in_range, positive_at_most
 from ..source import NodeLike, OpenContext, Source
+from .busargs import make_timing, parse_filters
 from .group import CanGroup
 from .layout import ID_RANGE, CanLayout, ScanAssembler
-from .busargs import make_timing, parse_filters
 from .reader import BusReader, FrameThread, bus_kwargs, open_bus
 
 
@@ -66,7 +66,9 @@ class CanOptions:
             raise ValueError(f"filter: {exc}") from None
 
 
-class CanSource(Source):
+# The live bus's options and a replayed log's (``can-log``, a subclass) share this
+# class's code, each method reading the keys its kind has: ``Any`` for both.
+class CanSource(Source[Any]):
     kind = "can"
     spec = "can"
     Options: ClassVar[type] = CanOptions  # (the log kind has options of its own)
@@ -138,7 +140,7 @@ class CanSource(Source):
             step(0.0)
         self.assembler.flush()
 
-    def start(self) -> "CanSource":
+    def start(self) -> CanSource:
         self.feeder.start()
         return self
 
@@ -162,22 +164,22 @@ class CanSource(Source):
         return replace(profile, can=can_section)
 
     @classmethod
-    def fd(cls, node: NodeLike) -> bool:
+    def fd(cls, node: NodeLike[Any]) -> bool:
         return node.profile.can.fd if node.options.fd is None else node.options.fd
 
     @classmethod
-    def describe(cls, node: NodeLike) -> str:
+    def describe(cls, node: NodeLike[Any]) -> str:
         o = node.options
         return f"can {o.interface or '(configured)'} {o.channel or ''} ids {node.profile.can.base_id:#x}+{ID_RANGE}"
 
     @classmethod
-    def check(cls, node: NodeLike, base_dir: str) -> None:
+    def check(cls, node: NodeLike[Any], base_dir: str) -> None:
         cls.check_layout(node)
         if node.options.log:
             check_writable_dir(node.options.log, "log")
 
     @classmethod
-    def check_layout(cls, node: NodeLike) -> None:
+    def check_layout(cls, node: NodeLike[Any]) -> None:
         """The node's frames as the profile describes them can carry its raw values
         (``taxel_bits``, a scan that fits a node's IDs): the refusal the run meets when it
         opens the bus, found before."""
@@ -187,9 +189,9 @@ class CanSource(Source):
             raise ValueError(f"profile: {exc}") from None
 
     @classmethod
-    def check_together(cls, nodes: Sequence[NodeLike]) -> None:
+    def check_together(cls, nodes: Sequence[NodeLike[Any]]) -> None:
         """Nodes on one bus must not share IDs."""
-        by_bus: dict[tuple, list[NodeLike]] = {}
+        by_bus: dict[tuple, list[NodeLike[Any]]] = {}
         for n in nodes:
             by_bus.setdefault(cls.share_key(n), []).append(n)
         for group in by_bus.values():
@@ -200,17 +202,17 @@ class CanSource(Source):
                                      f"(a node takes {ID_RANGE} IDs; set base_id)")
 
     @classmethod
-    def share_key(cls, node: NodeLike) -> tuple:
+    def share_key(cls, node: NodeLike[Any]) -> tuple:
         o = node.options
         return ("can", o.interface, o.channel, o.bitrate_bps, cls.fd(node), o.data_bitrate_bps,
                 tuple(sorted((o.timing or {}).items())), o.filter, tuple(sorted(o.bus_kwargs.items())))
 
     @classmethod
-    def open_nodes(cls, nodes: Sequence[NodeLike], context: OpenContext) -> list[Source]:
+    def open_nodes(cls, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Source[Any]]:
         groups: dict[tuple, list[int]] = {}
         for i, n in enumerate(nodes):
             groups.setdefault(cls.share_key(n), []).append(i)
-        out: list[Source | None] = [None] * len(nodes)
+        out: list[Source[Any] | None] = [None] * len(nodes)
         for members in groups.values():
             first = nodes[members[0]]
             reader = cls._reader(first, context)
@@ -227,7 +229,7 @@ class CanSource(Source):
         return [s for s in out if s is not None]
 
     @classmethod
-    def _reader(cls, node: NodeLike, context: OpenContext) -> FrameThread:
+    def _reader(cls, node: NodeLike[Any], context: OpenContext) -> FrameThread:
         o = node.options
         kw = bus_kwargs(node.profile, o.interface, o.channel, o.bitrate_bps, o.fd, o.data_bitrate_bps,
                         timing=o.timing, filters=o.filter, extra=o.bus_kwargs)

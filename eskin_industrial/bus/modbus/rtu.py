@@ -60,7 +60,7 @@ class RtuOptions:
     baudrate: int | None = field(default=None, metadata=positive())
 
 
-class RtuSource(Source):
+class RtuSource(Source["RtuOptions"]):
     """Polls one RTU sensor node at its pace; one scan per poll."""
 
     kind = "modbus-rtu"
@@ -88,7 +88,7 @@ class RtuSource(Source):
         #: ``error``); kept after a good poll, as a CAN reader keeps its last error.
         self._last_error = ""
 
-    def open(self) -> "RtuSource":
+    def open(self) -> RtuSource:
         self.master.connect()
         return self
 
@@ -198,7 +198,7 @@ class RtuSource(Source):
         return {"serial_port": port, **({"baudrate": int(baud)} if baud else {})}
 
     @classmethod
-    def adapt_profile(cls, profile: Profile, options: Any) -> Profile:
+    def adapt_profile(cls, profile: Profile, options: RtuOptions) -> Profile:
         node = profile.modbus.node
         if options.unit_id is None and options.baudrate is None:
             return profile
@@ -206,20 +206,20 @@ class RtuSource(Source):
         return replace(profile, modbus=replace(profile.modbus, node=node))
 
     @classmethod
-    def describe(cls, node: NodeLike) -> str:
+    def describe(cls, node: NodeLike[RtuOptions]) -> str:
         return f"rtu {node.options.serial_port} unit {node.profile.modbus.node.unit_id}"
 
     @classmethod
-    def check(cls, node: NodeLike, base_dir: str) -> None:
+    def check(cls, node: NodeLike[RtuOptions], base_dir: str) -> None:
         check_serial(node.options.serial_port, "serial_port")
 
     @classmethod
-    def check_together(cls, nodes: Sequence[NodeLike]) -> None:
+    def check_together(cls, nodes: Sequence[NodeLike[RtuOptions]]) -> None:
         ports = [n.options.serial_port for n in nodes]
         for port in ports:
             if ports.count(port) > 1:
                 raise ValueError(f"[node] serial_port: {port!r} is used by two nodes (one node per line)")
 
     @classmethod
-    def open_node(cls, node: NodeLike, context: OpenContext) -> "RtuSource":
+    def open_node(cls, node: NodeLike[RtuOptions], context: OpenContext) -> RtuSource:
         return cls(node.profile, node.options.serial_port, baudrate=node.options.baudrate).open()

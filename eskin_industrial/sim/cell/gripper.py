@@ -18,6 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ...modbus.exception_codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE
+from ...modbus.pdu import Table
 
 #: The force registers' unit: 0.01 N.
 FORCE_SCALE = 100.0
@@ -121,12 +122,12 @@ class GripperRegisters:
         return [int(Action.GO) if s.go else 0, to_register(s.request_n), int(status), int(obj),
                 to_register(s.target_n), to_register(s.force_n)]
 
-    def read(self, table, address, count):
+    def read(self, table: Table, address: int, count: int) -> list[int] | int:
         if table not in ("holding", "input") or address < 0 or address + count > GRIPPER_COUNT:
             return ILLEGAL_ADDRESS
         return self.values()[address: address + count]
 
-    def write(self, table, address, values):
+    def write(self, table: Table, address: int, values: list[int] | list[bool]) -> int | None:
         writable = GREG["FORCE_REQUEST"].offset + 1
         if table != "holding" or address < 0 or address + len(values) > writable:
             return ILLEGAL_ADDRESS

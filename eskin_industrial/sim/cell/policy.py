@@ -25,8 +25,9 @@ Pure: the caller reads the registers (decoded) and writes what comes out.
 from __future__ import annotations
 
 import collections
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Literal, Mapping
+from typing import Literal
 
 from ...plc.image import Status
 from ...schema import non_negative, positive

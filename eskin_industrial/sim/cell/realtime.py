@@ -50,7 +50,6 @@ from .recipes import fixed_grip_n, policy_settings
 from .virtual import ChainSpec, raw_of
 from .world import CellWorld, Episode
 
-
 #: The cell's bridge reads the sensor stale after this long without a scan (the
 #: profile's default is 2.5 scan periods, 25 ms at 100 Hz): the simulated node is a
 #: thread, and on a shared machine it falls tens of milliseconds behind its deadlines

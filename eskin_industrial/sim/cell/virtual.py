@@ -35,8 +35,8 @@ from ...calibration import Calibrator
 from ...detect.state import GraspState
 from ...detect.updates import Update
 from ...frames import RawScan
-from ...pipeline import Pipeline
 from ...node import Command, Health, NodeStatus
+from ...pipeline import Pipeline
 from ...plc.image import PlcImage, decode_registers
 from ...profile import Profile
 from .actuator import ActuatorSpec

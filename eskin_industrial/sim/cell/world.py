@@ -15,7 +15,7 @@ import numpy as np
 
 from .actuator import Actuator, ActuatorSpec
 from .objects import CellObject, Specimen
-from .physics import G, Contact, Friction
+from .physics import Contact, Friction, G
 from .render import FrameRenderer
 from .task import Task
 

@@ -1,0 +1,108 @@
+"""Detection methods by name: the built-in ones (``detect/methods.py``) and the
+plug-ins of installed distributions, as python-can finds an interface by name.
+
+A plug-in method is an entry point in the ``eskin_industrial.methods`` group that
+names a :class:`~eskin_industrial.detect.methods.Method`::
+
+    [project.entry-points."eskin_industrial.methods"]
+    peak-shift = "mypackage.peak:METHOD"
+
+Its ``name`` must be the entry point's name, and its ``code`` (the METHOD_ID register
+value and the Sparkplug ``Method`` metric, which a PLC program compares) must be
+neither 0 (no method) nor another method's: a plug-in that breaks either rule is
+refused with one line naming it, never silently given another number.  A plug-in
+never replaces a built-in method of the same name.
+
+This lookup sits above ``detect`` (the numeric core reads no entry points) and below
+everything that names a method: profiles, the evaluation, the outputs, the commands.
+"""
+
+from __future__ import annotations
+
+import difflib
+import functools
+from collections.abc import Callable
+from typing import Any
+
+from .detect.methods import METHODS, Method
+from .errors import ProfileError
+from .registry import METHOD_GROUP, load_attr, plugins
+
+
+def method_names() -> list[str]:
+    """Every method's name: the built-in ones in their order, then the plug-ins' (read
+    from the entry points without importing them)."""
+    return [*METHODS, *(n for n in plugins(METHOD_GROUP) if n not in METHODS)]
+
+
+#: The built-in baseline that never reports slip (the closed loop's light grip with no
+#: sensing): a method, but no detector to score unless asked for.
+BASELINE = "none"
+
+
+def detector_names() -> tuple[str, ...]:
+    """Every method that detects slip (all but the ``none`` baseline): what an
+    evaluation scores unless told otherwise."""
+    return tuple(n for n in method_names() if n != BASELINE)
+
+
+@functools.cache
+def _plugin(name: str) -> Method:
+    target = plugins(METHOD_GROUP)[name]
+    method = load_attr(target)
+    where = f"method plug-in {name!r} ({target})"
+    if not isinstance(method, Method):
+        raise ProfileError(f"{where}: expected an eskin_industrial.detect.methods.Method, got {type(method).__name__}")
+    if method.name != name:
+        raise ProfileError(f"{where}: its Method is named {method.name!r}; the entry point and the name must agree")
+    taken = {m.code: m.name for m in METHODS.values()}
+    if method.code <= 0 or method.code > 0xFFFF:
+        raise ProfileError(f"{where}: code {method.code} is not a METHOD_ID (1..65535; 0 means no method)")
+    if method.code in taken:
+        raise ProfileError(f"{where}: code {method.code} is already {taken[method.code]!r}'s METHOD_ID; "
+                           f"give the plug-in a number of its own (the built-in ones use 1..{max(taken)})")
+    return method
+
+
+def _plugins_checked() -> dict[str, Method]:
+    """Every plug-in method, loaded, with no two sharing a code."""
+    found = {n: _plugin(n) for n in plugins(METHOD_GROUP) if n not in METHODS}
+    seen: dict[int, str] = {}
+    for name, method in found.items():
+        if method.code in seen:
+            raise ProfileError(f"method plug-ins {seen[method.code]!r} and {name!r} both take METHOD_ID "
+                               f"{method.code}; one must change its code")
+        seen[method.code] = name
+    return found
+
+
+def get_method(name: str) -> Method:
+    """The method ``name``, built in or a plug-in; an unknown name is a ``KeyError``
+    naming the nearest and the known ones."""
+    if name in METHODS:
+        return METHODS[name]
+    if name in plugins(METHOD_GROUP):
+        return _plugins_checked()[name]
+    known = method_names()
+    near = difflib.get_close_matches(name, known, n=1)
+    hint = f" (did you mean {near[0]!r}?)" if near else ""
+    raise KeyError(f"unknown detection method {name!r}{hint}; known: {', '.join(sorted(known))}")
+
+
+def all_methods() -> dict[str, Method]:
+    """Every method by name, the plug-ins loaded and checked."""
+    return {**METHODS, **_plugins_checked()}
+
+
+def method_of_code(code: int) -> Method | None:
+    """The method with this METHOD_ID register value (None: 0 or unknown)."""
+    return next((m for m in all_methods().values() if m.code == code), None)
+
+
+def method_of_stream(factory: Callable[..., Any]) -> Method | None:
+    """The registered method whose stream factory ``factory`` is (None: no registered
+    method's, such as a bound one or a sweep's own)."""
+    return next((m for m in all_methods().values() if factory is m.stream), None)
+
+
+__all__ = ["all_methods", "detector_names", "get_method", "method_of_code", "method_of_stream", "method_names"]

@@ -1,0 +1,38 @@
+"""The example kinds of docs/architecture.md (a source, an output, a method), taken
+from the page itself as one module's text, for the seams test and the plug-in test."""
+
+from __future__ import annotations
+
+import re
+
+from .paths import ROOT
+
+#: What the page's examples take as given.
+PRELUDE = '''from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from eskin_industrial.bus.source import NodeLike, OpenContext, Source
+from eskin_industrial.detect.methods import UNUSED, Method, Score, batch_via_stream
+from eskin_industrial.detect.scored import ScoredDetector
+from eskin_industrial.detect.state import GraspState
+from eskin_industrial.frames import RawScan
+from eskin_industrial.node import NodeSnapshot
+from eskin_industrial.sinks.base import CliOption, Sink
+'''
+
+#: The registry lines the page shows (the tests register the kinds themselves).
+REGISTRY_LINE = re.compile(r"^(SOURCES|SINKS|METHODS)\[.*$", flags=re.M)
+
+
+def page_examples() -> str:
+    """The Python blocks of docs/architecture.md, less their registry lines, as one module."""
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    assert len(blocks) == 3, "the page shows one source, one output and one method"
+    return PRELUDE + "\n".join(REGISTRY_LINE.sub("", b) for b in blocks)
