@@ -22,6 +22,14 @@ class ProfileError(EskinError):
     exit_code = 2
 
 
+class ListenError(EskinError):
+    """A server cannot listen (its port in use, an address not this machine's): a
+    setting to change, which a restart does not mend; exit 2 as a bad configuration
+    (the service unit restarts neither), the same line as ``--check``'s."""
+
+    exit_code = 2
+
+
 class InputFormatError(EskinError):
     """An input file (recording CSV, log) is malformed; the message names the line."""
 
@@ -52,6 +60,20 @@ class TransportError(EskinError):
 
 class CanBusError(TransportError):
     """The CAN bus cannot be opened (unknown interface, missing channel, no driver)."""
+
+
+class SocketCanMissing(CanBusError):
+    """The kernel has no SocketCAN (``AF_CAN`` is not supported): no channel name and
+    no interface option can help, only a kernel module or another machine; exit 5."""
+
+    exit_code = 5
+
+
+class NothingReceived(TransportError):
+    """``--idle-exit`` passed with not one scan of the node since the start: a channel
+    nobody sends on, a node that is off, or another node's IDs; exit 6."""
+
+    exit_code = 6
 
 
 class ModbusFault(TransportError):

@@ -7,6 +7,7 @@ Each refusal is one line naming where, and exit 2."""
 from __future__ import annotations
 
 import os
+import re
 import socket
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from click.testing import CliRunner
 
 from eskin_industrial.cli import main
 from tests.helpers.modbus import free_port
-from tests.helpers.paths import PROFILES
+from tests.helpers.paths import PROFILES, ROOT
 
 PAPER = str(PROFILES / "paper-5x5.toml")
 HAND = str(PROFILES / "hand-4x5.toml")
@@ -150,18 +151,22 @@ def test_host_of_plc_and_sparkplug_sections_are_parsed(tmp_path):
 
 def test_a_port_in_use_is_named_by_check_and_by_the_run():
     """Before: --check passed, and the run said "Could not start listen, please check
-    address"."""
+    address"; then the run said it in other words, with exit 1, which the service
+    unit restarts in a loop: now the same line and exit 2, which it does not."""
     with socket.socket() as taken:
         taken.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
         why = f"cannot listen on 127.0.0.1:{port}: address already in use"
-        refused(run("bridge", "-p", PAPER, "--source", "scene:case2", "--plc", f"serve:127.0.0.1:{port}", "--check"),
-                f"[plc] port: {why}")
+        check = run("bridge", "-p", PAPER, "--source", "scene:case2", "--plc", f"serve:127.0.0.1:{port}", "--check")
+        line = refused(check, f"[plc] port: {why}")
         res = run("bridge", "-p", PAPER, "--source", "scene:case2", "--plc", f"serve:{port}", "--duration", "5",
                   "--log-level", "error")
-        assert res.exit_code != 0 and f"eskin-bus: error: modbus server: {why}" in res.output, res.output
+        assert (res.exit_code, res.output.strip()) == (check.exit_code, line), res.output
+    unit = (ROOT / "examples" / "deploy" / "eskin-bus-bridge.service").read_text()
+    kept = re.search(r"^RestartPreventExitStatus=(.*)$", unit, re.M)
+    assert kept and str(check.exit_code) in kept.group(1).split(), "the unit would restart on a port in use"
     res = run("bridge", "-p", PAPER, "--source", "scene:case2", "--plc", f"serve:127.0.0.1:{port}", "--check")
     assert res.exit_code == 0, res.output  # free again; --check let go of it
     with socket.socket() as s:

@@ -53,6 +53,7 @@ class NodeLoop:
         self.recent_raw: collections.deque[np.ndarray] = collections.deque(maxlen=self.TARE_SCANS)
         self.tares = 0
         self.tares_refused = 0
+        self.commands = 0  #: commands applied (a client-mode ENABLE read back unchanged is none)
         self.publications = 0
         self._last_pub = float("-inf")
         self._last_conditions = -1
@@ -162,6 +163,7 @@ class NodeLoop:
                     # A client-mode PLC's ENABLE is read back every refresh: only a change counts.
                     if (status.enabled, status.latched) == before:
                         continue
+                self.commands += 1
                 if self.on_command is not None:
                     self.on_command(cmd.name)
                 acted = True
@@ -244,9 +246,12 @@ class NodeLoop:
 
     def run(self, duration_s: float | None = None, idle_timeout_s: float | None = None,
             max_scans: int | None = None) -> str:
-        """Step until :meth:`stop`, ``duration_s``, no scan for ``idle_timeout_s`` (after
-        the first), ``max_scans`` scans, or a finite source's end; returns which."""
-        end = None if duration_s is None else time.monotonic() + duration_s
+        """Step until :meth:`stop`, ``duration_s``, no scan for ``idle_timeout_s``
+        (``"idle"``; ``"silent"`` when not one came since the start: a channel nobody
+        sends on ends the run too), ``max_scans`` scans, or a finite source's end;
+        returns which."""
+        start = time.monotonic()
+        end = None if duration_s is None else start + duration_s
         source, counters = self.source, self.pipeline.counters
         while not self._stop.is_set():
             self.step()
@@ -254,6 +259,8 @@ class NodeLoop:
                 return "duration"
             if idle_timeout_s is not None:
                 age = source.frame_age()
+                if age is None and time.monotonic() - start >= idle_timeout_s:
+                    return "silent"
                 if age is not None and age >= idle_timeout_s:
                     return "idle"
             if max_scans is not None and counters.scans >= max_scans:
@@ -269,7 +276,7 @@ class NodeLoop:
         c = self.pipeline.counters
         out = {"scans": c.scans, "updates": c.updates, "lost_scans": self.lost_scans(),
                "state_changes": c.state_changes, "publications": self.publications, "tares": self.tares,
-               "tares_refused": self.tares_refused}
+               "tares_refused": self.tares_refused, "commands": self.commands}
         out.update(self.pipeline.time_faults())
         out.update(self.source.counters())
         for sink in self.sinks:

@@ -30,6 +30,8 @@ from typing import Any
 from ..bus.source import Feeder, OpenContext, Source
 from ..detect.state import GraspState
 from ..detect.updates import Update
+from ..errors import ListenError
+from ..ratelimit import Throttle
 from ..sinks.base import Sink
 from .config import BridgeConfig, ResolvedNode, output_classes
 from .logs import EventLog
@@ -69,7 +71,11 @@ def open_nodes(config: BridgeConfig, nodes: list[ResolvedNode], closers: list[Ca
     context = OpenContext(queue_frames=config.queue_frames, all_frames=all_frames, closers=closers)
     per_node: list[list[Sink]] = [[] for _ in nodes]
     for cls, options in output_classes(config, default_output):
-        for i, sink in enumerate(cls.open_nodes(options, nodes, context)):
+        try:
+            opened = cls.open_nodes(options, nodes, context)
+        except ListenError as exc:  # a port in use: the line --check gives (probe_outputs)
+            raise ListenError(f"{config.source}: [{cls.kind}] port: {exc}") from None
+        for i, sink in enumerate(opened):
             per_node[i].append(sink)
     sources: list[Source | None] = [None] * len(nodes)
     by_kind: dict[type[Source], list[int]] = {}
@@ -132,6 +138,7 @@ class Bridge:
         self.nodes = nodes
         self.log = log
         self.on_update = on_update
+        self._commands_logged = Throttle()
         #: systemd's READY/STOPPING/STATUS and its watchdog (does nothing outside systemd).
         self.notifier = notifier or Notifier(None)
         self.runs: list[NodeRun] = []
@@ -147,16 +154,22 @@ class Bridge:
         self.stopped = False
         self._switch_interval: float | None = None
         self.failure = ""
+        self._excepthook: Callable[[threading.ExceptHookArgs], Any] | None = None
         self.stop_reason = ""  #: the signal's name, when one stopped the bridge
         self.failed_sources: list[str] = []  #: "node: error" of each source that failed
 
     # -- building: everything is opened before anything runs ----------------------
     def open(self) -> Bridge:
         """Open outputs and sources; an error here stops before any loop runs."""
+        # An output's own thread (paho's, a writer's) that dies of an exception would
+        # otherwise stop that output in silence: it stops the bridge, exit 1.
+        self._excepthook = threading.excepthook
+        threading.excepthook = self._thread_died
         try:
             loops = open_nodes(self.config, self.nodes, self._closers)
         except BaseException:
             self._close_all()
+            threading.excepthook = self._excepthook
             raise
         for node, loop in zip(self.nodes, loops):
             run = NodeRun(node, loop)
@@ -206,7 +219,17 @@ class Bridge:
         return hook
 
     def _command_hook(self, run: NodeRun) -> Callable[[str], None]:
-        return lambda name: self.log.event("plc_command", node=run.name, command=name)
+        log, throttle = self.log, self._commands_logged
+
+        def hook(name: str) -> None:
+            # A client may write commands as fast as the link goes: one line per
+            # command and node per LOG_EVERY_S, the next saying how many were held back
+            # (the loop's ``commands`` counter counts every one).
+            held = throttle.passes((run.name, name))
+            if held is not None:
+                log.event("plc_command", node=run.name, command=name, held_back=held)
+
+        return hook
 
     def _sink_event_hook(self, run: NodeRun) -> Callable[[str, str, dict[str, Any]], None]:
         return lambda name, level, fields: self.log.event(name, level, node=run.name, **fields)
@@ -247,6 +270,18 @@ class Bridge:
             self.log.event("loop_failed", level="error", loop=threading.current_thread().name,
                            error=f"{type(exc).__name__}: {exc}")
             self._stop.set()
+
+    def _thread_died(self, args: threading.ExceptHookArgs) -> None:
+        """A thread of the process ended by an exception (the loops catch theirs:
+        this is an output's): logged, and the bridge stops with a failure."""
+        if args.exc_type is SystemExit:
+            return
+        name = args.thread.name if args.thread is not None else "-"
+        error = f"{args.exc_type.__name__}: {args.exc_value}"
+        if not self.failure:
+            self.failure = f"thread {name} died: {error}"
+        self.log.event("thread_failed", level="error", thread=name, error=error)
+        self._stop.set()
 
     def _node_loop(self, run: NodeRun, beat: int) -> None:
         step, stop, beats = run.loop.step, self._stop, self._beats
@@ -440,6 +475,8 @@ class Bridge:
         self._close_all()
         if self._switch_interval is not None:  # the process's setting, as it was
             sys.setswitchinterval(self._switch_interval)
+        if self._excepthook is not None:
+            threading.excepthook = self._excepthook
         self.log.event("stopped", reason=self.stop_reason or ("failure" if self.failure else "end"),
                        offline_written=",".join(offline) or "-")
         self.notifier.close()

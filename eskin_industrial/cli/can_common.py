@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from ..bus.can.busargs import parse_bus_kwargs, parse_filters, parse_timing
+from ..errors import NothingReceived
+
+if TYPE_CHECKING:
+    from ..bus.can.logbus import LogBus
+    from ..profile import Profile
 
 
 def bus_extra(timing: tuple[str, ...], can_filter: tuple[str, ...], kwargs: tuple[str, ...]) -> dict[str, Any]:
@@ -66,3 +71,24 @@ def bus_options(func: Callable[..., Any]) -> Callable[..., Any]:
     for opt in reversed(opts):
         out = opt(out)
     return out
+
+
+def log_bus(path: str) -> LogBus:
+    """A CAN log to write frames to (``--can-log FILE``); a file that cannot be created
+    is a usage error naming the option."""
+    from ..bus.can.logbus import LogBus
+
+    try:
+        return LogBus(path)
+    except (OSError, ValueError) as exc:
+        detail = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise click.BadParameter(f"{path}: cannot write: {detail}", param_hint="--can-log") from None
+
+
+def nothing_received(profile: Profile, where: str, idle_s: float) -> NothingReceived:
+    """``--idle-exit`` with not one scan since the start: one line naming the channel
+    and the IDs listened on (exit 6, docs/cli.md)."""
+    lo = profile.can.base_id
+    return NothingReceived(f"no scan of profile {profile.name}'s node on {where} in {idle_s:g} s (--idle-exit): "
+                           f"nothing sent there on IDs {lo:#x}-{lo + 15:#x}; is the node on, on this channel, "
+                           "with this base_id?")

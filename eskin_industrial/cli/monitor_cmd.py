@@ -10,7 +10,7 @@ from typing import Any
 import click
 
 from ..methods import method_names
-from .can_common import bus_options
+from .can_common import bus_options, nothing_received
 from .common import profile_option
 
 
@@ -22,7 +22,7 @@ from .common import profile_option
               help="Detection method (default: the profile's).")
 @click.option("--duration", "duration_s", type=float, default=None, help="Stop after this many seconds.")
 @click.option("--idle-exit", "idle_s", type=float, default=None,
-              help="Stop once no scan came for this many seconds (after the first).")
+              help="Stop once no scan came for this many seconds, counted from the start (none at all: exit 6).")
 @click.option("--plain", is_flag=True,
               help="One line per state change instead of the live view (the default when stdout is not a terminal).")
 def monitor(profile_path: str, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None, data_bitrate: int | None, bus_extra: dict[str, Any],
@@ -79,11 +79,11 @@ def monitor(profile_path: str, interface: str | None, channel: str | None, bitra
     if not live:
         click.echo(f"eskin-bus monitor: {prof.name} on {where}, method {chosen}; Ctrl-C ends", err=True)
     start = time.monotonic()
-    interrupted = False
+    interrupted, ended = False, ""
     with single:
         try:
             with live_screen(watch, stdout, color_wanted()) if live else nullcontext():
-                loop.run(duration_s=duration_s, idle_timeout_s=idle_s)
+                ended = loop.run(duration_s=duration_s, idle_timeout_s=idle_s)
         except KeyboardInterrupt:
             interrupted = True
     c = loop.counters()
@@ -91,3 +91,5 @@ def monitor(profile_path: str, interface: str | None, channel: str | None, bitra
                f"scans {c.get('scans', 0)}, lost {c.get('lost_scans', 0)}, torn {c.get('torn_scans', 0)}, "
                f"malformed {c.get('malformed_frames', 0)}, rx queue drops {c.get('rx_queue_drops', 0)}, "
                f"bus errors {c.get('bus_errors', 0)}, state changes {c.get('state_changes', 0)}")
+    if ended == "silent" and idle_s is not None:
+        raise nothing_received(prof, where, idle_s)

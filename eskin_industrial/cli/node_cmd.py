@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
-from .can_common import bus_options
+if TYPE_CHECKING:
+    import can
+
+from .can_common import bus_options, log_bus
 from .common import open_profile, profile_option, scene_or_recording
 
 
@@ -32,21 +35,34 @@ from .common import open_profile, profile_option, scene_or_recording
 @click.option("--silent-for", "silent_for_s", type=float, default=0.0, help="...for this long (s).")
 @click.option("--modbus-rtu", "modbus_rtu", default=None, metavar="PORT",
               help="Be a Modbus RTU node on this serial port instead of a CAN node (the profile's [modbus.node] map).")
+@click.option("--can-log", "can_log", default=None, type=click.Path(dir_okay=False, allow_dash=True), metavar="FILE",
+              help="Write the frames to a CAN log instead of a bus (python-can's writer by suffix: .asc, .blf, .csv, "
+                   ".log candump, .trc), unpaced, stamped with the node's clock; '-': candump -L lines on stdout, "
+                   "paced (unless --burst).")
 @click.option("--baud", "baudrate", type=int, default=None, help="With --modbus-rtu: baud rate (default: the profile's).")
 @click.option("-q", "--quiet", is_flag=True, help="No summary on stderr.")
 def node(profile_path: str, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None, data_bitrate: int | None, bus_extra: dict[str, Any],
          scene: str | None, recording: str | None, rate_hz: float | None, burst: bool, repeat: int,
          duration_s: float | None, seed: int, drop: float, duplicate: float, reorder: float, corrupt: float,
-         silent_at_s: float | None, silent_for_s: float, modbus_rtu: str | None, baudrate: int | None,
-         quiet: bool) -> None:
+         silent_at_s: float | None, silent_for_s: float, modbus_rtu: str | None, can_log: str | None,
+         baudrate: int | None, quiet: bool) -> None:
     """Send scans as the profile's sensor node: one scan every 1/rate seconds (absolute
     deadlines, no drift), with the node's heartbeat and optional faults; or, with
     --modbus-rtu PORT, serve them as a Modbus RTU slave (the scene loops until
-    --duration or Ctrl-C)."""
+    --duration or Ctrl-C); or, with --can-log FILE, write the frames to a CAN log
+    (no hardware, no vcan: detect --can-log reads it)."""
     from ..bus.can.layout import CanLayout
+    from ..bus.can.logbus import check_log_path
     from ..bus.can.reader import bus_kwargs, open_bus
     from ..sim.can_node import CanNode, Faults
 
+    if can_log is not None:
+        if modbus_rtu is not None or interface is not None or channel is not None:
+            raise click.UsageError("--can-log writes a log instead of a bus: give it without -i/-c and --modbus-rtu")
+        try:
+            check_log_path(can_log)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--can-log") from None
     prof = open_profile(profile_path)
     if modbus_rtu is not None:
         from .modbus_cmd import run_rtu_node
@@ -62,7 +78,12 @@ def node(profile_path: str, interface: str | None, channel: str | None, bitrate:
                     filters=bus_extra.get("filter", ()), extra=bus_extra.get("bus_kwargs"))
     layout = CanLayout.from_profile(prof, fd=kw["fd"])
     faults = Faults(drop, duplicate, reorder, corrupt, silent_at_s, silent_for_s, seed)
-    bus = open_bus(**kw)
+    bus: can.BusABC
+    if can_log is not None:
+        bus = log_bus(can_log)
+        burst = burst or can_log != "-"  # a file is written at once; stdout is paced for a live reader
+    else:
+        bus = open_bus(**kw)
     try:
         sim = CanNode(layout, bus, raw, rate, prof.can.heartbeat_s, faults, burst, repeat, duration_s)
         stats = sim.run()

@@ -9,12 +9,15 @@ from pathlib import Path
 
 import click
 
+from .. import __version__
 from ..plc.export import codesys_st, flat_csv, ident, tia_xlsx
+from ..plc.plcopen import plcopen_xml
 from ..profile import ModbusPlcSection
 from .common import open_profile
 
 #: File name (the node's or profile's name in it) of each format.
-_FILES = {"codesys": "eskin_{}.st", "tia": "eskin_{}_tags.xlsx", "csv": "eskin_{}_tags.csv"}
+_FILES = {"codesys": "eskin_{}.st", "plcopen": "eskin_{}.xml", "tia": "eskin_{}_tags.xlsx",
+          "csv": "eskin_{}_tags.csv"}
 
 
 @dataclass(frozen=True)
@@ -33,25 +36,27 @@ class _Block:
 @click.option("--config", "config_path", type=click.Path(dir_okay=False),
               help="A bridge configuration: one file per node, tags prefixed with the node's name, each at its "
                    "base_address (instead of -p; needs -o).")
-@click.option("--format", "fmt", type=click.Choice(["codesys", "tia", "csv"]), required=True,
-              help="codesys: structured types, GVL and FB_SlipGuard (Structured Text); tia: a TIA Portal PLC tag "
-                   "table (.xlsx); csv: one row per tag with IEC 61131-3 types.")
+@click.option("--format", "fmt", type=click.Choice(["plcopen", "codesys", "tia", "csv"]), required=True,
+              help="plcopen: a PLCopen XML project (IEC 61131-10) that Codesys and TwinCAT import: the structured "
+                   "types, the GVL at the channels' %IW/%QW words, F_EskinJoin32 and FB_SlipGuard; codesys: the same "
+                   "as Structured Text to paste; tia: a TIA Portal PLC tag table (.xlsx); csv: a generic tag list, one "
+                   "row per tag with IEC 61131-3 types (no tool's import format).")
 @click.option("-o", "--output-dir", "out_dir", type=click.Path(file_okay=False),
               help="Write the file into this folder (created if missing); default: standard output.")
 @click.option("--node-name", help="With -p: name the node (tag prefix NAME_, tag table, types, file name).")
 @click.option("--base-address", type=click.IntRange(0, 65000),
               help="With -p: the block's base address, instead of the profile's [modbus.plc] base_address.")
 @click.option("--input-word", type=click.IntRange(0, 65535), default=0, show_default=True,
-              help="codesys: %IW address of the read channel (from the device tree's I/O mapping).")
+              help="plcopen, codesys: %IW address of the read channel (from the device tree's I/O mapping).")
 @click.option("--output-word", type=click.IntRange(0, 65535), default=0, show_default=True,
-              help="codesys: %QW address of the write channel.")
+              help="plcopen, codesys: %QW address of the write channel.")
 @click.option("--m-byte", type=click.IntRange(0, 65534), default=0, show_default=True,
               help="tia: the M byte (even) where the first block's first register lands: MB_CLIENT's DATA_PTR, or "
                    "MB_SERVER's MB_HOLD_REG start + 2 x base_address; other nodes' blocks follow at their distance.")
 def export(profile_path: str | None, config_path: str | None, fmt: str, out_dir: str | None, node_name: str | None,
            base_address: int | None, input_word: int, output_word: int, m_byte: int) -> None:
-    """Write PLC import files for a register image: a Codesys source, a TIA Portal
-    tag table or a flat CSV tag list (see docs/plc.md)."""
+    """Write PLC import files for a register image: a PLCopen XML project, a Codesys
+    source, a TIA Portal tag table or a generic CSV tag list (see docs/plc.md)."""
     if (profile_path is None) == (config_path is None):
         raise click.UsageError("give a profile (-p PROFILE) or a bridge configuration (--config BRIDGE.toml)")
     if m_byte % 2:
@@ -77,7 +82,9 @@ def export(profile_path: str | None, config_path: str | None, fmt: str, out_dir:
     first = min(b.settings.base_address for b in blocks)
     for b in blocks:
         data: bytes
-        if fmt == "codesys":
+        if fmt == "plcopen":
+            data = plcopen_xml(b.settings, b.name, input_word, output_word, b.method, __version__).encode()
+        elif fmt == "codesys":
             data = codesys_st(b.settings, b.name, input_word, output_word, b.method).encode()
         elif fmt == "csv":
             data = flat_csv(b.settings, b.prefix, b.method).encode()

@@ -5,15 +5,13 @@ log lines, structured and rate-limited."""
 from __future__ import annotations
 
 import logging
-import threading
-import time
 from typing import Any, Protocol
 
+from ..ratelimit import LOG_EVERY_S, Throttle
 from . import pdu
 from .exception_codes import DEVICE_FAILURE
 
-#: One log line per event name in this time at most; the rest are counted.
-LOG_EVERY_S = 10.0
+__all__ = ["LOG_EVERY_S", "HandlerErrors", "RateLimitedLog", "answer"]
 
 
 class HandlerErrors(Protocol):
@@ -30,19 +28,12 @@ class RateLimitedLog:
     def __init__(self, logger: logging.Logger, every_s: float = LOG_EVERY_S) -> None:
         self.logger = logger
         self.every_s = every_s
-        self._last: dict[str, float] = {}
-        self._held: dict[str, int] = {}
-        self._lock = threading.Lock()
+        self._throttle = Throttle(every_s)
 
     def event(self, name: str, level: int = logging.WARNING, **fields: Any) -> None:
-        now = time.monotonic()
-        with self._lock:
-            last = self._last.get(name)
-            if last is not None and now - last < self.every_s:
-                self._held[name] = self._held.get(name, 0) + 1
-                return
-            self._last[name] = now
-            held = self._held.pop(name, 0)
+        held = self._throttle.passes(name)
+        if held is None:
+            return
         if held:
             fields["held_back"] = held
         self.logger.log(level, name, extra={"fields": fields})

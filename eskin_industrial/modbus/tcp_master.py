@@ -5,7 +5,11 @@ bridge's loop may send an urgent write itself (:meth:`PipelinedTcpMaster.send_wr
 and go on: the PLC gets the new state without a hand-off to the writer thread, and
 the writer collects the answer (:meth:`PipelinedTcpMaster.await_response`).  Answers
 are matched by transaction id; a late answer to a request given up on is counted and
-dropped.  The framing is :mod:`.mbap` (pure).
+dropped.  An answer is taken for what it says only if it answers the request sent
+under its transaction id: the same function code (an FC3-shaped answer to an FC16
+write acknowledges nothing) and, for a write, the same address and count echoed;
+anything else is a device that does not speak Modbus as it should, a ``connection``
+fault.  The framing is :mod:`.mbap` (pure).
 """
 
 from __future__ import annotations
@@ -31,6 +35,8 @@ class PipelinedTcpMaster:
         self._tid = 0
         self._rx = bytearray()
         self._send_lock = threading.Lock()
+        #: What each transaction asked: (function, address, count), until its answer.
+        self._asked: dict[int, tuple[int, int, int]] = {}
 
     @property
     def where(self) -> str:
@@ -45,6 +51,7 @@ class PipelinedTcpMaster:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.sock = sock
         self._rx.clear()
+        self._asked.clear()
 
     def close(self) -> None:
         sock, self.sock = self.sock, None
@@ -60,6 +67,7 @@ class PipelinedTcpMaster:
         with self._send_lock:
             self._tid = (self._tid + 1) & 0xFFFF
             tid = self._tid
+            self._asked[tid] = (mbap.FC_WRITE_MULTIPLE, address, len(values))
             self._send(mbap.write_request(tid, self.unit_id, address, values))
         return tid
 
@@ -67,6 +75,7 @@ class PipelinedTcpMaster:
         with self._send_lock:
             self._tid = (self._tid + 1) & 0xFFFF
             tid = self._tid
+            self._asked[tid] = (mbap.FC_READ_HOLDING, address, count)
             self._send(mbap.read_request(tid, self.unit_id, address, count))
         return tid
 
@@ -88,14 +97,27 @@ class PipelinedTcpMaster:
         deadline = time.monotonic() + wait
         while True:
             resp = self._next_frame(deadline, tid, wait)
+            asked = self._asked.pop(resp.tid, None)
             if resp.tid != tid:
                 self.stale_answers += 1  # the answer to a request given up on
                 continue
+            if asked is not None:
+                self._check(resp, *asked)
             if resp.exception:
                 raise ModbusFault("exception", f"{self.where} answered exception {resp.exception:02d} "
                                   f"({exception_name(resp.exception)}) to function {resp.function}",
                                   resp.exception)
             return resp
+
+    def _check(self, resp: mbap.Response, function: int, address: int, count: int) -> None:
+        """``resp`` answers the request of its transaction id, else a ``connection`` fault."""
+        if resp.function != function:
+            raise ModbusFault("connection", f"{self.where} answered function {resp.function} to a function "
+                              f"{function} request (transaction {resp.tid})")
+        if function == mbap.FC_WRITE_MULTIPLE and not resp.exception and resp.registers != (address, count):
+            got_address, got_count = resp.registers
+            raise ModbusFault("connection", f"{self.where} acknowledged {got_count} registers at {got_address}, "
+                              f"written: {count} at {address} (transaction {resp.tid})")
 
     def _next_frame(self, deadline: float, tid: int, wait_s: float) -> mbap.Response:
         rx = self._rx

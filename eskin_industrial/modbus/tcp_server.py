@@ -7,15 +7,24 @@ moves the bytes and applies the :class:`Policy`.
 - At most ``max_connections`` at once.  A connection beyond the cap replaces the one
   idle the longest, if that one has been quiet for :data:`EVICT_IDLE_S` or more (an
   idle socket left behind, never a PLC that polls); otherwise it is closed at once.
-- A connection quiet for ``idle_timeout_s`` is closed.
+  A client on ``allow_write`` (the PLC, when the list names it) always gets in: it
+  replaces the quietest connection that is not on ``allow_write``.
+- A connection quiet for ``idle_timeout_s`` is closed.  Only whole requests are
+  activity: bytes of a frame never completed are not, and a frame still incomplete
+  after ``frame_timeout_s`` closes its connection (one byte a second keeps no socket).
+- Fair service: at most ``max_batch`` requests of one connection are answered in a
+  turn of the server's loop, the rest after every other connection has had its turn
+  (its reading paused meanwhile, so TCP holds the client back); at most
+  ``max_unread_bytes`` of answers a client has not read are buffered (the kernel's
+  send buffer set to as much), beyond it the client is not read either, and a
+  client that leaves its answers unread for ``unread_timeout_s`` is closed.
 - ``allow_read`` / ``allow_write``: the client addresses (or networks) that may
   connect and read, and that may write; empty: any.  A client in neither list is
   closed at once; a write from a client that may not write, or any write in
   ``read_only`` mode, is answered with exception 01 (ILLEGAL FUNCTION).
 - ``unit_ids``: the unit ids served; a request to another is answered with exception
   0x0B (gateway target device failed to respond).
-- A client that stops reading its responses is not read either (no buffer grows);
-  a frame header no Modbus TCP client sends closes its connection.
+- A frame header no Modbus TCP client sends closes its connection.
 
 Every refusal is counted (:attr:`TcpServer.counters`) and logged; the log lines (and
 whatever asyncio reports) go to the standard logger :data:`LOG` as structured events,
@@ -29,13 +38,14 @@ import asyncio
 import contextvars
 import ipaddress
 import logging
+import socket
 import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import DecodeError, EskinError
+from ..errors import DecodeError, EskinError, ListenError
 from ..netaddr import listen_error
 from . import mbap, pdu
 from .exception_codes import GATEWAY_TARGET_FAILED, ILLEGAL_FUNCTION
@@ -73,11 +83,24 @@ class Policy:
     allow_write: tuple[Network, ...] = ()
     read_only: bool = False
     unit_ids: frozenset[int] | None = None  #: None: every unit id
+    #: Requests of one connection answered in one turn; the rest wait for the next.
+    max_batch: int = 8
+    #: Answers a client has not read, buffered at most (bytes; the kernel's send
+    #: buffer is set to as much, which the kernel doubles for its own bookkeeping).
+    max_unread_bytes: int = 8192
+    #: A client that leaves its answers unread this long is closed.
+    unread_timeout_s: float = 5.0
+    #: A frame still incomplete this long after its first byte closes its connection.
+    frame_timeout_s: float = 2.0
 
     def may_connect(self, ip: Address) -> bool:
         if not self.allow_read:
             return True
         return _within(ip, self.allow_read) or (bool(self.allow_write) and _within(ip, self.allow_write))
+
+    def kept_slot(self, ip: Address) -> bool:
+        """A client named by ``allow_write`` (the PLC): it gets in at the cap."""
+        return bool(self.allow_write) and _within(ip, self.allow_write)
 
     def may_write(self, ip: Address) -> bool:
         if self.read_only:
@@ -105,6 +128,9 @@ class Counters:
     over_cap: int = 0  #: closed at once: the cap was reached and nobody idle to replace
     evicted: int = 0  #: replaced by a new connection at the cap
     idle_closed: int = 0
+    partial_closed: int = 0  #: closed for a frame left incomplete past ``frame_timeout_s``
+    unread_closed: int = 0  #: closed for answers left unread past ``unread_timeout_s``
+    deferred: int = 0  #: turns in which a connection had more than ``max_batch`` requests
     malformed: int = 0  #: connections closed for a frame header no client sends
     requests: int = 0
     denied_writes: int = 0  #: read-only mode, or a client not allowed to write
@@ -121,23 +147,44 @@ class _Connection(asyncio.Protocol):
         self.server = server
         self.transport: asyncio.Transport | None = None
         self.buf = bytearray()
-        self.last = time.monotonic()
+        self.last = time.monotonic()  #: the last whole request (or the connection's start)
+        self.partial_since: float | None = None  #: the first byte of a frame not yet complete
+        self.unread_since: float | None = None  #: answers left unread past the limit, since
+        self.backlog = False  #: requests left for the next turn
         self.peer = "-"
         self.may_write = False
+        self.kept = False  #: on allow_write: never replaced to let another in
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self.transport = transport
         peer = transport.get_extra_info("peername")
         self.peer = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
+        limit = self.server.policy.max_unread_bytes
+        transport.set_write_buffer_limits(high=limit)
+        sock = transport.get_extra_info("socket")
+        if sock is not None:  # else the kernel grows it to megabytes of unread answers
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, limit)
+            except OSError:
+                pass
         self.server.admit(self, _peer_ip(peer))
 
     def data_received(self, data: bytes) -> None:
-        self.last = time.monotonic()
+        self.buf += data
+        if not self.backlog:
+            self._serve()
+
+    def _serve(self) -> None:
+        """Answer up to ``max_batch`` whole requests, in order, in one send."""
+        self.backlog = False
+        transport = self.transport
+        if transport is None or transport.is_closing():
+            return
         buf = self.buf
-        buf += data
-        out = []
+        out: list[bytes] = []
         bad = ""
+        limit = self.server.policy.max_batch
         while len(buf) >= mbap.HEADER_BYTES:
             try:
                 need = mbap.frame_length(bytes(buf[:mbap.HEADER_BYTES]))
@@ -146,21 +193,54 @@ class _Connection(asyncio.Protocol):
                 break
             if len(buf) < need:
                 break
+            if len(out) == limit:  # more than a turn's share: the rest after the others
+                self.backlog = True
+                break
             request = bytes(buf[:need])
             del buf[:need]
             out.append(self.server.answer(request, self))
-        if out and self.transport is not None:
-            self.transport.write(b"".join(out))  # every answer, in order, in one send
+        now = time.monotonic()
+        if out:
+            self.last = now
+            transport.write(b"".join(out))  # the answers, in order, in one send
         if bad:  # the requests before it are answered; the stream cannot be resynchronised
             self.server.malformed(self, bad)
+            return
+        if self.backlog:
+            self.server.counters.deferred += 1
+            self.partial_since = None
+            asyncio.get_running_loop().call_soon(self._next_turn)
+        elif buf:
+            if self.partial_since is None or out:
+                self.partial_since = now
+        else:
+            self.partial_since = None
+        self._reading()
 
-    def pause_writing(self) -> None:  # the client does not read its responses: stop reading it
-        if self.transport is not None:
-            self.transport.pause_reading()
+    def _next_turn(self) -> None:
+        if self.unread_since is None:  # else resume_writing serves the rest
+            self._serve()
+
+    def _reading(self) -> None:
+        """Read the client only while it has no backlog and reads its answers."""
+        transport = self.transport
+        if transport is None or transport.is_closing():
+            return
+        if self.backlog or self.unread_since is not None:
+            transport.pause_reading()
+        else:
+            transport.resume_reading()
+
+    def pause_writing(self) -> None:  # the client does not read its answers: stop reading it
+        self.unread_since = time.monotonic()
+        self._reading()
 
     def resume_writing(self) -> None:
-        if self.transport is not None and not self.transport.is_closing():
-            self.transport.resume_reading()
+        self.unread_since = None
+        if self.backlog:
+            self._serve()
+        else:
+            self._reading()
 
     def connection_lost(self, exc: Exception | None) -> None:
         self.server.conns.discard(self)
@@ -212,10 +292,14 @@ class TcpServer:
             self.log.event("modbus_client_refused", peer=conn.peer, reason="not in allow_read")
             conn.close()
             return
+        conn.kept = p.kept_slot(ip)
         if len(self.conns) >= p.max_connections:
             now = time.monotonic()
             oldest = min(self.conns, key=lambda k: k.last)
-            if now - oldest.last < EVICT_IDLE_S:
+            others = [k for k in self.conns if not k.kept]
+            if conn.kept and others:  # the PLC's slot: the quietest of the others makes room
+                oldest = min(others, key=lambda k: k.last)
+            elif now - oldest.last < EVICT_IDLE_S:
                 c.over_cap += 1
                 self.log.event("modbus_client_refused", peer=conn.peer, reason="connection cap",
                                max_connections=p.max_connections)
@@ -258,11 +342,23 @@ class TcpServer:
         conn.close(flush=True)
 
     def _sweep(self) -> None:
-        limit = self.policy.idle_timeout_s
+        p, c = self.policy, self.counters
         now = time.monotonic()
-        for conn in [k for k in self.conns if now - k.last >= limit]:
-            self.counters.idle_closed += 1
-            self.log.event("modbus_client_idle", level=logging.INFO, peer=conn.peer, idle_timeout_s=limit)
+        for conn in list(self.conns):
+            if conn.partial_since is not None and now - conn.partial_since >= p.frame_timeout_s:
+                c.partial_closed += 1
+                self.log.event("modbus_client_partial_frame", peer=conn.peer, pending_bytes=len(conn.buf),
+                               frame_timeout_s=p.frame_timeout_s)
+            elif conn.unread_since is not None and now - conn.unread_since >= p.unread_timeout_s:
+                c.unread_closed += 1
+                self.log.event("modbus_client_not_reading", peer=conn.peer, unread_timeout_s=p.unread_timeout_s,
+                               max_unread_bytes=p.max_unread_bytes)
+            elif now - conn.last >= p.idle_timeout_s:
+                c.idle_closed += 1
+                self.log.event("modbus_client_idle", level=logging.INFO, peer=conn.peer,
+                               idle_timeout_s=p.idle_timeout_s)
+            else:
+                continue
             conn.close()
 
     def _asyncio_error(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
@@ -280,7 +376,7 @@ class TcpServer:
         if not self._ready.wait(timeout_s):
             raise EskinError(f"modbus server ({self.where}): did not start within {timeout_s:g} s")
         if isinstance(self._error, OSError):  # in use, not this machine's address, ...: say which
-            raise EskinError(f"modbus server: {listen_error(self.host, self.port, self._error)}")
+            raise ListenError(listen_error(self.host, self.port, self._error))
         if self._error is not None:
             raise EskinError(f"modbus server ({self.where}): cannot listen: {self._error}")
         return self
@@ -298,7 +394,8 @@ class TcpServer:
         self._stopping = asyncio.Event()
         server = await loop.create_server(lambda: _Connection(self), self.host, self.port)
         self._ready.set()
-        tick = min(1.0, self.policy.idle_timeout_s / 4)
+        p = self.policy
+        tick = min(1.0, p.idle_timeout_s / 4, p.frame_timeout_s / 4, p.unread_timeout_s / 4)
         try:
             while not self._stopping.is_set():
                 try:

@@ -29,6 +29,7 @@ import math
 import os
 import threading
 import time
+import unicodedata
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +39,7 @@ from .. import __version__
 from ..detect.state import LABELS
 from ..errors import EskinError, ProfileError
 from ..node import Command, NodeSnapshot, refusal
+from ..ratelimit import Throttle
 from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Sink, SinkHealth
 from . import payload as pb
@@ -56,9 +58,21 @@ REBIRTH = "Node Control/Rebirth"
 _FORBIDDEN = set("+#/")
 
 
+#: An id's length at most, in UTF-8 bytes: three of them make a topic and two the
+#: client id, each an MQTT string of at most 65,535 bytes (a longer one ended paho's
+#: thread); ids are names, not texts.
+MAX_ID_BYTES = 256
+
+
 def check_id(key: str, value: str) -> None:
     if not value or _FORBIDDEN & set(value):
         raise ValueError(f"{key}: {value!r} is not a Sparkplug id (not empty, no '+', '#' or '/')")
+    size = len(value.encode("utf-8", "surrogatepass"))
+    if size > MAX_ID_BYTES:
+        raise ValueError(f"{key}: {size} bytes long (UTF-8); a Sparkplug id here is at most {MAX_ID_BYTES}")
+    bad = next((c for c in value if unicodedata.category(c) in ("Cc", "Cs")), None)
+    if bad is not None:  # MQTT strings: no U+0000, no control characters, valid UTF-8
+        raise ValueError(f"{key}: {value!r} holds the character U+{ord(bad):04X}, which an MQTT topic may not")
 
 
 @dataclass(frozen=True)
@@ -220,6 +234,7 @@ class EdgeNode:
         self.published = self.dropped = self.connects = self.failures = self.bad_commands = self.rebirths = 0
         self.unknown_devices = self.commands = self.commands_refused = self.bad_states = 0
         self._bad_logged: dict[str, tuple[float, int]] = {}
+        self.commands_logged = Throttle()  #: the DCMD lines, per device and event
         self.last_error = ""
         self.client = client_factory
         self.client.on_connect = self._on_connect
@@ -615,11 +630,19 @@ class SparkplugDevice(Sink[SparkplugOptions]):
             why = refusal(cmd, snapshot)
             if why is not None:
                 node.commands_refused += 1
-                self._event("sparkplug_command_refused", "warning", command=cmd.name, reason=why)
+                self._logged("sparkplug_command_refused", "warning", command=cmd.name, reason=why)
                 return
         node.commands += len(cmds)
         self._commands.extend(cmds)
-        self._event("sparkplug_command", "info", commands=",".join(c.name for c in cmds))
+        self._logged("sparkplug_command", "info", commands=",".join(c.name for c in cmds))
+
+    def _logged(self, name: str, level: str, **fields: Any) -> None:
+        """A DCMD's line: at most one per name per LOG_EVERY_S (a host may send them as
+        fast as the broker goes), the next saying how many were held back; the
+        counters count every one."""
+        held = self.node.commands_logged.passes((self.device_id, name))
+        if held is not None:
+            self._event(name, level, held_back=held, **fields)
 
     def source_ended(self, error: str) -> None:
         """The node's source is gone while the bridge goes on: DDEATH (its last

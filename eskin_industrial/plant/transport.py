@@ -6,6 +6,7 @@ the shell's history)."""
 from __future__ import annotations
 
 import os
+import ssl
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
@@ -50,6 +51,33 @@ def check_files(options: Any) -> None:
             raise ValueError(f"{key}: {path!r} {'is not readable' if Path(path).exists() else 'does not exist'}")
     if options.password_env is not None and os.environ.get(options.password_env) is None:
         raise ValueError(f"password_env: the environment variable {options.password_env} is not set")
+    check_pem(options)
+
+
+def check_pem(options: Any) -> None:
+    """The TLS files are what ``tls_set`` will load: the CA file PEM certificates, the
+    client certificate a PEM certificate and the key a PEM private key (without a
+    passphrase: nobody is there to type it) that goes with it; ValueError ``key: what``,
+    one line, where ssl would end the run with a traceback."""
+    ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+    for key in ("ca_file", "cert_file"):
+        path = getattr(options, key)
+        if path is None:
+            continue
+        try:
+            ctx.load_verify_locations(cafile=path)
+        except (ssl.SSLError, ValueError, OSError) as exc:
+            raise ValueError(f"{key}: {path!r} is not a PEM certificate ({_reason(exc)})") from None
+    if options.cert_file is not None and options.key_file is not None:
+        try:
+            ctx.load_cert_chain(options.cert_file, options.key_file, password=lambda: b"")
+        except (ssl.SSLError, ValueError, OSError) as exc:
+            raise ValueError(f"key_file: {options.key_file!r} is not a PEM private key, without a passphrase, "
+                             f"of cert_file ({_reason(exc)})") from None
+
+
+def _reason(exc: Exception) -> str:
+    return str(getattr(exc, "reason", None) or exc).lower().replace("_", " ")
 
 
 def password(options: Any) -> str | None:

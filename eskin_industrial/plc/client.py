@@ -7,7 +7,12 @@ on.  The image is written at once when it is urgent (a state change), otherwise
 every ``refresh_s``; an older image not yet written is replaced by the newer one
 (the PLC wants the present; events survive in the latch and the counters).  After
 each refresh the writer reads COMMAND and ENABLE from the PLC, hands their commands
-to the bridge, and writes COMMAND back to 0 (the handshake).  The method's scores
+to the bridge, and writes COMMAND back to 0 (the handshake), or to
+:data:`~.image.CMD_REFUSED` for a value it refuses (unknown bits: nothing of it is
+done); an ENABLE other than 0 or 1 is ignored (detection stays as it was).  Each
+refused value read is counted (``plc_command_values_refused``,
+``plc_enable_values_refused``) and logged, at most once per
+:data:`~..ratelimit.LOG_EVERY_S` per kind.  The method's scores
 (SCORE_A..SCORE_B, after COMMAND and ENABLE) are written at each refresh too, in a
 request of their own; a PLC whose map ends before them answers with an exception,
 which is no outage (counted, logged once, retried with the back-off).  After an urgent
@@ -51,8 +56,9 @@ from ..modbus.serial_line import SerialSettings
 from ..modbus.tcp_master import PipelinedTcpMaster
 from ..node import Command, NodeSnapshot
 from ..profile import ModbusPlcSection
+from ..ratelimit import Throttle
 from ..sinks.base import Sink, SinkHealth
-from .image import REG, TAIL_AT, PlcImage, parse_register_write
+from .image import CMD_REFUSED, REG, TAIL_AT, PlcImage, parse_register_write
 
 if TYPE_CHECKING:
     from .sink import PlcOptions  # noqa: F401 - named in the base class (a string: no import cycle at run time)
@@ -77,6 +83,8 @@ class WriterStats:
     command_reads_refused: int = 0  #: reads of COMMAND/ENABLE answered with an exception
     score_writes: int = 0  #: writes of SCORE_A..SCORE_B the PLC acknowledged
     score_writes_refused: int = 0  #: writes of SCORE_A..SCORE_B answered with an exception
+    command_values_refused: int = 0  #: COMMAND values read with unknown bits (answered CMD_REFUSED)
+    enable_values_refused: int = 0  #: ENABLE values read other than 0 or 1 (ignored)
     last_error: str = ""
     #: offer -> acknowledged write (urgent only); the newest ones, so months of
     #: running do not grow it
@@ -165,6 +173,7 @@ class PlcWriter(Sink["PlcOptions"]):
         self._commands = _Optional("command_reads_refused", "plc_commands_refused", "plc_commands_read")
         self._tail: tuple[int, ...] = ()  #: the newest image's SCORE_A..SCORE_B
         self._scores = _Optional("score_writes_refused", "plc_scores_refused", "plc_scores_written")
+        self._refusals = Throttle()  #: the refused-value log lines, per kind
 
         if serial is not None:
             self.where = f"rtu {serial.port} at {serial.baudrate} baud, unit {settings.unit_id} (client)"
@@ -439,14 +448,31 @@ class PlcWriter(Sink["PlcOptions"]):
         command, enable = self.master.read_holding(at, 2)
         try:
             cmds = parse_register_write(REG["ENABLE"].offset, [enable])
-            if command:
+        except Refused as exc:
+            cmds = []  # ENABLE is the PLC's level: ignored, detection stays as it was
+            self._refused("enable", enable, exc)
+        if command == CMD_REFUSED:
+            command = 0  # our refusal, not yet overwritten: nothing new
+        answer = 0  # the handshake: done
+        if command:
+            try:
                 cmds = parse_register_write(REG["COMMAND"].offset, [command]) + cmds
-        except Refused:
-            cmds = []
+            except Refused as exc:
+                answer = CMD_REFUSED  # not "done": nothing of it was done
+                self._refused("command", command, exc)
         for c in cmds:
             self.commands.put(c)
         if command:
-            self.master.write_registers(at, [0])
+            self.master.write_registers(at, [answer])
+
+    def _refused(self, register: str, value: int, exc: Refused) -> None:
+        """A COMMAND or ENABLE value read that the bridge refuses: counted, logged."""
+        field_name = f"{register}_values_refused"
+        setattr(self.stats, field_name, getattr(self.stats, field_name) + 1)
+        held = self._refusals.passes(register)
+        if held is not None:
+            self._event(f"plc_{register}_refused", "warning", plc=self.where, value=value, error=str(exc),
+                        refused=getattr(self.stats, field_name), held_back=held)
 
     def flush(self, timeout_s: float = 1.0) -> bool:
         """Stop the writer once the pending image is written (or ``timeout_s`` passed)."""
@@ -489,6 +515,8 @@ class PlcWriter(Sink["PlcOptions"]):
                "plc_connects": st.connects, "plc_connect_attempts": st.connect_attempts, "plc_outages": st.outages,
                "plc_superseded": st.superseded, "plc_sent_inline": st.sent_inline,
                "plc_command_reads_refused": st.command_reads_refused, "plc_score_writes": st.score_writes,
-               "plc_score_writes_refused": st.score_writes_refused}
+               "plc_score_writes_refused": st.score_writes_refused,
+               "plc_command_values_refused": st.command_values_refused,
+               "plc_enable_values_refused": st.enable_values_refused}
         out.update((f"plc_exception_{code:02d}", n) for code, n in exceptions)
         return out

@@ -252,6 +252,22 @@ END_FUNCTION_BLOCK
 """
 
 
+JOIN32_DOC = "A 32-bit value from its two words (high word, low word)."
+
+
+def join32_st() -> str:
+    """``F_EskinJoin32``: a UDINT from the two words of a pair in big word order."""
+    return """\
+FUNCTION F_EskinJoin32 : UDINT
+VAR_INPUT
+    wHigh : WORD;
+    wLow  : WORD;
+END_VAR
+F_EskinJoin32 := SHL(WORD_TO_UDINT(wHigh), 16) OR WORD_TO_UDINT(wLow);
+END_FUNCTION
+"""
+
+
 # -- Codesys -----------------------------------------------------------------------
 
 def ident(name: str) -> str:
@@ -334,16 +350,7 @@ def codesys_st(settings: ModbusPlcSection, name: str, input_word: int = 0, outpu
     glob += ["END_VAR", "", "(* STATUS bit numbers, the same as the discrete inputs 0.. *)",
              "VAR_GLOBAL CONSTANT", consts, "END_VAR", ""]
     parts.append("\n".join(glob))
-    parts.append("""\
-(* A 32-bit value from its two words (high word, low word). *)
-FUNCTION F_EskinJoin32 : UDINT
-VAR_INPUT
-    wHigh : WORD;
-    wLow  : WORD;
-END_VAR
-F_EskinJoin32 := SHL(WORD_TO_UDINT(wHigh), 16) OR WORD_TO_UDINT(wLow);
-END_FUNCTION
-""")
+    parts.append(f"(* {JOIN32_DOC} *)\n{join32_st()}")
     parts.append(slip_guard_st())
     return "\n".join(parts)
 

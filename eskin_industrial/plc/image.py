@@ -147,6 +147,9 @@ IMAGE_COUNT = max(r.offset + r.words for r in REGISTERS)
 
 CMD_ACK = 1 << 0
 CMD_TARE = 1 << 1
+#: Client mode: what the bridge writes back into a COMMAND it refused (unknown bits),
+#: instead of 0 (done); the PLC's handshake waits for 0 or this.
+CMD_REFUSED = 1 << 15
 
 @dataclass(frozen=True)
 class Coil:

@@ -52,7 +52,8 @@ class CanNode:
 
     def __init__(self, layout: CanLayout, bus: can.BusABC, raw: np.ndarray, rate_hz: float,
                  heartbeat_s: float = 0.1, faults: Faults = Faults(), burst: bool = False,
-                 repeat: int = 1, duration_s: float | None = None, first_seq: int = 0) -> None:
+                 repeat: int = 1, duration_s: float | None = None, first_seq: int = 0,
+                 t0: float | None = None) -> None:
         self.layout = layout
         self.bus = bus
         self.rate_hz = float(rate_hz)
@@ -62,6 +63,8 @@ class CanNode:
         self.repeat = repeat
         self.duration_s = duration_s
         self.first_seq = first_seq
+        self.t0 = t0  #: the node clock's start (None: the wall clock's at ``run``)
+        self._stamp = 0.0  # the timestamp of the scan being sent: t0 + k / rate
         self.stats = NodeStats()
         self._frames = layout.encode(np.arange(len(raw)), raw)  # packed once; counter patched per scan
         self._rng = random.Random(faults.seed)
@@ -69,7 +72,8 @@ class CanNode:
 
     def _message(self, can_id: int, data: bytes) -> can.Message:
         lay = self.layout
-        return can.Message(arbitration_id=can_id, data=data, is_extended_id=lay.extended_id,
+        # a bus stamps what it sends itself; a log (bus/can/logbus.py) keeps the node's clock
+        return can.Message(timestamp=self._stamp, arbitration_id=can_id, data=data, is_extended_id=lay.extended_id,
                            is_fd=lay.fd, bitrate_switch=lay.fd)
 
     def _send(self, msg: can.Message) -> None:
@@ -128,8 +132,10 @@ class CanNode:
             silent_lo = int(round(f.silent_at_s * self.rate_hz))
             silent_hi = silent_lo + int(round(f.silent_for_s * self.rate_hz))
         start = time.monotonic()
+        t0 = time.time() if self.t0 is None else self.t0
         for i in range(total):
             seq = self.first_seq + i
+            self._stamp = t0 + i * period
             if not self.burst:
                 deadline = start + i * period
                 delay = deadline - time.monotonic()

@@ -2,15 +2,21 @@
 detect``'s output) or JSON lines, to a file or standard output.
 
 Configured as ``[recorder]`` in the bridge configuration or ``--record PATH`` on the
-command line.  With several nodes, ``{node}`` in the path names each node's file.  A
-write that fails (a full disk) is counted and the bridge goes on; the file is
-flushed every ``flush_every_s`` so that a reader following it sees recent updates.
+command line.  With several nodes, ``{node}`` in the path names each node's file.  The
+file is written every ``flush_every_s`` so that a reader following it sees recent
+updates, and it only ever ends on a whole row: a write that fails (a full disk, a
+file-size limit) is cut back to the last whole row, its rows are lost and counted
+(``record_lost_rows``), the failure is logged once (``record_write_failed``, an
+error) and the bridge goes on, trying again at the next write; ``record_write_ok``
+says when the file is written again.  (The recorder's degraded mode: detection and
+the other outputs never wait for a disk.)
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -68,6 +74,7 @@ class Recorder(Sink[RecorderOptions]):
         self.records = 0
         self.write_errors = 0
         self.last_error = ""
+        self._failing = False  #: since a write failed, until one succeeds
         if not self._jsonl:
             self._write(",".join(COLUMNS) + "\n")
 
@@ -92,22 +99,38 @@ class Recorder(Sink[RecorderOptions]):
             self._out.write(text)
             return True
         except (OSError, ValueError) as exc:  # a full disk, a closed pipe: counted, never fatal
-            self.write_errors += 1
-            self.last_error = str(exc)
+            self._failed(exc)
             return False
 
     def _flush_stream(self) -> None:
         try:
             self._out.flush()
         except (OSError, ValueError) as exc:
-            self.write_errors += 1
-            self.last_error = str(exc)
+            self._failed(exc)
+        else:
+            if self._failing:
+                self._failing = False
+                self._event("record_write_ok", path=self.where, lost_rows=self.lost_rows,
+                            write_errors=self.write_errors)
+
+    def _failed(self, exc: Exception) -> None:
+        self.write_errors += 1
+        self.last_error = str(exc.strerror if isinstance(exc, OSError) and exc.strerror else exc)
+        if not self._failing:
+            self._failing = True
+            self._event("record_write_failed", "error", path=self.where, error=self.last_error,
+                        lost_rows=self.lost_rows)
+
+    @property
+    def lost_rows(self) -> int:
+        return self._out.lost_rows if isinstance(self._out, RowFile) else 0
 
     def health(self) -> SinkHealth:
         return SinkHealth(None, self.write_errors, self.last_error)
 
     def counters(self) -> dict[str, int]:
-        return {"recorded_updates": self.records, "record_write_errors": self.write_errors}
+        return {"recorded_updates": self.records, "record_write_errors": self.write_errors,
+                "record_lost_rows": self.lost_rows}
 
     def flush(self, timeout_s: float = 1.0) -> bool:
         self._flush_stream()
@@ -159,7 +182,7 @@ class Recorder(Sink[RecorderOptions]):
                           flush_every_s=options.flush_every_s)
             else:
                 try:
-                    stream = open(path, "w", encoding="utf-8", newline="")
+                    stream: IO[str] = RowFile(path)  # type: ignore[assignment]  # write, flush, close
                 except OSError as exc:
                     raise EskinError(f"{path}: cannot write the record: {exc.strerror or exc}") from None
                 rec = cls(stream, options.resolved_format, n.name, where=path, owned=True,
@@ -167,6 +190,55 @@ class Recorder(Sink[RecorderOptions]):
             context.closers.append(rec.close)
             out.append(rec)
         return out
+
+
+class RowFile:
+    """A file written in whole rows: ``write`` buffers, ``flush`` writes; a write the
+    disk refuses (full, a file-size limit) is cut back to the end of the last whole
+    row written, and the rows it held are lost (``lost_rows``); OSError as from a file."""
+
+    #: Written out when the buffer holds this much, flushed or not.
+    BUFFER_BYTES = 65536
+
+    def __init__(self, path: str) -> None:
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+        self._buf = bytearray()
+        self._end = 0  #: the end of the last whole row on disk
+        self.lost_rows = 0
+
+    def write(self, text: str) -> int:
+        self._buf += text.encode("utf-8")
+        if len(self._buf) >= self.BUFFER_BYTES:
+            self.flush()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self._buf or self._fd < 0:
+            return
+        data = bytes(self._buf)
+        self._buf.clear()  # written or lost: never written twice
+        view = memoryview(data)
+        try:
+            while view:
+                view = view[os.write(self._fd, view):]
+        except OSError:
+            self.lost_rows += data.count(b"\n")
+            try:  # no half row left behind
+                os.ftruncate(self._fd, self._end)
+                os.lseek(self._fd, self._end, os.SEEK_SET)
+            except OSError:
+                pass
+            raise
+        self._end += len(data)
+
+    def close(self) -> None:
+        if self._fd < 0:
+            return
+        try:
+            self.flush()
+        finally:
+            os.close(self._fd)
+            self._fd = -1
 
 
 def _path_for(path: str, node: str) -> str:

@@ -8,6 +8,8 @@ PLC can misbehave.  Its ``mode`` can be changed while it runs:
 - ``late``: answers correctly after ``delay_s``;
 - ``exception``: answers every request with exception ``code`` (02, 04, ...);
 - ``no-reads``: takes writes, answers reads (FC3) with exception ``code``;
+- ``wrong-fc``: answers a write (FC16), without taking it, as if it had been a read
+  (FC3 function code and layout), reads correctly;
 - ``down``: not listening at all (connections refused), see :meth:`go_down`.
 
 With ``map_size``, a request that reaches past that many registers is answered with
@@ -148,6 +150,8 @@ class PlcStandIn:
         past = fc in (3, 16) and self.map_size is not None and sum(struct.unpack(">HH", pdu[1:5])) > self.map_size
         if self.mode == "exception" or (self.mode == "no-reads" and fc == 3) or past:
             body = bytes([fc | 0x80, self.code])
+        elif self.mode == "wrong-fc" and fc == 16:
+            body = struct.pack(">BBH", 3, 2, 0)
         elif fc == 16:
             self.regs[address:address + count] = values
             body = struct.pack(">BHH", 16, address, count)

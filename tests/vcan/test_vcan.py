@@ -3,6 +3,7 @@ wrote (can-utils' cansend, canplayer, candump)."""
 from __future__ import annotations
 
 import json
+import signal
 import socket
 import subprocess
 import sys
@@ -190,13 +191,17 @@ def test_live_receiver_and_its_log_replay_agree(vcan, tmp_path):
     rec, log, live, replay = (tmp_path / n for n in ("rec.csv", "traffic.log", "live.csv", "replay.csv"))
     write_recording(rec, np.arange(400) / 100.0, f)
     with subprocess.Popen([sys.executable, "-m", "eskin_industrial", "receive", "-p", PAPER, "-i", "socketcan",
-                           "-c", vcan, "--log", str(log), "-o", str(live), "--idle-exit", "2", "--duration", "90"],
+                           "-c", vcan, "--log", str(log), "-o", str(live), "--duration", "90"],
                           stderr=subprocess.PIPE, text=True) as rx:
         try:
             assert "receiving paper-5x5" in rx.stderr.readline()  # the bus is open
             res = eskin("node", "-p", PAPER, "-i", "socketcan", "-c", vcan, "--recording", str(rec), "--burst",
                         "--drop", "0.01", "--duplicate", "0.01", "--seed", "3")
             assert res.returncode == 0, res.stderr
+            # Ctrl-C once the frames are in (--idle-exit counts from the receiver's start,
+            # and the node's start here takes longer than a short bound)
+            time.sleep(2.0)
+            rx.send_signal(signal.SIGINT)
             counters = json.loads(rx.stderr.read().strip().splitlines()[-1])
             assert rx.wait(timeout=60) == 0
         finally:

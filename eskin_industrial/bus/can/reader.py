@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any, Self
 
 import can
 
-from ...errors import CanBusError, EskinError
+from ...errors import CanBusError, EskinError, SocketCanMissing
 from ..source import DEFAULT_QUEUE_FRAMES
 from .busargs import NO_BITRATE, configured, make_timing, parse_filters
 
@@ -54,12 +54,32 @@ def open_bus(interface: str | None = None, channel: str | None = None, bitrate: 
         where = f"interface {interface!r}" if interface else "the configured interface"
         if channel:
             where += f", channel {channel!r}"
+        if _no_af_can(exc):
+            # the name was right: the kernel lacks the protocol family, and listing the
+            # valid interface names (socketcan among them) would say the opposite
+            raise SocketCanMissing(
+                f"cannot open CAN bus ({where}): this kernel has no SocketCAN (address family AF_CAN not "
+                "supported): load it as root with `modprobe can` (and `modprobe vcan` for a virtual bus), or run "
+                "where it exists; without a bus, `eskin-bus node --can-log FILE` writes a log to try") from exc
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         hint = "" if interface else " (give -i/--interface and -c/--channel, or set CAN_INTERFACE and CAN_CHANNEL)"
         raise CanBusError(f"cannot open CAN bus ({where}): {detail}{hint}; valid interfaces: "
                           f"{', '.join(sorted(can.interfaces.VALID_INTERFACES))}") from exc
     enlarge_rcvbuf(bus, rcvbuf_bytes)
     return bus
+
+
+def _no_af_can(exc: BaseException) -> bool:
+    """The error of a kernel without SocketCAN: the CAN socket's protocol family is
+    refused (EAFNOSUPPORT), whichever python-can error wraps the OSError."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, OSError) and seen.errno == errno.EAFNOSUPPORT:
+            return True
+        if getattr(seen, "error_code", None) == errno.EAFNOSUPPORT:
+            return True
+        seen = seen.__cause__ or seen.__context__
+    return False
 
 
 def bus_kwargs(profile: Profile, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None,
