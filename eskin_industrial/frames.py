@@ -31,11 +31,26 @@ class FrameFlag(enum.IntFlag):
     #: taxel, a very light or noisy grip; or it has not judged this contact yet): a turn
     #: would read ``stable``.  cof-track's only (detect/torsion.py, ``TurnFlow.blind``)
     TURN_UNSEEN = 512
+    # The sensor's faults (detect/integrity.py): while one is set the node claims no
+    # state and DATA_VALID is clear, whatever the detector says.
+    #: too many taxels invalid at once (more than ``[output] hold_share`` of them), or
+    #: one invalid for longer than ``[output] hold_s``: open lines, shorts, NaN
+    DEAD_TAXELS = 1024
+    #: the scans have been identical, every taxel to the bit, for longer than
+    #: ``[output] frozen_s``: a hung node repeating its last scan
+    FROZEN = 2048
+    #: the scans' own timestamps show a rate more than ``[output] rate_tolerance`` times
+    #: away from the rate the detector assumes
+    RATE = 4096
 
     @classmethod
     def describe(cls, value: int) -> str:
         """``"SATURATED|GAP_BEFORE"`` for the bits set, ``""`` for none."""
         return "|".join(f.name for f in cls if value & f and f.name)
+
+
+#: The sensor-fault bits: any of them makes a state no verdict.
+SENSOR_FAULTS = int(FrameFlag.DEAD_TAXELS | FrameFlag.FROZEN | FrameFlag.RATE)
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .calibration import Calibrator
+from .detect.integrity import IntegrityWatch
 from .detect.learned import Model
 from .detect.protocol import Detector
 from .detect.updates import Update, state_changed
@@ -28,6 +29,8 @@ class Counters:
     lost_scans: int = 0  #: gaps in the sequence numbers
     dropped_by_detector: int = 0  #: duplicate or out-of-order times
     state_changes: int = 0  #: :func:`~.detect.updates.state_changed` (the STATE_CHANGES register's count)
+    fault_scans: int = 0  #: scans with a sensor fault (DEAD_TAXELS, FROZEN, RATE): no verdict
+    sensor_faults: int = 0  #: entries into a sensor fault
     extra: dict[str, int] = field(default_factory=dict)  #: transport-specific counters
 
 
@@ -46,6 +49,11 @@ class Pipeline:
         #: Whichever method decides, only :class:`~eskin_industrial.detect.protocol.Detector`'s surface is used.
         self.detector: Detector = self.method.stream(profile.detector, x, y, self.rate_hz)
         self.counters = Counters()
+        out = profile.output
+        #: The sensor's faults (:mod:`~.detect.integrity`); ``fault`` holds the newest scan's bits.
+        self.integrity = IntegrityWatch(profile.taxels, self.rate_hz, hold_s=out.hold_s, hold_share=out.hold_share,
+                                        frozen_s=out.frozen_s, rate_tolerance=out.rate_tolerance)
+        self.fault = 0
         self.last_frame: Frame | None = None
         self.last_update: Update | None = None
         self._last_seq: int | None = None
@@ -72,6 +80,12 @@ class Pipeline:
         if frame.flags & _SATURATED:
             c.saturated_scans += 1
         self.last_frame = frame
+        fault = self.integrity.push(frame.t, frame.forces, scan.raw, bool(frame.flags & _INVALID))
+        if fault:
+            c.fault_scans += 1
+            if not self.fault:
+                c.sensor_faults += 1
+        self.fault = fault
         before = self.detector.dropped
         updates = self.detector.push(frame.t, frame.forces, frame.flags)
         c.dropped_by_detector += self.detector.dropped - before

@@ -39,11 +39,15 @@ STALE_PERIODS = 2.5
 #: (15 in 20 s for one node in a busy process: docs/benchmarks.md).  Four switch
 #: intervals; from 125 Hz down the periods decide.
 STALE_FLOOR_S = 0.02
+#: The learnt stale limit's ceiling, in stale_s (``[output] stale_max_s``'s default).
+STALE_MAX_FACTOR = 4.0
 
 # Bounds of the settings, each in docs/profiles.md: past them a value is a typo or a
 # unit mistake, and is refused before the run rather than met in it.
-#: Scan and poll rates: a fast tactile ADC scans at a few kHz.
+#: Scan and poll rates: a fast tactile ADC scans at a few kHz; below 1 Hz no window of
+#: the detector holds two scans of a slip.
 MAX_RATE_HZ = 100_000.0
+MIN_RATE_HZ = 1.0
 #: Taxels per node (64 x 64): a node's per-taxel arrays are sized from it at load.
 MAX_TAXELS = 4096
 #: RTU retries within one scan period.
@@ -56,6 +60,14 @@ MAX_DATA_BITRATE_BPS = 16_000_000
 #: Samples in the detector's window and lag (10 s at 100 kHz): its buffers are sized
 #: from them when it starts.
 MAX_WINDOW_SAMPLES = 1_000_000
+#: Taxel coordinates and pitches (mm): a skin larger than 10 m is a unit mistake, and
+#: squares of coordinates must stay far inside a float's range.
+MAX_COORD_MM = 10_000.0
+#: A reading in the node's raw unit (ohm, ADC counts, N): zero and per_newton up to 1e12.
+MAX_RAW = 1e12
+#: ... and per_newton at least this in magnitude (a slope of 1e-300 makes every reading
+#: a meganewton).
+MIN_SLOPE = 1e-9
 
 
 def derived_stale_s(rate_hz: float, poll_hz: float | None) -> float:
@@ -69,7 +81,7 @@ class SensorSection:
     name: str
     description: str = ""
     #: Nominal scan rate; offline input takes its rate from the timestamps instead.
-    rate_hz: float = field(default=100.0, metadata=positive_at_most(MAX_RATE_HZ))
+    rate_hz: float = field(default=100.0, metadata=in_range(MIN_RATE_HZ, MAX_RATE_HZ))
 
 
 @dataclass(frozen=True)
@@ -78,11 +90,11 @@ class LayoutSection:
     cols: int = field(metadata=positive("an integer >= 1"))
     #: Distance between neighbouring taxels along a row (x) and, unless
     #: ``row_pitch_mm`` is given, between rows (y).
-    pitch_mm: float = field(metadata=positive())
-    row_pitch_mm: float | None = field(default=None, metadata=positive())
+    pitch_mm: float = field(metadata=in_range(0.01, 1000.0))
+    row_pitch_mm: float | None = field(default=None, metadata=in_range(0.01, 1000.0))
     #: Explicit taxel coordinates, row-major, one per taxel; default: the grid.
-    x_mm: tuple[float, ...] | None = None
-    y_mm: tuple[float, ...] | None = None
+    x_mm: tuple[float, ...] | None = field(default=None, metadata=in_range(-MAX_COORD_MM, MAX_COORD_MM))
+    y_mm: tuple[float, ...] | None = field(default=None, metadata=in_range(-MAX_COORD_MM, MAX_COORD_MM))
     #: Names of the rows when each row is a separate strip (the hand's fingers).
     row_names: tuple[str, ...] | None = None
 
@@ -112,8 +124,8 @@ class LayoutSection:
 
 @dataclass(frozen=True)
 class TaxelCalibration:
-    zero: float | None = None
-    per_newton: float | None = None
+    zero: float | None = field(default=None, metadata=in_range(-MAX_RAW, MAX_RAW))
+    per_newton: float | None = field(default=None, metadata=in_range(-MAX_RAW, MAX_RAW))
 
     def __post_init__(self) -> None:
         if self.per_newton == 0:
@@ -125,16 +137,16 @@ class CalibrationSection:
     #: What the node reports: resistance, ADC counts, or forces already in newtons.
     raw_unit: Literal["ohm", "adc_counts", "newton"]
     #: Reading at 0 N in ``raw_unit``: one number, or one per taxel (row-major).
-    zero: float | tuple[float, ...]
+    zero: float | tuple[float, ...] = field(metadata=in_range(-MAX_RAW, MAX_RAW))
     #: Change of the reading per newton: one number, or one per taxel.
-    per_newton: float | tuple[float, ...]
+    per_newton: float | tuple[float, ...] = field(metadata=in_range(-MAX_RAW, MAX_RAW))
     #: raw value x raw_scale = reading in ``raw_unit`` (e.g. 0.1 ohm per LSB).
-    raw_scale: float = field(default=1.0, metadata=positive())
+    raw_scale: float = field(default=1.0, metadata=in_range(1e-09, 1000000000.0))
     #: Readings outside [valid_min, valid_max] (after scaling) are invalid.
-    valid_min: float = -1e300
-    valid_max: float = 1e300
+    valid_min: float = field(default=-1e300, metadata=in_range(-1e300, 1e300))
+    valid_max: float = field(default=1e300, metadata=in_range(-1e300, 1e300))
     #: Forces at or above this are flagged saturated and clipped.
-    full_scale_n: float = field(default=1e300, metadata=positive())
+    full_scale_n: float = field(default=1e300, metadata=in_range(1e-06, 1e+300))
     #: Per-taxel corrections keyed by the taxel's row-major index: {"7" = {zero = ...}}.
     overrides: dict[str, TaxelCalibration] = field(default_factory=dict)
 
@@ -145,6 +157,9 @@ class CalibrationSection:
         slopes = self.per_newton if isinstance(self.per_newton, tuple) else (self.per_newton,)
         if any(s == 0 for s in slopes):
             raise ValueError("per_newton: expected non-zero slopes, got 0")
+        if any(abs(s) < MIN_SLOPE for s in slopes):
+            raise ValueError(f"per_newton: expected slopes of at least {MIN_SLOPE:g} raw units per newton in "
+                             f"magnitude, got {min(slopes, key=abs):g}")
         if self.valid_min >= self.valid_max:
             raise ValueError("valid_min: expected valid_min < valid_max")
         for index in self.overrides:
@@ -177,7 +192,7 @@ class CanSection:
     #: Data-phase bit rate of CAN FD frames.
     data_bitrate_bps: int = field(default=5_000_000, metadata=positive_at_most(MAX_DATA_BITRATE_BPS, "an integer"))
     #: Period of the node's heartbeat (status) frame.
-    heartbeat_s: float = field(default=0.1, metadata=positive_at_most(60.0))
+    heartbeat_s: float = field(default=0.1, metadata=in_range(0.001, 60.0))
 
     def __post_init__(self) -> None:
         top = 0x1FFFFFFF if self.extended_id else 0x7FF
@@ -205,17 +220,17 @@ class ModbusNodeSection:
     value_type: Literal["uint16", "int16", "uint32", "int32"] = "uint16"
     #: For 32-bit values: which register holds the high word.
     word_order: Literal["big", "little"] = "big"
-    baudrate: int = field(default=115200, metadata=positive())
+    baudrate: int = field(default=115200, metadata=in_range(300, 10000000))
     parity: Literal["N", "E", "O"] = "N"
     stopbits: Literal[1, 2] = 1
     #: How long to wait for an answer before the poll counts as a timeout.
-    timeout_s: float = field(default=0.05, metadata=positive_at_most(10.0))
+    timeout_s: float = field(default=0.05, metadata=in_range(0.001, 10.0))
     #: Further attempts after a failed poll, within the same scan period.
     retries: int = field(default=1, metadata=in_range(0, MAX_RETRIES))
     #: Poll rate; default: the sensor's ``rate_hz``.
-    poll_hz: float | None = field(default=None, metadata=positive_at_most(MAX_RATE_HZ))
+    poll_hz: float | None = field(default=None, metadata=in_range(MIN_RATE_HZ, MAX_RATE_HZ))
     #: Consecutive failed polls after which the bus-fault bit is set.
-    fault_after_failures: int = field(default=3, metadata=positive("an integer >= 1"))
+    fault_after_failures: int = field(default=3, metadata=in_range(1, 1000000))
     #: The node keeps its scan counter (uint16, wrapping) in the register before the
     #: taxels: scans are then timed on the node's clock (counter / rate_hz), a scan
     #: polled twice is used once, and skipped scans count as lost.
@@ -280,7 +295,7 @@ class ModbusPlcSection:
     unit_ids: tuple[int, ...] = field(default=(), metadata=in_range(0, 255))
     identity: DeviceIdentitySection = field(default_factory=DeviceIdentitySection)
     #: R_coe and R_dw are sent as round(R x r_scale), saturated at 65535.
-    r_scale: float = field(default=100.0, metadata=positive_at_most(MAX_R_SCALE))
+    r_scale: float = field(default=100.0, metadata=in_range(0.001, MAX_R_SCALE))
 
     def __post_init__(self) -> None:
         if self.backoff_max_s < self.backoff_s:
@@ -296,11 +311,31 @@ class OutputSection:
     #: A snapshot is published at every change of the state or of a health condition,
     #: and every ``refresh_s`` when nothing changes (a PLC in client mode is written
     #: that often; a heartbeat advances).
-    refresh_s: float = field(default=0.05, metadata=positive_at_most(60.0))
+    refresh_s: float = field(default=0.05, metadata=in_range(0.001, 60.0))
     #: The newest scan older than this makes the sensor stale: no state is claimed and
     #: no verdict is valid.  Default: 2.5 scan periods (of the slower of ``[sensor]
     #: rate_hz`` and ``[modbus.node] poll_hz``), so a silent sensor shows within three.
-    stale_s: float | None = field(default=None, metadata=positive_at_most(3600.0))
+    stale_s: float | None = field(default=None, metadata=in_range(0.001, 3600.0))
+    #: The stale limit learns the sensor's arrivals (``node/staleness.py``): it rises to
+    #: 1.5 times the longest interval between scans seen lately, never above this.
+    #: Default: 4 x ``stale_s``; equal to ``stale_s``: a fixed limit.
+    stale_max_s: float | None = field(default=None, metadata=in_range(0.001, 3600.0))
+    #: A sensor fault makes the state no verdict (``docs/plc.md``, FLAGS bits 10-12).
+    #: An invalid reading (open line, short, NaN) is replaced by the taxel's last good
+    #: value for at most ``hold_s`` (on the sensor's clock), and in at most
+    #: ``hold_share`` of the taxels at once; beyond either: DEAD_TAXELS.
+    hold_s: float = field(default=0.25, metadata=in_range(0.0, 60.0))
+    hold_share: float = field(default=0.25, metadata=in_range(0.0, 1.0))
+    #: Raw scans identical to the bit for longer than this: FROZEN (0: not judged).
+    frozen_s: float = field(default=0.5, metadata=in_range(0.0, 3600.0))
+    #: The scans' timestamps showing a rate more than this factor from the detector's:
+    #: RATE (0: not judged).
+    rate_tolerance: float = field(default=2.0, metadata=in_range(0.0, 100.0))
+
+    def __post_init__(self) -> None:
+        if 0 < self.rate_tolerance < 1.1:
+            raise ValueError("rate_tolerance: expected 0 (not judged) or a factor of at least 1.1, "
+                             f"got {self.rate_tolerance:g}")
 
 
 #: Keys that moved, old dotted path -> new one: still read, with a warning.
@@ -369,6 +404,11 @@ class Profile:
             # Resolved here, once, so every consumer reads a number.
             out = replace(self.output, stale_s=derived_stale_s(self.sensor.rate_hz, self.modbus.node.poll_hz))
             object.__setattr__(self, "output", out)
+        if self.output.stale_max_s is None:
+            object.__setattr__(self, "output", replace(self.output, stale_max_s=STALE_MAX_FACTOR * self.stale_s))
+        elif self.output.stale_max_s < self.stale_s:
+            raise SchemaError("output.stale_max_s", f"expected at least stale_s ({self.stale_s:g} s), "
+                                                    f"got {self.output.stale_max_s:g}")
 
     @property
     def stale_s(self) -> float:
@@ -376,6 +416,13 @@ class Profile:
         stale = self.output.stale_s
         assert stale is not None  # resolved in __post_init__
         return stale
+
+    @property
+    def stale_max_s(self) -> float:
+        """``[output] stale_max_s``, resolved."""
+        stale_max = self.output.stale_max_s
+        assert stale_max is not None  # resolved in __post_init__
+        return stale_max
 
     @property
     def name(self) -> str:

@@ -41,9 +41,10 @@ LO = LAYOUT.base_id
 DATA_IDS = [LAYOUT.data_id(s) for s in range(LAYOUT.segments)]
 UNUSED_IDS = [i for i in range(LO, LO + ID_RANGE) if i not in DATA_IDS and i != LAYOUT.status_id]
 RATE_HZ = 100.0
-#: After the last valid frame, stale_s (2.5 periods) + 15 ms of scheduling on a loaded
-#: machine: from then on no image may claim a verdict (the silence test times it exactly).
-INVALID_AFTER_S = 3 / RATE_HZ + 0.015
+#: After the last valid frame, the stale limit (stale_s, learnt from the arrivals up to
+#: stale_max_s: docs/plc.md) + 15 ms of scheduling on a loaded machine: from then on no
+#: image may claim a verdict (the silence test times the fixed limit exactly).
+INVALID_AFTER_S = PROFILE.stale_max_s + 0.015
 
 # Each garbage frame with the counter it must land in ("malformed": the node's
 # malformed_frames; "error": error_frames; "unrouted": frames of no node).

@@ -72,7 +72,7 @@ def test_calibration_entries_must_match_the_layout():
 
 
 def test_negative_window():
-    assert "[detector] window_s: expected a number > 0" in refused(BASE + "[detector]\nwindow_s = -0.4\n")
+    assert "[detector] window_s: expected a value in [0.0001, 600], got -0.4" in refused(BASE + "[detector]\nwindow_s = -0.4\n")
 
 
 def test_window_must_be_whole_hops_and_hold_the_filter():
@@ -113,7 +113,7 @@ def test_cli_check_and_show(tmp_path):
     bad.write_text(BASE + "[detector]\nhop_s = -1.0\n")
     res = run_cli("profile", "check", str(bad))
     assert res.returncode == 2
-    assert re.fullmatch(r"eskin-bus: error: .*bad\.toml: \[detector\] hop_s: expected a number > 0, got -1\.0\n", res.stderr)
+    assert re.fullmatch(r"eskin-bus: error: .*bad\.toml: \[detector\] hop_s: expected a value in \[0\.0001, 600\], got -1\.0\n", res.stderr)
     shown = run_cli("profile", "show", str(PROFILES / "hand-4x5.toml"))
     assert shown.returncode == 0
     table = tomllib.loads(shown.stdout)
@@ -141,7 +141,7 @@ def test_an_unknown_key_in_a_method_section_is_refused(section, key, near):
 
 def test_method_sections_are_typed_and_checked():
     assert "expected true or false" in refused(BASE + "[detector.hf_energy]\ntotal = 1\n")
-    assert "[detector] force_rate.lag_s: expected a number > 0" in refused(BASE + "[detector.force_rate]\nlag_s = 0.0\n")
+    assert "[detector] force_rate.lag_s: expected a value in [0.0001, 600], got 0.0" in refused(BASE + "[detector.force_rate]\nlag_s = 0.0\n")
     prof = parse_profile(BASE + "[detector.force_rate]\nthreshold_per_s = 2.5\n[detector.learned]\nconfirm_hops = 2\n")
     assert prof.detector.force_rate.threshold_per_s == 2.5 and prof.detector.force_rate.lag_s == 0.1
     assert prof.detector.learned.confirm_hops == 2

@@ -56,7 +56,7 @@ from typing import Any, Literal
 
 from ..bus.source import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES, Source, source_class
 from ..errors import DeprecatedKey, ProfileError
-from ..profile import MAX_RATE_HZ, Profile, derived_stale_s, load_profile
+from ..profile import MAX_RATE_HZ, STALE_MAX_FACTOR, Profile, derived_stale_s, load_profile
 from ..schema import SchemaError, build, in_range, positive_at_most, read_toml_file
 from ..sinks.base import DEFAULT_OUTPUT, Sink, sink_class, sink_kinds
 
@@ -334,7 +334,10 @@ def _apply_overrides(prof: Profile, nc: NodeConfig) -> Profile:
         # a node running slower must get its own, or it reads stale between two scans.
         poll = prof.modbus.node.poll_hz
         if prof.output.stale_s == derived_stale_s(prof.sensor.rate_hz, poll):
-            prof = replace(prof, output=replace(prof.output, stale_s=derived_stale_s(nc.rate_hz, poll)))
+            # (and its ceiling, when that was derived too: re-derived from the new limit)
+            derived_max = prof.output.stale_max_s == STALE_MAX_FACTOR * prof.stale_s
+            prof = replace(prof, output=replace(prof.output, stale_s=derived_stale_s(nc.rate_hz, poll),
+                                                stale_max_s=None if derived_max else prof.output.stale_max_s))
     return prof
 
 

@@ -27,6 +27,7 @@ import numpy as np
 from ..bus.source import Source
 from ..detect.updates import Update
 from ..node import Health, NodeSnapshot, NodeStatus, refusal
+from ..node.staleness import Staleness
 from ..pipeline import Pipeline
 from ..profile import Profile
 from ..sinks.base import Sink
@@ -48,6 +49,8 @@ class NodeLoop:
         chosen = self.pipeline.method
         self.status = NodeStatus(profile.stale_s, chosen.name, chosen.code,
                                  (chosen.scores[0].name, chosen.scores[1].name))
+        #: The stale limit, learnt from the sensor's arrivals (``status.stale_s`` follows it).
+        self.staleness = Staleness(profile.stale_s, profile.stale_max_s)
         #: The newest snapshot published (None before the first).
         self.snapshot: NodeSnapshot | None = None
         self.recent_raw: collections.deque[np.ndarray] = collections.deque(maxlen=self.TARE_SCANS)
@@ -87,7 +90,7 @@ class NodeLoop:
     def health(self, now: float | None = None) -> Health:
         src = self.source
         return Health(frame_age_s=src.frame_age(now), bus_fault=src.bus_fault,
-                      lost_scans=self.lost_scans(), bus_errors=src.bus_errors())
+                      lost_scans=self.lost_scans(), bus_errors=src.bus_errors(), fault=self.pipeline.fault)
 
     def lost_scans(self) -> int:
         """Gaps the pipeline counted, plus the scans an outage under way has lost so far
@@ -109,6 +112,9 @@ class NodeLoop:
         updates: list[Update] = []
         if scan is not None:
             self.recent_raw.append(scan.raw)
+            # the transport's receipt when it stamps one (a reader thread), else now
+            rx = scan.rx_time if scan.rx_time == scan.rx_time else time.monotonic()
+            self.status.stale_s = self.staleness.observe(rx)
             observe = self.status.observe
             updates = self.pipeline.push(scan)
             for u in updates:
@@ -176,14 +182,17 @@ class NodeLoop:
         fault, enable, latch, validity), or when ``refresh_s`` has passed."""
         now = time.monotonic()
         src = self.source
+        if not urgent and src.pending:
+            return False  # scans wait: the loop, not the sensor, is late; take them first
         age, bus_fault = src.frame_age(now), src.bus_fault
-        conditions = self.status.conditions(age, bus_fault)
+        fault = self.pipeline.fault
+        conditions = self.status.conditions(age, bus_fault, fault)
         if not urgent and conditions == self._last_conditions and now - self._last_pub < self._refresh_s:
             return False
         t0 = time.perf_counter()
         if t_event is None:
             t_event = t0
-        snap = self.status.snapshot(Health(age, bus_fault, self.lost_scans(), src.bus_errors()),
+        snap = self.status.snapshot(Health(age, bus_fault, self.lost_scans(), src.bus_errors(), fault),
                                     scans=self.pipeline.counters.scans, t_event=t_event,
                                     # the wall clock of the deciding scan's arrival, not of now
                                     wall_time_s=time.time() - (t0 - t_event),
@@ -276,7 +285,8 @@ class NodeLoop:
         c = self.pipeline.counters
         out = {"scans": c.scans, "updates": c.updates, "lost_scans": self.lost_scans(),
                "state_changes": c.state_changes, "publications": self.publications, "tares": self.tares,
-               "tares_refused": self.tares_refused, "commands": self.commands}
+               "tares_refused": self.tares_refused, "commands": self.commands, "invalid_scans": c.invalid_scans,
+               "saturated_scans": c.saturated_scans, "fault_scans": c.fault_scans, "sensor_faults": c.sensor_faults}
         out.update(self.pipeline.time_faults())
         out.update(self.source.counters())
         for sink in self.sinks:

@@ -31,6 +31,7 @@ from ..bus.source import Feeder, OpenContext, Source
 from ..detect.state import GraspState
 from ..detect.updates import Update
 from ..errors import ListenError
+from ..frames import FrameFlag
 from ..ratelimit import Throttle
 from ..sinks.base import Sink
 from .config import BridgeConfig, ResolvedNode, output_classes
@@ -326,7 +327,11 @@ class Bridge:
             self.log.event("source_ended", node=",".join(clean), error="-")
         for run in runs:
             source = run.loop.source
-            if source.failed:
+            if not source.failed and not self._stop.is_set():
+                # The node's last image while the bridge runs on: nothing claimed, the
+                # node offline (its heartbeat stops here), never its last "stable".
+                run.loop.shutdown()
+            elif source.failed:
                 self.log.event("source_failed", level="error", node=run.name, error=source.last_error)
                 run.loop.publish_if_due(True)  # BUS_FAULT now, before the loop lets go
                 self.failed_sources.append(f"{run.name}: {source.last_error}")
@@ -409,6 +414,8 @@ class Bridge:
             seen: dict[str, tuple[bool, Sink | None]] = {
                 "stale": (run.loop.status.is_stale(src.frame_age(now)), None),
                 "bus_fault": (src.bus_fault, None),
+                # once per episode (a scan more, or a second kind joining, is no news)
+                "sensor_fault": (bool(run.loop.pipeline.fault), None),
             }
             sink: Sink | None  # (each output, then the one a change is about)
             for sink in run.sinks:
@@ -436,6 +443,14 @@ class Bridge:
             age = source.frame_age()
             self.log.event("sensor_stale" if value else "sensor_fresh", level="warning" if value else "info",
                            node=run.name, frame_age_ms=None if age is None else round(age * 1000, 1))
+        elif key == "sensor_fault":
+            fault = run.loop.pipeline.fault
+            c = run.loop.pipeline.counters
+            if value:
+                self.log.event("sensor_fault", level="warning", node=run.name, why=FrameFlag.describe(fault),
+                               fault_scans=c.fault_scans, invalid_scans=c.invalid_scans)
+            else:
+                self.log.event("sensor_ok", level="info", node=run.name, fault_scans=c.fault_scans)
         elif key == "bus_fault":
             self.log.event("bus_fault" if value else "bus_ok", level="warning" if value else "info",
                            node=run.name, error=source.last_error or "-")

@@ -17,6 +17,14 @@ from ..profile import Profile
 from .source import NodeLike, OpenContext, OptionsT, Source
 
 
+def _rate_problem(t: np.ndarray, node: NodeLike[Any]) -> str | None:
+    """The check ``detect`` makes on a recording, against the node's rate (``--rate``,
+    else the profile's): one rule for every file source."""
+    from ..detect.hygiene import rate_problem
+
+    return rate_problem(t, node.rate_hz, "the node's rate_hz (--rate, else the profile's)")
+
+
 class ReplaySource(Source[OptionsT]):
     """Raw scans played at ``rate_hz`` (any speed), as if polled; scan times are the
     recording's (each loop continues them)."""
@@ -130,9 +138,12 @@ class RecordingSource(ReplaySource["RecordingOptions"]):
         from ..recording import read_recording
 
         try:
-            read_recording(node.options.path, node.profile.taxels)
+            rec = read_recording(node.options.path, node.profile.taxels)
         except EskinError as exc:
             raise ValueError(f"path: {exc}") from None
+        problem = _rate_problem(rec.t, node)
+        if problem is not None:
+            raise ValueError(f"path: {rec.name}: {problem}")
 
     @classmethod
     def open_node(cls, node: NodeLike[RecordingOptions], context: OpenContext) -> RecordingSource:
@@ -140,6 +151,9 @@ class RecordingSource(ReplaySource["RecordingOptions"]):
 
         prof = node.profile
         rec = read_recording(node.options.path, prof.taxels)
+        problem = _rate_problem(rec.t, node)
+        if problem is not None:  # (a file that changed since the check)
+            raise EskinError(f"node {node.name!r}: {rec.name}: {problem}")
         raw = rec.values if rec.unit == "raw" else \
             Calibrator.from_section(prof.calibration, prof.taxels).to_raw(rec.values)
         # played at the pace its timestamps show (the detector runs at the node's rate)

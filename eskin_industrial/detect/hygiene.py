@@ -85,10 +85,27 @@ def rate_problem(t: np.ndarray, expected_hz: float, what: str = "") -> str | Non
         return f"the timestamps never advance ({t.size} frames, {kept.size} usable distinct time)"
     rate = 1.0 / float(np.median(np.diff(kept)))
     lo, hi = expected_hz / RATE_TOLERANCE, expected_hz * RATE_TOLERANCE
-    if not lo <= rate <= hi:
-        return (f"the timestamps show {rate:.4g} Hz, implausible for {what or 'a rate of'} {expected_hz:g} Hz "
-                f"(accepted: {lo:g} to {hi:g} Hz); are the times in seconds?")
+    # Inclusive, up to the rounding of times written in decimal: 1 ms steps of a 1 kHz
+    # recording give 1000.0000001 Hz, which is 1000 Hz.
+    if not lo * (1 - _RATE_SLACK) <= rate <= hi * (1 + _RATE_SLACK):
+        return (f"the timestamps show {_outside(rate, lo, hi)} Hz, implausible for {what or 'a rate of'} "
+                f"{expected_hz:g} Hz (accepted: {lo:g} to {hi:g} Hz); are the times in seconds?")
     return None
+
+
+#: The relative slack of :func:`rate_problem`'s bounds (times in a CSV carry about 9
+#: significant digits).
+_RATE_SLACK = 1e-6
+
+
+def _outside(rate: float, lo: float, hi: float) -> str:
+    """``rate`` with as many digits as it takes to read outside [lo, hi] (a message
+    must not say "1000 Hz ... accepted: 10 to 1000 Hz")."""
+    for digits in range(4, 17):
+        shown = f"{rate:.{digits}g}"
+        if not lo <= float(shown) <= hi:
+            return shown
+    return repr(rate)
 
 
 class FrameHygiene:

@@ -89,7 +89,7 @@ def segment_indicators(
     sums = forces @ mat  # S, S*X, S*Y
     s = sums[:, 0]
     ss = np.einsum("ij,ij->i", forces, forces)
-    contact = ContactRule.from_settings(cfg).mask(s)
+    contact = ContactRule.from_settings(cfg, geo.rate_hz).mask(s)
     with np.errstate(invalid="ignore", divide="ignore"):
         cof = sums[:, 1:] / s[:, None]
     centre = mat[:, 1:].mean(axis=0)

@@ -93,6 +93,6 @@ def paper_batch(
 def _hop_vf(s: np.ndarray, flags: np.ndarray, end: np.ndarray, settings: DetectorSettings, hop: int,
             rate_hz: float) -> np.ndarray:
     """Each update's largest varying-force score over its hop (the frames end - hop + 1 .. end)."""
-    contact = ContactRule.from_settings(settings).mask(s)
+    contact = ContactRule.from_settings(settings, rate_hz).mask(s)
     score = force_variation_batch(s, contact, (flags & int(FrameFlag.FILLED)) != 0, settings.varying_force, rate_hz)
     return np.array([score[e - hop + 1:e + 1].max() for e in end.tolist()]) if len(end) else np.zeros(0)

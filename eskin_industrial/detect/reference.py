@@ -22,7 +22,7 @@ def reference_window_sums(
     geo = settings.geometry(rate_hz)
     k_total = forces.shape[0]
     ends, coe, dw = [], [], []
-    rule = ContactRule.from_settings(settings)
+    rule = ContactRule.from_settings(settings, rate_hz)
     # contact per frame (the rule remembers the frame before), and the centre of force,
     # held at its last in-contact value (array centre before any)
     contact = np.zeros(k_total, bool)

@@ -69,7 +69,8 @@ class ScoredDetector(FrameHygiene):
         self._mat = np.column_stack([np.ones(self.n), x_mm, y_mm, np.zeros(self.n)]).astype(np.float64)
         if self._turn is not None:
             self._turn.project_into(self._mat[:, 3])
-        self._touching = ContactRule.from_settings(settings).touching
+        self._rule = ContactRule.from_settings(settings, rate_hz)
+        self._touching = self._rule.touching
         # (confirmation is per frame, above: the decision reports a hop's slip vote at once)
         self.decision = Decision.from_settings(settings, confirm=1)
         own = settings.varying_force.evidence == "method"
@@ -84,6 +85,7 @@ class ScoredDetector(FrameHygiene):
     def _reset(self, flags: int) -> None:
         self._k = 0
         self._contact_run = 0
+        self._rule.reset()  # (a restart learns the baseline anew, as the batch form's segments do)
         self._hop_a = self._hop_b = 0.0
         self._hop_slip = self._hop_var = False
         self._hop_vf = 0.0

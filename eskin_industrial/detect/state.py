@@ -28,11 +28,13 @@ method's own evidence instead (a yes or no: 1 or 0), through the same latch.
 
 Contact has one rule too, :class:`ContactRule`, applied to each frame's total force
 by every method (the paper's indicators included, where it decides whether F_dis and
-the centre of force are defined): contact begins when the total reaches
-``contact_threshold_n`` and lasts while it stays above half of that.  A plain
-threshold would make a first touch that hovers at the threshold toggle the PLC
-between ``no_contact`` and ``stable`` every frame, and restart a detector's warm-up
-each time.
+the centre of force are defined): contact begins when the loaded force (the total
+minus the sensor's unloaded baseline, learnt out of contact) reaches
+``contact_threshold_n`` (and five times the learnt noise), and lasts while it stays
+above half of that, each change held for ``contact_dwell_s``.  A plain threshold
+would make a first touch that hovers at the threshold, or an idle film whose offset
+and noise reach it, toggle the PLC between ``no_contact`` and ``stable`` every few
+frames, and restart a detector's warm-up each time.
 
 What counts as slip evidence is each method's own: :class:`StateMachine` is the paper's
 (R_coe and R_dw against their thresholds, with hysteresis) in front of a
@@ -42,6 +44,7 @@ frame and hands the hop's votes to its own :class:`Decision`.
 
 from __future__ import annotations
 
+import copy
 import enum
 import math
 
@@ -73,36 +76,107 @@ _NO_CONTACT, _STABLE, _VARIABLE, _SLIP = (int(s) for s in GraspState)
 
 
 class ContactRule:
-    """In contact from a total force of ``enter_n``, until it falls below ``stay_n``
-    (``STAY_FRACTION`` of it); never at a total of zero.
+    """Contact, judged on each frame's total force against the sensor's learnt
+    unloaded baseline and noise floor.
 
-    :meth:`touching` is the per-frame form (the caller keeps the previous answer),
-    :meth:`mask` the same rule over a run of frames, starting out of contact."""
+    Out of contact the rule learns the unloaded total (the offset of a piezoresistive
+    film, its slow drift) as a running mean over ``baseline_s``, and its noise as a
+    running RMS about it.  The loaded force is the total minus that baseline.  Contact
+    begins once the loaded force has reached ``enter_n`` (and ``noise_k`` noise RMS,
+    whichever is higher) for ``dwell_s``, and ends once it has stayed below
+    :data:`STAY_FRACTION` of that (and ``noise_k`` / 2 RMS) for ``dwell_s``; a clear
+    load (twice the entry level) or a clear release (below half the stay level)
+    changes at once; never in contact at a total of zero.  An idle sensor reading 0.15 +- 0.04 N against a 0.2 N threshold
+    thus stays out of contact, where a plain threshold made the PLC's CONTACT flap.
 
-    #: Contact, once made, lasts while the total stays above this share of the threshold.
+    The baseline is bounded so that it can never hide a real load: it learns only out
+    of contact and below the stay level, moves at most ``baseline_max_n`` from zero,
+    and starts at zero (a sensor loaded from its first frame is in contact, and
+    learns nothing); the noise floor raises the threshold by at most as much.  A load
+    of ``enter_n + 2 x baseline_max_n`` (0.7 N by default) is thus always contact,
+    however slowly it crept on.  ``baseline_s = 0`` learns nothing (the plain
+    hysteresis).
+
+    :meth:`touching` is the per-frame form (``was``, the previous answer, is kept by
+    the rule itself; the argument stays for callers that restart it), :meth:`mask`
+    the same rule over a run of frames from a fresh rule, so the batch answer is the
+    streaming one by construction."""
+
+    #: Contact, once made, lasts while the loaded force stays above this share of the threshold.
     STAY_FRACTION = 0.5
 
-    __slots__ = ("enter_n", "stay_n")
+    __slots__ = ("enter_n", "stay_n", "noise_k", "dwell", "alpha", "max_n", "baseline", "var", "seen", "on", "run")
 
-    def __init__(self, enter_n: float) -> None:
+    def __init__(self, enter_n: float, *, rate_hz: float = 100.0, baseline_s: float = 0.0, dwell_s: float = 0.0,
+                 noise_k: float = 5.0, baseline_max_n: float = 0.0) -> None:
         self.enter_n = enter_n
         self.stay_n = self.STAY_FRACTION * enter_n
+        self.noise_k = noise_k
+        self.dwell = max(int(round(dwell_s * rate_hz)), 1)  #: frames a change must hold
+        self.alpha = 1.0 / (baseline_s * rate_hz) if baseline_s > 0 else 0.0
+        self.max_n = baseline_max_n if baseline_s > 0 else 0.0
+        self.reset()
+
+    def reset(self) -> None:
+        self.baseline = 0.0
+        self.var = 0.0
+        self.seen = 0  #: unloaded frames learnt from (the mean's first steps are exact)
+        self.on = False
+        self.run = 0  #: consecutive frames that ask for the other answer
 
     @classmethod
-    def from_settings(cls, settings: DetectorSettings) -> ContactRule:
-        return cls(settings.contact_threshold_n)
+    def from_settings(cls, settings: DetectorSettings, rate_hz: float = 100.0) -> ContactRule:
+        return cls(settings.contact_threshold_n, rate_hz=rate_hz, baseline_s=settings.contact_baseline_s,
+                   dwell_s=settings.contact_dwell_s, noise_k=settings.contact_noise_k,
+                   baseline_max_n=settings.contact_baseline_max_n)
 
-    def touching(self, s: float, was: bool) -> bool:
-        """Contact at total force ``s``, given whether the previous frame was in contact."""
-        return s > 0.0 and (s >= self.enter_n or (was and s >= self.stay_n))
+    def levels(self) -> tuple[float, float]:
+        """The loaded force that enters contact, and the one below which it ends."""
+        # the noise floor raises the threshold by at most baseline_max_n, as the
+        # baseline moves it: a load of enter_n + 2 x baseline_max_n is always contact
+        floor = min(self.noise_k * math.sqrt(self.var), self.enter_n + self.max_n)
+        return max(self.enter_n, floor), max(self.stay_n, 0.5 * floor)
+
+    def touching(self, s: float, was: bool = False) -> bool:
+        """Contact at total force ``s`` (frames in time order, one call each)."""
+        if not s > 0.0:  # zero (or NaN): never in contact, and nothing to learn
+            self.on, self.run = False, 0
+            return False
+        loaded = s - self.baseline
+        enter, stay = self.levels() if self.alpha else (self.enter_n, self.stay_n)
+        want = loaded >= stay if self.on else loaded >= enter
+        if want == self.on:
+            self.run = 0
+        else:
+            self.run += 1
+            # the dwell is for a total about a level; a clear load (twice the entry
+            # level) or a clear release (below half the stay level) changes at once
+            clear = loaded >= 2.0 * enter if want else loaded < 0.5 * stay
+            if self.run >= self.dwell or clear:
+                self.on, self.run = want, 0
+        if self.alpha and not self.on and self.run == 0 and loaded < stay:
+            self._learn(s)
+        return self.on
+
+    def _learn(self, s: float) -> None:
+        self.seen += 1
+        a = max(self.alpha, 1.0 / self.seen)
+        d = s - self.baseline
+        b = self.baseline + a * d
+        self.baseline = min(max(b, -self.max_n), self.max_n)
+        self.var += a * (d * d - self.var)
 
     def mask(self, s: np.ndarray) -> np.ndarray:
-        """:meth:`touching` frame by frame over ``s``, the frame before the first out of contact."""
-        enter = (s > 0.0) & (s >= self.enter_n)
-        leave = ~((s > 0.0) & (s >= self.stay_n))  # disjoint from enter: stay_n <= enter_n
-        # each frame takes the answer of the last frame that enters or leaves
-        last = np.maximum.accumulate(np.where(enter | leave, np.arange(len(s)), -1))
-        return (last >= 0) & enter[np.maximum(last, 0)]
+        """:meth:`touching` frame by frame over ``s``, from a fresh rule (out of contact)."""
+        if not self.alpha and self.dwell == 1:  # the plain hysteresis: vectorized
+            enter = (s > 0.0) & (s >= self.enter_n)
+            leave = ~((s > 0.0) & (s >= self.stay_n))  # disjoint from enter: stay_n <= enter_n
+            last = np.maximum.accumulate(np.where(enter | leave, np.arange(len(s)), -1))
+            return (last >= 0) & enter[np.maximum(last, 0)]
+        fresh = copy.copy(self)
+        fresh.reset()
+        step = fresh.touching
+        return np.fromiter((step(v) for v in np.asarray(s, dtype=np.float64).tolist()), dtype=bool, count=len(s))
 
 
 class VaryingLatch:

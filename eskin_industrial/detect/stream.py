@@ -52,7 +52,8 @@ class IndicatorStream(FrameHygiene):
         self._c_floor = settings.coe_floor * self.geo.window
         self._e_floor = settings.dw_floor_mm2 * odd_offsets(self.geo.window, len(self._h))
         self._symmetric = settings.ratio_mode == "symmetric"
-        self._touching = ContactRule.from_settings(settings).touching
+        self._rule = ContactRule.from_settings(settings, rate_hz)
+        self._touching = self._rule.touching
         own = settings.varying_force.evidence == "method"
         self._vf = None if own else ForceVariation(settings.varying_force, rate_hz)
         self._reset(0)
@@ -61,6 +62,7 @@ class IndicatorStream(FrameHygiene):
         geo = self.geo
         self._k = 0
         self._contact = False  # the previous frame's, for the contact rule's hysteresis
+        self._rule.reset()  # (a restart learns the baseline anew, as the batch form's segments do)
         self._ring_f = np.zeros((geo.lag, self.n))
         self._ring_s = [0.0] * geo.lag
         self._ring_ss = [0.0] * geo.lag

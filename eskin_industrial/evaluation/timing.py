@@ -34,7 +34,7 @@ def _traces(rec: Rendered, settings: DetectorSettings) -> tuple[UpdateTable, np.
     """The default method's updates, and the varying-force score of every frame."""
     table, _ = run_one(ready_method(None, settings).stream, settings, rec)
     s = rec.forces.sum(axis=1)
-    contact = ContactRule.from_settings(settings).mask(s)
+    contact = ContactRule.from_settings(settings, rec.rate_hz).mask(s)
     score = force_variation_batch(s, contact, np.zeros(len(s), bool), settings.varying_force, rec.rate_hz)
     return table, score
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from ..detect.state import GraspState
-from ..frames import FrameFlag
+from ..frames import SENSOR_FAULTS, FrameFlag
 
 _TURN_UNSEEN = int(FrameFlag.TURN_UNSEEN)
 _NO_CONTACT = int(GraspState.NO_CONTACT)
@@ -27,6 +27,9 @@ class Health(NamedTuple):
     bus_fault: bool = False
     lost_scans: int = 0
     bus_errors: int = 0
+    #: the sensor's faults now (:data:`~eskin_industrial.frames.SENSOR_FAULTS` bits;
+    #: any: no state is claimed)
+    fault: int = 0
 
 
 class NodeSnapshot(NamedTuple):
@@ -39,7 +42,7 @@ class NodeSnapshot(NamedTuple):
 
     #: The claimed grasp state (:class:`~eskin_industrial.detect.state.GraspState`
     #: code); None when no state is claimed: no update yet, detection disabled, the
-    #: sensor stale, or the bridge offline.
+    #: sensor stale or faulty (FLAGS DEAD_TAXELS, FROZEN, RATE), or the bridge offline.
     state: int | None
     #: The state is a verdict: claimed, the detector's indicators valid, no bus fault.
     valid: bool
@@ -54,10 +57,12 @@ class NodeSnapshot(NamedTuple):
     #: The deciding method's own two scores (:attr:`score_names`; None when no state is claimed).
     score_a: float | None
     score_b: float | None
-    f_sum_n: float | None  #: total force of the newest frame (None: no update yet, or offline)
+    f_sum_n: float | None  #: total force of the newest frame (None: no update yet, a sensor fault, or offline)
     xc_mm: float | None  #: centre of force (held while out of contact; None: no update yet)
     yc_mm: float | None
-    flags: int  #: the newest update's frame and update flags (:class:`~eskin_industrial.frames.FrameFlag`)
+    #: the newest update's frame and update flags (:class:`~eskin_industrial.frames.FrameFlag`),
+    #: and the sensor's faults now
+    flags: int
     frame_age_s: float | None  #: age of the newest scan at publication (None: none, or offline)
     slip_events: int  #: entries into slip since start
     state_changes: int  #: changes of the state since start
@@ -91,6 +96,11 @@ class NodeSnapshot(NamedTuple):
     def turn_unseen(self) -> bool:
         """In contact, but a turn about the normal would go unseen (FrameFlag.TURN_UNSEEN)."""
         return bool(self.flags & _TURN_UNSEEN)
+
+    @property
+    def sensor_fault(self) -> int:
+        """The sensor's fault bits in :attr:`flags` (DEAD_TAXELS, FROZEN, RATE; 0: none)."""
+        return self.flags & SENSOR_FAULTS
 
     @property
     def state_label(self) -> str | None:

@@ -23,6 +23,7 @@ _SLIP = int(GraspState.SLIP)
 # ints: this runs at every scan).
 _STALE, _BUS_FAULT, _ENABLED, _LATCHED, _VALID = 1, 2, 4, 8, 16
 _STATE_SHIFT = 5  #: the claimed state's code + 1 from here (0: none claimed)
+_FAULT_SHIFT = 8  #: the sensor's fault bits (FrameFlag 1024..4096) from here on
 
 
 @dataclass
@@ -73,13 +74,13 @@ class NodeStatus:
         # written so that a NaN age (a broken clock) reads as stale, never as fresh
         return frame_age_s is None or not frame_age_s <= self.stale_s
 
-    def conditions(self, frame_age_s: float | None, bus_fault: bool) -> int:
+    def conditions(self, frame_age_s: float | None, bus_fault: bool, fault: int = 0) -> int:
         """What the outputs show, as one int: equal ints, nothing to tell at once."""
         u = self.update
         stale = frame_age_s is None or not frame_age_s <= self.stale_s
         bits = (_STALE if stale else 0) | (_BUS_FAULT if bus_fault else 0) | (_ENABLED if self.enabled else 0) \
-            | (_LATCHED if self.latched else 0)
-        if u is not None and self.enabled and not stale:
+            | (_LATCHED if self.latched else 0) | (fault << _FAULT_SHIFT)
+        if u is not None and self.enabled and not stale and not fault:
             bits |= (int(u.state) + 1) << _STATE_SHIFT
             if u.valid and not bus_fault:
                 bits |= _VALID
@@ -87,32 +88,37 @@ class NodeStatus:
 
     def snapshot(self, health: Health, *, scans: int, t_event: float, wall_time_s: float,
                  urgent: bool) -> NodeSnapshot:
-        """The snapshot of this moment: a state is claimed only while enabled and fresh."""
+        """The snapshot of this moment: a state is claimed only while enabled, fresh and
+        free of a sensor fault (whose bits join the flags; the total force, made of
+        held or frozen readings, is then none)."""
         u = self.update
+        fault = health.fault
         age = health.frame_age_s
         stale = age is None or not age <= self.stale_s
         if u is None:
             return NodeSnapshot(None, False, self.enabled, self.latched, stale, health.bus_fault, False,
-                                None, None, None, None, None, None, None, 0, age, self.slip_events,
+                                None, None, None, None, None, None, None, fault, age, self.slip_events,
                                 self.state_changes, health.lost_scans, health.bus_errors, scans, self.method,
                                 self.method_code, self.score_names, None, t_event, wall_time_s, urgent, None, False)
-        if self.enabled and not stale:
+        if self.enabled and not stale and not fault:
             return NodeSnapshot(int(u.state), bool(u.valid) and not health.bus_fault, True, self.latched, False,
                                 health.bus_fault, False, u.r_coe, u.r_dw, u.score_a, u.score_b, u.f_sum, u.xc, u.yc,
                                 int(u.flags), age, self.slip_events, self.state_changes, health.lost_scans,
                                 health.bus_errors, scans, self.method, self.method_code, self.score_names, u.t,
                                 t_event, wall_time_s, urgent, int(u.state), bool(u.valid))
         return NodeSnapshot(None, False, self.enabled, self.latched, stale, health.bus_fault, False,
-                            None, None, None, None, u.f_sum, u.xc, u.yc, int(u.flags), age, self.slip_events,
+                            None, None, None, None, None if fault else u.f_sum, u.xc, u.yc, int(u.flags) | fault,
+                            age, self.slip_events,
                             self.state_changes, health.lost_scans, health.bus_errors, scans, self.method,
                             self.method_code, self.score_names, u.t, t_event, wall_time_s, urgent, int(u.state),
                             bool(u.valid))
 
     def offline_snapshot(self, health: Health, *, scans: int, t_event: float, wall_time_s: float) -> NodeSnapshot:
-        """The last snapshot of a bridge that stops: offline, nothing claimed, no force,
-        flags or frame age; the counts and the centre of force are kept."""
+        """The last snapshot of a bridge that stops, or of a node whose source ended:
+        offline and stale (no scan will come), nothing claimed, no force, flags or frame
+        age; the counts and the centre of force are kept."""
         u = self.update
-        return NodeSnapshot(None, False, self.enabled, self.latched, self.is_stale(health.frame_age_s),
+        return NodeSnapshot(None, False, self.enabled, self.latched, True,
                             health.bus_fault, True, None, None, None, None, None,
                             None if u is None else u.xc, None if u is None else u.yc, 0, None, self.slip_events,
                             self.state_changes, health.lost_scans, health.bus_errors, scans, self.method,

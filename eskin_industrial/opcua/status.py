@@ -16,6 +16,7 @@ follows from the node's snapshot and its source (pure code, one place):
 | the node's source failed (a corrupt log) | BadDeviceFailure | BadDeviceFailure | Good |
 | the node's source ended (a finished replay) | BadOutOfService | BadOutOfService | Good |
 | bus fault | BadNoCommunication | BadNoCommunication | Good |
+| a sensor fault (Flags DEAD_TAXELS, FROZEN, RATE) | BadSensorFailure | BadSensorFailure | Good |
 | no scan yet since start | BadWaitingForInitialData | BadWaitingForInitialData | Good |
 | sensor stale (no scan for ``stale_s``) | UncertainLastUsableValue | UncertainLastUsableValue | Good |
 | ... for ``bad_after_s`` (default 1 s) | BadNoCommunication | BadNoCommunication | Good |
@@ -40,6 +41,7 @@ BAD_WAITING_FOR_INITIAL_DATA = 0x80320000
 BAD_NO_COMMUNICATION = 0x80310000
 BAD_OUT_OF_SERVICE = 0x808D0000
 BAD_DEVICE_FAILURE = 0x808B0000
+BAD_SENSOR_FAILURE = 0x808C0000
 #: Method results.
 BAD_INVALID_STATE = 0x80AF0000
 BAD_USER_ACCESS_DENIED = 0x801F0000
@@ -51,6 +53,7 @@ NAMES: dict[int, str] = {
     GOOD: "Good", UNCERTAIN: "Uncertain", UNCERTAIN_LAST_USABLE_VALUE: "UncertainLastUsableValue",
     BAD_WAITING_FOR_INITIAL_DATA: "BadWaitingForInitialData", BAD_NO_COMMUNICATION: "BadNoCommunication",
     BAD_OUT_OF_SERVICE: "BadOutOfService", BAD_DEVICE_FAILURE: "BadDeviceFailure",
+    BAD_SENSOR_FAILURE: "BadSensorFailure",
     BAD_INVALID_STATE: "BadInvalidState", BAD_USER_ACCESS_DENIED: "BadUserAccessDenied",
     BAD_TOO_MANY_OPERATIONS: "BadTooManyOperations", BAD_EVENT_ID_UNKNOWN: "BadEventIdUnknown",
     BAD_CONDITION_BRANCH_ALREADY_ACKED: "BadConditionBranchAlreadyAcked",
@@ -88,6 +91,8 @@ def quality(s: NodeSnapshot, source: SourceEnd = "", bad_after_s: float = 1.0) -
         return Quality(BAD_OUT_OF_SERVICE, BAD_OUT_OF_SERVICE, GOOD)
     if s.bus_fault:
         return Quality(BAD_NO_COMMUNICATION, BAD_NO_COMMUNICATION, GOOD)
+    if s.sensor_fault:  # dead taxels, a frozen sensor, a rate far from the profile's
+        return Quality(BAD_SENSOR_FAILURE, BAD_SENSOR_FAILURE, GOOD)
     if s.f_sum_n is None:  # no update since start
         return Quality(BAD_WAITING_FOR_INITIAL_DATA, BAD_WAITING_FOR_INITIAL_DATA, GOOD)
     if s.stale:
@@ -109,7 +114,7 @@ def machinery_state(s: NodeSnapshot, source: SourceEnd = "") -> str:
     bridge stopped or the source ended."""
     if s.offline or source == "ended":
         return "NotAvailable"
-    if source == "failed" or s.bus_fault or (s.stale and s.f_sum_n is not None):
+    if source == "failed" or s.bus_fault or s.sensor_fault or (s.stale and s.f_sum_n is not None):
         return "OutOfService"
     if s.state is None:
         return "NotExecuting"

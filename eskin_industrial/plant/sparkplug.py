@@ -164,6 +164,8 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Score B", pb.FLOAT, "", True, "the deciding method's second score, likewise"),
     MetricDef("Turn Unseen", pb.BOOLEAN, "", False, "in contact, but a turn about the normal would go unseen: "
               "read stable (FLAGS bit TURN_UNSEEN)"),
+    MetricDef("Sensor Fault", pb.UINT32, "bits", False, "the sensor's faults (FLAGS bits DEAD_TAXELS 1024, FROZEN "
+              "2048, RATE 4096; 0 none): while one is set no state is claimed and Data Valid is false"),
 )
 #: The taxel frame: declared (and sent) only with ``frame_interval_s``; its alias is
 #: the device's base + :data:`FRAME_ALIAS`.
@@ -189,7 +191,7 @@ def metric_values(s: NodeSnapshot) -> tuple[Any, ...]:
             s.stale, s.bus_fault, s.contact, s.enabled, _real(s.r_coe), _real(s.r_dw), _real(s.f_sum_n),
             _real(s.xc_mm), _real(s.yc_mm), _FRAME_AGE_NONE if age is None else min(_ms(age), _FRAME_AGE_NONE),
             s.slip_events & 0xFFFFFFFF, s.state_changes & 0xFFFFFFFF, s.lost_scans & 0xFFFFFFFF,
-            s.bus_errors & 0xFFFFFFFF, s.scans, _real(s.score_a), _real(s.score_b), s.turn_unseen)
+            s.bus_errors & 0xFFFFFFFF, s.scans, _real(s.score_a), _real(s.score_b), s.turn_unseen, s.sensor_fault)
 
 
 _SLIP = 3  #: GraspState.SLIP

@@ -70,13 +70,16 @@ BIT_DOC: dict[Status, str] = {
     Status.VARIABLE_FORCE: "state code 2: force varying, no slip",
     Status.SLIP: "state code 3: slip now",
     Status.SLIP_LATCHED: "a slip was seen since the last acknowledge (stays set while slip lasts)",
-    Status.DATA_VALID: "the state is a verdict: indicators valid, sensor fresh, no bus fault, enabled",
-    Status.SENSOR_STALE: "no scan from the sensor for longer than stale_s (default 2.5 scan periods, at least 20 ms)",
+    Status.DATA_VALID: "the state is a verdict: indicators valid, sensor fresh and free of a sensor fault "
+                       "(FLAGS bits 10-12), no bus fault, enabled",
+    Status.SENSOR_STALE: "no scan from the sensor for longer than the stale limit: stale_s (default 2.5 scan "
+                         "periods, at least 20 ms), learnt up to stale_max_s (4 x stale_s) from the sensor's arrivals",
     Status.BUS_FAULT: "the sensor bus fails: consecutive polls failed (RTU); reads fail, or bus-off or a run of "
                       "error frames with nothing of the node since (CAN)",
     Status.BRIDGE_ALIVE: "toggles at every publication (life bit; HEARTBEAT counts the same)",
     Status.ENABLED: "detection enabled by the PLC (ENABLE register)",
-    Status.BRIDGE_OFFLINE: "the bridge has shut down (last image it wrote); no state is claimed",
+    Status.BRIDGE_OFFLINE: "the bridge has shut down, or this node's source ended (last image it wrote; the "
+                           "heartbeat stops); no state is claimed",
 }
 
 Kind = Literal["bits", "u16", "i16", "u32"]

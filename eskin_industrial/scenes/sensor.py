@@ -55,6 +55,11 @@ def baseline_drift(forces: np.ndarray, t: np.ndarray, rate_n_per_s: float, sprea
     return forces + rate_n_per_s * (t - t[0])[:, None] * gain[None, :]
 
 
+def offset(forces: np.ndarray, total_n: float) -> np.ndarray:
+    """Every taxel reads its share of an unloaded offset of ``total_n`` in total."""
+    return forces + total_n / forces.shape[1]
+
+
 def noise(forces: np.ndarray, sigma_n: float, rng: np.random.Generator) -> np.ndarray:
     return forces + sigma_n * rng.standard_normal(forces.shape)
 
@@ -90,6 +95,7 @@ def apply(forces: np.ndarray, t: np.ndarray, fx: SensorEffects, rng: np.random.G
     if fx.machine_vibration_n:
         out = machine_vibration(out, t, fx.machine_vibration_n, fx.machine_vibration_hz, fx.machine_vibration_start_s)
     out = baseline_drift(out, t, fx.drift_n_per_s, fx.drift_spread, rng) if fx.drift_n_per_s else out
+    out = offset(out, fx.offset_n) if fx.offset_n else out
     out = noise(out, fx.noise_n, rng) if fx.noise_n else out
     out = np.maximum(out, 0.0)  # a piezoresistive taxel reads no tension
     out = dead_and_stuck(out, fx.dead_taxels, fx.stuck_taxels, fx.stuck_value_n)

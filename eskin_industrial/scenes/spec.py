@@ -117,6 +117,9 @@ class SensorEffects:
     """What the sensor adds; every effect is off (0, empty) unless set."""
 
     noise_n: float = field(default=0.01, metadata=non_negative())
+    #: The unloaded film's offset: this total (N) spread evenly over the taxels, read
+    #: loaded or not (an idle piezoresistive sensor that never reads 0).
+    offset_n: float = field(default=0.0, metadata=non_negative())
     gain_mismatch: float = field(default=0.0, metadata=in_range(0.0, 0.9))
     quantization_n: float = field(default=0.0, metadata=non_negative())
     saturation_n: float | None = field(default=None, metadata=positive())
