@@ -35,6 +35,17 @@ def method_names() -> list[str]:
     return [*METHODS, *(n for n in plugins(METHOD_GROUP) if n not in METHODS)]
 
 
+#: The built-in baseline that never reports slip (the closed loop's light grip with no
+#: sensing): a method, but no detector to score unless asked for.
+BASELINE = "none"
+
+
+def detector_names() -> tuple[str, ...]:
+    """Every method that detects slip (all but the ``none`` baseline): what an
+    evaluation scores unless told otherwise."""
+    return tuple(n for n in method_names() if n != BASELINE)
+
+
 @functools.cache
 def _plugin(name: str) -> Method:
     target = plugins(METHOD_GROUP)[name]
@@ -94,4 +105,4 @@ def method_of_stream(factory: Callable[..., Any]) -> Method | None:
     return next((m for m in all_methods().values() if factory is m.stream), None)
 
 
-__all__ = ["all_methods", "get_method", "method_of_code", "method_of_stream", "method_names"]
+__all__ = ["all_methods", "detector_names", "get_method", "method_of_code", "method_of_stream", "method_names"]

@@ -10,6 +10,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
@@ -19,6 +20,7 @@ from eskin_industrial.plant.watch import PlantModel
 from eskin_industrial.view.plant_table import plant_lines
 from tests.helpers import sparkplug as spb
 from tests.helpers.snapshots import made
+from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 
 def _p(seq=None, ts=1000, **metrics) -> bytes:
@@ -116,6 +118,25 @@ def test_the_command_shows_what_the_subscriber_received(tmp_path):
     assert [e for e in summary if "device" not in e][0]["seq_gaps"] == 0
 
 
+def test_historical_values_are_history_not_the_live_state() -> None:
+    """After an outage the node sends what it held, is_historical, after its births:
+    the view shows it as history (an event with its time) and keeps the births' live
+    state; a slip while away is still the last slip."""
+    m = PlantModel()
+    t = "spBv1.0/g/{}/e"
+    m.take(t.format("NBIRTH"), _p(0, bdSeq=dict(name="bdSeq", datatype=4, long_value=0)), 0.0)
+    birth = _p(1, a=dict(name="State", alias=1000, datatype=12, string_value="stable"),
+               c=dict(name="Slip", alias=1002, datatype=11, boolean_value=False))
+    m.take(t.format("DBIRTH") + "/grip", birth, 0.0)
+    held = _p(2, ts=9000, a=dict(alias=1000, timestamp=4000, string_value="slip", is_historical=True),
+              c=dict(alias=1002, timestamp=4000, boolean_value=True, is_historical=True))
+    ev = m.take(t.format("DDATA") + "/grip", held, 1.0)
+    assert ev == [{"event": "historical", "group": "g", "edge": "e", "device": "grip", "state": "slip",
+                   "timestamp": 4000}]
+    (dev,) = [r for r in m.rows(1.0) if "device" in r]
+    assert dev["state"] == "stable" and dev["last_slip_ms"] == 4000
+
+
 def test_data_before_any_birth_is_an_unborn_node_once():
     m = PlantModel()
     first = m.take("spBv1.0/g/DDATA/e/grip", _p(4, a=dict(alias=1000, datatype=12, string_value="slip")), 0.0)
@@ -124,7 +145,7 @@ def test_data_before_any_birth_is_an_unborn_node_once():
 
 
 @pytest.mark.slow
-def test_rebirth_asks_a_node_born_before_the_view_started(tmp_path):
+def test_rebirth_asks_a_node_born_before_the_view_started(tmp_path: Path) -> None:
     with spb.broker(tmp_path) as port:
         edge = open_edge(SparkplugOptions(f"mqtt://127.0.0.1:{port}", "g", "e"), [("grip", {})])
         edge.start()
@@ -134,9 +155,10 @@ def test_rebirth_asks_a_node_born_before_the_view_started(tmp_path):
             proc = subprocess.Popen([sys.executable, "-m", "eskin_industrial", "plant", f"mqtt://127.0.0.1:{port}",
                                      "--json", "--rebirth", "--duration", "4"], stdout=subprocess.PIPE,
                                     stderr=subprocess.DEVNULL, text=True, env={**os.environ, "PYTHONPATH": os.getcwd()})
-            time.sleep(1.5)  # subscribed by now
+            first = proc.stdout.readline()  # "connected": its subscription in place (the SUBACK)
             edge.devices[0].publish(_pub(3, 1))  # data of a node the view has not seen born
             out, _ = proc.communicate(timeout=15)
+            out = first + out
             rebirths = edge.rebirths
         finally:
             edge.close()

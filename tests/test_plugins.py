@@ -119,9 +119,11 @@ def test_the_plugin_source_output_and_method_from_bridge_toml(plugin_python, tmp
     assert typo.returncode == 2 and "valeu: unknown key; did you mean 'value'" in typo.stderr
     res = run(plugin_python, "bridge", "--config", str(config), "--duration", "2")
     assert res.returncode == 0, res.stderr
-    # a still firm grasp: warm-up, stable, then the stopped bridge's "unknown"
-    assert said(out) == [("g", "peak-shift", "unknown"), ("g", "peak-shift", "stable"),
-                         ("g", "peak-shift", "unknown")], out.read_text()
+    # a still firm grasp: warm-up, stable (no slip: the load never moves), the stopped
+    # bridge's "unknown" last (a loaded host may hold the source back in between: stale)
+    lines = said(out)
+    assert lines[0] == ("g", "peak-shift", "unknown") and lines[-1] == ("g", "peak-shift", "unknown"), lines
+    assert {s for _, _, s in lines} == {"unknown", "stable"}, lines
 
 
 # -- the method registry's rules, on entry points given in-process -----------------

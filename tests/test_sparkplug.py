@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from hypothesis import given, settings
@@ -17,11 +18,13 @@ from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.errors import ProfileError
 from eskin_industrial.plant import payload as pb
 from eskin_industrial.plant.commands import COMMANDS
-from eskin_industrial.plant.sparkplug import DEVICE_METRICS, SparkplugDevice, SparkplugOptions
+from eskin_industrial.plant.sparkplug import DEVICE_METRICS, SparkplugDevice, SparkplugOptions, open_edge
 from eskin_industrial.sinks.base import SINKS, sink_class
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, server_config, slip_raw, wait_for
 from tests.helpers.paths import PROFILES
+from tests.helpers.snapshots import made
+from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 # -- the codec against protobuf ------------------------------------------------------
 _VALUES = {
@@ -306,3 +309,99 @@ def test_a_broker_restart_is_a_new_session_with_the_next_bdseq(tmp_path):
             second.kill()
     nbirths = [spb.parse(p) for t, p in msgs if "/NBIRTH/" in t]
     assert all(p.seq == 0 and spb.metric_value(p, "bdSeq") == 1 for p in nbirths) and nbirths
+
+
+def _check(*extra: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(_cli(1883, *extra, "--check"), capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYTHONPATH": os.getcwd(), **(env or {})})
+
+
+def test_qos_1_for_data_is_an_explicit_opt_in_warned_about(tmp_path: Path) -> None:
+    """Sparkplug's QoS 0 for births and data is the default; ``qos = 1`` is refused in
+    one line naming the file and the key and the opt-in; ``nonconforming_qos1`` is
+    warned about by ``--check`` (and at start, below)."""
+    cfg = tmp_path / "b.toml"
+    cfg.write_text(f'[sparkplug]\nbroker = "mqtt://127.0.0.1:1883"\ngroup_id = "g"\nedge_node_id = "e"\nqos = 1\n\n'
+                   f'[[node]]\nname = "grip"\nprofile = "{PAPER}"\nsource = "scene"\nscene = "case2"\n')
+    bad = subprocess.run([sys.executable, "-m", "eskin_industrial", "bridge", "--config", str(cfg), "--check"],
+                         capture_output=True, text=True, timeout=60, env={**os.environ, "PYTHONPATH": os.getcwd()})
+    lines = bad.stderr.strip().splitlines()
+    assert bad.returncode == 2 and len(lines) == 1 and str(cfg) in lines[0] and "qos" in lines[0] and \
+        "nonconforming_qos1 = true" in lines[0], bad.stderr
+    quiet = _check()
+    assert quiet.returncode == 0 and "warning" not in quiet.stderr, quiet.stderr
+    loud = _check("--sparkplug-nonconforming-qos1")
+    assert loud.returncode == 0 and "eskin-bus: warning: [sparkplug] nonconforming_qos1: " in loud.stderr, loud.stderr
+
+
+def test_a_state_folder_that_cannot_be_written_is_a_warning_not_an_error(tmp_path: Path) -> None:
+    """bdSeq kept across restarts needs a folder: without one (here the state folder
+    is under a file) the run goes on from 0 at each start, and says so."""
+    f = tmp_path / "a-file"
+    f.write_text("")
+    out = _check(env={"STATE_DIRECTORY": str(f / "sub")})
+    assert out.returncode == 0 and "warning: [sparkplug] bdSeq is not kept across restarts" in out.stderr, out.stderr
+    assert "give store_dir" in out.stderr
+    assert "warning" not in _check("--sparkplug-store-dir", str(tmp_path / "store"),
+                                   env={"STATE_DIRECTORY": str(f / "sub")}).stderr
+
+
+@pytest.mark.slow
+def test_nonconforming_qos1_publishes_at_qos_1_and_says_so(tmp_path: Path) -> None:
+    broker = spb.Broker(tmp_path)
+    cap = spb.Capture(broker.port, tmp_path / "sub.txt", detail=True)
+    edge = open_edge(SparkplugOptions(f"mqtt://127.0.0.1:{broker.port}", "g", "e", nonconforming_qos1=True),
+                     [("grip", {})])
+    events: list = []
+    edge.devices[0].on_events(lambda name, level, fields: events.append((name, level, fields)))
+    try:
+        edge.start()
+        assert edge.wait_connected(5)
+        edge.devices[0].publish(made(state=1))
+        recs = cap.wait(lambda m: any("/DDATA/" in t for t, _ in m)) and cap.records()
+    finally:
+        edge.close()
+        cap.close()
+        broker.kill()
+    assert {(t.split("/")[2], q) for t, q, _, _ in recs} == {("NBIRTH", 1), ("DBIRTH", 1), ("DDATA", 1)}
+    (warned,) = [e for e in events if e[0] == "sparkplug_nonconforming"]
+    assert warned[1] == "warning" and "QoS 1" in warned[2]["what"]
+
+
+def test_the_bdseq_file_goes_on_from_the_last_connect_and_wraps(tmp_path: Path) -> None:
+    from eskin_industrial.plant.bdseq import BdSeqFile, bdseq_path
+
+    path = bdseq_path(str(tmp_path / "store"), "g", "e")
+    assert path == tmp_path / "store" / "g-e.bdseq"
+    f = BdSeqFile(path)
+    assert f.error is None and f.previous() is None and f.first() == 0, "a first start: 0"
+    assert f.write(7) is None and path.read_text() == "7\n" and BdSeqFile(path).first() == 8
+    assert f.write(255) is None and BdSeqFile(path).first() == 0, "255 wraps to 0"
+    path.write_text("not a number\n")
+    assert BdSeqFile(path).first() == 0, "an unreadable file is a first start"
+    blocked = tmp_path / "a-file"
+    blocked.write_text("")
+    g = BdSeqFile(blocked / "sub" / "g-e.bdseq")
+    assert g.error is not None and "is not a writable folder" in g.error and g.write(1) == g.error
+
+
+def test_every_key_but_qos_is_a_command_line_option() -> None:
+    """docs/plant.md: every ``[sparkplug]`` key but ``qos`` (kept for old files) is also
+    an option of the command line, each option sets its key, and none takes the
+    password itself."""
+    import dataclasses
+
+    keys = {f.name for f in dataclasses.fields(SparkplugOptions)}
+    by_option = SparkplugDevice._CLI_KEYS
+    assert keys - set(by_option.values()) == {"broker", "group_id", "edge_node_id", "qos"}
+    dests = {o.dest: o for o in SparkplugDevice.cli_options}
+    assert {"sparkplug", "group_id", "edge_node_id"} <= set(dests) and set(by_option) <= set(dests)
+    assert not any("password" == k for k in keys)
+    sample = {bool: True, int: 7, float: 0.25, str: "x"}
+    for dest, key in by_option.items():
+        if key in ("cert_file", "key_file", "ca_file", "password_file", "password_env", "username", "store_dir"):
+            continue  # (their files and pairs are checked elsewhere; the mapping above covers them)
+        value = sample[dests[dest].type]
+        opts = SparkplugDevice.options_from_cli({"sparkplug": "mqtt://127.0.0.1:1883", "group_id": "g",
+                                                 "edge_node_id": "e", dest: value})
+        assert getattr(opts, key) == value, (dest, key)

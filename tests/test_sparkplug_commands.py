@@ -17,9 +17,11 @@ from eskin_industrial.node import Command
 from eskin_industrial.plant import payload as pb
 from eskin_industrial.plant.commands import COMMAND_ALIAS, COMMANDS, BadCommand, parse_device_command
 from eskin_industrial.plant.sparkplug import DEVICE_METRICS, SparkplugOptions
+from eskin_industrial.profile import Profile
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, to_raw, wait_for
 from tests.helpers.modbus import need
+from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 ENABLED = 1000 + next(i for i, m in enumerate(DEVICE_METRICS) if m.name == "Enabled")
 
@@ -72,7 +74,7 @@ def _config(port: int, node: NodeConfig) -> BridgeConfig:
 
 
 @pytest.mark.slow
-def test_dcmds_are_applied_by_the_loop_and_garbage_is_counted(paper_profile, tmp_path):
+def test_dcmds_are_applied_by_the_loop_and_garbage_is_counted(paper_profile: Profile, tmp_path: Path) -> None:
     ch = channel()
     unloaded = to_raw(paper_profile, np.zeros((400, paper_profile.taxels)))
     dcmd = "spBv1.0/g/DCMD/e/grip"
@@ -90,10 +92,9 @@ def test_dcmds_are_applied_by_the_loop_and_garbage_is_counted(paper_profile, tmp
                 # garbage of every kind: counted, logged, and the bridge goes on
                 _publish(port, dcmd, b"\x0a\xff\xff", tmp_path)
                 _publish(port, dcmd, _dcmd(Rebirth=True), tmp_path)
-                _publish(port, "spBv1.0/g/DCMD/e/nosuch", _dcmd(Tare=True), tmp_path)
+                _publish(port, "spBv1.0/g/DCMD/e/nosuch", _dcmd(Tare=True), tmp_path)  # not subscribed
                 _publish(port, "spBv1.0/g/NCMD/e", b"\xff", tmp_path)
-                wait_for(lambda: c()["sparkplug_bad_commands"] == 3 and c()["sparkplug_unknown_devices"] == 1,
-                         what="counted")
+                wait_for(lambda: c()["sparkplug_bad_commands"] == 3, what="counted")
                 time.sleep(1.05)  # one line a second: the next one counts those left out
                 _publish(port, "spBv1.0/g/NCMD/e", b"\x08", tmp_path)
                 wait_for(lambda: c()["sparkplug_bad_commands"] == 4, what="counted")
@@ -113,22 +114,24 @@ def test_dcmds_are_applied_by_the_loop_and_garbage_is_counted(paper_profile, tmp
                                                spb.parse(p).metrics if x.alias == ENABLED][-2:] == [False, True])
                     nt.join(15)
                 assert c()["sparkplug_commands"] == 4 and c()["sparkplug_commands_refused"] == 1
+                c_end = c()
                 events = run.log.events()
         finally:
             cap.close()
     assert not run.bridge.failure
     dbirth = spb.parse(next(p for t, p in msgs if "/DBIRTH/" in t))
     declared = {m.name: (m.alias, m.datatype, spb.value(m)) for m in dbirth.metrics}
-    for i, cdef in enumerate(COMMANDS):
-        assert declared[cdef.name] == (1000 + COMMAND_ALIAS + i, pb.BOOLEAN, False)
+    for i, cdef in enumerate(COMMANDS):  # Enable born as Enabled reads, the others false
+        want = declared["Enabled"][2] if cdef.name == "Device Control/Enable" else False
+        assert declared[cdef.name] == (1000 + COMMAND_ALIAS + i, pb.BOOLEAN, want)
     names = [e["event"] for e in events]
     refused = [e for e in events if e["event"] == "sparkplug_command_refused"]
     assert [(e["command"], e["reason"], e["level"]) for e in refused] == [("tare", "contact_unknown", "warning")]
     bad = [e for e in events if e["event"] == "sparkplug_bad_command"]
     assert bad and bad[0]["topic"] == dcmd and "truncated" in bad[0]["error"]
     assert [e["not_logged"] for e in bad] == [0, 2], "one line a second, with the count of those left out"
-    (unknown,) = [e for e in events if e["event"] == "sparkplug_unknown_device"]
-    assert unknown["topic"] == "spBv1.0/g/DCMD/e/nosuch"
+    # each device's DCMD topic is subscribed on its own: another device's never arrives
+    assert c_end["sparkplug_unknown_devices"] == 0 and "sparkplug_unknown_device" not in names
     # the loop's own record of what it applied (an acknowledge with nothing latched changes nothing)
     assert [e["command"] for e in events if e["event"] == "plc_command"] == ["tare", "disable", "enable"]
     assert "loop_failed" not in names

@@ -34,6 +34,7 @@ from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, running_bridge, wait_for
 from tests.helpers.modbus import need
 from tests.helpers.paths import PROFILES
+from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 FLOAT_ARRAY = 30  # Sparkplug 3.0 "FloatArray" (the specification's DataType enum), written out here on purpose
 FRAME = "Taxels/Frame"
@@ -165,7 +166,7 @@ def _frames_of(msgs: list[tuple[str, bytes]]) -> list[tuple[int, np.ndarray, boo
             p = spb.parse(data)
             for m in p.metrics:
                 if m.alias == ALIAS:
-                    assert m.datatype == FLOAT_ARRAY and not m.HasField("name")
+                    assert not m.HasField("datatype") and not m.HasField("name") and m.timestamp == p.timestamp
                     out.append((p.timestamp, _floats(m.bytes_value), m.is_historical))
     return out
 
@@ -239,7 +240,7 @@ def test_off_by_default_no_frame_metric_and_no_frames(tmp_path):
         finally:
             cap.close()
     assert _birth_frame(msgs) is None
-    assert all(m.datatype != FLOAT_ARRAY for t, p in msgs if "/DDEATH/" not in t for m in spb.parse(p).metrics)
+    assert all(m.alias != ALIAS for t, p in msgs if "/DDATA/" in t for m in spb.parse(p).metrics)
     assert "sparkplug_frames" not in counters
     assert loops and all(not loop._frame_sinks for loop in loops), "no sink asks the loop for frames"
 

@@ -1,12 +1,15 @@
 """Sparkplug 3.0 primary host awareness on a real broker: ``mosquitto_pub`` plays the
 primary host and publishes its retained STATE (JSON); the edge node births only while
-it is online, holds its data while it is away, and births again when it is back."""
+it is online; when the host goes offline it sends its NDEATH, disconnects and connects
+again (a new session, the next bdSeq), holds its data while the host is away, and
+births again when it is back (tck-id-message-flow-edge-node-birth-publish-phid-offline)."""
 
 from __future__ import annotations
 
 import json
 import subprocess
 import time
+from pathlib import Path
 
 import pytest
 
@@ -15,6 +18,7 @@ from eskin_industrial.plant.sparkplug import SparkplugOptions
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, running_bridge, wait_for
 from tests.helpers.modbus import need
+from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 
 def _state(port: int, online: bool | None, ts: int, raw: bytes | None = None) -> None:
@@ -28,7 +32,7 @@ def _kinds(msgs):
 
 
 @pytest.mark.slow
-def test_births_wait_for_the_primary_host_and_come_again_when_it_is_back(tmp_path):
+def test_births_wait_for_the_primary_host_and_come_again_when_it_is_back(tmp_path: Path) -> None:
     with spb.broker(tmp_path) as port:
         cap = spb.Capture(port, tmp_path / "sub.txt")
         try:
@@ -48,6 +52,7 @@ def test_births_wait_for_the_primary_host_and_come_again_when_it_is_back(tmp_pat
                 first = cap.wait(lambda m: any("/NDATA/" in t for t, _ in m))  # the store forwarded
                 _state(port, False, t0 + 10)
                 wait_for(lambda: c()["sparkplug_host_online"] == 0, what="host offline seen")
+                wait_for(lambda: c()["sparkplug_connects"] == 2, what="a new session")
                 gone = len(_kinds(cap.messages()))
                 _state(port, True, t0 + 5)  # older than the offline: stale, ignored
                 time.sleep(0.5)
@@ -55,6 +60,7 @@ def test_births_wait_for_the_primary_host_and_come_again_when_it_is_back(tmp_pat
                 _state(port, True, t0 + 20)
                 msgs = cap.wait(lambda m: _kinds(m).count("NDATA") == 2)
                 events = run.log.events("sparkplug_primary_host")
+                c_end = c()
         finally:
             cap.close()
     kinds = _kinds(first)
@@ -65,10 +71,13 @@ def test_births_wait_for_the_primary_host_and_come_again_when_it_is_back(tmp_pat
     kinds = [t.split("/")[2] for t, _ in ours]
     births = [i for i, k in enumerate(kinds) if k == "NBIRTH"]
     assert len(births) == 2, "a rebirth when the host came back"
-    # between the offline and the rebirth: nothing but what was under way
-    between = kinds[gone:births[1]]
-    assert all(k == "DDATA" for k in between) and len(between) <= 2, between
-    assert spb.parse(ours[births[1]][1]).seq == 0
+    # after the offline: what was under way, the NDEATH of the session, then nothing until the rebirth
+    assert kinds[births[1] - 1] == "NDEATH" and kinds[gone - 1] == "NDEATH", kinds
+    first_bd = spb.metric_value(spb.parse(ours[births[0]][1]), "bdSeq")
+    assert spb.metric_value(spb.parse(ours[gone - 1][1]), "bdSeq") == first_bd
+    reborn = spb.parse(ours[births[1]][1])
+    assert reborn.seq == 0 and spb.metric_value(reborn, "bdSeq") == first_bd + 1, "a new session"
+    assert c_end["sparkplug_host_sessions_ended"] == 1 and c_end["sparkplug_failures"] == 0
     second = [spb.parse(p) for t, p in ours[births[1]:] if "/DDATA/" in t]
     assert any(all(m.is_historical for m in p.metrics) for p in second), "the time away: historical"
     assert [(e["online"], e["level"]) for e in events] == [(1, "info"), (0, "warning"), (1, "info")]

@@ -20,6 +20,7 @@ from eskin_industrial.plant.transport import check_files, parse_broker, password
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, running_bridge
 from tests.helpers.paths import PROFILES
+from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 
 def _opts(**kw) -> SparkplugOptions:

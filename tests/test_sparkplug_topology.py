@@ -17,6 +17,7 @@ from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import wait_for
 from tests.helpers.modbus import need
 from tests.helpers.paths import PROFILES
+from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
 
 @pytest.mark.slow

@@ -23,7 +23,7 @@ from ..evaluation.suite import (
     by_name,
     evaluate,
 )
-from ..methods import method_names
+from ..methods import detector_names, method_names
 from .common import open_profile
 from .console import Ticker, echo_json, json_alias
 from .evaluate_families import family_names, leave_one_out, list_families, per_family, slip_episodes
@@ -48,8 +48,10 @@ def _seeds(value: str) -> tuple[int, ...]:
 
 
 @click.command()
-@click.option("-m", "--method", "methods", multiple=True, type=click.Choice(sorted(method_names())),
-              help="Method to score (repeatable; default: all).")
+@click.option("-m", "--method", "methods", multiple=True,
+              type=click.Choice(sorted(method_names()) + ["fixed", "oracle"]),
+              help="Method to score (repeatable; default: every detector, not the 'none' baseline; with "
+                   "--closed-loop also the baselines fixed and oracle, and all of them by default).")
 @click.option("-s", "--scene", "scenes", multiple=True, help="Scene (repeatable; default: the built-in suite).")
 @click.option("--seeds", default="evaluation", show_default=True,
               help="'evaluation' (held out), 'tuning', or seeds and ranges: 0..4,7,10..59")
@@ -88,16 +90,54 @@ def _seeds(value: str) -> tuple[int, ...]:
                    "at the ramp channel's threshold (evaluation/bound.py), as a row of its own.")
 @click.option("--format", "fmt", type=click.Choice(["md", "json"]), default="md", show_default=True,
               help="Markdown tables, or one JSON document (every figure, per scene too).")
+@click.option("--closed-loop", is_flag=True,
+              help="The closed loop instead: each method in the virtual cell, whose gripper reacts (docs/cell.md): "
+                   "objects held, dropped and crushed, distance slid, needless squeezes, grip against the fixed grip; "
+                   "--seeds evaluation, fresh and tuning are its own (9000-9399, 9400-9799, 8000-8199).")
+@click.option("--plc-cycle", "plc_cycle_ms", type=click.FloatRange(min=1.0, max=100.0), default=10.0, show_default=True,
+              help="With --closed-loop: the PLC's scan cycle (ms).")
+@click.option("--cell", "cell", multiple=True, metavar="NAME=VALUE",
+              help="With --closed-loop: change the cell (repeatable): actuator_rate (N/s), dead_time (ms), latency "
+                   "(ms added), mass, friction, accel (x the recipe's), viscous (s/m).")
+@click.option("--sweep", type=click.Choice(["rate", "plc-cycle", "actuator", "dead-time", "friction", "mass", "latency",
+                                            "viscous"]), default=None,
+              help="With --closed-loop: one sweep of docs/evaluation.md (default controls: fixed, none, the default "
+                   "method, oracle).")
+@click.option("--jobs", type=click.IntRange(min=1, max=64), default=None,
+              help="With --closed-loop: worker processes (default 1; the figures do not depend on it).")
+@click.option("--tune", is_flag=True,
+              help="With --closed-loop: remake the recipes' choices on the tuning seeds (the fixed grip's safety "
+                   "factor, the grip policy's factors; 20-40 minutes with --jobs 2).")
 @json_alias
 def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, rate_hz: float, tolerance_s: float,
                  per_scene: bool, charts_dir: str | None, quick: bool, only_charts: tuple[str, ...], long_holds: bool,
                  profile_path: str | None, conditions: tuple[str, ...], within_ms: tuple[int, ...],
                  show_families: bool, per_family: bool, family_opt: tuple[str, ...], hold_out: tuple[str, ...],
-                 oracle: bool, fmt: str) -> None:
+                 oracle: bool, fmt: str, closed_loop: bool, plc_cycle_ms: float, cell: tuple[str, ...], sweep: str | None,
+                 jobs: int | None, tune: bool) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
     force read as slip, and cost per frame, for each method; then how steady the
     reported state is: varying-force episodes found, their time read as varying force,
-    state changes per episode, per minute in varying force and in still holds."""
+    state changes per episode, per minute in varying force and in still holds.
+
+    With --closed-loop: each method in the virtual cell instead, beside the fixed grip,
+    the light grip with no sensing (none) and the oracle."""
+    from .evaluate_closed_loop import check_options
+
+    plc_cycle_set = click.get_current_context().get_parameter_source("plc_cycle_ms") != \
+        click.core.ParameterSource.DEFAULT
+    check_options(closed_loop, per_family=per_family, hold_out=hold_out, long_holds=long_holds, per_scene=per_scene,
+                  scenes=scenes, conditions=conditions, within_ms=within_ms, only_charts=only_charts, cell=cell,
+                  sweep=sweep, jobs_set=jobs is not None, plc_cycle_set=plc_cycle_set, tune=tune)
+    if closed_loop:
+        from .evaluate_closed_loop import closed_loop as run_closed_loop
+
+        if profile_path:
+            raise click.UsageError("--closed-loop takes each object's built-in profile: leave out --profile")
+        run_closed_loop(methods, seeds, _seeds, rate_hz, plc_cycle_ms, cell, sweep, jobs or 1, charts_dir, fmt, tune)
+        return
+    if any(m in ("fixed", "oracle") for m in methods):
+        raise click.UsageError("fixed and oracle are the closed loop's baselines: give --closed-loop too")
     if show_families:
         list_families()
         return
@@ -123,7 +163,7 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
         methods = methods or ("cof-track", "paper")
     else:
         seed_set = _seeds(seeds)
-    names = methods or tuple(method_names())
+    names = methods or detector_names()
     start = time.perf_counter()
     if "learned" in names:
         names = _prepare_learned(names, explicit=bool(methods))
@@ -216,7 +256,7 @@ def _families(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, rat
                       tolerance_s, fmt, _figures, _delays)
         return
     families = family_names(family_opt or ("all",))  # (a misspelt family is refused before any training)
-    names = methods or tuple(method_names())
+    names = methods or detector_names()
     if "learned" in names:
         names = _prepare_learned(names, explicit=bool(methods))
     shares = (lambda s: ", ".join(f"{_within(s, ms):.0f} % within {ms} ms" for ms in within_ms)) if within_ms else None

@@ -83,17 +83,21 @@ def plant(broker: str, group_id: str, plain: bool, as_json: bool, rebirth: bool,
             for e in model.take(msg.topic, msg.payload, time.monotonic()):
                 events.put(e)
                 if rebirth and e["event"] == "unborn":
-                    client.publish(f"spBv1.0/{e['group']}/NCMD/{e['edge']}", rebirth_command(), qos=1)
+                    client.publish(f"spBv1.0/{e['group']}/NCMD/{e['edge']}", rebirth_command(), qos=0)  # NCMD: QoS 0
 
     def on_connect(client: Any, userdata: Any, flags: Any, reason: Any, properties: Any) -> None:
         if reason.is_failure:
             events.put({"event": "refused", "broker": broker, "error": str(reason)})
             return
         client.subscribe(f"spBv1.0/{group_id}/#", qos=0)
+
+    def on_subscribe(client: Any, userdata: Any, mid: Any, reasons: Any, properties: Any) -> None:
+        """Connected once the broker has the subscription: what is published after this
+        line is seen."""
         events.put({"event": "connected", "broker": broker})
 
     client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2)
-    client.on_message, client.on_connect = on_message, on_connect
+    client.on_message, client.on_connect, client.on_subscribe = on_message, on_connect, on_subscribe
     try:
         configure(client, conn)
     except ValueError as exc:

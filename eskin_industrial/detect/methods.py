@@ -26,7 +26,7 @@ from .cof_track import CofTrack
 from .learned import Learned, Model
 from .paper import PaperDetector, paper_batch
 from .protocol import Detector
-from .scored import CofVelocity, ForceRate, HfEnergy
+from .scored import CofVelocity, ForceRate, HfEnergy, NoSlip
 from .settings import DetectorSettings
 from .updates import UpdateTable
 
@@ -43,6 +43,7 @@ class Score:
 PAPER_SCORES = (Score("r_coe", "the paper's R_coe again (slip above slip_r_coe)"),
                 Score("r_dw", "the paper's R_dw again (slip above slip_r_dw)"))
 UNUSED = Score("unused", "reads 0 (the method has one score)")
+NO_SCORE = Score("unused", "reads 0 (the method has no score)")
 
 
 @dataclass(frozen=True)
@@ -117,6 +118,10 @@ METHODS: dict[str, Method] = {
     "learned": _method("learned", "accuracy ceiling: a small classifier on the other methods' features (extra: learn)", Learned,
                        8, (Score("p_slip", "the model's slip probability (slip above slip_p, confirm_hops in a row)"),
                            Score("p_variable_force", "the model's varying-force probability")), needs_model=True),
+    # A baseline, not a detector: the closed loop's fixed grip (no slip sensing), with
+    # the state, contact and validity of any other method.
+    "none": _method("none", "baseline: never reports slip (no slip sensing; contact and varying force as the others)",
+                    NoSlip, 9, (NO_SCORE, NO_SCORE)),
 }
 
 

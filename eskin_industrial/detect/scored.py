@@ -180,6 +180,19 @@ class ScoredDetector(FrameHygiene):
         return feed(self.push, t, forces, flags)
 
 
+class NoSlip(ScoredDetector):
+    """No slip sensing at all: contact, the varying-force state and DATA_VALID as every
+    method reports them, and never a slip.  A PLC program fed by it grips as if the
+    skin were absent while still trusting the data (the fixed grip of the closed loop,
+    ``sim/cell``)."""
+
+    name = "none"
+    columns = ("unused", "unused")
+
+    def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
+        return 0.0, 0.0, False, False
+
+
 class _Lagged:
     """A ring of the last ``lag`` values: ``swap(v)`` returns the value ``lag`` pushes ago."""
 

@@ -59,6 +59,14 @@ def parse_device_command(payload: pb.Payload, base: int) -> list[Command]:
     return out
 
 
-def birth_metrics(base: int, now: int) -> list[pb.Metric]:
-    """The command metrics of a DBIRTH (false: nothing asked)."""
-    return [pb.Metric(c.name, base + COMMAND_ALIAS + i, now, pb.BOOLEAN, False) for i, c in enumerate(COMMANDS)]
+def birth_metrics(base: int, now: int, enabled: bool | None) -> list[pb.Metric]:
+    """The command metrics of a DBIRTH: Tare and Acknowledge Slip false (nothing
+    asked), Enable the detection's current state (null before the first snapshot),
+    as a birth gives every metric its current value
+    (tck-id-operational-behavior-data-publish-dbirth-values)."""
+    out = []
+    for i, c in enumerate(COMMANDS):
+        value = enabled if c.on_false is not None else False
+        out.append(pb.Metric(c.name, base + COMMAND_ALIAS + i, now, pb.BOOLEAN, value,
+                             is_null=True if value is None else None))
+    return out

@@ -114,7 +114,7 @@ _METRIC_VALUE = {"int": 10, "long": 11, "float": 12, "double": 13, "bool": 14, "
 _PROPERTY_VALUE = {"int": 3, "long": 4, "float": 5, "double": 6, "bool": 7, "string": 8}
 
 
-def _encode_metric(m: Metric) -> bytes:
+def _encode_metric(m: Metric, datatypes: bool) -> bytes:
     out = bytearray()
     if m.name is not None:
         out += _bytes(1, m.name.encode("utf-8"))
@@ -122,7 +122,7 @@ def _encode_metric(m: Metric) -> bytes:
         out += _uint(2, m.alias)
     if m.timestamp is not None:
         out += _uint(3, m.timestamp)
-    if m.datatype is not None:
+    if m.datatype is not None and datatypes:
         out += _uint(4, m.datatype)
     for field, flag in ((5, m.is_historical), (6, m.is_transient), (7, m.is_null)):
         if flag is not None:
@@ -140,12 +140,16 @@ def _encode_metric(m: Metric) -> bytes:
     return bytes(out)
 
 
-def encode(payload: Payload) -> bytes:
+def encode(payload: Payload, *, datatypes: bool = True) -> bytes:
+    """The payload's bytes.  ``datatypes=False`` leaves each metric's datatype off the
+    wire (it still chooses the value's field): a data message after the birth, where
+    the specification says the datatype SHOULD NOT be sent
+    (tck-id-payloads-metric-datatype-not-req)."""
     out = bytearray()
     if payload.timestamp is not None:
         out += _uint(1, payload.timestamp)
     for m in payload.metrics:
-        out += _bytes(2, _encode_metric(m))
+        out += _bytes(2, _encode_metric(m, datatypes))
     if payload.seq is not None:
         out += _uint(3, payload.seq)
     if payload.uuid is not None:

@@ -9,10 +9,18 @@ register image is rendered from, so that the plant and the PLC see the same stat
 The loop's thread only encodes and enqueues: paho-mqtt's network thread
 (``loop_start``) writes to the broker, reconnects, and calls back on connect (births),
 on a command (NCMD rebirth; DCMDs, queued for the loop: :mod:`.commands`) and on the
-primary host's STATE.  While the node cannot publish (no broker, no primary host) its
-data messages go to the store (:mod:`.store`), whose own thread writes them to SQLite
-and sends them, historical, after the next births.  One lock orders the ``seq``
-numbers with the messages.  The connection's security: :mod:`.transport`.
+primary host's STATE (offline: NDEATH, DISCONNECT, a new session), and on our own
+DDATA handed back by the broker (what it has: at QoS 0 the only way to know).  While
+the node cannot publish (no broker, no primary host) its data messages go to the store
+(:mod:`.store`), whose own thread writes them to SQLite and sends them, historical,
+after the next births; so do those a lost connection took with it.  One lock orders the
+``seq`` numbers with the messages.  The connection's security: :mod:`.transport`;
+``bdSeq`` across restarts: :mod:`.bdseq`.
+
+Sparkplug 3.0 to the letter by default (``docs/plant.md``, Conformance, and
+``tests/test_sparkplug_conformance.py``, one test per tck-id): births, data and DDEATH
+at QoS 0, every metric with its timestamp, no datatype after the birth; QoS 1 for them
+only by the opt-in ``nonconforming_qos1``, warned about.
 
 With ``frame_interval_s`` the device also publishes the calibrated taxel frame as a
 ``FloatArray`` metric (``Taxels/Frame``): the node's loop hands it the newest frame
@@ -24,9 +32,11 @@ publish (a frame is a sample of now: the store keeps the states, not stale frame
 from __future__ import annotations
 
 import collections
+import itertools
 import json
 import math
 import os
+import sys
 import threading
 import time
 import unicodedata
@@ -43,6 +53,7 @@ from ..ratelimit import Throttle
 from ..schema import SchemaError, build, in_range
 from ..sinks.base import CliOption, Sink, SinkHealth
 from . import payload as pb
+from .bdseq import BdSeqFile, bdseq_path, writable
 from .commands import COMMAND_ALIAS, COMMANDS, BadCommand, birth_metrics, parse_device_command
 from .properties import Property, frame_properties, layout_properties, method_properties, score_properties
 from .store import Forwarder, Held, store_path
@@ -65,6 +76,9 @@ MAX_ID_BYTES = 256
 
 
 def check_id(key: str, value: str) -> None:
+    """A group, edge node or device id: a UTF-8 string of the characters an MQTT topic
+    allows, without a level separator or a wildcard (tck-id-intro-group-id-chars and its
+    siblings, tck-id-topic-structure-namespace-valid-group-id and its siblings)."""
     if not value or _FORBIDDEN & set(value):
         raise ValueError(f"{key}: {value!r} is not a Sparkplug id (not empty, no '+', '#' or '/')")
     size = len(value.encode("utf-8", "surrogatepass"))
@@ -82,7 +96,15 @@ class SparkplugOptions:
     broker: str  #: ``mqtt://HOST:PORT``, or ``mqtts://HOST:PORT`` (TLS)
     group_id: str
     edge_node_id: str
-    qos: int = field(default=0, metadata=in_range(0, 1))
+    #: The MQTT QoS of NBIRTH, DBIRTH, NDATA, DDATA and DDEATH: 0, as Sparkplug requires
+    #: (tck-id-topics-ddata-mqtt and its siblings); QoS 1 is :attr:`nonconforming_qos1`.
+    qos: int = field(default=0, metadata={"check": (
+        lambda v: v == 0, "0, Sparkplug's QoS for births and data (nonconforming_qos1 = true publishes them "
+        "at QoS 1, against the specification)")})
+    #: Publish NBIRTH, DBIRTH, NDATA, DDATA and DDEATH at QoS 1, where the specification
+    #: requires 0: for a broker known to lose QoS 0 messages; a strict host may flag it.
+    #: Warned about at start and by ``--check``.
+    nonconforming_qos1: bool = False
     keepalive_s: int = field(default=30, metadata=in_range(5, 3600))
     #: An analog value is published when it moved by more than this (its own unit).
     deadband: float = field(default=0.01, metadata=in_range(0, 1e9))
@@ -153,18 +175,21 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Total Force", pb.FLOAT, "N", True, "total force of the newest frame"),
     MetricDef("CoF X", pb.FLOAT, "mm", True, "centre of force, x"),
     MetricDef("CoF Y", pb.FLOAT, "mm", True, "centre of force, y"),
-    MetricDef("Frame Age", pb.UINT32, "ms", True, "age of the newest frame, 65535 = none"),
-    MetricDef("Counters/Slip Events", pb.UINT32, "count", True, "entries into slip since start"),
-    MetricDef("Counters/State Changes", pb.UINT32, "count", True, "state changes since start"),
-    MetricDef("Counters/Lost Scans", pb.UINT32, "count", True, "failed polls and sequence gaps"),
-    MetricDef("Counters/Bus Errors", pb.UINT32, "count", True, "timeouts, CRC and exception responses"),
+    # No UInt32: the specification carries it in int_value, Tahu's JavaScript codec and
+    # hosts that followed Tahu before 2022 in long_value; UInt16 and UInt64 read alike
+    # everywhere (docs/plant.md, A second host).
+    MetricDef("Frame Age", pb.UINT16, "ms", True, "age of the newest frame, 65535 = none"),
+    MetricDef("Counters/Slip Events", pb.UINT64, "count", True, "entries into slip since start"),
+    MetricDef("Counters/State Changes", pb.UINT64, "count", True, "state changes since start"),
+    MetricDef("Counters/Lost Scans", pb.UINT64, "count", True, "failed polls and sequence gaps"),
+    MetricDef("Counters/Bus Errors", pb.UINT64, "count", True, "timeouts, CRC and exception responses"),
     MetricDef("Counters/Scans", pb.UINT64, "count", True, "scans the node's loop has taken since start"),
     MetricDef("Score A", pb.FLOAT, "", True, "the deciding method's first score (0 while no state is claimed); "
               "DBIRTH properties: method, score (its name), description"),
     MetricDef("Score B", pb.FLOAT, "", True, "the deciding method's second score, likewise"),
     MetricDef("Turn Unseen", pb.BOOLEAN, "", False, "in contact, but a turn about the normal would go unseen: "
               "read stable (FLAGS bit TURN_UNSEEN)"),
-    MetricDef("Sensor Fault", pb.UINT32, "bits", False, "the sensor's faults (FLAGS bits DEAD_TAXELS 1024, FROZEN "
+    MetricDef("Sensor Fault", pb.UINT16, "bits", False, "the sensor's faults (FLAGS bits DEAD_TAXELS 1024, FROZEN "
               "2048, RATE 4096; 0 none): while one is set no state is claimed and Data Valid is false"),
 )
 #: The taxel frame: declared (and sent) only with ``frame_interval_s``; its alias is
@@ -176,6 +201,9 @@ FRAME_ALIAS = 50
 #: the one with the layout (``layout_properties``).
 METHOD_METRIC, LAYOUT_METRIC = "State", "CoF X"
 _ANALOG = tuple(m.analog for m in DEVICE_METRICS)
+_ENABLED = next(i for i, m in enumerate(DEVICE_METRICS) if m.name == "Enabled")
+#: ``Device Control/Enable`` (its alias offset) reads what ``Enabled`` reads, and changes with it.
+_ENABLE_COMMAND = COMMAND_ALIAS + next(i for i, c in enumerate(COMMANDS) if c.on_false is not None)
 _FLOATS = tuple(m.datatype == pb.FLOAT for m in DEVICE_METRICS)
 #: Node metrics (aliases 1..); a device's metrics start at 1000 x (its index + 1).
 NODE_METRICS = ("bdSeq", REBIRTH, "Node Info/Version", "Node Info/Uptime", "Store/Pending", "Store/Overflow")
@@ -190,8 +218,8 @@ def metric_values(s: NodeSnapshot) -> tuple[Any, ...]:
     return (LABELS[code] if code < len(LABELS) else str(code), code, s.state == _SLIP, s.slip_latched, s.valid,
             s.stale, s.bus_fault, s.contact, s.enabled, _real(s.r_coe), _real(s.r_dw), _real(s.f_sum_n),
             _real(s.xc_mm), _real(s.yc_mm), _FRAME_AGE_NONE if age is None else min(_ms(age), _FRAME_AGE_NONE),
-            s.slip_events & 0xFFFFFFFF, s.state_changes & 0xFFFFFFFF, s.lost_scans & 0xFFFFFFFF,
-            s.bus_errors & 0xFFFFFFFF, s.scans, _real(s.score_a), _real(s.score_b), s.turn_unseen, s.sensor_fault)
+            s.slip_events, s.state_changes, s.lost_scans, s.bus_errors, s.scans, _real(s.score_a), _real(s.score_b),
+            s.turn_unseen, s.sensor_fault)
 
 
 _SLIP = 3  #: GraspState.SLIP
@@ -208,6 +236,20 @@ def _ms(age_s: float) -> int:
     return round(age_s * 1000.0) if math.isfinite(age_s) else _FRAME_AGE_NONE
 
 
+def _trailing_seq(data: bytes) -> int | None:
+    """The ``seq`` of a payload this edge node encoded: its last field (key 0x18, a
+    varint of one or two bytes); any other payload is decoded."""
+    n = len(data)
+    if n >= 2 and data[-2] == 0x18 and data[-1] < 0x80:
+        return data[-1]
+    if n >= 3 and data[-3] == 0x18 and data[-2] & 0x80 and data[-1] < 0x80:
+        return (data[-2] & 0x7F) | data[-1] << 7
+    try:
+        return pb.decode(data).seq
+    except EskinError:
+        return None
+
+
 def _now_ms() -> int:
     return int(time.time() * 1000)
 
@@ -215,16 +257,26 @@ def _now_ms() -> int:
 class EdgeNode:
     """One MQTT connection, the edge node's births and deaths, ``seq`` and ``bdSeq``."""
 
+    #: A data message written at QoS 0 and not seen back from the broker after this
+    #: long stops being tracked and is counted (``sparkplug_unconfirmed``): the broker
+    #: does not hand this edge node its own DDATA (an access rule, say).
+    ECHO_WAIT_S = 10.0
+
     def __init__(self, options: SparkplugOptions, client_factory: Any) -> None:
         self.options = options
         self.host, self.port, _ = parse_broker(options.broker)
         g, e = options.group_id, options.edge_node_id
         self.topic = {kind: f"{NAMESPACE}/{g}/{kind}/{e}" for kind in ("NBIRTH", "NDEATH", "NDATA", "NCMD")}
-        self.topic["DCMD"] = f"{NAMESPACE}/{g}/DCMD/{e}/+"
+        #: Our own DDATA, handed back by the broker: a QoS 0 message seen here has
+        #: reached the broker (what a dying broker took with it is sent again).
+        self.topic["ECHO"] = f"{NAMESPACE}/{g}/DDATA/{e}/+"
+        self.qos = 1 if options.nonconforming_qos1 else 0  #: births, data, DDEATH
         self.devices: list[SparkplugDevice] = []
         self.lock = threading.RLock()
         self.seq = 0
-        self.bd_seq = 0
+        self.bd_file = BdSeqFile(bdseq_path(options.store_dir, g, e))
+        self.bd_seq = self.bd_file.first()
+        self.bd_error = self.bd_file.error  #: why bdSeq is not kept across restarts (None: it is)
         self.started = time.monotonic()
         self.connected = False  #: publishing: a session, the births sent (and the primary host online)
         self.session = False  #: an MQTT session
@@ -233,8 +285,11 @@ class EdgeNode:
         host = options.primary_host_id
         self.state_topic = None if host is None else f"{NAMESPACE}/STATE/{host}"
         self.stopping = False
+        self._host_left = False  #: the session ends because the primary host went offline
+        self._life = threading.Lock()  #: start, a new session after the host left, close
         self.published = self.dropped = self.connects = self.failures = self.bad_commands = self.rebirths = 0
         self.unknown_devices = self.commands = self.commands_refused = self.bad_states = 0
+        self.resent = self.unconfirmed = self.host_sessions_ended = 0
         self._bad_logged: dict[str, tuple[float, int]] = {}
         self.commands_logged = Throttle()  #: the DCMD lines, per device and event
         self.last_error = ""
@@ -242,40 +297,60 @@ class EdgeNode:
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
         self.client.on_connect_fail = self._on_connect_fail
+        self.client.on_pre_connect = self._on_pre_connect
         self.client.on_message = self._on_message
         self.client.reconnect_delay_set(options.reconnect_min_s, options.reconnect_max_s)
         self._set_will()
         self.forwarder = Forwarder(store_path(options.store_dir, g, e), options.store_max, self._send_held,
                                    lambda: self.connected and not self.stopping, self._event, self._store_drained)
         self.serial = self.forwarder.next_serial  #: of the next data message (the replay order)
-        #: Data messages handed to paho with QoS 1 and not yet acknowledged: a lost
-        #: connection sends them through the store instead (paho would resend them
-        #: before the new births, out of Sparkplug's order).
-        self.inflight: collections.deque[tuple[Any, Held]] = collections.deque()
+        #: Data messages handed to paho and not yet known to be at the broker: (its
+        #: MessageInfo, the message as held, its seq, when).  At QoS 0 a message is
+        #: known there when the broker hands it back (our subscription to our own
+        #: DDATA), at QoS 1 when acknowledged.  A lost connection sends the rest
+        #: through the store, historical, after the next births (paho would drop them
+        #: at QoS 0, and resend them before the births at QoS 1: out of Sparkplug's order).
+        #: A frame's entry names its device instead (never held: counted if the connection
+        #: takes it unconfirmed, ``sparkplug_frames_lost``).
+        self.inflight: collections.deque[tuple[Any, Held | SparkplugDevice, int, float]] = collections.deque()
 
     def _event(self, name: str, level: str = "info", **fields: Any) -> None:
         """An event of the edge node, logged with its first device."""
         if self.devices:
             self.devices[0]._event(name, level, **fields)
 
+    def nonconforming(self) -> list[str]:
+        """What departs from the specification, one line each (start and ``--check``)."""
+        return nonconforming(self.options, self.bd_error, str(self.bd_file.path))
+
     # -- messages -----------------------------------------------------------------------
     def _death(self) -> bytes:
-        return pb.encode(pb.Payload(_now_ms(), (pb.Metric("bdSeq", None, None, pb.INT64, self.bd_seq),)))
+        return pb.encode(pb.Payload(_now_ms(), (pb.Metric("bdSeq", None, _now_ms(), pb.INT64, self.bd_seq),)))
 
     def _set_will(self) -> None:
+        """The will of the next CONNECT."""
         self.client.will_set(self.topic["NDEATH"], self._death(), qos=1, retain=False)
+
+    def _on_pre_connect(self, client: Any, userdata: Any) -> None:
+        """Just before each connection attempt (paho's thread): the bdSeq its CONNECT
+        carries is kept on disk, so that the next run goes on from the last one used
+        (:mod:`.bdseq`)."""
+        error = self.bd_file.write(self.bd_seq)
+        if error is not None and error != self.bd_error:
+            self.bd_error = error
+            self._event("sparkplug_bdseq_not_kept", "warning", file=str(self.bd_file.path), error=error)
 
     def _next_seq(self) -> int:
         s = self.seq
         self.seq = (s + 1) & 0xFF
         return s
 
-    def send(self, topic: str, payload: pb.Payload, *, seq: bool = True) -> None:
-        """Stamp ``seq`` and enqueue (under the lock: the wire order is the seq order)."""
+    def send(self, topic: str, payload: pb.Payload, *, birth: bool = False) -> None:
+        """Stamp ``seq`` and enqueue (under the lock: the wire order is the seq order);
+        a birth declares its metrics' datatypes, anything else leaves them off."""
         with self.lock:
-            if seq:
-                payload = pb.Payload(payload.timestamp, payload.metrics, self._next_seq())
-            info = self.client.publish(topic, pb.encode(payload), qos=self.options.qos)
+            payload = pb.Payload(payload.timestamp, payload.metrics, self._next_seq())
+            info = self.client.publish(topic, pb.encode(payload, datatypes=birth), qos=self.qos)
             if info.rc == 0:
                 self.published += 1
             else:
@@ -289,12 +364,13 @@ class EdgeNode:
         if not self.connected:
             self.forwarder.hold(held)
             return
-        payload = pb.Payload(ms, metrics, self._next_seq())
-        self._publish_tracked(device.topic["DDATA"], pb.encode(payload), held)
+        seq = self._next_seq()
+        self._publish_tracked(device.topic["DDATA"], pb.encode(pb.Payload(ms, metrics, seq), datatypes=False),
+                              held, seq)
 
     def send_frame(self, device: SparkplugDevice, data: bytes) -> None:
-        """A taxel frame as a DDATA of its own, QoS 0, when connected; else only kept
-        for the next DBIRTH and counted: never held (the loop's thread)."""
+        """A taxel frame as a DDATA of its own when connected; else only kept for the
+        next DBIRTH and counted: never held (the loop's thread)."""
         with self.lock:
             device.frame = data
             if device.dead:
@@ -302,39 +378,92 @@ class EdgeNode:
             if not self.connected:
                 device.frames_not_sent += 1
                 return
-            metric = pb.Metric(None, device.base + FRAME_ALIAS, None, pb.FLOAT_ARRAY, data)
-            info = self.client.publish(device.topic["DDATA"],
-                                       pb.encode(pb.Payload(_now_ms(), (metric,), self._next_seq())), qos=0)
-            if info.rc == 0:
-                self.published += 1
+            if data == device.frame_sent:
+                return  # unchanged: a DDATA carries what changed (tck-id-topics-ddata-payload)
+            now = _now_ms()
+            metric = pb.Metric(None, device.base + FRAME_ALIAS, now, pb.FLOAT_ARRAY, data)
+            seq = self._next_seq()
+            if self._publish_tracked(device.topic["DDATA"],
+                                     pb.encode(pb.Payload(now, (metric,), seq), datatypes=False), device, seq):
                 device.frames += 1
+                device.frame_sent = data
             else:
-                self.dropped += 1
                 device.frames_not_sent += 1
 
-    def _publish_tracked(self, topic: str, data: bytes, held: Held) -> None:
-        info = self.client.publish(topic, data, qos=self.options.qos)
-        if info.rc != 0 and self.options.qos == 0:
-            self.forwarder.hold(held)  # not sent (the connection went): held instead
-            return
+    def _publish_tracked(self, topic: str, data: bytes, held: Held | SparkplugDevice, seq: int) -> bool:
+        """Publish a DDATA and track it until the broker has it (under the lock); a
+        message paho refuses (the connection went) is held instead.  A frame (``held``
+        its device) goes at QoS 0 whatever the setting (the next one replaces a frame
+        lost), tracked for the order of the echoes and counted if lost, never held."""
+        data_message = isinstance(held, Held)
+        info = self.client.publish(topic, data, qos=self.qos if data_message else 0)
+        if info.rc != 0:
+            self.dropped += 1
+            if isinstance(held, Held):
+                self.forwarder.hold(held)
+            return False
         self.published += 1
-        if self.options.qos:
+        now = time.monotonic()
+        inflight = self.inflight
+        while inflight:
+            first, _, _, at = inflight[0]
+            if self.qos and first.is_published():
+                inflight.popleft()  # acknowledged
+            elif now - at > self.ECHO_WAIT_S and first.is_published():
+                inflight.popleft()  # written, never seen back
+                self.unconfirmed += 1
+            else:
+                break
+        inflight.append((info, held, seq, now))
+        return True
+
+    def _echo(self, data: bytes) -> None:
+        """One of our DDATA back from the broker (paho's thread): it and everything
+        written before it have reached the broker.  The echoes come in the order of
+        publishing, so the match is at the front; it is looked for among the first 256
+        (a seq comes back once in 256 messages), never the whole queue."""
+        seq = _trailing_seq(data)
+        if seq is None:
+            return
+        with self.lock:
             inflight = self.inflight
-            while inflight and inflight[0][0].is_published():
+            at = next((i for i, entry in enumerate(itertools.islice(inflight, 256)) if entry[2] == seq), None)
+            if at is None:
+                return  # another session's, or already confirmed
+            for _ in range(at + 1):
                 inflight.popleft()
-            inflight.append((info, held))
+
+    def _take_back(self) -> None:
+        """The connection is gone: what the broker may not have is held again, to go
+        out historical after the next births (under the lock).  What was written to the
+        connection is counted (``sparkplug_resent``): it may arrive twice.  A frame not
+        seen back is counted as lost (``sparkplug_frames_lost``: it may have arrived)."""
+        for info, held, _, _ in self.inflight:
+            published = info.is_published()  # QoS 0: written; QoS 1: acknowledged
+            if not isinstance(held, Held):
+                if not (self.qos and published):  # (with the opt-in a frame written counts as arrived)
+                    held.frames_lost += 1
+                continue
+            if self.qos and published:
+                continue
+            if published or self.qos:  # (an unacknowledged QoS 1 message may have been written)
+                self.resent += 1
+            self.forwarder.hold(held)
+        self.inflight.clear()
 
     def _send_held(self, serial: int, device_id: str, base: int, body: bytes) -> bool | None:
         """A held message as a historical DDATA (the forwarder's thread): False when not
-        connected, None when its device is no longer here."""
+        connected, None when its device is no longer here.  The payload's timestamp is
+        the time it is sent, its metrics' the time they were produced."""
         with self.lock:
             if not self.connected or self.stopping:
                 return False
             dev = next((d for d in self.devices if d.device_id == device_id), None)
             if dev is None or dev.base != base or dev.dead:
                 return None
-            data = body + pb.encode(pb.Payload(seq=self._next_seq()))
-            self._publish_tracked(dev.topic["DDATA"], data, Held(serial, device_id, base, 0, (), body))
+            seq = self._next_seq()
+            data = body + pb.encode(pb.Payload(timestamp=_now_ms(), seq=seq))
+            self._publish_tracked(dev.topic["DDATA"], data, Held(serial, device_id, base, 0, (), body), seq)
             return True
 
     def _store_drained(self) -> None:
@@ -350,17 +479,18 @@ class EdgeNode:
                 pb.Metric("Store/Overflow" if named else None, 6, now, pb.UINT64, f.overflow))
 
     def births(self) -> None:
-        """NBIRTH (seq 0) and every device's DBIRTH."""
+        """NBIRTH (seq 0) and every device's DBIRTH.  ``Node Control/Rebirth`` goes by
+        name alone (tck-id-operational-behavior-data-commands-rebirth-name-aliases)."""
         with self.lock:
             self.seq = 0
             now = _now_ms()
             metrics = (pb.Metric("bdSeq", 1, now, pb.INT64, self.bd_seq),
-                       pb.Metric(REBIRTH, 2, now, pb.BOOLEAN, False),
+                       pb.Metric(REBIRTH, None, now, pb.BOOLEAN, False),
                        pb.Metric("Node Info/Version", 3, now, pb.STRING, __version__),
                        pb.Metric("Node Info/Uptime", 4, now, pb.UINT64, int(time.monotonic() - self.started),
                                  properties=(("engUnit", (pb.STRING, "s")),)),
                        *self._store_metrics(now))
-            self.send(self.topic["NBIRTH"], pb.Payload(now, metrics))
+            self.send(self.topic["NBIRTH"], pb.Payload(now, metrics), birth=True)
             for d in self.devices:
                 if not d.dead:
                     d.birth()
@@ -372,7 +502,11 @@ class EdgeNode:
             self.last_error = str(reason)
             return
         self.connects += 1
-        topics = [(self.topic["NCMD"], 1), (self.topic["DCMD"], 1)]
+        # QoS 1, each device's DCMD topic of its own (tck-id-message-flow-edge-node-ncmd-subscribe,
+        # tck-id-message-flow-device-dcmd-subscribe)
+        topics = [(self.topic["NCMD"], 1), *((d.topic["DCMD"], 1) for d in self.devices)]
+        if not self.qos:
+            topics.append((self.topic["ECHO"], 0))
         if self.state_topic is not None:
             topics.append((self.state_topic, 1))
         client.subscribe(topics)
@@ -381,7 +515,7 @@ class EdgeNode:
         client.drop_out_messages()
         with self.lock:
             self.session = True
-            self._hold_unacknowledged()
+            self._take_back()
             if self.state_topic is None:
                 self._go_live()
             else:  # births once the primary host says it is online (its retained STATE)
@@ -393,12 +527,6 @@ class EdgeNode:
         self.connected = True
         self.forwarder.wake()
 
-    def _hold_unacknowledged(self) -> None:
-        for info, held in self.inflight:
-            if not info.is_published():
-                self.forwarder.hold(held)
-        self.inflight.clear()
-
     def _on_connect_fail(self, client: Any, userdata: Any) -> None:
         """No connection at all (refused, unreachable): counted; paho tries again after
         its back-off."""
@@ -409,18 +537,23 @@ class EdgeNode:
         with self.lock:
             was = self.session
             self.connected = self.session = self.host_online = False
+            self._take_back()
             if self.stopping:
                 return
-            if was:  # (a refused CONNECT was counted by _on_connect)
+            left, self._host_left = self._host_left, False
+            if was and not left:  # (a refused CONNECT was counted by _on_connect)
                 self.failures += 1
                 self.last_error = str(reason)
             # A new session, a new death certificate: the next NBIRTH repeats it.
             self.bd_seq = (self.bd_seq + 1) & 0xFF
             self._set_will()
+        if left:  # paho's thread ends after a DISCONNECT of ours: a new one connects again
+            threading.Thread(target=self._connect_again, name="sparkplug-reconnect", daemon=True).start()
 
     def _on_message(self, client: Any, userdata: Any, message: Any) -> None:
-        """An NCMD, a DCMD or a STATE (paho's thread): whatever it holds is counted and
-        logged, never raised (an exception would end paho's network thread)."""
+        """An NCMD, a DCMD, a STATE or our own DDATA back (paho's thread): whatever it
+        holds is counted and logged, never raised (an exception would end paho's
+        network thread)."""
         try:
             self._message(message)
         except Exception as exc:  # noqa: BLE001 - a bug here must not end the connection
@@ -433,6 +566,9 @@ class EdgeNode:
             self._on_state(message.payload)
             return
         parts = topic.split("/")
+        if parts[2] == "DDATA":
+            self._echo(message.payload)
+            return
         device = None
         if parts[2] == "DCMD":
             device = next((d for d in self.devices if d.device_id == parts[-1] and len(parts) == 5), None)
@@ -449,7 +585,8 @@ class EdgeNode:
         if device is not None:
             device.command(cmd, topic)
             return
-        rebirth = any((m.name == REBIRTH or m.alias == 2) and m.value is True for m in cmd.metrics)
+        # by name: the NBIRTH gives it no alias
+        rebirth = any(m.name == REBIRTH and m.value is True for m in cmd.metrics)
         if not rebirth:
             self.bad_commands += 1
             self._bad("sparkplug_bad_command", topic, f"expected {REBIRTH} = true")
@@ -461,7 +598,9 @@ class EdgeNode:
 
     def _on_state(self, data: bytes) -> None:
         """The primary host's STATE (Sparkplug 3.0: JSON ``{"online": bool, "timestamp":
-        ms}``, retained): births when it comes online, data held while it is away."""
+        ms}``, retained): births when it comes online; when it goes offline, the NDEATH,
+        a disconnect, and a new session that births once the host is back, its data
+        held meanwhile (tck-id-message-flow-edge-node-birth-publish-phid-offline)."""
         try:
             state = json.loads(data)
             online, ts = state["online"], state["timestamp"]
@@ -484,6 +623,30 @@ class EdgeNode:
                 self._event("sparkplug_primary_host", "warning", host=self.options.primary_host_id, online=0)
                 self.connected = False  # data is held until it is back
                 self.last_error = f"primary host {self.options.primary_host_id} offline"
+                if self.session:
+                    self._leave_for_host()
+
+    def _leave_for_host(self) -> None:
+        """The primary host went offline during our Sparkplug session: NDEATH, then a
+        clean DISCONNECT (the broker drops the will), then a new session (under the lock)."""
+        self.host_sessions_ended += 1
+        self._host_left = True
+        self.client.publish(self.topic["NDEATH"], self._death(), qos=1)
+        self.published += 1
+        self.client.disconnect()
+
+    def _connect_again(self) -> None:
+        """After a DISCONNECT of ours: paho's network thread ends; start another one
+        that connects again (a thread of its own: paho's cannot join itself)."""
+        with self._life:
+            if self.stopping:
+                return
+            self.client.loop_stop()
+            reset = getattr(self.client, "_reset_sockets", None)
+            if reset is not None:  # the ended thread's wake-up socket pair (loop_start makes another)
+                reset(sockpair_only=True)
+            self.client.connect_async(self.host, self.port, keepalive=self.options.keepalive_s)
+            self.client.loop_start()
 
     def _bad(self, event: str, topic: str, error: str, device: SparkplugDevice | None = None) -> None:
         """One warning per event name and second at most (a flood of bad commands must
@@ -500,9 +663,12 @@ class EdgeNode:
 
     # -- life ----------------------------------------------------------------------------
     def start(self) -> EdgeNode:
+        for line in self.nonconforming():
+            self._event("sparkplug_nonconforming", "warning", what=line)
         self.forwarder.start()
-        self.client.connect_async(self.host, self.port, keepalive=self.options.keepalive_s)
-        self.client.loop_start()
+        with self._life:
+            self.client.connect_async(self.host, self.port, keepalive=self.options.keepalive_s)
+            self.client.loop_start()
         return self
 
     def wait_connected(self, timeout_s: float) -> bool:
@@ -530,15 +696,16 @@ class EdgeNode:
                 info.wait_for_publish(timeout_s)
             except (RuntimeError, ValueError):
                 pass
-        self.client.disconnect()
-        self.client.loop_stop()
+        with self._life:
+            self.client.disconnect()
+            self.client.loop_stop()
         # paho's loop_start opens a socket pair to wake its thread, and loop_stop leaves it
         # open until the client is collected (a ResourceWarning then): close it now.
         reset = getattr(self.client, "_reset_sockets", None)
         if reset is not None:
             reset()
         with self.lock:
-            self._hold_unacknowledged()
+            self._take_back()
         self.forwarder.close()  # what is held stays on disk for the next start
 
     def counters(self) -> dict[str, int]:
@@ -548,9 +715,24 @@ class EdgeNode:
                 "sparkplug_bad_commands": self.bad_commands, "sparkplug_rebirths": self.rebirths,
                 "sparkplug_store_held": f.held, "sparkplug_store_pending": f.pending,
                 "sparkplug_store_overflow": f.overflow, "sparkplug_store_forwarded": f.forwarded,
-                "sparkplug_store_discarded": f.discarded, "sparkplug_store_failures": f.failures, "sparkplug_commands": self.commands,
+                "sparkplug_store_discarded": f.discarded, "sparkplug_store_failures": f.failures,
+                "sparkplug_resent": self.resent, "sparkplug_unconfirmed": self.unconfirmed,
+                "sparkplug_commands": self.commands,
                 "sparkplug_commands_refused": self.commands_refused, "sparkplug_unknown_devices": self.unknown_devices,
-                "sparkplug_bad_states": self.bad_states, "sparkplug_host_online": int(self.host_online)}
+                "sparkplug_bad_states": self.bad_states, "sparkplug_host_online": int(self.host_online),
+                "sparkplug_host_sessions_ended": self.host_sessions_ended}
+
+
+def nonconforming(options: SparkplugOptions, bd_error: str | None, bd_file: str) -> list[str]:
+    """What a run with these options does against the specification, one line each."""
+    out = []
+    if options.nonconforming_qos1:
+        out.append("nonconforming_qos1: NBIRTH, DBIRTH, NDATA, DDATA and DDEATH go at QoS 1; Sparkplug requires "
+                   "QoS 0 and a strict host may reject the edge node")
+    if bd_error is not None:
+        out.append(f"bdSeq is not kept across restarts ({bd_file}: {bd_error}): each start begins again at 0, "
+                   "where Sparkplug goes on from the previous CONNECT; give store_dir a writable folder")
+    return out
 
 
 class SparkplugDevice(Sink[SparkplugOptions]):
@@ -563,10 +745,19 @@ class SparkplugDevice(Sink[SparkplugOptions]):
                   "(mqtt://HOST:PORT, or mqtts:// for TLS); needs --group-id and --edge-node-id.", metavar="URL"),
         CliOption("--group-id", "group_id", "Sparkplug group id (with --sparkplug).", metavar="ID"),
         CliOption("--edge-node-id", "edge_node_id", "Sparkplug edge node id (with --sparkplug).", metavar="ID"),
-        CliOption("--sparkplug-qos", "sparkplug_qos", "MQTT QoS of the data messages (0 or 1; 1: nothing lost "
-                  "to a broker that dies, with the store).", type=int, metavar="N"),
+        CliOption("--sparkplug-nonconforming-qos1", "sparkplug_nonconforming_qos1", "Publish births, data and "
+                  "DDEATH at MQTT QoS 1, against the specification's QoS 0 (a strict host may reject the node).",
+                  type=bool),
         CliOption("--sparkplug-keepalive", "sparkplug_keepalive_s", "MQTT keepalive, seconds.", type=int,
                   metavar="S"),
+        CliOption("--sparkplug-deadband", "sparkplug_deadband", "An analog metric is sent when it moved by more "
+                  "than this, in its own unit (default 0.01).", type=float, metavar="X"),
+        CliOption("--sparkplug-min-interval", "sparkplug_min_interval_s", "An analog metric is sent at most this "
+                  "often, seconds (default 0.5; a state change goes at once).", type=float, metavar="S"),
+        CliOption("--sparkplug-reconnect-min", "sparkplug_reconnect_min_s", "Back-off between connection "
+                  "attempts, from this (seconds, default 0.2) ...", type=float, metavar="S"),
+        CliOption("--sparkplug-reconnect-max", "sparkplug_reconnect_max_s", "... doubling up to this (seconds, "
+                  "default 5).", type=float, metavar="S"),
         CliOption("--sparkplug-frame-interval", "sparkplug_frame_interval_s", "Publish each node's calibrated "
                   "taxel frame (metric Taxels/Frame, a FloatArray) at most this often, seconds (default 0: off).",
                   type=float, metavar="S"),
@@ -589,7 +780,9 @@ class SparkplugDevice(Sink[SparkplugOptions]):
                   "variable.", metavar="NAME"),
     )
     #: ``--sparkplug-*`` option -> the ``[sparkplug]`` key it sets.
-    _CLI_KEYS = {"sparkplug_qos": "qos", "sparkplug_keepalive_s": "keepalive_s",
+    _CLI_KEYS = {"sparkplug_nonconforming_qos1": "nonconforming_qos1", "sparkplug_keepalive_s": "keepalive_s",
+                 "sparkplug_deadband": "deadband", "sparkplug_min_interval_s": "min_interval_s",
+                 "sparkplug_reconnect_min_s": "reconnect_min_s", "sparkplug_reconnect_max_s": "reconnect_max_s",
                  "sparkplug_frame_interval_s": "frame_interval_s",
                  "sparkplug_store_dir": "store_dir", "sparkplug_store_max": "store_max",
                  "sparkplug_ca_file": "ca_file", "sparkplug_cert_file": "cert_file", "sparkplug_key_file": "key_file",
@@ -603,7 +796,7 @@ class SparkplugDevice(Sink[SparkplugOptions]):
         self.device_id = device_id
         self.where = f"mqtt {node.host}:{node.port} {node.options.group_id}/{node.options.edge_node_id}/{device_id}"
         g, e = node.options.group_id, node.options.edge_node_id
-        self.topic = {k: f"{NAMESPACE}/{g}/{k}/{e}/{device_id}" for k in ("DBIRTH", "DDATA", "DDEATH")}
+        self.topic = {k: f"{NAMESPACE}/{g}/{k}/{e}/{device_id}" for k in ("DBIRTH", "DDATA", "DDEATH", "DCMD")}
         self.base = 1000 * (index + 1)
         #: Metric name -> DBIRTH properties beyond its unit (the layout, the method).
         self.properties = properties or {}
@@ -615,7 +808,8 @@ class SparkplugDevice(Sink[SparkplugOptions]):
         self._commands: collections.deque[Command] = collections.deque()
         self.frame_every_s = node.options.frame_interval_s or None
         self.frame: bytes | None = None  #: the newest frame handed, packed (births declare it)
-        self.frames = self.frames_not_sent = 0
+        self.frame_sent: bytes | None = None  #: the frame last sent (a DBIRTH or a DDATA)
+        self.frames = self.frames_not_sent = self.frames_lost = 0
 
     def command(self, payload: pb.Payload, topic: str) -> None:
         """A DCMD for this device (paho's thread): queued for the loop, or refused as a
@@ -671,13 +865,14 @@ class SparkplugDevice(Sink[SparkplugOptions]):
         if self.frame_every_s is not None:
             m = FRAME_METRIC
             frame = self.frame
+            self.frame_sent = frame
             metrics.append(pb.Metric(m.name, self.base + FRAME_ALIAS, now, m.datatype, frame,
                                      is_null=True if frame is None else None,
                                      properties=(("engUnit", (pb.STRING, m.unit)), *self.properties.get(m.name, ()))))
-        metrics += birth_metrics(self.base, now)
+        metrics += birth_metrics(self.base, now, None if values is None else values[_ENABLED])
         self.sent = list(values) if values is not None else [None] * len(DEVICE_METRICS)
         self.sent_at = [time.monotonic()] * len(DEVICE_METRICS)
-        self.node.send(self.topic["DBIRTH"], pb.Payload(now, tuple(metrics)))
+        self.node.send(self.topic["DBIRTH"], pb.Payload(now, tuple(metrics)), birth=True)
 
     def death(self) -> None:
         with self.node.lock:
@@ -714,7 +909,9 @@ class SparkplugDevice(Sink[SparkplugOptions]):
             metrics = []
             for i in sorted(changed):
                 sent[i], sent_at[i] = values[i], now
-                metrics.append(pb.Metric(None, self.base + i, None, DEVICE_METRICS[i].datatype, values[i]))
+                metrics.append(pb.Metric(None, self.base + i, ms, DEVICE_METRICS[i].datatype, values[i]))
+            if _ENABLED in changed:
+                metrics.append(pb.Metric(None, self.base + _ENABLE_COMMAND, ms, pb.BOOLEAN, values[_ENABLED]))
             node.send_data(self, ms, tuple(metrics))
 
     def on_frame(self, frame: Frame) -> None:
@@ -730,6 +927,7 @@ class SparkplugDevice(Sink[SparkplugOptions]):
         if self.frame_every_s is not None:
             out["sparkplug_frames"] = self.frames
             out["sparkplug_frames_not_sent"] = self.frames_not_sent
+            out["sparkplug_frames_lost"] = self.frames_lost
         return out
 
     def _close(self) -> None:
@@ -739,9 +937,10 @@ class SparkplugDevice(Sink[SparkplugOptions]):
     @classmethod
     def options_from_cli(cls, values: dict[str, Any]) -> SparkplugOptions | None:
         url = values.get("sparkplug")
-        extra = {key: values[dest] for dest, key in cls._CLI_KEYS.items() if values.get(dest) is not None}
+        # (a flag not given reads False: not given either)
+        extra = {key: values[dest] for dest, key in cls._CLI_KEYS.items() if values.get(dest) not in (None, False)}
         if url is None:
-            given = [o.flag for o in cls.cli_options[1:] if values.get(o.dest) is not None]
+            given = [o.flag for o in cls.cli_options[1:] if values.get(o.dest) not in (None, False)]
             if given:
                 raise ValueError(f"{'/'.join(given)}: give --sparkplug URL too")
             return None
@@ -767,8 +966,12 @@ class SparkplugDevice(Sink[SparkplugOptions]):
 
     @classmethod
     def check(cls, options: SparkplugOptions, nodes: Sequence[NodeLike[Any]]) -> None:
+        seen: dict[str, str] = {}
         for n in nodes:
             check_id("device id (node name)", n.name)
+            other = seen.setdefault(n.name.lower(), n.name)
+            if other != n.name:  # tck-id-case-sensitivity-sparkplug-ids: a host may fold case
+                raise ValueError(f"device id (node name): {n.name!r} and {other!r} differ only in case")
         check_files(options)
         if options.store_dir is not None:
             d = Path(options.store_dir)
@@ -776,6 +979,14 @@ class SparkplugDevice(Sink[SparkplugOptions]):
                 d = d.parent
             if not d.is_dir() or not os.access(d, os.W_OK | os.X_OK):
                 raise ValueError(f"store_dir: {options.store_dir!r}: {str(d)!r} is not a writable folder")
+
+    @classmethod
+    def probe(cls, options: SparkplugOptions, nodes: Sequence[NodeLike[Any]]) -> None:
+        """``--check``: a warning line for each departure from the specification that
+        the run will make (the run logs the same as ``sparkplug_nonconforming``)."""
+        path = bdseq_path(options.store_dir, options.group_id, options.edge_node_id)
+        for line in nonconforming(options, writable(path), str(path)):
+            sys.stderr.write(f"eskin-bus: warning: [sparkplug] {line}\n")
 
     @classmethod
     def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
@@ -828,5 +1039,6 @@ def metric_table() -> list[str]:
     rows.append(f"| base+{FRAME_ALIAS} | `{m.name}` | {_TYPE_NAMES[m.datatype]} | {m.unit} | "
                 f"every `frame_interval_s` (0: not declared) | {m.doc} |")
     for i, c in enumerate(COMMANDS):
-        rows.append(f"| base+{COMMAND_ALIAS + i} | `{c.name}` | Boolean | - | DBIRTH (false); DCMD | {c.doc} |")
+        sent = "DBIRTH and DDATA (as `Enabled`); DCMD" if c.on_false is not None else "DBIRTH (false); DCMD"
+        rows.append(f"| base+{COMMAND_ALIAS + i} | `{c.name}` | Boolean | - | {sent} | {c.doc} |")
     return rows

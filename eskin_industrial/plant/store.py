@@ -42,14 +42,19 @@ class Held(NamedTuple):
 
 
 def historical(held: Held) -> bytes:
-    """The DDATA payload of a held message, without ``seq`` (appended when it is sent:
+    """The metrics of a held message's DDATA, without the payload's timestamp and
+    ``seq`` (appended when it is sent, the time of sending and the next number:
     protobuf fields may come in any order): every metric ``is_historical`` with the
-    message's own timestamp."""
+    time it was produced, by alias, without its datatype (as any data message).
+
+    A row written by an earlier version carries a payload timestamp of its own (the
+    production time): the one appended at sending comes later, and protobuf's last
+    value of a field wins."""
     if held.body is not None:
         return held.body
     ts = held.ts
-    return pb.encode(pb.Payload(ts, tuple(pb.Metric(None, m.alias, ts, m.datatype, m.value, is_historical=True)
-                                          for m in held.metrics)))
+    return pb.encode(pb.Payload(None, tuple(pb.Metric(None, m.alias, ts, m.datatype, m.value, is_historical=True)
+                                            for m in held.metrics)), datatypes=False)
 
 
 _SCHEMA = ("CREATE TABLE IF NOT EXISTS held (serial INTEGER PRIMARY KEY, device TEXT NOT NULL, "

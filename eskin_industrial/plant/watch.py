@@ -124,8 +124,15 @@ class PlantModel:
     def _values(dev: DeviceView, p: pb.Payload, where: dict[str, Any]) -> list[dict[str, Any]]:
         before = (dev.state, dev.valid)
         slip_before = dev.slip
+        history = []
         for m in p.metrics:
             name = m.name if m.name is not None else dev.aliases.get(m.alias or -1)
+            if m.is_historical:  # the past, sent after an outage: shown as such, never as now
+                if name == "State" and m.value is not None:
+                    history.append({"event": "historical", **where, "state": m.value, "timestamp": m.timestamp})
+                elif name == "Slip" and m.value and m.timestamp is not None:
+                    dev.last_slip_ms = max(dev.last_slip_ms or 0, m.timestamp)  # a slip while away is the latest
+                continue
             if name == FRAME:
                 _frame(dev, m.value)
                 continue
@@ -135,10 +142,10 @@ class PlantModel:
             setattr(dev, key, m.value)
             if key == "slip" and m.value and not slip_before:
                 dev.last_slip_ms = m.timestamp or p.timestamp
-        out = []
+        out = history
         if (dev.state, dev.valid) != before and dev.state is not None:
             out.append({"event": "state", **where, "state": dev.state, "valid": dev.valid, "slips": dev.slips,
-                        "historical": any(m.is_historical for m in p.metrics), "timestamp": p.timestamp})
+                        "timestamp": p.timestamp})
         return out
 
     def rows(self, now: float) -> list[dict[str, Any]]:

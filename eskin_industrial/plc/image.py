@@ -86,7 +86,7 @@ Kind = Literal["bits", "u16", "i16", "u32"]
 
 #: METHOD_ID's values, for the register table.
 METHOD_CODES = ", ".join(f"{m.code} {m.name}" for m in sorted(METHODS.values(), key=lambda m: m.code)) + \
-    "; 0 none"
+    "; 0 no method (a bridge that has stopped)"
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import collections
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import TextIO
 
 import numpy as np
@@ -53,15 +53,18 @@ class Watch:
     def __init__(self, profile: Profile, pipeline: Pipeline, *, method: str,
                  snapshot: Callable[[], NodeSnapshot | None], counters: Callable[[], Mapping[str, int]],
                  source: str, title: str, started: float, log_lines: int = 100,
-                 registers: Callable[[], RegisterTable | None] | None = None, registers_from: str = "") -> None:
+                 registers: Callable[[], RegisterTable | None] | None = None, registers_from: str = "",
+                 extra: Callable[[], Sequence[str]] | None = None) -> None:
         """``snapshot``: the node's newest published snapshot; ``registers``, when
-        given: a register table to show beside it (the PLC's, decoded by the caller)."""
+        given: a register table to show beside it (the PLC's, decoded by the caller);
+        ``extra``: lines shown under the state (read on the redraw thread)."""
         self.profile = profile
         self.pipeline = pipeline
         self.scale = indicator_scale(method, profile.detector, pipeline.detector)
         self.newest = snapshot
         self.registers = registers
         self.registers_from = registers_from
+        self.extra = extra
         self.counters = counters
         self.source = source
         self.title = title
@@ -109,6 +112,7 @@ class Watch:
             source=self.source,
             title=self.title,
             log=tuple(self.log),
+            extra=tuple(self.extra()) if self.extra is not None else (),
         )
 
     def frame(self, now: float, width: int, height: int, color: bool) -> list[str]:

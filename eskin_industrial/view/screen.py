@@ -234,7 +234,7 @@ def panel_block(s: Snapshot, width: int, color: bool) -> list[Line]:
         info.append((f"  CoF {s.cof[0]:.1f},{s.cof[1]:.1f} mm", ""))
     sc: IndicatorScale = s.scale
     names = [n.ljust(max(len(x) for x in sc.names)) for n in sc.names]
-    lines = box + [info]
+    lines = box + [info] + [[(text, "1")] for text in s.extra]
     lines.append(_gauge(names[0], s.r_coe, sc.slip[0], sc.variable[0], width))
     lines.append(_gauge(names[1], s.r_dw, sc.slip[1], sc.variable[1], width))
     if sc.meaning:

@@ -110,3 +110,5 @@ class Snapshot:
     log: tuple[str, ...] = ()
     #: Heat-map colour scale: at least this many N at the top (noise stays dark).
     scale_min_n: float = 0.5
+    #: Lines a chain adds under the state (the closed loop: the grip force, the distance slid).
+    extra: tuple[str, ...] = ()

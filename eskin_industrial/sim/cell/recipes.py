@@ -1,0 +1,88 @@
+"""Each object's recipe, as an integrator writes it from the catalogue values
+(``objects.py``): the fixed grip a cautious integrator would set with no skin, and the
+grip policy's forces for a gripper with one.
+
+The catalogue rule: grip = m (g + a) S / (n mu), with n = 2 fingers, the design (top)
+mass, the nominal friction, the program's largest acceleration and a safety factor S
+of 1.5-2.5 (the gripper makers' range).  A fragile object's grip is capped below its
+rated crush force.  The policy's forces are shares of the force that holds the object
+at rest (S = 1, a = 0).  Every factor here was chosen on the closed loop's tuning seeds
+(``episodes.TUNING_SEEDS``; docs/evaluation.md, *The closed loop*), never on the
+held-out ones.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Literal
+
+from .objects import CellObject
+from .physics import G
+from .policy import PolicySettings
+
+#: The largest acceleration of the cell's program (m/s^2: transports up to 8).
+DESIGN_ACCEL = 8.0
+#: The catalogue's safety factor the fixed grip uses: the smallest of 1.5, 1.75, ...,
+#: 2.5 with which the fixed grip dropped nothing on the tuning seeds.
+FIXED_SAFETY = 1.5
+#: A fragile object is gripped at most at its rated crush force over this.
+CRUSH_MARGIN = 1.25
+#: The lightest grip the policy holds with: below it the skin sees too little of the
+#: contact to tell a slide (five times the profiles' 0.2 N contact threshold).
+MIN_GRIP_N = 1.0
+
+
+@dataclass(frozen=True)
+class PolicyFactors:
+    """The policy's forces as shares of the rest force (the same for every object),
+    and its timing; chosen on the tuning seeds with the default method."""
+
+    light: float = 1.3  #: the light grip, of the rest force at the start mass
+    step: float = 0.5  #: a raise, of the rest force at the design mass
+    max_of_fixed: float = 1.0  #: the most it raises to, of the fixed grip
+    mode: Literal["step", "max"] = "step"
+    repeat_s: float = 0.2
+    quiet_s: float = 3.0
+    relax_share: float = 0.1
+    relax_floor: float = 1.5
+
+
+POLICY = PolicyFactors()
+
+
+def rest_force_n(mass_kg: float, mu: float) -> float:
+    """The grip that just holds ``mass_kg`` at rest between two pads."""
+    return mass_kg * G / (2.0 * mu)
+
+
+def crush_cap_n(kind: CellObject) -> float | None:
+    rated = kind.rated_crush_n
+    return None if rated is None else rated / CRUSH_MARGIN
+
+
+def fixed_grip_n(kind: CellObject, safety: float = FIXED_SAFETY) -> float:
+    """The cautious integrator's grip with no skin: the catalogue rule, capped below
+    the rated crush force."""
+    force = kind.design_mass_kg * (G + DESIGN_ACCEL) * safety / (2.0 * kind.nominal_mu)
+    cap = crush_cap_n(kind)
+    return force if cap is None else min(force, cap)
+
+
+def policy_settings(kind: CellObject, factors: PolicyFactors = POLICY, safety: float = FIXED_SAFETY) -> PolicySettings:
+    """The grip policy's settings for ``kind``."""
+    fixed = fixed_grip_n(kind, safety)
+    cap = crush_cap_n(kind)
+    light = max(factors.light * rest_force_n(kind.mass_kg.hi, kind.nominal_mu), MIN_GRIP_N)
+    step = factors.step * rest_force_n(kind.design_mass_kg, kind.nominal_mu)
+    top = factors.max_of_fixed * fixed
+    if cap is not None:
+        top = min(top, cap)
+    return PolicySettings(light_n=min(light, top), step_n=step, max_n=max(top, light), fallback_n=fixed,
+                          mode=factors.mode,
+                          repeat_s=factors.repeat_s, quiet_s=factors.quiet_s, relax_share=factors.relax_share,
+                          relax_floor=factors.relax_floor)
+
+
+def with_factors(**changes: float | str) -> PolicyFactors:
+    """The default factors with some changed (the tuning's candidates)."""
+    return replace(POLICY, **changes)  # type: ignore[arg-type]

@@ -1,0 +1,72 @@
+"""How the recipes' choices were made, on the closed loop's tuning seeds only
+(``eskin-bus evaluate --closed-loop --tune``):
+
+- the fixed grip's safety factor: the smallest of the gripper makers' range 1.5-2.5
+  with which the fixed grip drops nothing;
+- the grip policy's factors: of a small grid, with the default method deciding, the
+  one that holds the most objects, then with the fewest needless squeezes, then with
+  the lightest mean grip, among those that grip at most 60 % of the fixed grip.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+from ...progress import NO_PROGRESS, Progress
+from .episodes import TUNING_SEEDS
+from .recipes import POLICY, PolicyFactors
+from .runner import Setup, run_controls
+from .scoring import ControlScore, score
+
+#: The gripper makers' safety factors, smallest first.
+SAFETY_CANDIDATES: tuple[float, ...] = (1.5, 1.75, 2.0, 2.25, 2.5)
+
+
+def _grid() -> tuple[PolicyFactors, ...]:
+    out = [replace(POLICY, light=light, step=step, relax_floor=floor)
+           for light in (1.3, 1.6) for step in (0.5, 1.0) for floor in (1.25, 1.5)]
+    out.append(replace(POLICY, mode="max"))
+    out.append(replace(POLICY, relax_floor=100.0))  # never relaxes below the last raise
+    return tuple(out)
+
+
+POLICY_CANDIDATES: tuple[PolicyFactors, ...] = _grid()
+#: The most a candidate may grip, as a share of the fixed grip (the issue's target).
+GRIP_LIMIT = 0.60
+
+
+@dataclass(frozen=True)
+class Candidate:
+    factors: PolicyFactors
+    method: ControlScore
+    oracle: ControlScore
+
+
+def fixed_safety(seeds: Sequence[int] = TUNING_SEEDS, jobs: int = 1,
+                 progress: Progress = NO_PROGRESS) -> list[tuple[float, ControlScore]]:
+    out = []
+    for safety in SAFETY_CANDIDATES:
+        res = run_controls(["fixed"], seeds, Setup(fixed_safety=safety), jobs, progress)
+        out.append((safety, score("fixed", res["fixed"])))
+    return out
+
+
+def chosen_safety(rows: list[tuple[float, ControlScore]]) -> float | None:
+    return next((s for s, sc in rows if sc.dropped == 0), None)
+
+
+def policy_candidates(method: str, seeds: Sequence[int] = TUNING_SEEDS, jobs: int = 1,
+                      progress: Progress = NO_PROGRESS) -> list[Candidate]:
+    out = []
+    for factors in POLICY_CANDIDATES:
+        res = run_controls([method, "oracle"], seeds, Setup(factors=factors), jobs, progress)
+        out.append(Candidate(factors, score(method, res[method], res["oracle"]), score("oracle", res["oracle"])))
+    return out
+
+
+def chosen(candidates: list[Candidate]) -> Candidate | None:
+    light = [c for c in candidates if c.method.grip_vs_fixed <= GRIP_LIMIT]
+    if not light:
+        return None
+    return min(light, key=lambda c: (-c.method.held, c.method.needless_per_hour, c.method.grip_vs_fixed))
