@@ -62,6 +62,7 @@ def profile_with(section: str):
 @pytest.mark.parametrize("method,section", [
     ("force-rate", "[detector.force_rate]\nthreshold_per_s = 1000.0\n"),
     ("cof-velocity", "[detector.cof_velocity]\nthreshold_mm_s = 1000.0\n"),
+    ("cof-step", "[detector.cof_step]\nthreshold = 50.0\n"),
 ])
 def test_a_profile_threshold_silences_a_rival_where_it_fires(method, section):
     assert slips(method, DetectorSettings()) > 0

@@ -10,7 +10,14 @@ import pytest
 
 from eskin_industrial import ProfileError
 from eskin_industrial.scenes import load_scene, render, sensor
-from eskin_industrial.scenes.physics import footprint_forces, lift_off_gradient, rotation_deg, sampled_forces
+from eskin_industrial.scenes.physics import (
+    footprint_forces,
+    lift_off_gradient,
+    rotation_deg,
+    sampled_forces,
+    slide_offset,
+    stepped_slide,
+)
 from eskin_industrial.scenes.spec import ArraySpec, Event, Footprint, SensorEffects, parse_scene
 
 A5 = ArraySpec(5, 5, 5.0)
@@ -145,3 +152,78 @@ def test_new_keys_are_validated_like_the_others():
         parse_scene('[scene]\nname = "x"\n[footprint]\nshape = "cube"\n', "x.toml")
     spec = parse_scene('[scene]\nname = "x"\n[sensor]\ncrosstalk = 0.05\ncreep_fraction = 0.1\n', "x.toml")
     assert spec.sensor == SensorEffects(crosstalk=0.05, creep_fraction=0.1)
+
+
+def _stepped(hz=(10.0,), rest=(0.7,), speed=2.0, distance=2.0):
+    return Event("slide", 1.0, distance_mm=(distance, 0.0), speed_mm_s=speed, step_hz=hz, step_rest=rest)
+
+
+def _path(event, seed=0, rate=1000.0):
+    t = np.arange(0, 1.0 + event.end_s, 1.0 / rate)
+    offset, ripple = stepped_slide(t, event, np.random.default_rng(seed))
+    return t, slide_offset(t, (event,))[:, 0] + offset[:, 0], ripple
+
+
+def test_a_stepped_slide_jumps_then_rests_and_keeps_its_length_and_speed():
+    e = _stepped()
+    t, x, ripple = _path(e)
+    during = (t >= e.t_s) & (t < e.end_s)
+    assert x[t < e.t_s].max() == 0.0 and x[-1] == pytest.approx(2.0)  # the whole distance, no more
+    v = np.diff(x)
+    assert v.min() >= -1e-12  # it sticks and jumps forward, never back
+    moving = v[during[1:]] > 1e-9
+    assert 0.2 < moving.mean() < 0.4  # at rest for 70 % of each period
+    # one jump per period: 10 in the 1 s slide at 10 Hz, each the period's share of the
+    # slide: 0.2 mm (the speed over the rate), the periods wandering by 20 %
+    starts = np.flatnonzero(np.diff(np.concatenate(([0], moving.astype(int)))) == 1)
+    assert 8 <= starts.size <= 12
+    jumps = np.add.reduceat(v[during[1:]], starts)
+    assert 0.1 < jumps.min() and jumps.max() < 0.3 and jumps.mean() == pytest.approx(0.2, rel=0.2)
+    # the first jump starts at the onset, so the slide's label is when it first moves
+    assert x[np.searchsorted(t, e.t_s + 0.01)] > 0.0
+    # the normal force ripples with the jumps: it drops as each one starts
+    drop = np.flatnonzero(np.diff(ripple[during]) < -0.05)
+    assert drop.size == starts.size - 1 and np.abs(drop - starts[1:]).max() <= 2
+    assert np.abs(ripple - 1.0).max() < 0.04 * 2.5
+
+
+def test_a_stepped_slides_rate_and_rest_are_drawn_per_seed_within_their_ranges():
+    e = _stepped(hz=(6.0, 18.0), rest=(0.5, 0.8), distance=4.0)
+    seen = []
+    for seed in range(6):
+        t, x, _ = _path(e, seed)
+        moving = np.diff(x) > 1e-9
+        jumps = int(np.sum(np.diff(np.concatenate(([0], moving.astype(int)))) == 1))
+        rest = 1.0 - moving[(t[1:] >= e.t_s) & (t[1:] < e.end_s)].mean()
+        assert 6.0 * 2.0 * 0.8 <= jumps <= 18.0 * 2.0 * 1.2 and 0.45 <= rest <= 0.85
+        seen.append((jumps, round(rest, 2)))
+    assert len(set(seen)) == 6  # each seed its own
+    np.testing.assert_array_equal(_path(e, 3)[1], _path(e, 3)[1])  # reproducible
+
+
+def test_a_stepped_scene_renders_with_the_slides_labels_and_other_scenes_draw_as_before():
+    base = load_scene("case5")
+    steps = replace(base, events=tuple(replace(e, step_hz=(6.0, 18.0), step_rest=(0.5, 0.8)) if e.kind == "slide"
+                                       else e for e in base.events))
+    a, b = render(base, 100.0, 3), render(steps, 100.0, 3)
+    np.testing.assert_array_equal(a.labels, b.labels)
+    during = a.labels == "slip"
+    qa, qb = render(quiet(base), 100.0, 3).forces, render(quiet(steps), 100.0, 3).forces
+    np.testing.assert_allclose(qa[~during], qb[~during], atol=1e-12)  # the same before, and where it ends
+    xb = cof(qb[during])[:, 0]
+    assert np.mean(np.abs(np.diff(xb)) < 1e-9) > 0.4  # it rests
+    # the keys draw only where step_hz is set: a rest share alone changes nothing
+    rest_only = replace(base, events=tuple(replace(e, step_rest=(0.6,)) for e in base.events))
+    np.testing.assert_array_equal(render(rest_only, 100.0, 3).forces, a.forces)
+
+
+def test_step_keys_are_one_value_or_a_range():
+    slide = '[scene]\nname = "x"\n[[events]]\nkind = "slide"\nt_s = 1.0\ndistance_mm = [2.0, 0.0]\n'
+    assert parse_scene(slide + "step_hz = [6.0, 18.0]\nstep_rest = [0.5]\n", "x.toml").events[0].step_hz == (6.0, 18.0)
+    for bad, match in (("step_hz = [18.0, 6.0]", "step_hz: expected one value or a range"),
+                       ("step_hz = [6.0, 9.0, 12.0]", "step_hz: expected one value or a range"),
+                       ("step_rest = []", "step_rest: expected one value or a range"),
+                       ("step_rest = [0.99]", r"step_rest.*expected a value in \[0, 0.95\]"),
+                       ("step_hz = [0.1]", r"step_hz.*expected a value in \[0.5, 100\]")):
+        with pytest.raises(ProfileError, match=match):
+            parse_scene(slide + bad + "\n", "x.toml")

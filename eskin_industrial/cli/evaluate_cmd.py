@@ -74,7 +74,7 @@ def _seeds(value: str) -> tuple[int, ...]:
               help="Take the detector settings from this profile's [detector] (default: the built-in defaults).")
 @click.option("--condition", "conditions", multiple=True, metavar="NAME=VALUE",
               help="Push one property of every scene as the failure map does (repeatable), e.g. noise=0.1, "
-                   "vibration=0.3, drops=0.2, dead=8, force=0.15, onset=1 (evaluation/conditions.py).")
+                   "vibration=0.3, drops=0.2, dead=8, force=0.15, onset=1, ripple=0.08 (evaluation/conditions.py).")
 @click.option("--within", "within_ms", multiple=True, type=click.IntRange(min=0),
               help="Also print the share of slip events found within this many ms of onset (repeatable).")
 @click.option("--families", "show_families", is_flag=True, help="List the effect families and exit.")
@@ -85,6 +85,9 @@ def _seeds(value: str) -> tuple[int, ...]:
 @click.option("--hold-out-family", "hold_out", multiple=True,
               help="Leave-one-family-out (repeatable; 'all', 'new'): choose the deciding method's setting on the "
                    "tuning seeds of the other families, report it on this family's held-out seeds.")
+@click.option("--oracle", is_flag=True,
+              help="Also the delay's bound: an oracle that knows each slide's onset and path and its CoF's noise, "
+                   "at the ramp channel's threshold (evaluation/bound.py), as a row of its own.")
 @click.option("--format", "fmt", type=click.Choice(["md", "json"]), default="md", show_default=True,
               help="Markdown tables, or one JSON document (every figure, per scene too).")
 @click.option("--closed-loop", is_flag=True,
@@ -110,7 +113,7 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
                  per_scene: bool, charts_dir: str | None, quick: bool, only_charts: tuple[str, ...], long_holds: bool,
                  profile_path: str | None, conditions: tuple[str, ...], within_ms: tuple[int, ...],
                  show_families: bool, per_family: bool, family_opt: tuple[str, ...], hold_out: tuple[str, ...],
-                 fmt: str, closed_loop: bool, plc_cycle_ms: float, cell: tuple[str, ...], sweep: str | None,
+                 oracle: bool, fmt: str, closed_loop: bool, plc_cycle_ms: float, cell: tuple[str, ...], sweep: str | None,
                  jobs: int | None, tune: bool) -> None:
     """Event-level slip F1, false alarms per hour of holding, detection delay, varying
     force read as slip, and cost per frame, for each method; then how steady the
@@ -140,7 +143,7 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
         return
     if hold_out or per_family:
         _families(methods, scenes, seeds, rate_hz, tolerance_s, long_holds, profile_path, per_family, family_opt,
-                  hold_out, fmt, per_scene, within_ms)
+                  hold_out, fmt, per_scene, within_ms, conditions, oracle)
         return
     if charts_dir is not None:
         from ..evaluation.charts import all_charts
@@ -171,10 +174,12 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
                        tolerance_s=tolerance_s, settings=settings, spec_hook=_conditions(conditions),
                        progress=ticker)
     held = sum(r.score.holding_s for r in res.values()) / max(1, len(res)) / 3600
+    bound = _oracle(scene_set, seed_set, rate_hz, settings, _conditions(conditions)) if oracle else None
     if fmt == "json":
         echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz, "scenes": list(scene_set),
                    "conditions": list(conditions), "holding_h": held, "seconds": time.perf_counter() - start,
-                   "methods": [_json_row(r, res, within_ms) for r in res.values()]})
+                   "methods": [_json_row(r, res, within_ms) for r in res.values()],
+                   **({"oracle": _oracle_json(*bound, settings, within_ms)} if bound else {})})
         return
     click.echo(f"# eskin-bus evaluate --seeds {seeds} --rate {rate_hz:g}"
                + "".join(f" --condition {c}" for c in conditions) + "  "
@@ -191,6 +196,11 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
             for scene, ss in r.per_scene.items():
                 click.echo(f"|   {scene} | {ss.events} | {ss.found} | {ss.f1:.3f} | {ss.false_alarms} | {ss.vf_as_slip} | "
                            f"{_delays(ss)} | | |")
+    if bound is not None:
+        total, scenes_ = bound
+        rows = [(oracle_label(settings), total)] + ([(f"  {sc}", ss) for sc, ss in scenes_.items()] if per_scene else [])
+        for label, ss in rows:
+            click.echo(f"| {label} | {ss.events} | {ss.found} | - | - | - | {_delays(ss)} | | |")
     _stability_table(res, per_scene)
     for name, r in res.items():
         _unseen_line(name, r.score)
@@ -200,11 +210,36 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
         if within_ms:
             shares = ", ".join(f"{_within(r.score, ms):.0f} % within {ms} ms" for ms in within_ms)
             click.echo(f"# {name}: of {r.score.events} slip events, {shares}")
+    if bound is not None and within_ms:
+        shares = ", ".join(f"{_within(bound[0], ms):.0f} % within {ms} ms" for ms in within_ms)
+        click.echo(f"# {oracle_label(settings)}: of {bound[0].events} slip events, {shares}")
+
+
+def oracle_label(settings: Any) -> str:
+    return f"oracle (knows onset and path, z {settings.cof_track.ramp_z:g})"
+
+
+def _oracle(scenes: tuple[str, ...], seeds: tuple[int, ...], rate_hz: float, settings: Any, hook: Any,
+            stream: int | None = None) -> tuple[Any, dict[str, Any]]:
+    """The bound's delays (evaluation/bound.py) at the ramp channel's threshold."""
+    from ..evaluation.bound import oracle_score
+
+    with Ticker(len(scenes) * len(seeds), "oracle") as ticker:
+        return oracle_score(scenes, seeds, settings.cof_track.ramp_z, rate_hz, hook, stream, progress=ticker)
+
+
+def _oracle_json(total: Any, per_scene: dict[str, Any], settings: Any, within_ms: tuple[int, ...]) -> dict[str, Any]:
+    def one(s: Any) -> dict[str, Any]:
+        return {"events": s.events, "found": s.found, "delay_p50_ms": s.delay_percentile(50) * 1000,
+                "delay_p90_ms": s.delay_percentile(90) * 1000}
+    return {"z": settings.cof_track.ramp_z, **one(total), "within_ms": {str(ms): _within(total, ms) for ms in within_ms},
+            "per_scene": {sc: one(ss) for sc, ss in per_scene.items()}}
 
 
 def _families(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, rate_hz: float, tolerance_s: float,
               long_holds: bool, profile_path: str | None, per_family_: bool, family_opt: tuple[str, ...],
-              hold_out: tuple[str, ...], fmt: str, per_scene: bool, within_ms: tuple[int, ...]) -> None:
+              hold_out: tuple[str, ...], fmt: str, per_scene: bool, within_ms: tuple[int, ...],
+              conditions: tuple[str, ...] = (), oracle: bool = False) -> None:
     if scenes or long_holds:
         raise click.UsageError("--per-family and --hold-out-family take the families' scenes; leave out "
                                "--scene and --long-holds")
@@ -215,15 +250,20 @@ def _families(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, rat
                                    "ones (evaluation/corpus.py); leave out --seeds")
         if len(methods) > 1:
             raise click.UsageError("--hold-out-family chooses the setting of one method: give at most one -m")
+        if conditions or oracle:
+            raise click.UsageError("--hold-out-family takes the families as they are: leave out --condition and --oracle")
         leave_one_out(methods[0] if methods else settings.method, family_names(hold_out), rate_hz, settings,
                       tolerance_s, fmt, _figures, _delays)
         return
+    families = family_names(family_opt or ("all",))  # (a misspelt family is refused before any training)
     names = methods or detector_names()
     if "learned" in names:
         names = _prepare_learned(names, explicit=bool(methods))
     shares = (lambda s: ", ".join(f"{_within(s, ms):.0f} % within {ms} ms" for ms in within_ms)) if within_ms else None
-    per_family(names, family_names(family_opt or ("all",)), seeds, _seeds(seeds), rate_hz, settings, tolerance_s,
-               fmt, _figures, _delays, per_scene, shares)
+    per_family(names, families, seeds, _seeds(seeds), rate_hz, settings, tolerance_s,
+               fmt, _figures, _delays, per_scene, shares, _conditions(conditions), conditions,
+               (lambda scenes, seed_set, hook, stream: _oracle(scenes, seed_set, rate_hz, settings, hook, stream))
+               if oracle else None, oracle_label(settings))
 
 
 def _figures(s: Any) -> dict[str, Any]:
@@ -252,14 +292,15 @@ def _json_row(r: Any, res: dict[str, Any], within_ms: tuple[int, ...]) -> dict[s
 
 def _conditions(items: tuple[str, ...]) -> Any:
     """One scene hook from NAME=VALUE items (the failure map's conditions, but the rate)."""
-    from ..evaluation.conditions import CONDITIONS
+    from ..evaluation.conditions import CONDITIONS, MORE_CONDITIONS
 
+    every = {**CONDITIONS, **MORE_CONDITIONS}
     hooks = []
     for item in items:
         name, _, value = item.partition("=")
-        entry = CONDITIONS.get(name)
+        entry = every.get(name)
         if entry is None or entry[2] is None:
-            known = ", ".join(n for n, c in CONDITIONS.items() if c[2] is not None)
+            known = ", ".join(n for n, c in every.items() if c[2] is not None)
             raise click.BadParameter(f"{item!r}: expected NAME=VALUE with NAME one of {known} (the rate is --rate)",
                                      param_hint="--condition")
         try:

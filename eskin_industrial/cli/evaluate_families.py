@@ -10,7 +10,7 @@ from typing import Any
 import click
 
 from ..detect.settings import DetectorSettings
-from ..evaluation.families import FAMILIES, evaluate_families
+from ..evaluation.families import FAMILIES, evaluate_families, family_hook
 from ..evaluation.holdout import CANDIDATES, FALSE_ALARMS_PER_HOUR, hold_out, tuning_scores
 from ..evaluation.metrics import SceneScore
 from ..evaluation.suite import TUNING_SEEDS, by_name
@@ -54,18 +54,28 @@ def slip_episodes(per_event: list[int]) -> str:
 def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, seed_set: tuple[int, ...],
                rate_hz: float, settings: DetectorSettings, tolerance_s: float, fmt: str,
                figures: Callable[[Any], dict[str, Any]], delays: Callable[[Any], str], per_scene: bool = False,
-               within: Callable[[Any], str] | None = None) -> None:
+               within: Callable[[Any], str] | None = None, spec_hook: Any = None, conditions: tuple[str, ...] = (),
+               oracle: Callable[..., Any] | None = None, oracle_label: str = "oracle") -> None:
     start = time.perf_counter()
     with Ticker(sum(len(FAMILIES[f].scenes) for f in families) * len(seed_set) * len(names), "scoring") as ticker:
         res = evaluate_families(by_name(*names), families, seed_set, rate_hz, settings, tolerance_s,
-                                progress=ticker)
+                                progress=ticker, spec_hook=spec_hook)
+    # the bound per family (evaluation/bound.py): the oracle's delays on the same scenes
+    bounds = {f: oracle(FAMILIES[f].scenes, seed_set, family_hook(FAMILIES[f], spec_hook), FAMILIES[f].stream)
+              for f in families} if oracle is not None else {}
     if fmt == "json":
-        echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz,
+        def bound(total: Any, scenes: dict[str, Any]) -> dict[str, Any]:
+            one = lambda s: {"events": s.events, "found": s.found, "delay_p50_ms": s.delay_percentile(50) * 1000,  # noqa: E731
+                             "delay_p90_ms": s.delay_percentile(90) * 1000}
+            return {**one(total), "per_scene": {sc: one(ss) for sc, ss in scenes.items()}}
+        echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz, "conditions": list(conditions),
                    "families": {f: {m: {**figures(r.score),
                                         "per_scene": {sc: figures(ss) for sc, ss in r.per_scene.items()}}
-                                    for m, r in by.items()} for f, by in res.items()}})
+                                    for m, r in by.items()} for f, by in res.items()},
+                   **({"oracle": {f: bound(*b) for f, b in bounds.items()}} if bounds else {})})
         return
-    click.echo(f"# eskin-bus evaluate --per-family --seeds {seeds} --rate {rate_hz:g}  "
+    click.echo(f"# eskin-bus evaluate --per-family --seeds {seeds} --rate {rate_hz:g}"
+               + "".join(f" --condition {c}" for c in conditions) + "  "
                f"({len(families)} families x {len(seed_set)} seeds, {time.perf_counter() - start:.0f} s)")
     click.echo("| family | method | events | found | F1 | false alarms (per h holding) | varying force as slip | "
                "delay p50 / p90 (ms) | slip episodes per found event: mean / max |")
@@ -76,6 +86,12 @@ def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, se
             if per_scene:
                 for scene, ss in r.per_scene.items():
                     click.echo(f"|   | {scene} | {_row(ss, delays)} | {slip_episodes(ss.slip_episodes)} |")
+        if fam in bounds:
+            total, scenes = bounds[fam]
+            rows = [(f"{fam} | {oracle_label}", total)] + ([(f"  | {sc}", ss) for sc, ss in scenes.items()]
+                                                           if per_scene else [])
+            for label, ss in rows:
+                click.echo(f"| {label} | {ss.events} | {ss.found} | - | - | - | {delays(ss)} | - |")
     if within is not None:
         for fam, by in res.items():
             for m, r in by.items():

@@ -28,6 +28,13 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
     t    = the torsion channel (detect/torsion.py): the same ramp test on the angle of
            the distribution's rotational flow about the CoF (a turn about the normal
            keeps the CoF and the total); only while the force is steady
+    j    = the step channel (detect/step.py): the newest 20 ms of the CoF against its
+           mean over the half-second that ended 100 ms earlier, against the difference's
+           own learnt noise (never below white noise's share of q), with e added as for
+           the ramp; taken into r (r = max(r, j)).  Its silence for a varying force is
+           the ramp's rule on the force's level (0.1 s and 0.5 s means): a stick-slip
+           ripple about a constant level, which the 30 ms means of the ramp's silence
+           follow, leaves it open, so a slide in jumps is seen in frames
     slip when a > 1, b > 1, r > 1 or t > 1 (r and t only while the force is steady);
     in the slip state, also while a, b or r stays above 1 - hysteresis (0.8): a slow
     slide's evidence fades in and out as it stops.  (The CoF's step energy was a vote
@@ -35,7 +42,8 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
 
 The cost per frame is one 4-column matrix product (the total, the centre of force and
 the torsion channel's projection), three running sums per ramp horizon, a ring of
-squared changes for the evidence and a few scalar operations (the torsion channel's
+squared changes for the evidence, six running sums for the step channel and a few
+scalar operations (the torsion channel's
 angle once per 40 ms, its template once per 0.25 s): the
 same at 100 Hz and at 1 kHz.  The scores (score_a, score_b) are max(a, r, t) and b (1 = threshold).
 """
@@ -54,6 +62,7 @@ from .ripple import ForceRipple, ripple_dof, variance_evidence
 from .scored import ScoredDetector
 from .settings import DetectorSettings
 from .state import GraspState
+from .step import StepTest
 from .torsion import TurnFlow, grid_of
 
 _SLIP = int(GraspState.SLIP)
@@ -100,6 +109,27 @@ class CofTrack(ScoredDetector):
         self._ripple = ForceRipple(lag, window) if c.ripple_s > 0 else None
         self._ripple_dof = ripple_dof(lag, window)
         self._evidence_cap = 0.5 * max(0.0, c.ramp_z ** 2 - c.ramp_support_z ** 2)
+        # the step channel (detect/step.py): a jump of the CoF against where it was, beside
+        # the ramp bank, its noise its own (learnt like q); the evidence is capped for it
+        # as for the ramp: the step must reach ramp_support_z itself
+        self._jumps = StepTest(max(1, round(c.step_s * rate_hz)), round(c.step_gap_s * rate_hz),
+                              max(1, round(c.step_base_s * rate_hz))) if c.step_s > 0 else None
+        self._step_z = c.step_z
+        self._step_cap = 0.5 * max(0.0, c.step_z ** 2 - c.ramp_support_z ** 2)
+        self._step_vx = self._step_vy = 0.0  # its learnt noise per axis (N^2 mm^2, like q)
+        self._step_learnt = 0
+        # white noise's share of it: the frame noise q times this (1 / J + 1 / B); the
+        # learning starts there, counted as a base's worth of samples, and never goes
+        # below it (a few hundred correlated differences alone came out low at times:
+        # a grip's first seconds raised false alarms)
+        jumps = self._jumps
+        self._step_white = (1.0 / jumps.newest + 1.0 / jumps.base) if jumps is not None else 0.0
+        self._step_prior = jumps.base if jumps is not None else 0
+        # the step's silence for a varying force (below), squared: the change that counts
+        # as varying per newton of grip, and the level change's noise per unit of the
+        # total's learnt noise, in z standard deviations
+        self._level_rate = c.force_rate_per_s * c.fast_s
+        self._level_noise = c.z * c.z * jumps.level_weight if jumps is not None else 0.0
         # the torsion channel (detect/torsion.py): a turn keeps the CoF and the total
         # (it works on each of its hops' mean: its times count them)
         grid = grid_of(x_mm, y_mm) if c.torsion else None
@@ -130,6 +160,9 @@ class CofTrack(ScoredDetector):
         self._calm_force = 0
         self._ramp_on = False  # the ramp's verdict at the last hop's end
         self._ramp.reset()
+        self._level_calm = 0  # frames since the force's level last moved (the step's silence)
+        if self._jumps is not None:
+            self._jumps.reset()
         if self._profile is not None:
             self._profile.reset()
         if self._turn is not None:
@@ -144,6 +177,15 @@ class CofTrack(ScoredDetector):
         """Each scored frame's CoF step energy (S^2 |c_k - c_{k-1}|^2 / 2; a held copy's:
         the learnt noise), for a subclass that sets :attr:`_keeps_steps`: the learned
         method's feature (cof-track itself no longer votes on it: docs/evaluation.md)."""
+
+    def _evidence(self) -> float:
+        """The stick-slip ripple's evidence now (nats, not capped; 0 without it)."""
+        ripple = self._ripple
+        energy = ripple.energy if ripple is not None else None
+        rnoise = self._rnoise
+        if energy is None or not rnoise > 0.0:
+            return 0.0
+        return variance_evidence(energy / rnoise, self._ripple_dof)
 
     def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
         # (hot path: one call per frame at any rate, ten per paper hop at 100 Hz; so
@@ -216,13 +258,15 @@ class CofTrack(ScoredDetector):
         steady = calm > self._steady_n
         # the ramp's base must not hold the grab: its centres start once it has settled;
         # a held copy is no sample (repeats would count one noise draw twice)
-        ramp, profile = self._ramp, self._profile
+        ramp, profile, step = self._ramp, self._profile, self._jumps
         r = 0.0
         # the ramp's test is taken once a hop, on the frame the decision reads the hop
         # at: its statistic moves little from one frame to the next, and tested at every
         # frame of a 1 kHz node its noise crossed the threshold twice as often per hour
         # as at 100 Hz (docs/evaluation.md); its verdict stands for the hop's other frames
-        if steady and (self._k + 1) % self.hop == 0:
+        hop_end = (self._k + 1) % self.hop == 0
+        raw = -1.0  # the ripple's evidence, once it is worked out (the ramp's and the step's)
+        if steady and hop_end:
             # the ramp weighs raw centres, each axis against its own noise (in force
             # units, like q; the floor keeps a constant axis, a strip's y, harmless);
             # silent while the force changes and for a second after, like the
@@ -238,15 +282,16 @@ class CofTrack(ScoredDetector):
                 qy = floor
             energy = ripple.energy if ripple is not None else None
             rnoise = self._rnoise
-            evidence = 0.0
+            raw = 0.0
             if energy is not None and rnoise > 0.0:
-                evidence = variance_evidence(energy / rnoise, self._ripple_dof)
-                if evidence > self._evidence_cap:
-                    evidence = self._evidence_cap
+                raw = variance_evidence(energy / rnoise, self._ripple_dof)
+            evidence = raw if raw < self._evidence_cap else self._evidence_cap
             if filled:
                 r = ramp.score(qx, qy, self.ramp_min, evidence)
             else:  # (the push and the test in one pass: at 100 Hz every frame has both)
                 r = ramp.push_score(xc, yc, 1.0 / (s * s), qx, qy, self.ramp_min, evidence)
+                if step is not None:
+                    step.push(xc, yc, s)
                 if profile is not None:
                     profile.push(f)
             if profile is not None and not self.decision.latch.on:  # the sums' own test, OR'd
@@ -259,10 +304,61 @@ class CofTrack(ScoredDetector):
         else:
             if not filled:
                 ramp.push(xc, yc, 1.0 / (s * s))
+                if step is not None:
+                    step.push(xc, yc, s)
                 if profile is not None:
                     profile.push(f)
             if not steady:
                 self._ramp_on = False
+        level_open = False
+        if step is not None:
+            # the step channel has its own silence for a varying force: the ramp's rule
+            # (a change of the total of more than force_rate_per_s x fast_s, 3 % of the
+            # grip, and for a second after), on the force's level over the span the
+            # step looks across (its means over the newest 0.1 s and over the base),
+            # which a stick-slip ripple about a constant level does not move; the
+            # ramp's 30 ms means 0.1 s apart follow a ripple of 6-18 Hz
+            # (squares: no root a frame)
+            change = step.level
+            limit = self._level_rate * s
+            limit *= limit
+            noise2 = self._level_noise * self._fnoise
+            if noise2 > limit:
+                limit = noise2
+            self._level_calm = calm_level = self._level_calm + 1 if change * change <= limit else 0
+            level_open = calm_level > self._steady_n
+            if hop_end and level_open and self._step_learnt and step.ready:
+                # (the step's score, written out: a call a frame at 100 Hz) against its learnt
+                # noise per axis, never below white noise's share of q; the evidence added
+                # (capped: the step must reach ramp_support_z itself); the displacement floor
+                if raw < 0.0:
+                    raw = self._evidence()
+                vx, vy = self._step_vx, self._step_vy
+                qx = self._noise_x
+                white = self._step_white
+                if qx * white > vx:
+                    vx = qx * white
+                if (noise - qx) * white > vy:
+                    vy = (noise - qx) * white
+                floor = 0.0025 * (vx + vy)  # (a constant axis, a strip's y, stays harmless)
+                if not vx > floor:
+                    vx = floor
+                if not vy > floor:
+                    vy = floor
+                if vx > 0.0:
+                    jx, jy = step.dx, step.dy
+                    if raw > self._step_cap:
+                        raw = self._step_cap
+                    rs = math.sqrt((jx * jx / vx + jy * jy / vy) * s * s + 2.0 * raw) / self._step_z
+                    if rs > r:  # (else min(rs, mm) cannot raise r: mm is not needed)
+                        lim = self.ramp_min
+                        if lim > 0.0:
+                            mm = math.sqrt(jx * jx + jy * jy) / lim
+                            if mm < rs:
+                                rs = mm
+                        if rs > r:
+                            r = rs
+                self._ramp_on = r > 1.0
         turn = self._turn
         if turn is not None:
             turn.push(f, s, filled, self.projected)
@@ -315,6 +411,19 @@ class CofTrack(ScoredDetector):
             self._fnoise += gain * ((s - prev[2]) ** 2 * 0.5 - self._fnoise)
             if rip_d2 is not None:
                 self._rnoise += gain * (rip_d2 - self._rnoise)
+            if level_open and step is not None and step.ready:  # the step's own noise (force units)
+                if not self._step_learnt:  # (white noise's share to start from)
+                    self._step_vx = self._noise_x * self._step_white
+                    self._step_vy = (self._noise - self._noise_x) * self._step_white
+                    self._step_learnt = self._step_prior
+                learnt = self._step_learnt = self._step_learnt + 1
+                g = 1.0 / learnt
+                if g < self._a_noise:
+                    g = self._a_noise
+                s2 = s * s
+                jx, jy = step.dx, step.dy
+                self._step_vx += g * (jx * jx * s2 - self._step_vx)
+                self._step_vy += g * (jy * jy * s2 - self._step_vy)
             if profile is not None:
                 profile.calm()
         if tr > r:

@@ -21,6 +21,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .cof_step import CofStep
 from .cof_track import CofTrack
 from .learned import Learned, Model
 from .paper import PaperDetector, paper_batch
@@ -110,6 +111,10 @@ METHODS: dict[str, Method] = {
         Score("onset_score", "onset: the largest of the fast displacement, the ramp and the turn about the "
                              "normal, over their noise thresholds (slip above 1)"),
         Score("slow_score", "the slow displacement still moving onward, over its threshold (slip above 1)"))),
+    "cof-step": _method("cof-step", "rival: the newest 20 ms of the centre of force against the mean and spread of "
+                        "the half-second that ended 100 ms earlier", CofStep, 10, (
+        Score("step_score", "the newest CoF's distance from the base's mean in its standard deviations, over "
+                            "threshold (slip above 1)"), UNUSED)),
     "learned": _method("learned", "accuracy ceiling: a small classifier on the other methods' features (extra: learn)", Learned,
                        8, (Score("p_slip", "the model's slip probability (slip above slip_p, confirm_hops in a row)"),
                            Score("p_variable_force", "the model's varying-force probability")), needs_model=True),

@@ -69,6 +69,20 @@ class CofTrackSettings:
     #: shake) is no slip.  (0 flagged 19-22 of 30 such still grips, 4 one of 30, at 44 %
     #: of the tuning events within 40 ms against 50 %: docs/evaluation.md.)
     ramp_support_z: float = field(default=4.0, metadata=in_range(0.0, 1000.0))
+    #: Step channel (detect/step.py): the mean of the newest ``step_s`` of the CoF
+    #: against the mean of the ``step_base_s`` that ended ``step_gap_s`` before the
+    #: newest frame, each axis against the difference's own learnt noise, must exceed
+    #: ``step_z`` (with the stick-slip evidence added, as for the ramp) and move
+    #: ``ramp_min_mm``: a jump after a rest is seen in two frames, where the ramp waits
+    #: for a slope.  ``step_s = 0``: no step channel.  (The times are the plain
+    #: displacement test's, the rival ``cof-step``; ``step_z`` the smallest, in steps of
+    #: 0.25, whose crossings add no false alarm over the 11.3 h of tuning holds and the
+    #: suite's 4.1 h of tuning seeds, the step-slip family left out: 6.25 added 1 and
+    #: 6.0 2 in the holds; docs/evaluation.md.)
+    step_s: float = field(default=0.02, metadata=in_range(0.0, 0.5))
+    step_gap_s: float = field(default=0.1, metadata=in_range(0.0, 1.0))
+    step_base_s: float = field(default=0.5, metadata=in_range(0.01, 5.0))
+    step_z: float = field(default=6.5, metadata=in_range(3.0, 12.0))
     #: Profile channel (detect/profile_shift.py): the same ramp test on the column and
     #: row sums of the map, any change but a change of force, against their learnt
     #: noise; over the ramp's horizons, threshold the chi-square value with the
@@ -192,6 +206,25 @@ class CofVelocitySettings:
 
 
 @dataclass(frozen=True)
+class CofStepSettings:
+    """Rival ``cof-step``: the plain displacement test (detect/cof_step.py), the
+    yardstick for delay claims."""
+
+    #: Slip when the newest ``step_s`` of the CoF lies this many standard deviations
+    #: of the base's scatter from the base's mean (the distance over both axes, each in
+    #: its own standard deviations); chosen for the false-alarm rate of ``cof-track``
+    #: over the tuning holds (docs/evaluation.md).
+    threshold: float = field(default=4.5, metadata=in_range(1.0, 50.0))
+    #: The newest this long is averaged (two frames at 100 Hz) ...
+    step_s: float = field(default=0.02, metadata=in_range(0.0001, 1.0))
+    #: ... against the centres over ``base_s`` that ended this long before the newest frame.
+    gap_s: float = field(default=0.1, metadata=in_range(0.0, 5.0))
+    base_s: float = field(default=0.5, metadata=in_range(0.001, 10.0))
+    #: The test is taken once this long (every frame at 100 Hz), at any rate.
+    hop_s: float = field(default=0.01, metadata=in_range(0.0001, 1.0))
+
+
+@dataclass(frozen=True)
 class HfEnergySettings:
     """Rival ``hf-energy`` (vibration-based slip detection): energy of the second
     difference of the taxels (or of the total force) against its running baseline."""
@@ -280,6 +313,7 @@ class DetectorSettings:
     #: Settings of the rivals and of the learned ceiling, one section each.
     force_rate: ForceRateSettings = field(default_factory=ForceRateSettings)
     cof_velocity: CofVelocitySettings = field(default_factory=CofVelocitySettings)
+    cof_step: CofStepSettings = field(default_factory=CofStepSettings)
     hf_energy: HfEnergySettings = field(default_factory=HfEnergySettings)
     learned: LearnedSettings = field(default_factory=LearnedSettings)
 

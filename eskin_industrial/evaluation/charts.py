@@ -23,7 +23,7 @@ from .suite import DEFAULT_SETTINGS, EVALUATION_SEEDS, SUITE, evaluate, run_one
 from .sweeps import defaults, sweep
 
 COLOURS = {"paper": "tab:blue", "paper-coe": "tab:cyan", "paper-dw": "tab:purple", "force-rate": "tab:orange",
-           "hf-energy": "tab:brown", "cof-velocity": "tab:gray", "cof-track": "tab:red",
+           "hf-energy": "tab:brown", "cof-velocity": "tab:gray", "cof-step": "tab:olive", "cof-track": "tab:red",
            "learned": "tab:green"}
 
 

@@ -72,3 +72,18 @@ CONDITIONS: dict[str, tuple[str, tuple[float, ...], Callable[[float], Hook] | No
     "vibration": ("machine vibration at 37 Hz (N)", (0.0, 0.1, 0.3, 1.0, 2.0), vibration),
     "onset": ("the same, starting mid-hold (N)", (0.0, 0.1, 0.3, 1.0, 2.0), vibration_onset),
 }
+
+
+def slide_ripple(fraction: float) -> Hook:
+    """Every slide's stick-slip force ripple (``stick_slip_force``, 4 % in the scenes):
+    how strongly the normal force shakes as the contact sticks and slips (for slides in
+    jumps, how far it drops at each jump)."""
+    return lambda s: replace(s, events=tuple(replace(e, stick_slip_force=fraction) if e.kind == "slide" else e
+                                             for e in s.events))
+
+
+#: Conditions ``evaluate --condition`` can push beyond the failure map's (which draws
+#: ``CONDITIONS`` only): name -> (axis label, values, hook factory).
+MORE_CONDITIONS: dict[str, tuple[str, tuple[float, ...], Callable[[float], Hook]]] = {
+    "ripple": ("slides' force ripple (fraction of the grip)", (0.0, 0.04, 0.08, 0.12), slide_ripple),
+}

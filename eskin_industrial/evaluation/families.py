@@ -58,6 +58,13 @@ def _footprint(**changes: Any) -> Hook:
     return lambda s: replace(s, footprint=replace(s.footprint, **changes))
 
 
+#: The step-slip family's jumps: how many a second, and the share of each period at
+#: rest, each a range drawn per seed and slide (ordinary stick-slip: a jump of
+#: 0.2-1 mm at 6-18 Hz with rests of 50-80 % of each period; the step is the slide's
+#: speed over the rate, 0.17-1.7 mm on the paper's slides).
+STEP_HZ: tuple[float, float] = (6.0, 18.0)
+STEP_REST: tuple[float, float] = (0.5, 0.8)
+
 #: Radius at which a turn moves the footprint's edge as far as the slide it replaces
 #: (the 20 mm block's half-width).
 TORSION_RADIUS_MM = 10.0
@@ -112,6 +119,9 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("point-contact", "the paper's cases with a sphere: an 8 mm Hertzian point contact; and the sphere scene",
            (*PAPER, "sphere"),
            _footprint(shape="sphere", size_mm=(8.0, 8.0))),
+    Family("step-slip", "the paper's slides in jumps with rests: 6-18 jumps a second, at rest 50-80 % of each period "
+           "(drawn per seed and slide); and the steps scene (2 mm/s on 4 N)", (*SLIDES, "steps"),
+           _slides(step_hz=STEP_HZ, step_rest=STEP_REST)),
 )}
 
 
@@ -122,14 +132,24 @@ def get_family(name: str) -> Family:
         raise KeyError(f"unknown family {name!r}; families: {', '.join(FAMILIES)}") from None
 
 
+def family_hook(fam: Family, spec_hook: Hook | None = None) -> Hook | None:
+    """The family's effect, then ``spec_hook`` (a condition pushed on top of it)."""
+    if spec_hook is None or fam.hook is None:
+        return spec_hook or fam.hook
+    own = fam.hook
+    return lambda spec: spec_hook(own(spec))
+
+
 def evaluate_families(methods: dict[str, Factory], families: tuple[str, ...], seeds: tuple[int, ...],
                       rate_hz: float = 100.0, settings: DetectorSettings = DEFAULT_SETTINGS, tolerance_s: float = 0.5,
-                      progress: Progress = NO_PROGRESS) -> dict[str, dict[str, Result]]:
-    """Every method on every family's scenes (with its effect on): family -> method -> result;
-    ``progress`` advances by one per method, scene and seed, labelled with the family too."""
+                      progress: Progress = NO_PROGRESS, spec_hook: Hook | None = None) -> dict[str, dict[str, Result]]:
+    """Every method on every family's scenes (with its effect on, and ``spec_hook`` after
+    it): family -> method -> result; ``progress`` advances by one per method, scene and
+    seed, labelled with the family too."""
     out = {}
     for name in families:
         fam = get_family(name)
         out[name] = evaluate(methods, scenes=fam.scenes, seeds=seeds, rate_hz=rate_hz, settings=settings,
-                             spec_hook=fam.hook, tolerance_s=tolerance_s, progress=Prefixed(progress, f"{name}: "), stream=fam.stream)
+                             spec_hook=family_hook(fam, spec_hook), tolerance_s=tolerance_s,
+                             progress=Prefixed(progress, f"{name}: "), stream=fam.stream)
     return out

@@ -43,13 +43,15 @@ class Candidate:
 
 #: The candidates per deciding method: its threshold around the default, and (for
 #: cof-track) its stick-slip evidence on or off, the one part of it that leans on a
-#: single kind of physics.
+#: single kind of physics, and its step channel on or off (whether the step-slip
+#: family's jumps are needed to choose it: held out, they are not seen).
 CANDIDATES: dict[str, tuple[Candidate, ...]] = {
     "cof-track": (
-        Candidate("default (ramp_z 5.5, evidence on)"),
+        Candidate("default (ramp_z 5.5, evidence on, step channel on)"),
         Candidate("ramp_z 5.0", "cof_track", {"ramp_z": 5.0}),
         Candidate("ramp_z 6.0", "cof_track", {"ramp_z": 6.0}),
         Candidate("no stick-slip evidence (ripple_s 0)", "cof_track", {"ripple_s": 0.0}),
+        Candidate("no step channel (step_s 0)", "cof_track", {"step_s": 0.0}),
     ),
     "paper": (
         Candidate("default (R > 2.5)"),

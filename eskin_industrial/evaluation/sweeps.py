@@ -10,6 +10,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from ..detect.cof_step import CofStep
 from ..detect.cof_track import CofTrack
 from ..detect.paper import PaperDetector
 from ..detect.scored import CofVelocity, ForceRate, HfEnergy
@@ -45,6 +46,8 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
         points.append(("hf-energy", f"total >{thr}x", partial(HfEnergy, threshold=thr, total=True)))
     for thr in (2.0, 4.0, 8.0, 16.0):
         points.append(("cof-velocity", f">{thr} mm/s", partial(CofVelocity, threshold_mm_s=thr)))
+    for thr in (3.5, 4.5, 6.0, 8.0):  # the plain displacement test (4.5: cof-track's false alarms on long holds)
+        points.append(("cof-step", f">{thr:g} sd", partial(CofStep, threshold=thr)))
     for z in (4.0, 5.0, 6.0, 8.0):
         for fast in (0.05, 0.1, 0.2):
             points.append(("cof-track", f"z{z} fast {fast}s", partial(CofTrack, z=z, fast_s=fast)))
@@ -55,6 +58,10 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
     points.append(("cof-track", "no ripple evidence", partial(CofTrack, ripple_s=0.0)))
     for support in (0.0, 3.0, 4.5):
         points.append(("cof-track", f"ramp support z{support:g}", partial(CofTrack, ramp_support_z=support)))
+    # the step channel: off, and its threshold around the default
+    points.append(("cof-track", "no step channel", partial(CofTrack, step_s=0.0)))
+    for step_z in (5.5, 6.0, 7.5):
+        points.append(("cof-track", f"step z{step_z:g}", partial(CofTrack, step_z=step_z)))
     if importlib.util.find_spec("sklearn") is not None:  # the optional extra: one model, several decision rules
         learned = bind(get_method("learned")).stream  # the default model, trained here once per process
         for p, hops in ((0.5, 1), (0.7, 1), (0.5, 2), (0.7, 2), (0.5, 3), (0.7, 3)):
@@ -63,5 +70,5 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
 
 
 def defaults() -> dict[str, Callable[..., Any]]:
-    names = ("paper", "paper-coe", "paper-dw", "force-rate", "hf-energy", "cof-velocity", "cof-track")
+    names = ("paper", "paper-coe", "paper-dw", "force-rate", "hf-energy", "cof-velocity", "cof-step", "cof-track")
     return {n: get_method(n).stream for n in names}

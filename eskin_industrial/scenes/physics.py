@@ -61,6 +61,11 @@ def stick_slip(t: np.ndarray, events: tuple[Event, ...], rng: np.random.Generato
     jitter = np.zeros((t.size, 2))
     factor = np.ones_like(t)
     for e in events:
+        if e.kind == "slide" and e.step_hz:
+            moved, ripple = stepped_slide(t, e, rng)
+            jitter += moved
+            factor *= ripple
+            continue
         if e.kind != "slide" or (e.stick_slip_mm == 0 and e.stick_slip_force == 0):
             continue
         active = (t >= e.t_s) & (t < e.end_s)
@@ -75,6 +80,41 @@ def stick_slip(t: np.ndarray, events: tuple[Event, ...], rng: np.random.Generato
         jitter[active] += wobble[:, None] * direction[None, :]
         factor[active] *= 1.0 + e.stick_slip_force * (saw + 0.3 * rng.standard_normal(n))
     return jitter, factor
+
+
+def drawn(values: tuple[float, ...], rng: np.random.Generator) -> float:
+    """One value, or a draw from the range ``[low, high]``."""
+    return float(values[0]) if len(values) == 1 else float(rng.uniform(values[0], values[1]))
+
+
+def stepped_slide(t: np.ndarray, e: Event, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A slide that moves in jumps with rests between them (``step_hz``, ``step_rest``):
+    its offset from the constant-speed path of :func:`slide_offset` (K, 2) and a force
+    factor (K,).
+
+    Each period (``1 / step_hz``, wandering by 20 %; the periods are scaled to fill the
+    slide exactly) starts with a jump, a smooth move over ``1 - step_rest`` of it that
+    covers the period's share of the distance, and rests for the remainder: the slide
+    starts with its first jump (its label's onset) and ends on the spot it would reach.
+    The normal force ripples as the sawtooth of :func:`stick_slip` does, in step with
+    the jumps: it drops at each jump and builds up again while the contact sticks."""
+    hz, rest = drawn(e.step_hz, rng), drawn(e.step_rest, rng)
+    duration = e.end_s - e.t_s
+    count = int(np.ceil(duration * hz * 2.0)) + 2  # enough, however short the periods drawn
+    periods = (1.0 + 0.2 * rng.standard_normal(count)).clip(0.5, 1.5) / hz
+    ends = np.cumsum(periods)
+    n = int(np.searchsorted(ends, duration)) + 1  # periods that reach the slide's end
+    periods = periods[:n] * (duration / ends[n - 1])
+    starts = e.t_s + np.concatenate(([0.0], np.cumsum(periods)[:-1]))
+    active = (t >= e.t_s) & (t < e.end_s)
+    idx = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, n - 1)
+    within = (t - starts[idx]) / periods[idx]  # 0 .. 1 through its period
+    moved = (starts[idx] - e.t_s + periods[idx] * smooth_ramp(within / (1.0 - rest))) / duration
+    linear = np.clip((t - e.t_s) / duration, 0.0, 1.0)
+    offset = np.where(active, moved - linear, 0.0)[:, None] * np.asarray(e.distance_mm)[None, :]
+    saw = 2.0 * within - 1.0
+    ripple = np.where(active, 1.0 + e.stick_slip_force * (saw + 0.3 * rng.standard_normal(t.size)), 1.0)
+    return offset, ripple
 
 
 def taxel_centres(array: ArraySpec) -> tuple[np.ndarray, np.ndarray]:

@@ -66,7 +66,8 @@ class Event:
     - oscillate: force x (1 + amplitude sin 2 pi f t) for ``duration_s`` (variable_force)
     - slide: the footprint moves by ``distance_mm`` at ``speed_mm_s`` (slip); the force
       may change to ``force_n`` meanwhile (a glass slipping out of a grasp); with
-      ``stick_slip_mm = 0`` and ``stick_slip_force = 0`` it is smooth; ``lift_off_per_mm``
+      ``stick_slip_mm = 0`` and ``stick_slip_force = 0`` it is smooth; with ``step_hz``
+      it moves in jumps with rests between them; ``lift_off_per_mm``
       tips the object forward as it starts (partial lift-off)
     - rotate: the footprint turns about its own centre by ``angle_deg`` at
       ``angular_speed_deg_s`` (torsional slip: label slip, the centre stays)
@@ -86,6 +87,16 @@ class Event:
     stick_slip_mm: float = field(default=0.15, metadata=non_negative())
     stick_slip_force: float = field(default=0.04, metadata=non_negative())
     stick_slip_hz: float = field(default=25.0, metadata=positive())
+    #: Stick-slip as discrete jumps (the way it often is: the contact sticks while the
+    #: drive loads it, then jumps): ``step_hz`` jumps a second, the footprint at rest
+    #: for ``step_rest`` of each period and covering the period's share of the slide in
+    #: the rest of it (so the slide keeps its speed, length and label).  Each is one
+    #: value, or a range ``[low, high]`` drawn per seed and slide; the periods wander by
+    #: 20 %.  The force ripple (``stick_slip_force``) then follows the jumps; the
+    #: sawtooth micro-motion (``stick_slip_mm``, ``stick_slip_hz``) is not used.  Empty
+    #: (the default): the smooth slide with the sawtooth.
+    step_hz: tuple[float, ...] = field(default=(), metadata=in_range(0.5, 100.0))
+    step_rest: tuple[float, ...] = field(default=(0.65,), metadata=in_range(0.0, 0.95))
     #: Partial lift-off at slip onset: a pressure gradient (relative change per mm)
     #: along the slide's direction, ramped in over the slide's first ``lift_off_s`` and
     #: out as long after it ends; where 1 + gradient x distance falls below 0 the
@@ -101,6 +112,11 @@ class Event:
             raise ValueError(f"force_n: expected a force for a {self.kind} event")
         if len(self.distance_mm) != 2:
             raise ValueError("distance_mm: expected [x, y]")
+        for key, empty in (("step_hz", True), ("step_rest", False)):
+            value = getattr(self, key)
+            if not (empty or value) or len(value) > 2 or (len(value) == 2 and value[0] > value[1]):
+                raise ValueError(f"{key}: expected one value or a range [low, high]{' (or none)' if empty else ''}, "
+                                 f"got {list(value)}")
 
     @property
     def end_s(self) -> float:
