@@ -970,14 +970,19 @@ def test_the_findings_are_found(plain_run: Run) -> None:
 
 
 def test_the_sizes_in_the_docs_are_a_default_runs(plain_run: Run) -> None:
-    """docs/plant.md's NBIRTH, DBIRTH and median DDATA sizes, within 2 % of the
-    default run's (a version string or a profile key may change a few bytes)."""
+    """docs/plant.md's NBIRTH and DBIRTH sizes within 2 % of the default run's (a
+    version string or a profile key may change a few bytes), its median DDATA within 20 %."""
     text = " ".join((ROOT / "docs" / "plant.md").read_text().split())
     doc = re.search(r"NBIRTH ([\d,]+) bytes, DBIRTH ([\d,]+) .*? DDATA ([\d,]+) bytes median", text)
     assert doc is not None
     nbirth, dbirth, ddata = (int(g.replace(",", "")) for g in doc.groups())
     sizes = {k: [len(m.p.SerializeToString()) for m in plain_run.of(k)] for k in ("NBIRTH", "DBIRTH", "DDATA")}
     live = sorted(sizes["DDATA"])
-    for claimed, measured in ((nbirth, sizes["NBIRTH"][0]), (dbirth, sizes["DBIRTH"][0]),
-                              (ddata, live[len(live) // 2])):
-        assert abs(claimed - measured) <= 0.02 * measured, (claimed, measured)
+    pairs = {"NBIRTH": (nbirth, sizes["NBIRTH"][0]), "DBIRTH": (dbirth, sizes["DBIRTH"][0]),
+             "DDATA median": (ddata, live[len(live) // 2])}
+    # the births are fixed by the configuration; the DDATA median moves with which
+    # metrics a publication carries (what changed since the last), hence its wider margin
+    margin = {"NBIRTH": 0.02, "DBIRTH": 0.02, "DDATA median": 0.2}
+    off = {k: (claimed, measured) for k, (claimed, measured) in pairs.items()
+           if abs(claimed - measured) > margin[k] * measured}
+    assert not off, f"docs/plant.md (claimed, measured): {off}"
