@@ -29,18 +29,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ..profile import ModbusPlcSection
-from . import image
 from .export import (
     JOIN32_DOC,
     Member,
     _bit,
     _name,
-    _published,
-    _span,
-    _written,
-    ident,
+    block_names,
     join32_st,
-    members,
     slip_guard_st,
 )
 from .image import BIT_DOC, BITS
@@ -184,15 +179,8 @@ def plcopen_xml(settings: ModbusPlcSection, name: str, input_word: int = 0, outp
     GVLs as in :func:`~.export.codesys_st`, ``input_word``/``output_word`` the
     ``%IW``/``%QW`` words of the read and the write channel, ``version`` the
     package's (in the file header)."""
-    node = ident(name)
-    gvl = f"GVL_Eskin_{node}"
-    base, wo = settings.base_address, settings.word_order
-    published, written = _published(image.REGISTERS), _written(image.REGISTERS)
-    read = members(published, settings, native="little", method=method)
-    write = members(written, settings, native="little", method=method)
-    in_type, out_type = f"ST_Eskin_{node}_In", f"ST_Eskin_{node}_Out"
-    first_in, n_in = _span(published)
-    first_out, n_out = _span(written)
+    node, gvl, base, wo, read, write, in_type, out_type, first_in, n_in, first_out, n_out = block_names(
+        settings, name, method)
 
     ET.register_namespace("", TC6)
     ET.register_namespace("xhtml", XHTML)
