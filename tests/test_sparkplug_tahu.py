@@ -12,47 +12,25 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
 import signal
 import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from tests.helpers import sparkplug as spb
+from tests.helpers.bridge import wait_for
+from tests.helpers.opcua import need_node_peer
 from tests.helpers.paths import PROFILES, ROOT
 
 pytestmark = pytest.mark.slow
 
 PEER = ROOT / "tests" / "sparkplug_peer"
 UINT32 = 7  #: the one datatype the specification and Tahu's JavaScript codec carry in different fields
-
-
-def _node() -> str:
-    node = shutil.which("node")
-    problem = None
-    if node is None:
-        problem = "node (Node.js) is missing: scripts/setup test installs it from Debian"
-    elif not (PEER / "node_modules" / "sparkplug-payload").is_dir():
-        problem = "tests/sparkplug_peer/node_modules is missing: run scripts/setup test (npm ci)"
-    if problem is not None:
-        if os.environ.get("CI") == "true":
-            pytest.fail(problem)
-        pytest.skip(problem)
-    assert node is not None
-    return node
-
-
-def _wait(what: str, cond: Callable[[], bool], timeout_s: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        assert time.monotonic() < deadline, f"{what}: not seen within {timeout_s} s"
-        time.sleep(0.05)
 
 
 def _same(tahu: Any, ours: Any) -> bool:
@@ -64,7 +42,7 @@ def _same(tahu: Any, ours: Any) -> bool:
 
 
 def test_a_host_on_tahus_codec_reads_a_default_run(tmp_path: Path) -> None:
-    node = _node()
+    node = need_node_peer(PEER, "sparkplug-payload")
     broker = spb.Broker(tmp_path)
     cap = spb.Capture(broker.port, tmp_path / "cap.txt", detail=True)
     url = f"mqtt://127.0.0.1:{broker.port}"
@@ -78,18 +56,18 @@ def test_a_host_on_tahus_codec_reads_a_default_run(tmp_path: Path) -> None:
     reader.start()
     bridge = None
     try:
-        _wait("the host's subscription", lambda: any(x.get("event") == "ready" for x in lines))
+        wait_for(lambda: any(x.get("event") == "ready" for x in lines), 30.0, "the host's subscription")
         bridge = subprocess.Popen(
             [sys.executable, "-m", "eskin_industrial", "bridge", "-p", str(PROFILES / "paper-5x5.toml"),
              "--source", "scene:case2", "--sparkplug", url, "--group-id", "plant1", "--edge-node-id", "cell7"],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
             env={**os.environ, "PYTHONPATH": str(ROOT), "XDG_STATE_HOME": str(tmp_path / "state")})
-        _wait("the slip", lambda: any(x.get("kind") == "DDATA" and any(
-            m["name"] == "State" and m["value"] == "slip" for m in x["metrics"]) for x in lines), 60)
+        wait_for(what="the slip", timeout_s=60.0, cond=lambda: any(x.get("kind") == "DDATA" and any(
+            m["name"] == "State" and m["value"] == "slip" for m in x["metrics"]) for x in lines))
         bridge.send_signal(signal.SIGTERM)
         bridge.wait(20)
-        _wait("NDEATH at the host and at the capture", lambda: any(x.get("kind") == "NDEATH" for x in lines) and any(
-            "/NDEATH/" in t for t, _ in cap.messages()))
+        wait_for(lambda: any(x.get("kind") == "NDEATH" for x in lines) and any(
+            "/NDEATH/" in t for t, _ in cap.messages()), 30.0, "NDEATH at the host and at the capture")
         time.sleep(0.3)
     finally:
         if bridge is not None and bridge.poll() is None:

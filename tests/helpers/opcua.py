@@ -14,6 +14,7 @@ import subprocess
 import threading
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -26,21 +27,27 @@ PEER_DIR = ROOT / "tests" / "opcua_peer"
 NAMESPACE_URI = "urn:eskin-industrial:opcua:grasp"
 
 
-def need_peer() -> str:
-    """The ``node`` executable with the peer's packages installed; a missing one skips
-    the test (fails it in CI: ``CI=true``)."""
+def need_node_peer(peer_dir: Path, package: str) -> str:
+    """The ``node`` executable, with ``package`` installed in ``peer_dir`` (a test-only
+    npm package set, pinned by its lock file); a missing one skips the test (fails it
+    in CI: ``CI=true``)."""
     node = shutil.which("node")
     problem = None
     if node is None:
         problem = "node (Node.js) is missing: scripts/setup test installs it from Debian"
-    elif not (PEER_DIR / "node_modules" / "node-opcua-client").is_dir():
-        problem = "tests/opcua_peer/node_modules is missing: run scripts/setup test (npm ci)"
+    elif not (peer_dir / "node_modules" / package).is_dir():
+        problem = f"{peer_dir.relative_to(ROOT)}/node_modules is missing: run scripts/setup test (npm ci)"
     if problem is not None:
         if os.environ.get("CI") == "true":
             pytest.fail(problem)
         pytest.skip(problem)
     assert node is not None
     return node
+
+
+def need_peer() -> str:
+    """The ``node`` executable with node-opcua installed (:func:`need_node_peer`)."""
+    return need_node_peer(PEER_DIR, "node-opcua-client")
 
 
 class PeerError(AssertionError):
