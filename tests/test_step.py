@@ -26,15 +26,16 @@ def test_streaming_equals_batch(newest: int, gap: int, base: int) -> None:
     rng = np.random.default_rng(1)
     k = 3000  # the sums are renewed from the ring several times on the way
     c = 10 + 0.05 * rng.standard_normal((k, 3)) + np.cumsum(rng.random((k, 3)) < 0.01, axis=0) * 0.3
+    c[:, 2] *= 1.0 + 0.5 * np.sin(np.arange(k) * 2.3)  # (a total that swings: the weights differ)
     test = StepTest(newest, gap, base)
     want = step_batch(c, newest, gap, base)
     for i in range(k):
         test.push(*c[i])
         d = test.difference()
         if d is None:
-            assert np.isnan(want[i]).all() and test.level_change() == 0.0
+            assert np.isnan(want[i]).all() and test.level_change() == 0.0 and test.weight == 0.0
         else:
-            np.testing.assert_allclose([*d, test.level_change()], want[i], rtol=0, atol=1e-12)
+            np.testing.assert_allclose([*d, test.level_change(), test.weight], want[i], rtol=1e-12, atol=1e-12)
     test.reset()
     test.push(1.0, 1.0, 1.0)
     assert test.difference() is None
@@ -59,8 +60,8 @@ def run(f: np.ndarray, **overrides: float) -> tuple[CofTrack, np.ndarray]:
 
 
 def _learnt_and_spread(wander_mm: float, seed: int = 3) -> tuple[float, float, float]:
-    """cof-track's learnt step noise along x, the statistic's own spread, and the
-    white-noise model's, in force units, on an 8 N grip whose centre wanders about its
+    """cof-track's learnt step noise along x times the centres' weight at 8 N, the
+    statistic's own spread, and the white-noise model's, in force units, on an 8 N grip whose centre wanders about its
     place (a first-order process of ``wander_mm`` with a 0.3 s time constant) beside
     the taxels' noise."""
     rng = np.random.default_rng(seed)
@@ -76,7 +77,7 @@ def _learnt_and_spread(wander_mm: float, seed: int = 3) -> tuple[float, float, f
     jumps = det._jumps
     d = step_batch(seen, jumps.newest, jumps.gap, jumps.base)[1000:, 0]
     white = float(np.var(np.diff(seen[:, 0]))) / 2.0 * (1 / jumps.newest + 1 / jumps.base)
-    return det._step_vx, float(np.nanvar(d)) * 64.0, white * 64.0
+    return det._step_vx * (1 / jumps.newest + 1 / jumps.base), float(np.nanvar(d)) * 64.0, white * 64.0
 
 
 def test_its_noise_is_its_own_where_the_centre_wanders() -> None:
@@ -147,3 +148,35 @@ def test_a_profile_can_turn_it_off_and_refuses_a_threshold_out_of_range() -> Non
     with pytest.raises(ProfileError, match=r"step_z: expected a value in \[3, 12\]"):
         parse_profile(text + "\n[detector.cof_track]\nstep_z = 1.0\n", "p.toml")
     assert replace(DEFAULT_SETTINGS.cof_track, step_z=7.0).step_z == 7.0
+
+
+
+def test_a_total_shaken_between_light_and_firm_weighs_each_centre_by_its_own() -> None:
+    """The hand's light hold (`hand-hold`, about 3 N) shaken by 2 N of machine vibration
+    at 37 Hz from 3 s on: its total swings between 1 and 5 N from one frame to the next,
+    and a centre taken at the light end is several times noisier than one at the firm
+    end.  The step channel weighs each centre by its own total, and raises no slip of
+    its own there (as many false alarms as without the channel); scaled by the newest
+    total alone, as it once was, the same differences cross its threshold."""
+    from eskin_industrial.evaluation import conditions
+    from eskin_industrial.evaluation.metrics import score_scene
+    from eskin_industrial.evaluation.suite import coordinates, run_one
+    from eskin_industrial.scenes import load_scene, render
+
+    r = render(conditions.vibration_onset(2.0)(load_scene("hand-hold")), RATE, 0)
+    off = replace(DEFAULT_SETTINGS, cof_track=replace(DEFAULT_SETTINGS.cof_track, step_s=0.0))
+    alarms = [score_scene(run_one(CofTrack, settings, r)[0], r.t, r.labels).false_alarms
+              for settings in (DEFAULT_SETTINGS, off)]
+    assert alarms[0] <= alarms[1]
+    x, y = coordinates(r)
+    det = CofTrack(DEFAULT_SETTINGS, x, y, RATE)
+    det.feed(r.t, r.forces)
+    s = r.forces.sum(axis=1)
+    held = (s > 0.5) & (r.t > 4.0) & (r.labels == "stable")
+    seen = np.column_stack([r.forces @ x / np.maximum(s, 1e-9), r.forces @ y / np.maximum(s, 1e-9), np.maximum(s, 1e-9)])
+    jumps = det._jumps
+    out = step_batch(seen, jumps.newest, jumps.gap, jumps.base)
+    q = np.array([det._noise_x, det._noise - det._noise_x])  # (the learnt noise, force units)
+    unweighted = (out[:, :2] ** 2 / q).sum(axis=1) * s ** 2 / (1 / jumps.newest + 1 / jumps.base)
+    weighted = (out[:, :2] ** 2 / q).sum(axis=1) / out[:, 3]
+    assert (np.sqrt(unweighted[held]) > det._step_z).sum() > 3 * max(1, (np.sqrt(weighted[held]) > det._step_z).sum())

@@ -29,8 +29,9 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
            the distribution's rotational flow about the CoF (a turn about the normal
            keeps the CoF and the total); only while the force is steady
     j    = the step channel (detect/step.py): the newest 20 ms of the CoF against its
-           mean over the half-second that ended 100 ms earlier, against the difference's
-           own learnt noise (never below white noise's share of q), with e added as for
+           mean over the half-second that ended 100 ms earlier, each centre weighed by
+           its own total, against the difference's own learnt noise (never below
+           q's), with e added as for
            the ramp; taken into r (r = max(r, j)).  Its silence for a varying force is
            the ramp's rule on the force's level (0.1 s and 0.5 s means): a stick-slip
            ripple about a constant level, which the 30 ms means of the ramp's silence
@@ -42,7 +43,7 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
 
 The cost per frame is one 4-column matrix product (the total, the centre of force and
 the torsion channel's projection), three running sums per ramp horizon, a ring of
-squared changes for the evidence, six running sums for the step channel and a few
+squared changes for the evidence, eight running sums for the step channel and a few
 scalar operations (the torsion channel's
 angle once per 40 ms, its template once per 0.25 s): the
 same at 100 Hz and at 1 kHz.  The scores (score_a, score_b) are max(a, r, t) and b (1 = threshold).
@@ -116,14 +117,13 @@ class CofTrack(ScoredDetector):
                               max(1, round(c.step_base_s * rate_hz))) if c.step_s > 0 else None
         self._step_z = c.step_z
         self._step_cap = 0.5 * max(0.0, c.step_z ** 2 - c.ramp_support_z ** 2)
-        self._step_vx = self._step_vy = 0.0  # its learnt noise per axis (N^2 mm^2, like q)
+        # its learnt noise per axis in force units (N^2 mm^2, like q): d^2 / w, which
+        # white noise makes q's own; the learning starts at q, counted as a base's worth
+        # of samples, and never goes below it (a few hundred correlated differences
+        # alone came out low at times: a grip's first seconds raised false alarms)
+        self._step_vx = self._step_vy = 0.0
         self._step_learnt = 0
-        # white noise's share of it: the frame noise q times this (1 / J + 1 / B); the
-        # learning starts there, counted as a base's worth of samples, and never goes
-        # below it (a few hundred correlated differences alone came out low at times:
-        # a grip's first seconds raised false alarms)
         jumps = self._jumps
-        self._step_white = (1.0 / jumps.newest + 1.0 / jumps.base) if jumps is not None else 0.0
         self._step_prior = jumps.base if jumps is not None else 0
         # the step's silence for a varying force (below), squared: the change that counts
         # as varying per newton of grip, and the level change's noise per unit of the
@@ -329,17 +329,17 @@ class CofTrack(ScoredDetector):
             level_open = calm_level > self._steady_n
             if hop_end and level_open and self._step_learnt and step.ready:
                 # (the step's score, written out: a call a frame at 100 Hz) against its learnt
-                # noise per axis, never below white noise's share of q; the evidence added
-                # (capped: the step must reach ramp_support_z itself); the displacement floor
+                # noise per axis, never below q's, times the centres' weight; the evidence
+                # added (capped: the step must reach ramp_support_z itself); the
+                # displacement floor
                 if raw < 0.0:
                     raw = self._evidence()
                 vx, vy = self._step_vx, self._step_vy
                 qx = self._noise_x
-                white = self._step_white
-                if qx * white > vx:
-                    vx = qx * white
-                if (noise - qx) * white > vy:
-                    vy = (noise - qx) * white
+                if qx > vx:
+                    vx = qx
+                if noise - qx > vy:
+                    vy = noise - qx
                 floor = 0.0025 * (vx + vy)  # (a constant axis, a strip's y, stays harmless)
                 if not vx > floor:
                     vx = floor
@@ -349,7 +349,7 @@ class CofTrack(ScoredDetector):
                     jx, jy = step.dx, step.dy
                     if raw > self._step_cap:
                         raw = self._step_cap
-                    rs = math.sqrt((jx * jx / vx + jy * jy / vy) * s * s + 2.0 * raw) / self._step_z
+                    rs = math.sqrt((jx * jx / vx + jy * jy / vy) / step.weight + 2.0 * raw) / self._step_z
                     if rs > r:  # (else min(rs, mm) cannot raise r: mm is not needed)
                         lim = self.ramp_min
                         if lim > 0.0:
@@ -412,18 +412,18 @@ class CofTrack(ScoredDetector):
             if rip_d2 is not None:
                 self._rnoise += gain * (rip_d2 - self._rnoise)
             if level_open and step is not None and step.ready:  # the step's own noise (force units)
-                if not self._step_learnt:  # (white noise's share to start from)
-                    self._step_vx = self._noise_x * self._step_white
-                    self._step_vy = (self._noise - self._noise_x) * self._step_white
+                if not self._step_learnt:  # (white noise's, q, to start from)
+                    self._step_vx = self._noise_x
+                    self._step_vy = self._noise - self._noise_x
                     self._step_learnt = self._step_prior
                 learnt = self._step_learnt = self._step_learnt + 1
                 g = 1.0 / learnt
                 if g < self._a_noise:
                     g = self._a_noise
-                s2 = s * s
+                inv = 1.0 / step.weight
                 jx, jy = step.dx, step.dy
-                self._step_vx += g * (jx * jx * s2 - self._step_vx)
-                self._step_vy += g * (jy * jy * s2 - self._step_vy)
+                self._step_vx += g * (jx * jx * inv - self._step_vx)
+                self._step_vy += g * (jy * jy * inv - self._step_vy)
             if profile is not None:
                 profile.calm()
         if tr > r:
