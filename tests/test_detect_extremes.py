@@ -100,6 +100,24 @@ def test_the_reported_cases(paper_profile, name):
     run_both(METHODS[name], paper_profile, t2, grasp(600, N, seed=3))
 
 
+def test_a_first_frame_with_no_time_refuses_only_itself(paper_profile):
+    """A first time of 1e10 s (no time: past the limit) and, later, one that falls back
+    to 0: the batch rule once took the NaN it kept for "no newest time yet" as the
+    newest, refused the second frame too, and its updates fell one frame off the
+    stream's (found by the test above)."""
+    t = np.arange(K) / RATE
+    t[0], t[60] = 1e10, 0.0
+    verdicts = time_verdicts(t)
+    assert verdicts[0] == TIME_FAULTS_CODE["not_a_time"] and verdicts[60] == TIME_FAULTS_CODE["backward_time"]
+    assert (np.delete(verdicts, [0, 60]) == 0).all()
+    f = grasp(K, N, seed=5, noise=0.02)
+    for name in FAST:
+        assert len(run_both(METHODS[name], paper_profile, t, f))  # (stream and batch the same updates)
+
+
+TIME_FAULTS_CODE = {name: code for code, name in TIME_FAULTS.items()}
+
+
 def test_time_refusals_are_counted_by_kind_the_same_in_stream_and_batch(paper_profile):
     t = np.arange(1000) / RATE
     t[100] = math.nan

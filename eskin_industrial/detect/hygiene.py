@@ -54,11 +54,12 @@ def time_verdicts(t: np.ndarray) -> np.ndarray:
     if t.size and -TIME_LIMIT_S < t[0] and t[-1] < TIME_LIMIT_S and (np.diff(t) > 0).all():
         return np.zeros(t.shape, np.int8)  # the usual recording: every time after the one before
     ok = np.abs(t) < TIME_LIMIT_S  # False for NaN
-    # the newest kept time before each frame; fmax skips NaN, so a time that is none
-    # never becomes it
+    # the newest kept time before each frame: a time that is none counts as -inf, so
+    # it never becomes it (NaN would: a first frame with no time left NaN as the
+    # newest, and the next, a good time, was then refused as backward)
     newest = np.full(t.shape, -np.inf)
     if t.size > 1:
-        newest[1:] = np.fmax.accumulate(np.where(ok, t, np.nan)[:-1])
+        newest[1:] = np.maximum.accumulate(np.where(ok, t, -np.inf)[:-1])
     out = np.full(t.shape, TIME_BACKWARD, np.int8)
     out[t > newest] = TIME_KEPT
     out[t == newest] = TIME_REPEATED
