@@ -82,6 +82,12 @@ def test_the_asyncua_client_reads_what_node_opcua_reads(paper_profile) -> None:
     async def read_all(url: str) -> dict[str, ua.DataValue]:
         async with Client(url, timeout=10) as client:
             ns = await client.get_namespace_index(NAMESPACE_URI)
+            # the server shows a scan at the output's next publication, not the instant
+            # the loop counts it: wait for the last one to be shown (a loaded host read 146)
+            scans = client.get_node(f"ns={ns};s=grip.Counters.Scans")
+            deadline = time.monotonic() + 10
+            while (await scans.read_value()) != 150 and time.monotonic() < deadline:
+                await asyncio.sleep(0.05)
             out = {}
             for v in model.VARIABLES:
                 out[v.path] = await client.get_node(f"ns={ns};s=grip.{v.path.replace('/', '.')}").read_data_value(

@@ -11,7 +11,9 @@ is set (CI must not pass by skipping).
 """
 from __future__ import annotations
 
+import fcntl
 import functools
+import json
 import os
 import shlex
 import shutil
@@ -54,7 +56,25 @@ def _ci() -> bool:
 
 
 @pytest.fixture(scope="session")
-def vm_results() -> dict[str, GuestOutcome]:
+def vm_results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, GuestOutcome]:
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if worker is None:
+        return _boot_and_run()
+    # with workers (pytest-xdist), one machine for the run: the first worker to need it
+    # boots it and writes the outcomes beside the workers' temporary folders (their
+    # common parent is this run's own); the others wait on the lock and read them
+    shared = tmp_path_factory.getbasetemp().parent / "vcan-outcomes.json"
+    with open(shared.with_suffix(".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if shared.exists():
+            return {k: GuestOutcome(*v) for k, v in json.loads(shared.read_text()).items()}
+        results = _boot_and_run()
+        shared.write_text(json.dumps({k: [v.status, v.message] for k, v in results.items()}))
+        return results
+
+
+def _boot_and_run() -> dict[str, GuestOutcome]:
+    """Boot the machine, run ``pytest tests/vcan`` in it: each test's outcome by node id."""
     out = vm.CACHE / f"run-{os.getpid()}"
     run = vm.run_in_vm(
         f"{shlex.quote(sys.executable)} -m pytest -q -p no:cacheprovider -p no:hypothesispytest tests/vcan "
