@@ -132,10 +132,16 @@ def trees_from_sklearn(clf: Any) -> TreeEnsemble:
     return TreeEnsemble(feature, threshold, table, init)
 
 
-@lru_cache(maxsize=4)
 def default_model(config: TrainConfig = TrainConfig()) -> TreeEnsemble:
     """The model ``learned`` runs with unless given another: trained once per process
-    (methods are handed it by ``binding.bind``)."""
+    (methods are handed it by ``binding.bind``).  The extra is checked at every call,
+    so that the method needs it alike whether or not this process trained already."""
+    require_sklearn()
+    return _trained(config)
+
+
+@lru_cache(maxsize=4)
+def _trained(config: TrainConfig) -> TreeEnsemble:
     return fit(config)
 
 
