@@ -92,3 +92,34 @@ def test_every_exit_code_is_distinct_in_its_cause_and_listed_in_cli_md():
     assert "--idle-exit" in listed[6]
     others = {c.exit_code for c in _subclasses(EskinError) if c not in (SocketCanMissing, NothingReceived)}
     assert not {5, 6} & others
+
+
+@pytest.mark.parametrize("command", [["receive", "-q"], ["monitor", "--plain"]])
+def test_a_reader_thread_that_dies_stops_the_command_in_one_line(monkeypatch, command):
+    """The CAN reader ending by an exception no bus error explains (a bug, a library's
+    surprise): the command stops at once with one line naming the thread and the
+    error, exit 1, instead of running on with nothing behind its verdicts (the
+    bridge's thread watch, in the commands that run one node in the foreground)."""
+    import threading
+    import time
+
+    from click.testing import CliRunner
+
+    from eskin_industrial.bus.can.reader import BusReader
+    from eskin_industrial.cli import main
+
+    def broken(self: BusReader) -> None:
+        time.sleep(0.2)
+        raise RuntimeError("reader broke")
+
+    monkeypatch.setattr(BusReader, "_run", broken)
+    hook = threading.excepthook
+    start = time.monotonic()
+    res = CliRunner().invoke(main, [command[0], "-p", "paper-5x5", "-i", "virtual", "-c", "dies-here", "--duration",
+                                    "20", *command[1:]])
+    assert time.monotonic() - start < 10, "it ran on"
+    assert res.exit_code == EskinError.exit_code == 1, res.output
+    assert threading.excepthook is hook  # (put back)
+    last = res.output.strip().splitlines()[-1]
+    assert last == (f"eskin-bus: error: {command[0]} stopped: thread can-reader died: RuntimeError: reader broke"), \
+        res.output

@@ -96,7 +96,13 @@ def open_nodes(config: BridgeConfig, nodes: list[ResolvedNode], closers: list[Ca
 class SingleNode:
     """One node's loop on the caller's thread, for the commands that run one node in
     the foreground (``modbus-bridge``, ``receive``, ``monitor``, ``demo``): the same
-    configuration, the same wiring and the same loop as the bridge."""
+    configuration, the same wiring and the same loop as the bridge.  Inside ``with``,
+    a helper thread that ends by an exception (the CAN reader, an output's) stops the
+    loop and leaves :attr:`failure` set, as the bridge's thread watch does: no command
+    goes on deciding with a source or an output gone."""
+
+    #: why the run was stopped: a thread that died ("" while none did)
+    failure = ""
 
     def __init__(self, config: BridgeConfig, node: ResolvedNode, *, extra_sinks: Sequence[Sink] = (),
                  default_output: bool = True, all_frames: bool = False, **loop_kw: Any) -> None:
@@ -114,6 +120,8 @@ class SingleNode:
     def __enter__(self) -> SingleNode:
         self._switch_interval = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)  # the reader thread, not the loop, comes first
+        self._excepthook = threading.excepthook
+        threading.excepthook = self._thread_died
         self.source.start()
         return self
 
@@ -124,6 +132,15 @@ class SingleNode:
             self.offline_written = all([sink.flush() for sink in self.loop.sinks])
             self.close()
             sys.setswitchinterval(self._switch_interval)
+            threading.excepthook = self._excepthook
+
+    def _thread_died(self, args: threading.ExceptHookArgs) -> None:
+        if args.exc_type is SystemExit:
+            return
+        name = args.thread.name if args.thread is not None else "-"
+        if not self.failure:
+            self.failure = f"thread {name} died: {args.exc_type.__name__}: {args.exc_value}"
+        self.loop.stop()
 
     def close(self) -> None:
         """Close everything opened; safe to call twice."""

@@ -137,7 +137,7 @@ def modbus_bridge(profile_path: str, rtu_port: str | None, recording: str | None
             next_status = time.monotonic() + status_every if status_every else None
             usr1 = 0
             with single:
-                while not flags.reason and (end is None or time.monotonic() < end):
+                while not flags.reason and not single.failure and (end is None or time.monotonic() < end):
                     loop.step()
                     if flags.counters != usr1:
                         usr1 = flags.counters
@@ -151,6 +151,9 @@ def modbus_bridge(profile_path: str, rtu_port: str | None, recording: str | None
     finally:
         package_log.removeHandler(lines)
         package_log.setLevel(level)
+    if single.failure:
+        _say(f"eskin-bus: error: modbus-bridge stopped: {single.failure}")
+        sys.exit(EXIT_FAILED)
     if flags.failing:
         sys.exit(EXIT_FAILED)
 

@@ -35,6 +35,7 @@ def monitor(profile_path: str, interface: str | None, channel: str | None, bitra
     from ..bridge.config import BridgeConfig, NodeConfig, resolve
     from ..bridge.runtime import SingleNode
     from ..detect.updates import Update
+    from ..errors import EskinError
     from ..plc.kept import KeptRegisters
     from ..view.live import Watch, change_line, live_screen
     from ..view.snapshot import RegisterTable
@@ -91,5 +92,7 @@ def monitor(profile_path: str, interface: str | None, channel: str | None, bitra
                f"scans {c.get('scans', 0)}, lost {c.get('lost_scans', 0)}, torn {c.get('torn_scans', 0)}, "
                f"malformed {c.get('malformed_frames', 0)}, rx queue drops {c.get('rx_queue_drops', 0)}, "
                f"bus errors {c.get('bus_errors', 0)}, state changes {c.get('state_changes', 0)}")
+    if single.failure:
+        raise EskinError(f"monitor stopped: {single.failure}")
     if ended == "silent" and idle_s is not None:
         raise nothing_received(prof, where, idle_s)

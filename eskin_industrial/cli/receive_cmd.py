@@ -41,6 +41,7 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
     The same source and loop as ``eskin-bus bridge --source can``."""
     from ..bridge.config import BridgeConfig, NodeConfig, resolve
     from ..bridge.runtime import SingleNode
+    from ..errors import EskinError
     from ..sinks.recorder import RecorderOptions
 
     if can_log is None:
@@ -74,5 +75,7 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
         if source.assembler.status is not None:
             summary["node_rate_hz"] = source.assembler.status.rate_hz
         click.echo(json.dumps(summary), err=True)
+    if single.failure:
+        raise EskinError(f"receive stopped: {single.failure}")
     if ended == "silent" and idle_s is not None:
         raise nothing_received(resolved.profile, where, idle_s)
