@@ -18,8 +18,8 @@ A centre's noise scales as 1 / S, so ``d``'s variance is ``w`` times the noise i
 force units, each centre weighed with its own total as the ramp weighs its samples:
 under a machine's vibration the total swings between 1 and 5 N within two frames, and
 a centre taken at the light end, scaled by the newest total as if it were as sure as
-that one, read as a jump of 6 standard deviations (20 false slips on a light hold
-shaken at 37 Hz, none with the weights).  The noise is the statistic's own, not one
+that one, read as a jump of 6 to 7 standard deviations (20 false slips on a light
+hold shaken at 37 Hz; 2 with the weights, as many as without the channel).  The noise is the statistic's own, not one
 derived from the frame-to-frame noise under a white-noise model: the base spans
 0.6 s, and whatever wanders the CoF over that time (a light grip's sway, a slow
 drift) widens ``d`` but not the frame-to-frame steps.  ``e`` is the same evidence the
