@@ -122,7 +122,12 @@ class SingleNode:
         sys.setswitchinterval(SWITCH_INTERVAL_S)  # the reader thread, not the loop, comes first
         self._excepthook = threading.excepthook
         threading.excepthook = self._thread_died
-        self.source.start()
+        try:
+            self.source.start()
+        except BaseException:  # (no __exit__ follows a failed __enter__: put back what it changed)
+            threading.excepthook = self._excepthook
+            sys.setswitchinterval(self._switch_interval)
+            raise
         return self
 
     def __exit__(self, *exc: object) -> None:

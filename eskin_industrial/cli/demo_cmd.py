@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 from dataclasses import replace
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, TextIO, TypeVar
 
 import click
 import numpy as np
@@ -23,6 +23,8 @@ if TYPE_CHECKING:
 #: The methods' names, without importing the detectors at start-up.
 _METHODS = ("paper", "paper-coe", "paper-dw", "force-rate", "hf-energy", "cof-velocity", "cof-track", "learned",
             "none")
+
+T = TypeVar("T")
 
 
 @click.command()
@@ -129,17 +131,8 @@ def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> De
         watches.append(watch)
         return live_screen(watch, stdout, color_wanted())
 
-    try:
-        res = run_demo(prof, rec, say, (lambda line: kept.append(f"    PLC {line}")) if plc_log else None,
-                       live=view)
-    except KeyboardInterrupt:  # the view has restored the terminal: say what was seen
-        for line in kept:
-            click.echo(line)
-        click.echo("demo: interrupted", err=True)
-        sys.exit(130)
-    for line in kept:
-        click.echo(line)
-    return res
+    return _then_echo(kept, lambda: run_demo(prof, rec, say, (lambda line: kept.append(f"    PLC {line}"))
+                                             if plc_log else None, live=view))
 
 
 def _closed_loop(objects: tuple[str, ...], profile_path: str | None, rate_hz: float, seed: int, plain: bool,
@@ -218,14 +211,21 @@ def _cell_live(objects: tuple[str, ...], seed: int, method: str, chain: ChainSpe
         watches.append(watch)
         return live_screen(watch, stdout, color_wanted())
 
+    return _then_echo(kept, lambda: run_objects(objects, seed, method, chain, profile_for, say,
+                                                (lambda line: kept.append(f"    PLC {line}")) if plc_log else None,
+                                                live=view))
+
+
+def _then_echo(kept: list[str], run: Callable[[], T]) -> T:
+    """``run()``, then the lines it kept (printed once the live view has left the
+    screen), also when Ctrl-C ends it (then exit 130)."""
     try:
-        runs = run_objects(objects, seed, method, chain, profile_for, say,
-                           (lambda line: kept.append(f"    PLC {line}")) if plc_log else None, live=view)
-    except KeyboardInterrupt:
+        out = run()
+    except KeyboardInterrupt:  # the view has restored the terminal: say what was seen
         for line in kept:
             click.echo(line)
         click.echo("demo: interrupted", err=True)
         sys.exit(130)
     for line in kept:
         click.echo(line)
-    return runs
+    return out
