@@ -11,7 +11,7 @@ import click
 
 from ..errors import DeprecatedKey, EskinError
 from .bridge_cmd import bridge
-from .console import add_envvars, add_global_verbosity, add_verbosity
+from .console import add_envvars, add_global_verbosity, add_verbosity, sigterm_as_interrupt
 from .demo_cmd import demo
 from .detect_cmd import detect
 from .evaluate_cmd import evaluate_cmd
@@ -65,6 +65,7 @@ def main(ctx: click.Context, debug: bool) -> None:
     """Electronic-skin tactile arrays on industrial grippers: decode, detect slip, tell the PLC."""
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
+    sigterm_as_interrupt(ctx)  # SIGTERM as Ctrl-C: each long command's own clean end
     warnings.showwarning = _one_line_warning
     warnings.simplefilter("always", DeprecatedKey)  # each moved key of each file, every time
 

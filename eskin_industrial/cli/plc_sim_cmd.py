@@ -37,9 +37,9 @@ def plc_sim(profile_path: str, host: str, port: int | None, rtu_port: str | None
     sim = PlcSimulator(plc, host, port or plc.port, gripper=Gripper(step_n=grip_step),
                        echo=lambda s: click.echo(s), serial=serial)
     sim.start()
-    click.echo(f"plc-sim: listening on {sim.server.where}, registers from {plc.base_address} "
-               f"(40001 + {plc.base_address}), grip force {sim.gripper.force_n:g} N", err=True)
-    try:
+    try:  # from the start line on, Ctrl-C or SIGTERM end with the summary
+        click.echo(f"plc-sim: listening on {sim.server.where}, registers from {plc.base_address} "
+                   f"(40001 + {plc.base_address}), grip force {sim.gripper.force_n:g} N", err=True)
         if duration_s is None:
             while True:
                 time.sleep(1.0)

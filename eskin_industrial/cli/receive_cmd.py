@@ -60,12 +60,12 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
     single = SingleNode(cfg, resolved, default_output=False, all_frames=True)  # a bus that cannot be opened: one line, exit 3 (5: no SocketCAN)
     loop, source = single.loop, cast("CanSource", single.loop.source)  # the node's source is "can" or "can-log"
     ended, where = "", source.describe_where()
-    if not quiet:
-        layout = source.assembler.layout
-        click.echo(f"eskin-bus: receiving {resolved.profile.name} on {where} "
-                   f"({layout.segments} frame{'s' if layout.segments > 1 else ''} per scan)", err=True)
     with single:
-        try:
+        try:  # from the start line on, Ctrl-C or SIGTERM end with the counters
+            if not quiet:
+                layout = source.assembler.layout
+                click.echo(f"eskin-bus: receiving {resolved.profile.name} on {where} "
+                           f"({layout.segments} frame{'s' if layout.segments > 1 else ''} per scan)", err=True)
             ended = loop.run(duration_s=duration_s, idle_timeout_s=idle_s, max_scans=max_scans)
         except KeyboardInterrupt:
             pass
