@@ -76,13 +76,15 @@ def add_global_verbosity(root: click.Group) -> None:
     root.params.extend([_verbose_option(), _quiet_option()])
 
 
-def add_verbosity(cmd: click.Command) -> None:
-    """Give ``cmd`` (and every command under a group) ``-v/--verbose`` and
-    ``-q/--quiet``, unless it has them already."""
+def add_verbosity(cmd: click.Command, root: bool = True) -> None:
+    """Give ``cmd`` (and every command under a group, and the group itself but the
+    root: ``eskin-bus plc -q map``) ``-v/--verbose`` and ``-q/--quiet``, unless it has
+    them already.  The root's are :func:`add_global_verbosity`'s."""
     if isinstance(cmd, click.Group):
         for sub in cmd.commands.values():
-            add_verbosity(sub)
-        return
+            add_verbosity(sub, root=False)
+        if root:
+            return
     taken = {opt for p in cmd.params for opt in getattr(p, "opts", [])}
     for p in cmd.params:
         if "-q" in getattr(p, "opts", []) and p.callback is None:

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, TextIO, TypeVar
 import click
 import numpy as np
 
+from ..methods import method_names
 from .common import open_profile
 
 if TYPE_CHECKING:
@@ -20,9 +21,6 @@ if TYPE_CHECKING:
     from ..sim.demo import DemoResult
     from ..view.terminal import LiveScreen
 
-#: The methods' names, without importing the detectors at start-up.
-_METHODS = ("paper", "paper-coe", "paper-dw", "force-rate", "hf-energy", "cof-velocity", "cof-track", "learned",
-            "none")
 
 T = TypeVar("T")
 
@@ -39,7 +37,7 @@ T = TypeVar("T")
 @click.option("--closed-loop", is_flag=True,
               help="The closed loop instead of a scene: the gripper reacts and the object is held or dropped "
                    "(docs/cell.md).")
-@click.option("-m", "--method", type=click.Choice(_METHODS), default=None,
+@click.option("-m", "--method", type=click.Choice(method_names()), default=None,
               help="The bridge's detection method (default: the profile's; 'none' never reports slip: the fixed "
                    "light grip).")
 @click.option("--object", "objects", multiple=True, metavar="NAME",

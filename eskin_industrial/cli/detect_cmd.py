@@ -30,7 +30,7 @@ from .console import PROGRESS_DELAY_S, Counter, Ticker
                    "(candump -L can0 | eskin-bus detect -p P --can-log -).")
 @click.option("-o", "--output", default="-", type=click.Path(dir_okay=False, allow_dash=True), show_default=True,
               help="Output CSV, one row per detector update ('-' for stdout).")
-@click.option("--method", type=click.Choice(sorted(method_names())), default=None,
+@click.option("-m", "--method", type=click.Choice(sorted(method_names())), default=None,
               help="Detection method (default: the profile's).")
 @click.option("--rate", "rate_hz", type=float, default=None,
               help="Sample rate in Hz (default: from the timestamps; the profile's if there are too few).")

@@ -33,7 +33,7 @@ from pymodbus.exceptions import ModbusException
 from pymodbus.pdu import ModbusPDU
 from pymodbus.server import ModbusTcpServer
 
-from ..errors import EskinError, ModbusFault
+from ..errors import EskinError, ListenError, ModbusFault
 from ..netaddr import listen_problem
 from .pdu import RegisterHandler, Table
 from .rtu_frame import intact
@@ -108,8 +108,8 @@ class RegisterServer:
         if self._error is not None:
             # pymodbus says only "please check address": try the bind ourselves for why
             problem = listen_problem(*self.tcp)
-            if problem:
-                raise EskinError(f"modbus server: {problem}")
+            if problem:  # a port in use: a setting to change, exit 2 (as the bridge's server)
+                raise ListenError(f"modbus server: {problem}")
             raise EskinError(f"modbus server ({self.where}): cannot listen: {self._error}")
         return self
 
