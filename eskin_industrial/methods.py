@@ -13,20 +13,32 @@ neither 0 (no method) nor another method's: a plug-in that breaks either rule is
 refused with one line naming it, never silently given another number.  A plug-in
 never replaces a built-in method of the same name.
 
+A plug-in's settings (``Method.settings``, a frozen dataclass) are read from
+``[detector.<key>]`` of a profile (``key``: its name with ``-`` as ``_``), checked
+like every section: :func:`section_class` tells the profile loader which class a
+section is, so that the plug-in is imported only when a profile names it.  The key
+must not be one of ``[detector]``'s own.
+
 This lookup sits above ``detect`` (the numeric core reads no entry points) and below
 everything that names a method: profiles, the evaluation, the outputs, the commands.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import functools
 from collections.abc import Callable
 from typing import Any
 
 from .detect.methods import METHODS, Method
+from .detect.settings import DetectorSettings
 from .errors import ProfileError
 from .registry import METHOD_GROUP, load_attr, plugins
+from .schema import SchemaError, build
+
+#: The keys of ``[detector]`` itself and its built-in sections (no plug-in's section).
+_DETECTOR_KEYS = frozenset(f.name for f in dataclasses.fields(DetectorSettings))
 
 
 def method_names() -> list[str]:
@@ -61,7 +73,22 @@ def _plugin(name: str) -> Method:
     if method.code in taken:
         raise ProfileError(f"{where}: code {method.code} is already {taken[method.code]!r}'s METHOD_ID; "
                            f"give the plug-in a number of its own (the built-in ones use 1..{max(taken)})")
+    if method.settings is not None:
+        _check_settings(method, where)
     return method
+
+
+def _check_settings(method: Method, where: str) -> None:
+    cls = method.settings
+    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls) and cls.__dataclass_params__.frozen):  # type: ignore[attr-defined]
+        raise ProfileError(f"{where}: its settings must be a frozen dataclass, got {cls!r}")
+    if not method.key.isidentifier() or method.key in _DETECTOR_KEYS:
+        raise ProfileError(f"{where}: its settings cannot be [detector.{method.key}] (a key of [detector] itself, "
+                           f"or no TOML key); give the Method a section of its own")
+    try:
+        build(cls, {}, f"detector.{method.key}")
+    except SchemaError as exc:
+        raise ProfileError(f"{where}: its settings need a default for every key ({exc})") from None
 
 
 def _plugins_checked() -> dict[str, Method]:
@@ -94,6 +121,27 @@ def all_methods() -> dict[str, Method]:
     return {**METHODS, **_plugins_checked()}
 
 
+def is_builtin(name: str) -> bool:
+    """``name`` is a built-in method's (a plug-in never replaces one)."""
+    return name in METHODS
+
+
+def section_class(owner: type, key: str) -> type | None:
+    """The settings dataclass of the plug-in method whose section is ``[detector.<key>]``
+    (None: no installed plug-in's), for the profile loader (``schema.build``'s ``sections``)."""
+    if owner is not DetectorSettings:
+        return None
+    for name in plugins(METHOD_GROUP):
+        if name not in METHODS and name.replace("-", "_") == key:
+            method = get_method(name)
+            if method.settings is not None and method.key == key:
+                return method.settings
+    for method in _plugins_checked().values():  # a plug-in that names its section itself
+        if method.settings is not None and method.key == key:
+            return method.settings
+    return None
+
+
 def method_of_code(code: int) -> Method | None:
     """The method with this METHOD_ID register value (None: 0 or unknown)."""
     return next((m for m in all_methods().values() if m.code == code), None)
@@ -105,4 +153,5 @@ def method_of_stream(factory: Callable[..., Any]) -> Method | None:
     return next((m for m in all_methods().values() if factory is m.stream), None)
 
 
-__all__ = ["all_methods", "detector_names", "get_method", "method_of_code", "method_of_stream", "method_names"]
+__all__ = ["all_methods", "detector_names", "get_method", "method_of_code", "method_of_stream", "method_names",
+           "is_builtin", "section_class"]

@@ -376,10 +376,15 @@ class Profile:
         for index in cal.overrides:
             if int(index) >= n:
                 raise SchemaError(f"calibration.overrides.{index}", f"expected a taxel index below {n}")
-        from .methods import method_names  # the registry imports detectors, not profiles
+        from .methods import get_method, is_builtin, method_names  # the registry imports detectors, not profiles
 
         if self.detector.method not in (known := method_names()):
             raise SchemaError("detector.method", f"expected one of {', '.join(sorted(known))}, got {self.detector.method!r}")
+        method = get_method(self.detector.method)
+        if not is_builtin(method.name) and method.settings is not None and method.key not in dict(self.detector.plugins):
+            # a plug-in's section the file leaves out: its defaults, shown and published like a built-in's
+            det = self.detector.with_section(method.key, method.settings_of(self.detector))
+            object.__setattr__(self, "detector", det)
         try:
             geo = self.detector.geometry(self.sensor.rate_hz)
         except (ValueError, OverflowError):
@@ -473,6 +478,8 @@ def load_profile(path: str | Path, base: Path | None = None) -> Profile:
 
 
 def parse_profile(text: str, source: str = "<profile>") -> Profile:
-    profile = parse_toml(Profile, text, source, MOVED_KEYS)
+    from .methods import section_class  # (a plug-in method's [detector.<key>])
+
+    profile = parse_toml(Profile, text, source, MOVED_KEYS, section_class)
     object.__setattr__(profile, "source", source)
     return profile
