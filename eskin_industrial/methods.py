@@ -121,22 +121,18 @@ def all_methods() -> dict[str, Method]:
     return {**METHODS, **_plugins_checked()}
 
 
-def is_builtin(name: str) -> bool:
-    """``name`` is a built-in method's (a plug-in never replaces one)."""
-    return name in METHODS
-
-
 def section_class(owner: type, key: str) -> type | None:
-    """The settings dataclass of the plug-in method whose section is ``[detector.<key>]``
-    (None: no installed plug-in's), for the profile loader (``schema.build``'s ``sections``)."""
-    if owner is not DetectorSettings:
+    """The settings dataclass of the method whose section is ``[detector.<key>]`` when
+    ``[detector]`` has no key of that name (a plug-in's; None: no method's), for the
+    profile loader (``schema.build``'s ``sections``)."""
+    if owner is not DetectorSettings or key in _DETECTOR_KEYS:
         return None
-    for name in plugins(METHOD_GROUP):
-        if name not in METHODS and name.replace("-", "_") == key:
-            method = get_method(name)
-            if method.settings is not None and method.key == key:
-                return method.settings
-    for method in _plugins_checked().values():  # a plug-in that names its section itself
+    for method in METHODS.values():
+        if method.settings is not None and method.key == key:
+            return method.settings
+    named = [n for n in plugins(METHOD_GROUP) if n not in METHODS and n.replace("-", "_") == key]
+    # the plug-in of that name first (imported alone), then any that names its section itself
+    for method in [get_method(n) for n in named] or list(_plugins_checked().values()):
         if method.settings is not None and method.key == key:
             return method.settings
     return None
@@ -154,4 +150,4 @@ def method_of_stream(factory: Callable[..., Any]) -> Method | None:
 
 
 __all__ = ["all_methods", "detector_names", "get_method", "method_of_code", "method_of_stream", "method_names",
-           "is_builtin", "section_class"]
+           "section_class"]

@@ -12,7 +12,7 @@ PRELUDE = '''from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -21,10 +21,12 @@ from eskin_industrial.bus.source import Source
 from eskin_industrial.seam import NodeLike, OpenContext
 from eskin_industrial.detect.methods import UNUSED, Method, Score, batch_via_stream
 from eskin_industrial.detect.scored import ScoredDetector
+from eskin_industrial.detect.settings import DetectorSettings
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.frames import RawScan
 from eskin_industrial.node import NodeSnapshot
 from eskin_industrial.outputs.base import CliOption, Sink
+from eskin_industrial.schema import in_range
 '''
 
 #: The registry lines the page shows (the tests register the kinds themselves).

@@ -55,7 +55,7 @@ def method_properties(profile: Profile) -> tuple[Property, ...]:
     """``method`` and the keys that set its decision, as the method declares them, by
     their profile name (``detector.slip_r_coe``, ``detector.cof_track.z``);
     ``detector.contact_threshold_n`` for every method."""
-    from ..methods import get_method
+    from ...methods import get_method
 
     det = profile.detector
     method = get_method(det.method)
