@@ -22,7 +22,7 @@ import pytest
 from eskin_industrial import methods
 from eskin_industrial.detect.methods import Method
 from eskin_industrial.errors import ProfileError
-from tests.helpers.page_kinds import page_examples
+from tests.helpers.page_kinds import page_examples, page_plugin_test
 from tests.helpers.paths import PROFILES, ROOT
 
 PYPROJECT = """\
@@ -59,6 +59,7 @@ def plugin_python(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (package / "eskin_pagekinds").mkdir(parents=True)
     (package / "eskin_pagekinds" / "__init__.py").write_text(page_examples())
     (package / "pyproject.toml").write_text(PYPROJECT)
+    (root / "test_pagekinds.py").write_text(page_plugin_test())  # the plug-in's own test, beside it
     venv = root / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
     site = next((venv / "lib").glob("python*/site-packages"))
@@ -90,6 +91,37 @@ def test_only_the_environment_with_the_plugin_knows_its_kinds(plugin_python, tmp
     assert here.returncode == 2 and "[detector] method" in here.stderr and "'peak-shift'" in here.stderr
     missing = run(sys.executable, "bridge", "-p", profile, "--source", "scene:case2", "--state-log", "x", "--check")
     assert missing.returncode == 2 and "--state-log" in missing.stderr
+
+
+def test_the_plugin_methods_section_is_checked_and_shown(plugin_python, tmp_path):
+    profile = peak_profile(tmp_path)
+    base = profile.read_text()
+    shown = run(plugin_python, "profile", "show", str(profile))
+    assert shown.returncode == 0, shown.stderr
+    assert "[detector.peak_shift]\nmargin = 1.2  # default\n" in shown.stdout  # left out: its defaults, shown
+    profile.write_text(base + "\n[detector.peak_shift]\nmargin = 2.5\n")
+    assert run(plugin_python, "profile", "check", str(profile)).returncode == 0
+    assert "[detector.peak_shift]\nmargin = 2.5\n" in run(plugin_python, "profile", "show", str(profile)).stdout
+    profile.write_text(base + "\n[detector.peak_shift]\nmargn = 2.5\n")
+    typo = run(plugin_python, "profile", "check", str(profile))
+    assert typo.returncode == 2
+    assert typo.stderr == (f"eskin-bus: error: {profile}: [detector] peak_shift.margn: unknown key; "
+                           f"did you mean 'margin'?\n")
+    profile.write_text(base + "\n[detector.peak_shift]\nmargin = 0.5\n")
+    check = run(plugin_python, "bridge", "-p", str(profile), "--source", "scene:case2", "--check")
+    assert check.returncode == 2 and "[detector] peak_shift.margin: expected a value in [1, 10], got 0.5" in check.stderr
+    # this environment, without the plug-in, knows no such section
+    profile.write_text(base.replace('method = "peak-shift"', 'method = "paper"') + "\n[detector.peak_shift]\nmargin = 2.5\n")
+    here = run(sys.executable, "profile", "check", str(profile))
+    assert here.returncode == 2 and "[detector] peak_shift: unknown key" in here.stderr
+
+
+def test_the_plugins_own_test_calls_the_conformance_checks(plugin_python):
+    test = plugin_python.parents[2] / "test_pagekinds.py"
+    res = subprocess.run([str(plugin_python), "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:xdist",
+                          "-W", "error", str(test)], capture_output=True, text=True, timeout=300, cwd=test.parent)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "1 passed" in res.stdout
 
 
 def test_the_plugin_output_and_method_from_the_command_line(plugin_python, tmp_path):

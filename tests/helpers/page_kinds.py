@@ -1,5 +1,6 @@
 """The example kinds of docs/architecture.md (a source, an output, a method), taken
-from the page itself as one module's text, for the seams test and the plug-in test."""
+from the page itself as one module's text, for the seams test and the plug-in test,
+and the page's example of the plug-in's own test."""
 
 from __future__ import annotations
 
@@ -39,3 +40,11 @@ def page_examples() -> str:
     blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
     assert len(blocks) == 3, "the page shows one source, one output and one method"
     return PRELUDE + "\n".join(REGISTRY_LINE.sub("", b) for b in blocks)
+
+
+def page_plugin_test() -> str:
+    """The plug-in's own test the page shows (the block that calls the conformance checks)."""
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    (block,) = [b for lang, b in re.findall(r"^```(\w*)\n(.*?)^```", text, flags=re.S | re.M)
+                if not lang and "eskin_industrial.testing" in b]
+    return block
