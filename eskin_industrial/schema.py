@@ -252,7 +252,7 @@ def build(cls: type, table: dict[str, Any], where: str = "", sections: Sections 
 def to_table(obj: Any) -> Any:
     """The inverse of :func:`build`, for ``profile show``: dataclasses to plain dicts."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        out = {}
+        out: dict[str, Any] = {}
         for f in dataclasses.fields(obj):
             if not f.init:
                 continue

@@ -27,7 +27,10 @@ from eskin_industrial.sim.modbus_node import NodeSimulator
 from tests.helpers.bridge import channel, hold_raw, node_thread
 from tests.helpers.modbus import free_port, pty_pair, slip_recording
 from tests.helpers.paths import ROOT
-from tests.helpers.sparkplug import broker, state_home  # noqa: F401 - an autouse fixture: the edge node's state is the test's
+from tests.helpers.sparkplug import (  # noqa: F401 - an autouse fixture: the edge node's state is the test's
+    broker,
+    state_home,
+)
 
 # -- every built-in method -------------------------------------------------------------
 
