@@ -10,10 +10,9 @@ from dataclasses import dataclass, field
 
 from ..detect.settings import DetectorSettings
 from ..detect.updates import UpdateTable
-from ..methods import get_method
+from ..methods import Factory, get_method, ready_factory
 from ..progress import NO_PROGRESS, Progress
 from ..scenes import Rendered, SceneSpec, load_scene, render
-from .binding import Factory, ready_factory
 from .corpus import (
     EVALUATION_SEEDS,
     HOLD_EVALUATION_SEEDS,
