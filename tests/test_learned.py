@@ -170,6 +170,21 @@ def test_the_model_file_is_written_deterministically(model, tmp_path):
         assert np.array_equal(getattr(again.model, name), getattr(model, name))
 
 
+def test_a_model_file_that_is_not_the_training_s_is_told_apart(model):
+    from dataclasses import replace
+
+    from eskin_industrial.evaluation.train import differences
+
+    shipped = read_model(shipped_model_file())
+    assert differences(shipped, shipped) == []
+    table = model.table.copy()
+    table[5, 17] += 1e-9  # one leaf, off in its last digits
+    other = replace(shipped, model=type(model)(model.feature, model.threshold, table, model.init))
+    assert differences(shipped, other) == ["table differs"]
+    fewer = replace(shipped, trained={**shipped.trained, "seeds": [0, 1]})
+    assert differences(shipped, fewer) == [f"trained on {shipped.trained}, the training is {fewer.trained}"]
+
+
 @pytest.mark.slow
 def test_the_shipped_model_is_what_the_training_gives(paper_profile, model, tmp_path):
     """Trains afresh (about 16 s of CPU): the same arrays, hence the same verdicts
@@ -219,7 +234,8 @@ def test_a_missing_or_damaged_model_file_is_one_line_naming_it(model, tmp_path):
         said[kind] = str(err.value)
         assert said[kind].startswith(f"{path}: ") and "\n" not in said[kind], (kind, said[kind])
     assert "model file is missing" in said["missing"]
-    assert "features" in said["fewer"] and "format 2" in said["newer"] and "shape (120, 7), expected (119, 7)" in said["short"]
+    assert "features" in said["fewer"] and "format 2" in said["newer"]
+    assert "shape (120, 7), expected (119, 7)" in said["short"]
 
 
 def test_a_damaged_shipped_model_stops_the_command_with_one_line(model, tmp_path, monkeypatch):

@@ -154,7 +154,9 @@ def write_trained(path: Path, config: TrainConfig = TrainConfig()) -> StoredMode
 def differences(shipped: StoredModel, trained: StoredModel) -> list[str]:
     """What differs between two stored models (the versions that made them aside):
     nothing when the shipped file is what the training gives."""
-    out = [f"trained on {shipped.trained}, the training is {trained.trained}"] if shipped.trained != trained.trained else []
+    out = []
+    if shipped.trained != trained.trained:
+        out.append(f"trained on {shipped.trained}, the training is {trained.trained}")
     for name in ("feature", "threshold", "table", "init"):
         a, b = getattr(shipped.model, name), getattr(trained.model, name)
         if a.shape != b.shape or not np.array_equal(a, b):
