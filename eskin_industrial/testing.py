@@ -50,8 +50,7 @@ from .detect.settings import DetectorSettings
 from .detect.state import GraspState
 from .detect.updates import COLUMNS, UpdateTable
 from .errors import EskinError
-from .evaluation.binding import bind
-from .methods import get_method
+from .methods import bind, get_method
 from .outputs.base import CliOption, Sink, SinkHealth, sink_class
 from .profile import Profile, load_profile, parse_profile
 from .scenes import render
@@ -79,8 +78,7 @@ def check_method(method: str | Method, *, scene: str = "case2", profile: str = "
                  rate_hz: float = 100.0, seed: int = 0, model: Model | None = None) -> None:
     """Check a registered detection method (by name, or its :class:`Method`) against
     what every method promises, on the shipped ``scene`` seen through ``profile``
-    (``model``: for a method that needs one, instead of the default model, which the
-    ``learned`` method trains on first use)."""
+    (``model``: for a method that needs one, instead of the model the package ships)."""
     m = _registered(method)
     what = f"method {m.name!r}"
     base = load_profile(profile)

@@ -34,8 +34,7 @@ from tests.helpers.sparkplug import (  # noqa: F401 - an autouse fixture: the ed
 
 # -- every built-in method -------------------------------------------------------------
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if METHODS[n].needs_model else n
-                                  for n in METHODS])
+@pytest.mark.parametrize("name", list(METHODS))
 def test_every_built_in_method_keeps_the_promises(name):
     testing.check_method(name)
 

@@ -14,7 +14,7 @@ as well as a built-in's.
 A method with ``needs_model`` (``learned``) must also be handed ``model=``; the
 registry does not know where models come from.  :meth:`Method.with_model` binds one;
 every layer that builds detectors by name does so through one function that hands
-over the default model (``eskin_industrial.evaluation.binding``).
+over the shipped model (``eskin_industrial.methods.bind``).
 """
 
 from __future__ import annotations
