@@ -210,6 +210,10 @@ class HandedSink(SupervisedSink):
         self.cached_health = SinkHealth()
         self.cached_counters: dict[str, int] = {}
 
+    def attach(self, inner: Sink[Any]) -> None:
+        self.cached_health, self.cached_counters = SinkHealth(), {}  # the old instance's no longer
+        super().attach(inner)
+
     def publish(self, snapshot: NodeSnapshot) -> None:
         if self.snapshot is not None:
             self.output.superseded += 1
@@ -377,7 +381,8 @@ class Output:
         self._closers: list[Callable[[], None]] = []
         self._handover: _Handover | None = None
         self._retired: weakref.WeakSet[threading.Thread] = weakref.WeakSet()
-        self._failed_at = 0.0
+        self._failed_at = 0.0  #: the failure (or failed reopen) the back-off is counted from
+        self._down_since = 0.0
         self._up_since = 0.0
         self._delay = policy.backoff_s
         self._random = random.Random()
@@ -402,7 +407,11 @@ class Output:
     def open(self) -> list[SupervisedSink]:
         """The first instance (an error here is the bridge's: nothing runs yet)."""
         opened = self._open_instance()
-        proxy = GuardedSink if self.policy.essential else HandedSink
+        base = GuardedSink if self.policy.essential else HandedSink
+        # the kind's name and what it says of itself, as the bridge reads them off the class
+        proxy = type(f"{base.__name__}_{self.kind}", (base,),
+                     {"kind": self.kind, "logs_connection": any(s.logs_connection for s in opened),
+                      "__module__": __name__})
         self.sinks = [proxy(self, i, sink) for i, sink in enumerate(opened)]
         self.up = True
         self._up_since = time.monotonic()
@@ -428,7 +437,7 @@ class Output:
             self.generation += 1
             self.failures += 1
             self.last_error = text
-            self._failed_at = time.monotonic()
+            self._failed_at = self._down_since = time.monotonic()
             for s in self.sinks:
                 if isinstance(s, GuardedSink):
                     s.inner = _DOWN
@@ -484,10 +493,14 @@ class Output:
             self._delay = self.policy.backoff_s  # up long enough: the next failure waits the least again
 
     def _restart(self) -> None:
+        """Close the failed instance (off the loop, within a limit), wait out the
+        back-off (counted from the failure: a slow close is part of it), open a fresh one."""
         self._handover = None
         closers, self._closers = self._closers, []
+        t0 = time.monotonic()
         if not _close_within(closers, max(self.policy.hang_s, CLOSE_MIN_S), f"{self.kind}-close"):
             self.abandoned += 1
+        close_s = time.monotonic() - t0
         wait = self._delay * (1.0 - JITTER * self._random.random())
         self._delay = min(self._delay * 2, self.policy.backoff_max_s)
         end = self._failed_at + wait
@@ -495,6 +508,7 @@ class Output:
             time.sleep(min(0.02, max(0.0, end - time.monotonic())))
         if self.closing:
             return
+        t1 = time.monotonic()
         try:
             opened = self._open_instance()
         except Exception as exc:  # noqa: BLE001 - tried again after the next back-off
@@ -504,6 +518,7 @@ class Output:
                       retry_in_s=round(self._delay, 3))
             self._kick.set()
             return
+        open_s = time.monotonic() - t1
         with self.lock:
             if self.closing:
                 _close_within(self._closers, CLOSE_MIN_S, f"{self.kind}-close")
@@ -516,7 +531,8 @@ class Output:
         if not self.policy.essential:
             self._start_handover()
         self._log("output_restarted", "info", output=self.kind, restarts=self.restarts,
-                  down_s=round(time.monotonic() - self._failed_at + wait, 3), where=self.sinks[0].where)
+                  down_s=round(time.monotonic() - self._down_since, 3), backoff_s=round(wait, 3),
+                  close_s=round(close_s, 3), open_s=round(open_s, 3), where=self.sinks[0].where)
 
     # -- state and the end -----------------------------------------------------------------
     def counters(self) -> dict[str, int]:
