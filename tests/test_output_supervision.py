@@ -28,12 +28,12 @@ import pytest
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, SupervisionSettings
 from eskin_industrial.bridge.supervise import GuardedSink, HandedSink, SupervisedSink
-from eskin_industrial.opcua.options import OpcuaOptions
-from eskin_industrial.plant.sparkplug import SparkplugOptions
-from eskin_industrial.plc.image import STATUS_COUNT, Status
-from eskin_industrial.plc.image import decode_registers as decode
-from eskin_industrial.plc.sink import PlcOptions
-from eskin_industrial.sinks.recorder import RecorderOptions
+from eskin_industrial.outputs.opcua.options import OpcuaOptions
+from eskin_industrial.outputs.plc.image import STATUS_COUNT, Status
+from eskin_industrial.outputs.plc.image import decode_registers as decode
+from eskin_industrial.outputs.plc.sink import PlcOptions
+from eskin_industrial.outputs.recorder.sink import RecorderOptions
+from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugOptions
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, Running, TimedPlc, running_bridge, wait_for
 from tests.helpers.modbus import free_port, need

@@ -9,7 +9,7 @@ sink itself: it holds one :class:`SupervisedSink` per node, and an
   take_commands, commands_done, source_ended, health, counters), a call in progress
   longer than ``hang_s``, or the death of a thread the kind owns (by name: a thread
   named for the kind, ``opcua-server``, or one the kind declares in
-  :attr:`~eskin_industrial.sinks.base.Sink.thread_names`, paho's), is one failure:
+  :attr:`~eskin_industrial.outputs.base.Sink.thread_names`, paho's), is one failure:
   one line (``output_failed``, the output and node named), the output set down (its
   sinks answer nothing until it is back), its instance closed off the loop with a
   time limit, and a fresh one opened after a back-off (``backoff_s`` doubling to
@@ -43,13 +43,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
-from ..sinks.base import EventHandler, Sink, SinkHealth
+from ..outputs.base import EventHandler, Sink, SinkHealth
 
 if TYPE_CHECKING:
-    from ..bus.source import NodeLike, OpenContext
     from ..detect.updates import Update
     from ..frames import Frame
     from ..node import Command, NodeSnapshot
+    from ..seam import NodeLike, OpenContext
 
 #: Share of a back-off taken off at random (the PLC writer's, plc/client.py).
 JITTER = 0.25
@@ -391,7 +391,7 @@ class Output:
 
     # -- opening ----------------------------------------------------------------------
     def _open_instance(self) -> list[Sink[Any]]:
-        from ..bus.source import OpenContext
+        from ..seam import OpenContext
 
         closers: list[Callable[[], None]] = []
         context = OpenContext(queue_frames=self.context.queue_frames, all_frames=self.context.all_frames,
