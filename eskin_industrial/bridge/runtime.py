@@ -9,6 +9,9 @@ Threads, and why each exists:
   scene) has its own loop thread, paced by its source;
 - whatever the sinks run themselves: a writer per node in PLC client mode (a slow or
   absent PLC never stalls detection), one Modbus server for all blocks in server mode;
+- per output, its supervisor (``supervise-KIND``: a failure restarts that output, not
+  the bridge) and, unless the output is essential, the thread that hands it the
+  loops' data (``KIND-output``: a hang there never stalls a loop), :mod:`.supervise`;
 - the caller's thread supervises: it logs what changed (sensor stale, bus fault, an
   output's connection) and the counters, feeds systemd's watchdog while every loop
   thread turns (bridge/notify.py), and handles the stop.
