@@ -247,10 +247,24 @@ class HandedSink(SupervisedSink):
         self.ended = error
         self.output.wake.set()
 
+    # Health and counters are plain reads in every kind, asked by the supervising thread
+    # (never a loop): read at once, as before supervision (a status line right after a
+    # burst counts all of it); the handover's thread refreshes the same cache, which
+    # answers while the output is down.
     def health(self) -> SinkHealth:
+        if self.output.up:
+            try:
+                self.cached_health = self.inner.health()
+            except Exception as exc:  # noqa: BLE001 - the output fails, the caller goes on
+                self.output.failed("health", self.index, exc)
         return self.cached_health
 
     def counters(self) -> dict[str, int]:
+        if self.output.up:
+            try:
+                self.cached_counters = dict(self.inner.counters())
+            except Exception as exc:  # noqa: BLE001
+                self.output.failed("counters", self.index, exc)
         return self._own(dict(self.cached_counters))
 
     def flush(self, timeout_s: float = 1.0) -> bool:
