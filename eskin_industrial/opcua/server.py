@@ -29,7 +29,7 @@ from .. import __version__
 from ..errors import ProfileError, TransportError
 from ..netaddr import listen_error
 from ..node import Command, NodeSnapshot, refusal
-from . import model, status
+from . import eventfilter, model, status
 from .access import Logins, Permissions
 from .alarm import AlarmState
 from .build import NodeHandles, NodeInfo, TypeIds, build_machines, build_node, build_types, variant_type
@@ -118,6 +118,7 @@ class OpcuaServer:
         self._by_object: dict[ua.NodeId, int] = {}
         self._by_condition: dict[ua.NodeId, int] = {}
         self._logged: dict[str, tuple[float, int]] = {}
+        self._event_errors_logged: set[str] = set()
         self._log_handler: _StackLog | None = None
         self.certificate_made = ""
         self.url = options.endpoint
@@ -236,6 +237,7 @@ class OpcuaServer:
         iserver.min_session_timeout_ms = min(iserver.min_session_timeout_ms, o.session_timeout_s * 1000.0)
         iserver.max_subscriptions = o.max_subscriptions
         await server.init()
+        eventfilter.guard(iserver.subscription_service, self._on_filter_refused)
         server.set_endpoint(o.endpoint)
         server.set_server_name(o.application_name)
         await server.set_application_uri(uri)
@@ -442,11 +444,29 @@ class OpcuaServer:
                                           + ("" if a.acked else ", not acknowledged"))
         # ConditionRefresh replays the retained conditions with the node they were last
         # emitted from: the Server object, where a SCADA subscribes, last
-        subs = self.server.iserver.subscription_service
         for emitter in (n.handles.obj, node_id(ua.ObjectIds.Server)):
             ev.emitting_node = emitter
-            await subs.trigger_event(ev)
+            await self._fire(n, ev)
         await self._condition_variables(n, now)
+
+    async def _fire(self, n: _NodeState, ev: Any) -> None:
+        """The event to each subscription in turn: what asyncua raises while it fills
+        one subscription's items is counted and logged (once for each kind), and the
+        other subscriptions get the event; nothing of it reaches the server's loop."""
+        assert self.server is not None
+        subs = self.server.iserver.subscription_service
+        # (no subscription: the call still keeps a retained condition for ConditionRefresh;
+        # 0 is no subscription's id)
+        for sid in list(subs.subscriptions) or [0]:
+            try:
+                await subs.trigger_event(ev, sid)
+            except Exception as exc:  # noqa: BLE001 - asyncua's, from a client's filter: the alarm goes on
+                self.node_counts[n.index]["event_errors"] += 1
+                kind = type(exc).__name__
+                if kind not in self._event_errors_logged:
+                    self._event_errors_logged.add(kind)
+                    self._event("opcua_event_error", "error", node_event=n.info.name, subscription=sid,
+                                detail=f"{kind}: {exc}"[:200])
 
     async def _condition_variables(self, n: _NodeState, now: datetime.datetime) -> None:
         """The condition object's variables, as its newest event says (a client that
@@ -530,6 +550,10 @@ class OpcuaServer:
         self.counts["logins_refused"] += 1
         self._log_once("opcua_login_refused", "warning", user=user)
 
+    def _on_filter_refused(self, code: int) -> None:
+        self.counts["filters_refused"] += 1
+        self._log_once("opcua_filter_refused", "warning", status=status_code(code).name)
+
     def _on_denied(self, user: str, request: int) -> None:
         self.counts["denied"] += 1
         self._log_once("opcua_access_denied", "warning", user=user, request=_REQUESTS.get(request, str(request)))
@@ -603,10 +627,10 @@ class OpcuaServer:
         out = {"opcua_connections": connections, "opcua_sessions": sessions}
         for key in ("logins", "logins_refused", "denied", "certificates_rejected", "connections_refused",
                     "activation_timeouts", "sessions_timed_out", "malformed", "service_faults", "stack_warnings",
-                    "stack_errors", "writes"):
+                    "stack_errors", "writes", "filters_refused"):
             out[f"opcua_{key}"] = c[key]
         for key in ("method_calls", "commands", "commands_refused", "commands_busy", "alarms", "alarm_acks",
-                    "alarm_acks_refused"):
+                    "alarm_acks_refused", "event_errors"):
             out[f"opcua_{key}"] = own[key]
         out["opcua_handover_dropped"] = h.dropped
         if self.nodes[index].info.frame_shape is not None:
