@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from eskin_industrial.opcua import model
+from eskin_industrial.outputs.opcua import model
 from tests.helpers.bridge import can_node, channel, node_thread, running_bridge, slip_raw
 from tests.helpers.opcua import NAMESPACE_URI, opcua_config
 
