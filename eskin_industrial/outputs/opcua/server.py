@@ -8,7 +8,8 @@ asyncua (sessions, subscriptions), :mod:`.logins` (security, users, certificates
 :mod:`.values` (the snapshots turned into values with their status and source
 timestamp), :mod:`.calls` (the methods, judged under
 :func:`~eskin_industrial.node.refusal`, queued for the loop), :mod:`.alarm_events`
-(the slip alarm's events), :mod:`.eventfilter` (the clients' event filters checked),
+(the slip alarm's events), :mod:`.eventfilter` and :mod:`.callcheck` (the clients'
+event filters and Call requests checked before asyncua takes them),
 :mod:`.stacklog` (what asyncua itself logs, counted and reported as events of the
 output, at most one line a second each: :mod:`.report`).
 """
@@ -28,7 +29,7 @@ from ... import __version__
 from ...errors import ProfileError, TransportError
 from ...netaddr import listen_error
 from ...node import Command, NodeSnapshot
-from . import eventfilter, model
+from . import callcheck, eventfilter, model
 from .alarm_events import AlarmEvents
 from .build import NodeInfo, TypeIds, build_machines, build_node, build_types
 from .calls import COMMANDS_MAX, Calls
@@ -193,6 +194,7 @@ class OpcuaServer:
         iserver.max_subscriptions = o.max_subscriptions
         await server.init()
         eventfilter.guard(iserver.subscription_service, self._on_filter_refused)
+        callcheck.guard(iserver, self._on_call_refused)
         server.set_endpoint(o.endpoint)
         server.set_server_name(o.application_name)
         await server.set_application_uri(uri)
@@ -254,6 +256,10 @@ class OpcuaServer:
         self.counts["filters_refused"] += 1
         self.report.log_once("opcua_filter_refused", "warning", status=status_code(code).name)
 
+    def _on_call_refused(self, code: int) -> None:
+        self.counts["calls_refused"] += 1
+        self.report.log_once("opcua_call_refused", "warning", status=status_code(code).name)
+
     def _attach_log(self) -> None:
         self._log_handler = StackLog(self.report)
         self._log_handler.attach()
@@ -282,7 +288,7 @@ class OpcuaServer:
         out = {"opcua_connections": connections, "opcua_sessions": sessions}
         for key in ("logins", "logins_refused", "denied", "certificates_rejected", "connections_refused",
                     "activation_timeouts", "sessions_timed_out", "malformed", "service_faults", "stack_warnings",
-                    "stack_errors", "writes", "filters_refused"):
+                    "stack_errors", "writes", "filters_refused", "calls_refused"):
             out[f"opcua_{key}"] = c[key]
         for key in ("method_calls", "commands", "commands_refused", "commands_busy", "alarms", "alarm_acks",
                     "alarm_acks_refused", "event_errors"):
