@@ -10,7 +10,10 @@ historians and PLCs with an OPC UA client.
   counters and events; :mod:`.stacklog`: what asyncua logs;
 - :mod:`.values`: the snapshots applied to the address space; :mod:`.calls`: the
   methods; :mod:`.alarm`: the slip alarm's state, :mod:`.alarm_events`: its events
-  and Acknowledge; :mod:`.eventfilter`: the clients' event filters checked;
+  and Acknowledge;
+- :mod:`.itemcheck`: the clients' monitored items checked (:mod:`.eventfilter`, their
+  event filters; :mod:`.deadband`, their deadbands); :mod:`.callcheck`: their calls
+  checked; :mod:`.typeinfo`: what both ask of the address space;
 - :mod:`.logins`: the security set up, logins counted; :mod:`.access`, :mod:`.users`,
   :mod:`.pki`: roles, users, certificates;
 - :mod:`.sink`: the output kind.

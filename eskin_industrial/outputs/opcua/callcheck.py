@@ -26,40 +26,30 @@ from typing import Any
 
 from asyncua import ua
 
+from .typeinfo import BASE, NUMBERS, TypeInfo
 from .uaconv import status_code
 
 _HAS_COMPONENT = (ua.ObjectIds.HasComponent, ua.ObjectIds.HasOrderedComponent)
-_NUMBERS = {ua.ObjectIds.Number: frozenset(range(2, 12)),  # SByte .. Double
-            ua.ObjectIds.Integer: frozenset((2, 4, 6, 8)),
-            ua.ObjectIds.UInteger: frozenset((3, 5, 7, 9))}
-_ENUMERATION = ua.ObjectIds.Enumeration
-_STRUCTURE = ua.ObjectIds.Structure
-_BASE = ua.ObjectIds.BaseDataType
 _OBJECTS = (ua.NodeClass.Object, ua.NodeClass.ObjectType)
 
 
-def _ns0(nodeid: ua.NodeId) -> int | None:
-    return nodeid.Identifier if nodeid.NamespaceIndex == 0 and isinstance(nodeid.Identifier, int) else None
-
-
 class CallCheck:
-    """The checks on one server's address space (asyncua's ``iserver.aspace``)."""
+    """The checks on one server's address space."""
 
-    def __init__(self, aspace: Any) -> None:
-        self.aspace = aspace
-        self._kinds: dict[ua.NodeId, int | None] = {}  #: a data type's built-in type (or abstract kind)
+    def __init__(self, types: TypeInfo) -> None:
+        self.types = types
 
     def problem(self, m: ua.CallMethodRequest) -> ua.CallMethodResult | None:
         """The result a request is refused with, or None: it may run."""
-        a = self.aspace
-        if m.ObjectId not in a:
+        t = self.types
+        if m.ObjectId not in t:
             return ua.CallMethodResult(StatusCode=status_code(ua.StatusCodes.BadNodeIdUnknown))
-        if self._node_class(m.ObjectId) not in _OBJECTS:
+        if t.attribute(m.ObjectId, ua.AttributeIds.NodeClass) not in _OBJECTS:
             return ua.CallMethodResult(StatusCode=status_code(ua.StatusCodes.BadNodeIdInvalid))
-        if (m.MethodId not in a or self._node_class(m.MethodId) != ua.NodeClass.Method
+        if (m.MethodId not in t or t.attribute(m.MethodId, ua.AttributeIds.NodeClass) != ua.NodeClass.Method
                 or not self._is_method_of(m.MethodId, m.ObjectId)):
             return ua.CallMethodResult(StatusCode=status_code(ua.StatusCodes.BadMethodInvalid))
-        declared = self._input_arguments(m.MethodId)
+        declared = [a for a in (t.property_value(m.MethodId, "InputArguments") or []) if isinstance(a, ua.Argument)]
         given = m.InputArguments or []
         if len(given) < len(declared):
             return ua.CallMethodResult(StatusCode=status_code(ua.StatusCodes.BadArgumentsMissing))
@@ -72,77 +62,30 @@ class CallCheck:
         return ua.CallMethodResult(StatusCode=status_code(ua.StatusCodes.BadInvalidArgument),
                                    InputArgumentResults=results)
 
-    def _node_class(self, nodeid: ua.NodeId) -> Any:
-        dv = self.aspace.read_attribute_value(nodeid, ua.AttributeIds.NodeClass)
-        return None if dv.Value is None else dv.Value.Value
-
-    def _refs(self, nodeid: ua.NodeId) -> list[ua.ReferenceDescription]:
-        return list(self.aspace[nodeid].references) if nodeid in self.aspace else []
-
     def _is_method_of(self, method: ua.NodeId, obj: ua.NodeId) -> bool:
         """A component of the object, or of its type definition or one of that's supertypes."""
+        t = self.types
         holders = [obj]
-        for r in self._refs(obj):
-            if r.IsForward and _ns0(r.ReferenceTypeId) == ua.ObjectIds.HasTypeDefinition:
-                holders.extend(self._supertypes(r.NodeId))
-        return any(r.IsForward and _ns0(r.ReferenceTypeId) in _HAS_COMPONENT and r.NodeId == method
-                   for h in holders for r in self._refs(h))
-
-    def _supertypes(self, type_id: ua.NodeId) -> list[ua.NodeId]:
-        out, seen = [], set()
-        t: ua.NodeId | None = type_id
-        while t is not None and t not in seen:
-            seen.add(t)
-            out.append(t)
-            t = next((r.NodeId for r in self._refs(t)
-                      if not r.IsForward and _ns0(r.ReferenceTypeId) == ua.ObjectIds.HasSubtype), None)
-        return out
-
-    def _input_arguments(self, method: ua.NodeId) -> list[ua.Argument]:
-        for r in self._refs(method):
-            if (r.IsForward and _ns0(r.ReferenceTypeId) == ua.ObjectIds.HasProperty
-                    and r.BrowseName.Name == "InputArguments"):
-                dv = self.aspace.read_attribute_value(r.NodeId, ua.AttributeIds.Value)
-                value = None if dv.Value is None else dv.Value.Value
-                return [a for a in (value or []) if isinstance(a, ua.Argument)]
-        return []
-
-    def _kind(self, data_type: ua.NodeId) -> int | None:
-        """The built-in type id (1 to 25) a data type is, an abstract kind (BaseDataType,
-        Number, Integer, UInteger), or None: not known (taken as anything)."""
-        if data_type in self._kinds:
-            return self._kinds[data_type]
-        kind = None
-        for t in self._supertypes(data_type):
-            i = _ns0(t)
-            if i is None:
-                continue
-            if i == _ENUMERATION:
-                kind = ua.VariantType.Int32.value
-            elif i == _STRUCTURE or 1 <= i <= 25 or i in _NUMBERS:
-                kind = i
-            else:
-                continue
-            break
-        self._kinds[data_type] = kind
-        return kind
+        for r in t.forward(obj, (ua.ObjectIds.HasTypeDefinition,)):
+            holders.extend(t.supertypes(r.NodeId))
+        return any(r.NodeId == method for h in holders for r in t.forward(h, _HAS_COMPONENT))
 
     def _fits(self, v: ua.Variant, arg: ua.Argument) -> bool:
         rank = arg.ValueRank
         if rank == -1 and v.is_array or rank >= 0 and not v.is_array:
             return False
-        kind = self._kind(arg.DataType)
-        if kind is None or kind == _BASE:
+        kind = self.types.kind(arg.DataType)
+        if kind is None or kind == BASE:
             return True
-        if kind in _NUMBERS:
-            return v.VariantType.value in _NUMBERS[kind]
+        if kind in NUMBERS:
+            return v.VariantType.value in NUMBERS[kind]
         return v.VariantType.value == kind
 
 
 def guard(iserver: Any, on_refused: Callable[[int], None] = lambda code: None) -> None:
     """Check every Call request before asyncua's method service (``iserver.method_service``)
     runs it; ``on_refused(code)`` for each call refused."""
-    check = CallCheck(iserver.aspace)
+    check = CallCheck(TypeInfo(iserver.aspace))
     service = iserver.method_service
     call: Callable[[list[ua.CallMethodRequest]], Awaitable[list[ua.CallMethodResult]]] = service.call
 

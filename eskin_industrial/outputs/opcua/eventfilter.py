@@ -1,5 +1,5 @@
 """The event filters a client sends with CreateMonitoredItems and ModifyMonitoredItems,
-made safe before asyncua keeps them (Part 4, 7.22.3).
+made safe before asyncua keeps them (Part 4, 7.22.3; :mod:`.itemcheck` calls this).
 
 asyncua reads a filter only when an event fires, on the server's loop: a null array
 (length -1 on the wire, None once decoded) in a select clause's BrowsePath made it
@@ -20,7 +20,6 @@ BrowsePath; Part 9, 5.5.2).  So, at the request:
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Awaitable, Callable
 from typing import Any
 
 from asyncua import ua
@@ -65,50 +64,3 @@ def _select_result(clause: ua.SimpleAttributeOperand) -> ua.StatusCode:
     if any(not q.Name for q in clause.BrowsePath):
         return status_code(ua.StatusCodes.BadBrowseNameInvalid)
     return _GOOD
-
-
-def _is_event_item(item: Any) -> bool:
-    return int(item.ItemToMonitor.AttributeId) == ua.AttributeIds.EventNotifier
-
-
-def guard(subscriptions: Any, on_refused: Callable[[int], None] = lambda code: None) -> None:
-    """Check the filters of every CreateMonitoredItems and ModifyMonitoredItems before
-    asyncua's subscription service (``iserver.subscription_service``) takes them;
-    ``on_refused(code)`` for each item refused."""
-    create: Callable[[ua.CreateMonitoredItemsParameters], Awaitable[list[ua.MonitoredItemCreateResult]]]
-    create = subscriptions.create_monitored_items
-    modify: Callable[[ua.ModifyMonitoredItemsParameters], list[ua.MonitoredItemModifyResult]]
-    modify = subscriptions.modify_monitored_items
-
-    async def create_checked(params: ua.CreateMonitoredItemsParameters) -> list[ua.MonitoredItemCreateResult]:
-        empty_null_arrays(params)
-        items = params.ItemsToCreate
-        refused: dict[int, ua.MonitoredItemCreateResult] = {}
-        for i, item in enumerate(items):
-            problem = event_filter_problem(item.RequestedParameters.Filter) if _is_event_item(item) else None
-            if problem is not None:
-                refused[i] = ua.MonitoredItemCreateResult(StatusCode=problem[0], FilterResult=problem[1])
-                on_refused(problem[0].value)
-        params.ItemsToCreate = [item for i, item in enumerate(items) if i not in refused]
-        made = iter(await create(params))  # (also with nothing left: the subscription is checked)
-        return [refused[i] if i in refused else next(made) for i in range(len(items))]
-
-    def modify_checked(params: ua.ModifyMonitoredItemsParameters) -> list[ua.MonitoredItemModifyResult]:
-        empty_null_arrays(params)
-        items = params.ItemsToModify
-        refused: dict[int, ua.MonitoredItemModifyResult] = {}
-        for i, item in enumerate(items):
-            flt = item.RequestedParameters.Filter
-            # (asyncua keeps the item's filter when none is given, and knows not the
-            # item's kind here: an EventFilter is what is checked)
-            problem = event_filter_problem(flt) if isinstance(flt, ua.EventFilter) else None
-            if problem is not None:
-                refused[i] = ua.MonitoredItemModifyResult(StatusCode=problem[0], FilterResult=problem[1])
-                on_refused(problem[0].value)
-        params.ItemsToModify = [item for i, item in enumerate(items) if i not in refused]
-        made = iter(modify(params))
-        return [refused[i] if i in refused else next(made) for i in range(len(items))]
-
-    # (on the instance: every session of this server calls its one subscription service)
-    subscriptions.create_monitored_items = create_checked
-    subscriptions.modify_monitored_items = modify_checked

@@ -8,8 +8,8 @@ asyncua (sessions, subscriptions), :mod:`.logins` (security, users, certificates
 :mod:`.values` (the snapshots turned into values with their status and source
 timestamp), :mod:`.calls` (the methods, judged under
 :func:`~eskin_industrial.node.refusal`, queued for the loop), :mod:`.alarm_events`
-(the slip alarm's events), :mod:`.eventfilter` and :mod:`.callcheck` (the clients'
-event filters and Call requests checked before asyncua takes them),
+(the slip alarm's events), :mod:`.itemcheck` and :mod:`.callcheck` (the clients'
+monitored items and Call requests checked before asyncua takes them),
 :mod:`.stacklog` (what asyncua itself logs, counted and reported as events of the
 output, at most one line a second each: :mod:`.report`).
 """
@@ -29,7 +29,7 @@ from ... import __version__
 from ...errors import ProfileError, TransportError
 from ...netaddr import listen_error
 from ...node import Command, NodeSnapshot
-from . import callcheck, eventfilter, model
+from . import callcheck, itemcheck, model
 from .alarm_events import AlarmEvents
 from .build import NodeInfo, TypeIds, build_machines, build_node, build_types
 from .calls import COMMANDS_MAX, Calls
@@ -193,7 +193,7 @@ class OpcuaServer:
         iserver.min_session_timeout_ms = min(iserver.min_session_timeout_ms, o.session_timeout_s * 1000.0)
         iserver.max_subscriptions = o.max_subscriptions
         await server.init()
-        eventfilter.guard(iserver.subscription_service, self._on_filter_refused)
+        itemcheck.guard(iserver, self._on_filter_refused)
         callcheck.guard(iserver, self._on_call_refused)
         server.set_endpoint(o.endpoint)
         server.set_server_name(o.application_name)
