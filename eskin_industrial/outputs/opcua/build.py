@@ -262,6 +262,12 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
                               ua.VariantType.ExtensionObject, ns=0)
             await rule(p1)
             await rule(p2)
+        elif v.unit:  # (a value with a unit says which, as an analog one does: Health/FrameAge)
+            code, unit_name = model.UNITS[v.unit]
+            eu = ua.EUInformation(NamespaceUri=model.UNECE_NAMESPACE, UnitId=code, DisplayName=ua.LocalizedText(v.unit),
+                                  Description=ua.LocalizedText(unit_name))
+            await rule(await b.prop(nid(f"{path}.EngineeringUnits"), node, "EngineeringUnits", ua.ObjectIds.EUInformation,
+                                    eu, ua.VariantType.ExtensionObject, ns=0))
         yield ("frame" if v is FRAME else f"var:{v.path}"), node
     for name, arg, doc in METHODS:
         inputs = [] if arg is None else [ua.Argument(Name=arg[0], DataType=node_id(_BUILTIN[arg[1]][0]),

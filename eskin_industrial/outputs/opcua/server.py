@@ -40,7 +40,7 @@ from .options import OpcuaOptions
 from .pki import default_application_uri
 from .report import Report
 from .stacklog import StackLog
-from .uaconv import status_code
+from .uaconv import node_id, status_code
 from .users import Directory, UserEntry
 from .values import Values
 
@@ -49,6 +49,26 @@ __all__ = ["COMMANDS_MAX", "START_TIMEOUT_S", "OpcuaServer"]
 #: The longest a start may take (a new certificate, the standard address space).
 START_TIMEOUT_S = 60.0
 _UTC = datetime.UTC
+
+
+#: The profile claimed in ServerCapabilities (Part 7; claimed, not certified: no
+#: compliance test tool has been run against it).
+SERVER_PROFILE = "http://opcfoundation.org/UA-Profile/Server/MicroEmbeddedDevice2017"
+
+
+async def _capabilities(server: Server) -> None:
+    """ServerCapabilities' values asyncua leaves null (Part 5, 6.3.2)."""
+    caps = ua.ObjectIds
+    for ident, value, vtype in (
+            (caps.Server_ServerCapabilities_ServerProfileArray, [SERVER_PROFILE], ua.VariantType.String),
+            (caps.Server_ServerCapabilities_LocaleIdArray, ["en"], ua.VariantType.String),
+            # a change is written at once and a refresh each refresh_s: 0, exception-based
+            (caps.Server_ServerCapabilities_MinSupportedSampleRate, 0.0, ua.VariantType.Double),
+            # asyncua answers each Browse whole, with no continuation point: none is held, 0 (no limit)
+            (caps.Server_ServerCapabilities_MaxBrowseContinuationPoints, 0, ua.VariantType.UInt16),
+            (caps.Server_ServerCapabilities_MaxQueryContinuationPoints, 0, ua.VariantType.UInt16),
+            (caps.Server_ServerCapabilities_MaxHistoryContinuationPoints, 0, ua.VariantType.UInt16)):
+        await server.write_attribute_value(node_id(ident), ua.DataValue(ua.Variant(value, vtype)))
 
 
 class OpcuaServer:
@@ -184,6 +204,7 @@ class OpcuaServer:
         uri = o.application_uri or default_application_uri()
         self.certificate_made = self.security.certificate(uri)
         server = Server(user_manager=self.security.user_manager())
+        server.application_type = ua.ApplicationType.Server  # (asyncua's default: ClientAndServer)
         self.server = server
         iserver = server.iserver
         iserver.bind_condition_methods = True  # ConditionRefresh
@@ -203,6 +224,7 @@ class OpcuaServer:
         await server.set_build_info(server.product_uri, server.manufacturer_name, "eskin-bus", __version__,
                                     __version__, datetime.datetime.now(_UTC))
         await self.security.apply(server)
+        await _capabilities(server)
         values = self.values = Values(server, o, self.report)
         alarms = self.alarms = AlarmEvents(server, o, self.nodes, self.report)
         idx = await server.register_namespace(model.NAMESPACE_URI)
