@@ -14,6 +14,7 @@ historians and PLCs with an OPC UA client.
 - :mod:`.itemcheck`: the clients' monitored items checked (:mod:`.eventfilter`, their
   event filters; :mod:`.deadband`, their deadbands); :mod:`.callcheck`: their calls
   checked; :mod:`.typeinfo`: what both ask of the address space;
+- :mod:`.wire`: the first message of a connection checked, refusals told;
 - :mod:`.logins`: the security set up, logins counted; :mod:`.access`, :mod:`.users`,
   :mod:`.pki`: roles, users, certificates;
 - :mod:`.sink`: the output kind.

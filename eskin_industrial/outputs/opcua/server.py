@@ -10,7 +10,8 @@ timestamp), :mod:`.calls` (the methods, judged under
 :func:`~eskin_industrial.node.refusal`, queued for the loop), :mod:`.alarm_events`
 (the slip alarm's events), :mod:`.itemcheck` and :mod:`.callcheck` (the clients'
 monitored items and Call requests checked before asyncua takes them),
-:mod:`.stacklog` (what asyncua itself logs, counted and reported as events of the
+:mod:`.wire` (the first message of a connection checked, a refusal told with
+an Error message), :mod:`.stacklog` (what asyncua itself logs, counted and reported as events of the
 output, at most one line a second each: :mod:`.report`).
 """
 
@@ -43,6 +44,7 @@ from .stacklog import StackLog
 from .uaconv import node_id, status_code
 from .users import Directory, UserEntry
 from .values import Values
+from .wire import GuardedServer
 
 __all__ = ["COMMANDS_MAX", "START_TIMEOUT_S", "OpcuaServer"]
 
@@ -203,7 +205,7 @@ class OpcuaServer:
         self._attach_log()
         uri = o.application_uri or default_application_uri()
         self.certificate_made = self.security.certificate(uri)
-        server = Server(user_manager=self.security.user_manager())
+        server = GuardedServer(user_manager=self.security.user_manager(), on_refused=self._on_wire_refused)
         server.application_type = ua.ApplicationType.Server  # (asyncua's default: ClientAndServer)
         self.server = server
         iserver = server.iserver
@@ -278,6 +280,11 @@ class OpcuaServer:
         self.counts["filters_refused"] += 1
         self.report.log_once("opcua_filter_refused", "warning", status=status_code(code).name)
 
+    def _on_wire_refused(self, counter: str, event: str, detail: str) -> None:
+        """A connection answered with an Error message and closed (:mod:`.wire`)."""
+        self.counts[counter] += 1
+        self.report.log_once(event, "warning", detail=detail[:200])
+
     def _on_call_refused(self, code: int) -> None:
         self.counts["calls_refused"] += 1
         self.report.log_once("opcua_call_refused", "warning", status=status_code(code).name)
@@ -310,7 +317,7 @@ class OpcuaServer:
         out = {"opcua_connections": connections, "opcua_sessions": sessions}
         for key in ("logins", "logins_refused", "denied", "certificates_rejected", "connections_refused",
                     "activation_timeouts", "sessions_timed_out", "malformed", "service_faults", "stack_warnings",
-                    "stack_errors", "writes", "filters_refused", "calls_refused"):
+                    "stack_errors", "writes", "filters_refused", "calls_refused", "hellos_refused"):
             out[f"opcua_{key}"] = c[key]
         for key in ("method_calls", "commands", "commands_refused", "commands_busy", "alarms", "alarm_acks",
                     "alarm_acks_refused", "event_errors"):
