@@ -113,11 +113,17 @@ def test_open62541s_condition_id_select_clause_gets_the_condition_and_the_server
             (result,) = await _subscribe(client, _selects(), events)
             node.start()
             raised = await _next(events, lambda f: f[5].Value is True, 20, "slip alarm")
+            # the server is still serving: the condition acknowledged with the ConditionId
+            # received, the alarm's end as an event, a read
+            (ack,) = await client.uaclient.call([ua.CallMethodRequest(
+                ObjectId=raised[4].Value, MethodId=ua.NodeId(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge),
+                InputArguments=[ua.Variant(raised[0].Value, ua.VariantType.ByteString),
+                                ua.Variant(ua.LocalizedText("seen"), ua.VariantType.LocalizedText)])])
+            acked = await _next(events, lambda f: "acknowledged" in f[3].Value.Text, 10, "the acknowledgement")
             node.join(20)
-            # the server is still serving: a read, and the alarm's end as an event
-            state = await client.get_node(f"ns={ns};s=grip.GraspState").read_data_value(raise_on_bad_status=False)
             cleared = await _next(events, lambda f: f[5].Value is False, 10, "the slip's end")
-            return dict(ns=ns, result=result, raised=raised, cleared=cleared, state=state)
+            state = await client.get_node(f"ns={ns};s=grip.GraspState").read_data_value(raise_on_bad_status=False)
+            return dict(ns=ns, result=result, raised=raised, cleared=cleared, state=state, ack=ack, acked=acked)
 
     got, counters = _slip(paper_profile, scenario)
     ns = got["ns"]
@@ -127,9 +133,10 @@ def test_open62541s_condition_id_select_clause_gets_the_condition_and_the_server
     assert raised[2].Value == "grip" and "slip on grip" in raised[3].Value.Text
     assert raised[4].Value == ua.NodeId("grip.SlipAlarm", ns)  # the ConditionId (Part 9, 5.5.2)
     assert raised[4].VariantType == ua.VariantType.NodeId
+    assert got["ack"].StatusCode.is_good() and got["acked"][4].Value == ua.NodeId("grip.SlipAlarm", ns)
     assert got["cleared"][4].Value == ua.NodeId("grip.SlipAlarm", ns)
     assert got["state"].Value.Value is not None
-    assert counters["opcua_alarms"] == 1 and counters["opcua_event_errors"] == 0
+    assert counters["opcua_alarms"] == 1 and counters["opcua_alarm_acks"] == 1 and counters["opcua_event_errors"] == 0
 
 
 def test_a_select_clause_with_a_null_browse_name_is_refused_with_its_result(paper_profile) -> None:
