@@ -4,20 +4,26 @@ lost frame now and then, or a frame swapped with the next, is no fault."""
 
 from __future__ import annotations
 
-import threading
 import time
 
 import can
 import numpy as np
 import pytest
-from pymodbus.client import ModbusTcpClient
 
 from eskin_industrial.bus.can.layout import CanLayout, NodeState, NodeStatus, ScanAssembler
 from eskin_industrial.bus.can.stream import CLEAN_S
 from eskin_industrial.frames import FrameFlag
-from eskin_industrial.plc.image import REG, Status
-from eskin_industrial.plc.image import decode_registers as decode
-from tests.helpers.bridge import can_node, channel, node_thread, running_bridge, server_config, to_raw, wait_for
+from eskin_industrial.plc.image import Status
+from tests.helpers.bridge import (
+    BlockPoller,
+    can_node,
+    channel,
+    node_thread,
+    running_bridge,
+    server_config,
+    to_raw,
+    wait_for,
+)
 from tests.helpers.scenes import grasp
 
 RATE_HZ = 100.0
@@ -104,35 +110,6 @@ def test_a_lost_or_swapped_frame_now_and_then_is_no_fault(paper_profile):
     assert c["stream_faults"] == 0 and not any(s.flags for s in scans)
 
 
-class Poller:
-    """A PLC polling the served block with pymodbus: (time, STATUS, F_SUM in N, FLAGS) per read."""
-
-    def __init__(self, port: int, every_s: float = 0.004) -> None:
-        self.client = ModbusTcpClient("127.0.0.1", port=port, timeout=2)
-        self.every_s = every_s
-        self.reads: list[tuple[float, int, float, int]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="plc-poller", daemon=True)
-
-    def _run(self) -> None:
-        n = REG["FLAGS"].offset + 1
-        while not self._stop.wait(self.every_s):
-            reply = self.client.read_holding_registers(0, count=n)
-            assert not reply.isError(), reply
-            v = decode(list(reply.registers) + [0, 0], "big")
-            self.reads.append((time.perf_counter(), v["STATUS"], v["F_SUM"] / 1000.0, v["FLAGS"]))
-
-    def __enter__(self) -> Poller:
-        assert self.client.connect()
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join(5)
-        self.client.close()
-
-
 @pytest.mark.slow
 def test_a_twin_node_on_the_ids_gives_the_plc_no_verdict_of_its_data(paper_profile):
     """The real node holds 2 N, then 8 N from 1 s on; from 1.5 s to 3 s a twin sends the
@@ -150,7 +127,7 @@ def test_a_twin_node_on_the_ids_gives_the_plc_no_verdict_of_its_data(paper_profi
     port = config.outputs["plc"].port
     twin_raw = scene(np.arange(int(1.5 * RATE_HZ)) / RATE_HZ + 1.5 - 3.0)
     with running_bridge(config) as run, node_thread(paper_profile, ch, scene(t), RATE_HZ) as real, \
-            Poller(port) as plc:
+            BlockPoller(port) as plc:
         real.start()
         wait_for(lambda: real.node.stats.scans >= 1.5 * RATE_HZ, what="the real node at 1.5 s")
         with node_thread(paper_profile, ch, twin_raw, RATE_HZ, first_seq=real.node.stats.scans + 5) as twin:
