@@ -77,7 +77,7 @@ def slip_train_toml(duration_s: float, every_s: float = 1.2) -> str:
 def capture_main(port: int, out: str) -> None:
     """Serve the PLC's registers; note (time, STATE) of every write."""
     from eskin_industrial.modbus.pymodbus_io import RegisterServer, quiet_pymodbus
-    from eskin_industrial.plc.image import IMAGE_COUNT, REG
+    from eskin_industrial.outputs.plc.image import IMAGE_COUNT, REG
 
     quiet_pymodbus()
     seen: list[tuple[float, int]] = []
@@ -176,7 +176,7 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
-    from eskin_industrial.plc.sink import PlcOptions
+    from eskin_industrial.outputs.plc.sink import PlcOptions
 
     rate = 1000.0 if path.endswith("1k") else 100.0
     fd = rate > 500
@@ -322,7 +322,7 @@ def run_reference(path: str, decisions: list[tuple[int, int]], scene_file: Path,
     from eskin_industrial.bus.can.layout import CanLayout
     from eskin_industrial.bus.can.reader import open_bus
     from eskin_industrial.modbus.pymodbus_io import TcpMaster
-    from eskin_industrial.plc.image import REG
+    from eskin_industrial.outputs.plc.image import REG
 
     rate = 1000.0 if path.endswith("1k") else 100.0
     fd = rate > 500

@@ -46,10 +46,10 @@ def run_scans(case: str, scans: int) -> None:
     from eskin_industrial.bus.source import Source
     from eskin_industrial.calibration import Calibrator
     from eskin_industrial.frames import Frame, RawScan
-    from eskin_industrial.plant import payload as pb
+    from eskin_industrial.outputs.base import Sink
+    from eskin_industrial.outputs.sparkplug import payload as pb
     from eskin_industrial.profile import load_profile
     from eskin_industrial.scenes import render
-    from eskin_industrial.sinks.base import Sink
 
     prof = load_profile(str(ROOT / "profiles" / "paper-5x5.toml"))
     rec = render("case2", prof.sensor.rate_hz, 0)

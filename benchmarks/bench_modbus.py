@@ -47,9 +47,9 @@ from eskin_industrial.frames import RawScan  # noqa: E402
 from eskin_industrial.modbus.pymodbus_io import TcpMaster, quiet_pymodbus  # noqa: E402
 from eskin_industrial.modbus.serial_line import rtu_transaction_s  # noqa: E402
 from eskin_industrial.node import Health, NodeStatus  # noqa: E402
+from eskin_industrial.outputs.plc.client import PlcWriter  # noqa: E402
+from eskin_industrial.outputs.plc.image import STATUS_COUNT, PlcImage  # noqa: E402
 from eskin_industrial.pipeline import Pipeline  # noqa: E402
-from eskin_industrial.plc.client import PlcWriter  # noqa: E402
-from eskin_industrial.plc.image import STATUS_COUNT, PlcImage  # noqa: E402
 from eskin_industrial.sim.modbus_node import NodeSimulator  # noqa: E402
 from tests.helpers.modbus import free_port, slip_recording  # noqa: E402
 

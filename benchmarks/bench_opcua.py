@@ -174,7 +174,7 @@ class NullOptions:
 def null_kind() -> str:
     """An output kind that takes every snapshot and does nothing (registered here, for
     the baseline: the same loops and handovers but for what OPC UA does)."""
-    from eskin_industrial.sinks.base import SINKS, Sink
+    from eskin_industrial.outputs.base import SINKS, Sink
 
     class NullSink(Sink):
         kind = "bench-null"
@@ -218,7 +218,7 @@ def free_port() -> int:
 def run_latency(rate: float, scene: Path, tmp: Path) -> dict[str, Any]:
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
-    from eskin_industrial.opcua.options import OpcuaOptions
+    from eskin_industrial.outputs.opcua.options import OpcuaOptions
 
     port = free_port()
     cfg, nodes, buses = bridge_config(1, rate, f"lat{int(rate)}", {"opcua": OpcuaOptions(
@@ -290,7 +290,7 @@ def match(decisions: list[tuple[float, int]], seen: list[tuple[float, int]]) -> 
 def run_fleet_step(n: int, kind: str, scene: Path, duration_s: float, tmp: Path) -> dict[str, Any]:
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
-    from eskin_industrial.opcua.options import OpcuaOptions
+    from eskin_industrial.outputs.opcua.options import OpcuaOptions
 
     rate = 100.0
     tag = f"{kind}-{n}-{time.monotonic_ns()}"

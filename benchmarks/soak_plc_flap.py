@@ -43,7 +43,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from bench_bridge import PROFILE, slip_train_toml  # noqa: E402
 from machine import describe  # noqa: E402
 
-from eskin_industrial.plc.image import REG, Status  # noqa: E402
+from eskin_industrial.outputs.plc.image import REG, Status  # noqa: E402
 from tests.helpers.bridge import LogCapture  # noqa: E402
 from tests.helpers.plc_standin import PlcStandIn  # noqa: E402
 
@@ -90,8 +90,8 @@ def main() -> None:
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
-    from eskin_industrial.plc.client import JITTER
-    from eskin_industrial.plc.sink import PlcOptions
+    from eskin_industrial.outputs.plc.client import JITTER
+    from eskin_industrial.outputs.plc.sink import PlcOptions
 
     print(f"# .venv/bin/python benchmarks/soak_plc_flap.py --duration {args.duration:g} --flap {args.flap:g}")
     print(f"# {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC on {describe()}", flush=True)

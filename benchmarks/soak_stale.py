@@ -42,9 +42,9 @@ from eskin_industrial.bus.source import Source  # noqa: E402
 from eskin_industrial.calibration import Calibrator  # noqa: E402
 from eskin_industrial.frames import RawScan  # noqa: E402
 from eskin_industrial.node import NodeSnapshot  # noqa: E402
+from eskin_industrial.outputs.base import Sink  # noqa: E402
 from eskin_industrial.profile import Profile, load_profile  # noqa: E402
 from eskin_industrial.scenes import render  # noqa: E402
-from eskin_industrial.sinks.base import Sink  # noqa: E402
 
 RATE_HZ = 100.0
 PERIOD_S = 5.0  # a silence every PERIOD_S ...

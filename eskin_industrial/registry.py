@@ -1,12 +1,12 @@
 """Kinds by name, imported on first use: the one lookup behind the source registry
-(``bus/source.py``), the output registry (``sinks/base.py``) and the methods'
+(``bus/source.py``), the output registry (``outputs/base.py``) and the methods'
 plug-ins, as python-can finds an interface by name.
 
 A kind is built in (a ``name -> "module:Class"`` table in the package) or a plug-in:
 an entry point of an installed distribution in the kind's group, as python-can's
 ``can.interface`` group adds interfaces::
 
-    [project.entry-points."eskin_industrial.sinks"]
+    [project.entry-points."eskin_industrial.outputs"]
     state-log = "mypackage.statelog:StateLog"
 
 A plug-in never replaces a built-in kind of the same name: the built-in one is used.
@@ -26,7 +26,7 @@ from .errors import ProfileError
 
 #: The entry-point groups, by what they add.
 SOURCE_GROUP = "eskin_industrial.sources"
-SINK_GROUP = "eskin_industrial.sinks"
+SINK_GROUP = "eskin_industrial.outputs"
 METHOD_GROUP = "eskin_industrial.methods"
 
 

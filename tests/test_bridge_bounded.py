@@ -13,8 +13,8 @@ from eskin_industrial.bridge.logs import QUEUE_RECORDS, EventLog
 from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.bus.can.reader import open_bus
 from eskin_industrial.modbus.pymodbus_io import TcpMaster
-from eskin_industrial.plc.image import IMAGE_COUNT
-from eskin_industrial.plc.image import decode_registers as decode
+from eskin_industrial.outputs.plc.image import IMAGE_COUNT
+from eskin_industrial.outputs.plc.image import decode_registers as decode
 from eskin_industrial.sim.can_node import CanNode
 from tests.helpers.bridge import can_node, channel, hold_raw, running_bridge, server_config, wait_for
 

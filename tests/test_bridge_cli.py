@@ -16,7 +16,7 @@ import pytest
 
 from eskin_industrial.errors import ModbusFault
 from eskin_industrial.modbus.pymodbus_io import TcpMaster
-from eskin_industrial.plc.image import IMAGE_COUNT, Status
+from eskin_industrial.outputs.plc.image import IMAGE_COUNT, Status
 from tests.helpers.bridge import PAPER, TimedPlc, wait_for
 from tests.helpers.modbus import free_port
 

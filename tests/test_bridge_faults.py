@@ -14,7 +14,7 @@ import pytest
 
 from eskin_industrial.bridge.config import NodeConfig
 from eskin_industrial.errors import CanBusError
-from eskin_industrial.plc.image import Status
+from eskin_industrial.outputs.plc.image import Status
 from eskin_industrial.sim.can_node import Faults
 from tests.helpers.bridge import (
     CLAIMS,

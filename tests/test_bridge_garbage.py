@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from eskin_industrial import load_profile
 from eskin_industrial.bus.can.layout import HEADER_BYTES, ID_RANGE, SEQ_BITS, STATUS_LENGTH, CanLayout
 from eskin_industrial.bus.can.reader import open_bus
-from eskin_industrial.plc.image import Status
+from eskin_industrial.outputs.plc.image import Status
 from eskin_industrial.sim.can_node import Faults
 from tests.helpers.bridge import (
     CLAIMS,

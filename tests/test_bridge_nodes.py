@@ -10,8 +10,8 @@ import pytest
 
 from eskin_industrial.bus.can.reader import open_bus
 from eskin_industrial.modbus.pymodbus_io import TcpMaster
-from eskin_industrial.plc.image import IMAGE_COUNT, Status
-from eskin_industrial.plc.image import decode_registers as decode
+from eskin_industrial.outputs.plc.image import IMAGE_COUNT, Status
+from eskin_industrial.outputs.plc.image import decode_registers as decode
 from tests.helpers.bridge import (
     can_node,
     channel,

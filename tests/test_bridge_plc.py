@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from eskin_industrial.plc.image import Status
+from eskin_industrial.outputs.plc.image import Status
 from tests.helpers.bridge import (
     TimedPlc,
     can_node,

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from eskin_industrial.plc.image import REG, Status, join32
+from eskin_industrial.outputs.plc.image import REG, Status, join32
 from eskin_industrial.recording import write_recording
 from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
 from tests.helpers.paths import PROFILES

@@ -20,8 +20,8 @@ from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.frames import RawScan
 from eskin_industrial.modbus.pymodbus_io import TcpMaster
+from eskin_industrial.outputs.plc.image import REG, join32
 from eskin_industrial.pipeline import Pipeline
-from eskin_industrial.plc.image import REG, join32
 from eskin_industrial.scenes import render
 from eskin_industrial.sim.can_node import CanNode, Faults
 from tests.helpers.bridge import wait_for

@@ -14,8 +14,8 @@ from eskin_industrial.bus.can.reader import open_bus
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.frames import RawScan
 from eskin_industrial.node import Health
+from eskin_industrial.outputs.plc.image import Status, decode_registers
 from eskin_industrial.pipeline import Pipeline
-from eskin_industrial.plc.image import Status, decode_registers
 from tests.helpers.bridge import can_node, channel, hold_raw, running_bridge, server_config, wait_for
 from tests.helpers.can_frames import msg, scans_to_messages
 from tests.helpers.scenes import grasp
@@ -122,9 +122,9 @@ def test_lost_scans_grow_while_an_rtu_outage_lasts(paper_profile, tmp_path):
     (BUS_ERRORS 44 and LOST_SCANS 0 at a frame age of 2.2 s)."""
     from eskin_industrial.bridge.loop import NodeLoop
     from eskin_industrial.bus.modbus.rtu import RtuSource
-    from eskin_industrial.plc.image import PlcImage
+    from eskin_industrial.outputs.base import Sink
+    from eskin_industrial.outputs.plc.image import PlcImage
     from eskin_industrial.sim.modbus_node import NodeSimulator
-    from eskin_industrial.sinks.base import Sink
     from tests.helpers.modbus import pty_pair
 
     class Keep(Sink):

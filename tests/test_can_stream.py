@@ -13,7 +13,7 @@ import pytest
 from eskin_industrial.bus.can.layout import CanLayout, NodeState, NodeStatus, ScanAssembler
 from eskin_industrial.bus.can.stream import CLEAN_S
 from eskin_industrial.frames import FrameFlag
-from eskin_industrial.plc.image import Status
+from eskin_industrial.outputs.plc.image import Status
 from tests.helpers.bridge import (
     BlockPoller,
     can_node,

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from eskin_industrial.plc.image import Status
+from eskin_industrial.outputs.plc.image import Status
 from eskin_industrial.sim.cell.objects import OBJECTS
 from eskin_industrial.sim.cell.policy import GripPolicy, PolicySettings
 from eskin_industrial.sim.cell.recipes import MIN_GRIP_N, crush_cap_n, fixed_grip_n, policy_settings

@@ -20,7 +20,7 @@ import click
 import pytest
 
 from eskin_industrial.cli import main
-from eskin_industrial.plc.image import IMAGE_COUNT
+from eskin_industrial.outputs.plc.image import IMAGE_COUNT
 from tests.helpers.doc_commands import all_blocks, inline_commands, invocations, pages, prose
 from tests.helpers.paths import ROOT
 

@@ -16,7 +16,7 @@ from eskin_industrial.detect.state import GraspState
 from eskin_industrial.detect.updates import Update
 from eskin_industrial.errors import Refused
 from eskin_industrial.node import Command, Health
-from eskin_industrial.plc.image import (
+from eskin_industrial.outputs.plc.image import (
     COILS,
     IMAGE_COUNT,
     REG,
@@ -25,7 +25,7 @@ from eskin_industrial.plc.image import (
     parse_coil_write,
     parse_register_write,
 )
-from eskin_industrial.plc.server import PlcRegisterHandler
+from eskin_industrial.outputs.plc.server import PlcRegisterHandler
 from tests.helpers.fuzz import fuzz
 from tests.helpers.paths import PROFILES
 from tests.helpers.snapshots import StatusImage

@@ -15,8 +15,8 @@ import pytest
 from eskin_industrial.bridge.loop import NodeLoop
 from eskin_industrial.bus.modbus.rtu import RtuSource
 from eskin_industrial.detect.state import GraspState
-from eskin_industrial.plc.client import PlcWriter
-from eskin_industrial.plc.image import Status
+from eskin_industrial.outputs.plc.client import PlcWriter
+from eskin_industrial.outputs.plc.image import Status
 from eskin_industrial.recording import write_recording
 from eskin_industrial.sim.modbus_node import NodeSimulator
 from eskin_industrial.sim.plc import PlcSimulator

@@ -12,7 +12,7 @@ import threading
 import time
 
 from eskin_industrial.modbus.tcp_server import Policy, networks
-from eskin_industrial.plc.server import PlcServer
+from eskin_industrial.outputs.plc.server import PlcServer
 from tests.helpers.modbus import free_port
 from tests.helpers.raw_modbus import adu, closed_by_peer, connect, read_registers
 

@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 from eskin_industrial import load_profile
 from eskin_industrial.modbus import pdu
-from eskin_industrial.plc.image import BITS, COILS, IMAGE_COUNT
-from eskin_industrial.plc.server import PlcRegisterHandler, identity_of
+from eskin_industrial.outputs.plc.image import BITS, COILS, IMAGE_COUNT
+from eskin_industrial.outputs.plc.server import PlcRegisterHandler, identity_of
 from tests.helpers.fuzz import fuzz
 from tests.helpers.paths import PROFILES
 

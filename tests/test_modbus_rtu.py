@@ -16,10 +16,10 @@ from eskin_industrial.bus.modbus.codec import decode_scans, encode_scan
 from eskin_industrial.bus.modbus.rtu import RtuSource
 from eskin_industrial.bus.source import Source
 from eskin_industrial.calibration import Calibrator
-from eskin_industrial.plc.image import Status
+from eskin_industrial.outputs.base import Sink
+from eskin_industrial.outputs.plc.image import Status
 from eskin_industrial.profile import ModbusNodeSection
 from eskin_industrial.sim.modbus_node import NodeSimulator
-from eskin_industrial.sinks.base import Sink
 from tests.helpers.modbus import mbpoll, mbpoll_values, pty_pair, slip_recording
 
 
@@ -44,7 +44,7 @@ class RecordingSink(Sink):
     def __init__(self, settings=None):
         super().__init__()
         from eskin_industrial import load_profile
-        from eskin_industrial.plc.image import PlcImage
+        from eskin_industrial.outputs.plc.image import PlcImage
         from tests.helpers.paths import PROFILES
 
         self.image = PlcImage(settings or load_profile(PROFILES / "paper-5x5.toml").modbus.plc)

@@ -19,7 +19,7 @@ from eskin_industrial.bus.modbus.rtu import RtuSource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.errors import ModbusFault
 from eskin_industrial.frames import FrameFlag
-from eskin_industrial.plc.image import Status
+from eskin_industrial.outputs.plc.image import Status
 from eskin_industrial.sim.modbus_node import NodeSimulator
 from tests.helpers.bridge import PAPER, BlockPoller, running_bridge, server_config, wait_for
 from tests.helpers.modbus import pty_pair

@@ -14,8 +14,8 @@ from pymodbus.framer.rtu import FramerRTU
 from eskin_industrial.modbus import rtu_frame
 from eskin_industrial.modbus.serial_line import SerialSettings
 from eskin_industrial.modbus.tcp_server import Policy
-from eskin_industrial.plc.image import COIL, REG
-from eskin_industrial.plc.server import PlcServer
+from eskin_industrial.outputs.plc.image import COIL, REG
+from eskin_industrial.outputs.plc.server import PlcServer
 from tests.helpers.modbus import pty_pair
 
 UNIT = 1

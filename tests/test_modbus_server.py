@@ -19,8 +19,8 @@ from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.modbus.tcp_server import Policy, networks
-from eskin_industrial.plc.image import COIL, IMAGE_COUNT, REG, Status
-from eskin_industrial.plc.server import PlcServer, identity_of
+from eskin_industrial.outputs.plc.image import COIL, IMAGE_COUNT, REG, Status
+from eskin_industrial.outputs.plc.server import PlcServer, identity_of
 from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, slip_recording
 from tests.helpers.raw_modbus import adu, ask, closed_by_peer, connect, read_adu, read_registers
 

@@ -17,8 +17,8 @@ from eskin_industrial.errors import DecodeError, ModbusFault
 from eskin_industrial.modbus import mbap
 from eskin_industrial.modbus.pymodbus_io import RegisterServer
 from eskin_industrial.modbus.tcp_master import PipelinedTcpMaster
-from eskin_industrial.plc.client import PlcWriter
-from eskin_industrial.plc.image import STATUS_COUNT, Status
+from eskin_industrial.outputs.plc.client import PlcWriter
+from eskin_industrial.outputs.plc.image import STATUS_COUNT, Status
 from tests.helpers.modbus import free_port
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from eskin_industrial import __version__
-from eskin_industrial.opcua import model
+from eskin_industrial.outputs.opcua import model
 from tests.helpers.modbus import free_port
 from tests.helpers.opcua import NAMESPACE_URI, by_path, node_peer, wait_listening
 from tests.helpers.paths import PROFILES

@@ -8,11 +8,17 @@ import pytest
 
 from eskin_industrial.detect.updates import Update
 from eskin_industrial.node import Command, Health, NodeStatus, refusal
-from eskin_industrial.opcua import model, status
-from eskin_industrial.opcua.alarm import AlarmState
-from eskin_industrial.opcua.handover import URGENT_MAX, Handover, Waker
-from eskin_industrial.opcua.options import POLICIES, SECURE_POLICIES, OpcuaOptions, is_loopback, parse_endpoint_url
-from eskin_industrial.opcua.users import (
+from eskin_industrial.outputs.opcua import model, status
+from eskin_industrial.outputs.opcua.alarm import AlarmState
+from eskin_industrial.outputs.opcua.handover import URGENT_MAX, Handover, Waker
+from eskin_industrial.outputs.opcua.options import (
+    POLICIES,
+    SECURE_POLICIES,
+    OpcuaOptions,
+    is_loopback,
+    parse_endpoint_url,
+)
+from eskin_industrial.outputs.opcua.users import (
     Directory,
     UserEntry,
     add_user,

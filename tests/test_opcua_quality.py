@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from eskin_industrial.bridge.config import NodeConfig
-from eskin_industrial.opcua import model
+from eskin_industrial.outputs.opcua import model
 from eskin_industrial.sim.can_node import Faults
 from tests.helpers.bridge import PAPER, can_node, channel, node_thread, running_bridge, slip_raw, wait_for
 from tests.helpers.opcua import NAMESPACE_URI, Capture, node_peer, opcua_config

@@ -15,8 +15,8 @@ from click.testing import CliRunner
 
 from eskin_industrial.bridge.config import NodeConfig
 from eskin_industrial.cli import main
-from eskin_industrial.opcua.options import SECURE_POLICIES
-from eskin_industrial.opcua.users import add_user
+from eskin_industrial.outputs.opcua.options import SECURE_POLICIES
+from eskin_industrial.outputs.opcua.users import add_user
 from tests.helpers.bridge import PAPER, running_bridge, wait_for
 from tests.helpers.opcua import NAMESPACE_URI, PeerError, node_peer, opcua_config
 

@@ -12,8 +12,8 @@ from dataclasses import replace
 
 import pytest
 
-from eskin_industrial.plc.client import JITTER, PlcWriter
-from eskin_industrial.plc.image import REG, STATUS_COUNT, TAIL_AT, TAIL_COUNT, Status
+from eskin_industrial.outputs.plc.client import JITTER, PlcWriter
+from eskin_industrial.outputs.plc.image import REG, STATUS_COUNT, TAIL_AT, TAIL_COUNT, Status
 from tests.helpers.modbus import free_port
 from tests.helpers.plc_standin import PlcStandIn
 

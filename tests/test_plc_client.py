@@ -10,9 +10,9 @@ from eskin_industrial.bridge.loop import NodeLoop
 from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
-from eskin_industrial.plc.client import PlcWriter
-from eskin_industrial.plc.image import REG, STATUS_COUNT, Status
-from eskin_industrial.plc.image import decode_registers as decode
+from eskin_industrial.outputs.plc.client import PlcWriter
+from eskin_industrial.outputs.plc.image import REG, STATUS_COUNT, Status
+from eskin_industrial.outputs.plc.image import decode_registers as decode
 from eskin_industrial.sim.plc import PlcSimulator
 from tests.helpers.modbus import free_port, slip_recording
 

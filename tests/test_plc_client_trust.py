@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import time
 
-from eskin_industrial.plc.client import PlcWriter
-from eskin_industrial.plc.image import CMD_REFUSED, REG, STATUS_COUNT
+from eskin_industrial.outputs.plc.client import PlcWriter
+from eskin_industrial.outputs.plc.image import CMD_REFUSED, REG, STATUS_COUNT
 from tests.helpers.plc_standin import PlcStandIn
 
 COMMAND, ENABLE = REG["COMMAND"].offset, REG["ENABLE"].offset

@@ -17,8 +17,8 @@ from click.testing import CliRunner
 
 from eskin_industrial import load_profile
 from eskin_industrial.cli import main
-from eskin_industrial.plc.export import TIA_COLUMNS, codesys_st, flat_csv, slip_guard_st, tia_xlsx
-from eskin_industrial.plc.image import (
+from eskin_industrial.outputs.plc.export import TIA_COLUMNS, codesys_st, flat_csv, slip_guard_st, tia_xlsx
+from eskin_industrial.outputs.plc.image import (
     BITS,
     COILS,
     IMAGE_COUNT,
@@ -293,7 +293,7 @@ def test_exported_files_say_what_the_profiles_method_puts_in_its_scores(method, 
 
 
 def test_a_register_added_to_the_table_appears_in_every_file(monkeypatch, tmp_path):
-    from eskin_industrial.plc import image
+    from eskin_industrial.outputs.plc import image
 
     added = image.Register("GRIP_WIDTH", 22, "u32", "0.01 mm", "an added value")
     table = (*image.REGISTERS, added)

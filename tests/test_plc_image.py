@@ -10,7 +10,7 @@ from eskin_industrial.cli import main
 from eskin_industrial.detect.updates import Update
 from eskin_industrial.errors import Refused
 from eskin_industrial.node import Command, Health
-from eskin_industrial.plc.image import (
+from eskin_industrial.outputs.plc.image import (
     COIL,
     COILS,
     IMAGE_COUNT,

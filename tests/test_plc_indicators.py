@@ -16,8 +16,8 @@ from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.cli import main
 from eskin_industrial.detect import PaperDetector, get_method
-from eskin_industrial.plc.image import IMAGE_COUNT, REG, saturate_u16
-from eskin_industrial.plc.server import PlcServer
+from eskin_industrial.outputs.plc.image import IMAGE_COUNT, REG, saturate_u16
+from eskin_industrial.outputs.plc.server import PlcServer
 from eskin_industrial.scenes import render
 from tests.helpers.modbus import free_port, mbpoll, mbpoll_values
 from tests.helpers.paths import PROFILES, ROOT

@@ -18,9 +18,9 @@ from xsdata.formats.dataclass.parsers import XmlParser
 from xsdata.formats.dataclass.parsers.config import ParserConfig
 
 from eskin_industrial import __version__
-from eskin_industrial.plc.export import codesys_st, join32_st, slip_guard_st
-from eskin_industrial.plc.image import BITS, IMAGE_COUNT, REGISTERS
-from eskin_industrial.plc.plcopen import CODESYS_GLOBALVARS, TC6, plcopen_xml
+from eskin_industrial.outputs.plc.export import codesys_st, join32_st, slip_guard_st
+from eskin_industrial.outputs.plc.image import BITS, IMAGE_COUNT, REGISTERS
+from eskin_industrial.outputs.plc.plcopen import CODESYS_GLOBALVARS, TC6, plcopen_xml
 from tests.test_plc_export import METHOD, PROFILE, SIZE, VALUES, WRITTEN, holding, settings, signed
 
 STRICT = ParserConfig(fail_on_unknown_properties=True, fail_on_unknown_attributes=True,

@@ -12,8 +12,8 @@ from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.modbus.serial_line import SerialSettings
-from eskin_industrial.plc.image import IMAGE_COUNT, REG, STATUS_COUNT, Status
-from eskin_industrial.plc.server import PlcServer
+from eskin_industrial.outputs.plc.image import IMAGE_COUNT, REG, STATUS_COUNT, Status
+from eskin_industrial.outputs.plc.server import PlcServer
 from tests.helpers.modbus import free_port, mbpoll, mbpoll_values, pty_pair, slip_recording
 
 

@@ -2,7 +2,7 @@
 the latch only once the slip is over (the latch stays set while it lasts)."""
 from __future__ import annotations
 
-from eskin_industrial.plc.image import Status
+from eskin_industrial.outputs.plc.image import Status
 from eskin_industrial.sim.plc import Gripper
 
 BASE = Status.CONTACT | Status.DATA_VALID | Status.ENABLED

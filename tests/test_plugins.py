@@ -38,7 +38,7 @@ description = "A source, an output and a method for eskin-industrial"
 [project.entry-points."eskin_industrial.sources"]
 const = "eskin_pagekinds:ConstSource"
 
-[project.entry-points."eskin_industrial.sinks"]
+[project.entry-points."eskin_industrial.outputs"]
 state-log = "eskin_pagekinds:StateLog"
 
 [project.entry-points."eskin_industrial.methods"]

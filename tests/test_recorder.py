@@ -19,9 +19,9 @@ from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.detect.state import LABELS
 from eskin_industrial.detect.updates import COLUMNS
 from eskin_industrial.errors import ProfileError
-from eskin_industrial.plc.image import Status
-from eskin_industrial.sinks.base import SINKS, sink_class
-from eskin_industrial.sinks.recorder import Recorder, RecorderOptions
+from eskin_industrial.outputs.base import SINKS, sink_class
+from eskin_industrial.outputs.plc.image import Status
+from eskin_industrial.outputs.recorder.sink import Recorder, RecorderOptions
 from tests.helpers.bridge import PAPER, channel, hold_raw, node_thread, running_bridge, server_config, wait_for
 
 

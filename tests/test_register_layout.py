@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from eskin_industrial import load_profile
 from eskin_industrial.node import Command
-from eskin_industrial.plc.image import (
+from eskin_industrial.outputs.plc.image import (
     COIL,
     COIL_COUNT,
     COILS,
@@ -33,7 +33,7 @@ from eskin_industrial.plc.image import (
     encode_tail,
     parse_coil_write,
 )
-from eskin_industrial.plc.server import PlcRegisterHandler
+from eskin_industrial.outputs.plc.server import PlcRegisterHandler
 from tests.helpers.fuzz import fuzz
 from tests.helpers.paths import PROFILES
 from tests.helpers.snapshots import StatusImage

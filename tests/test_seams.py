@@ -19,7 +19,7 @@ from eskin_industrial.detect.methods import METHODS
 from eskin_industrial.detect.settings import DetectorSettings
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.errors import ProfileError
-from eskin_industrial.sinks.base import SINKS
+from eskin_industrial.outputs.base import SINKS
 from tests.helpers.bridge import LogCapture, wait_for
 from tests.helpers.page_kinds import page_examples
 from tests.helpers.paths import PROFILES

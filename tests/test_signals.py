@@ -20,7 +20,7 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 
 from eskin_industrial.node import NodeSnapshot
-from eskin_industrial.sinks.base import Sink
+from eskin_industrial.outputs.base import Sink
 from tests.helpers.bridge import PAPER, TimedPlc, can_node, channel, client_config, running_bridge, wait_for
 from tests.helpers.modbus import free_port
 from tests.helpers.paths import ROOT

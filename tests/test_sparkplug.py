@@ -16,10 +16,10 @@ from hypothesis import strategies as st
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.errors import ProfileError
-from eskin_industrial.plant import payload as pb
-from eskin_industrial.plant.commands import COMMANDS
-from eskin_industrial.plant.sparkplug import DEVICE_METRICS, SparkplugDevice, SparkplugOptions, open_edge
-from eskin_industrial.sinks.base import SINKS, sink_class
+from eskin_industrial.outputs.base import SINKS, sink_class
+from eskin_industrial.outputs.sparkplug import payload as pb
+from eskin_industrial.outputs.sparkplug.commands import COMMANDS
+from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS, SparkplugDevice, SparkplugOptions, open_edge
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, server_config, slip_raw, wait_for
 from tests.helpers.paths import PROFILES
@@ -272,7 +272,7 @@ def test_check_describes_the_output(tmp_path):
 
 
 def test_the_metric_table_in_the_docs_is_the_code():
-    from eskin_industrial.plant.sparkplug import metric_table
+    from eskin_industrial.outputs.sparkplug.sparkplug import metric_table
     from tests.helpers.paths import ROOT
 
     text = (ROOT / "docs" / "plant.md").read_text()
@@ -369,7 +369,7 @@ def test_nonconforming_qos1_publishes_at_qos_1_and_says_so(tmp_path: Path) -> No
 
 
 def test_the_bdseq_file_goes_on_from_the_last_connect_and_wraps(tmp_path: Path) -> None:
-    from eskin_industrial.plant.bdseq import BdSeqFile, bdseq_path
+    from eskin_industrial.outputs.sparkplug.bdseq import BdSeqFile, bdseq_path
 
     path = bdseq_path(str(tmp_path / "store"), "g", "e")
     assert path == tmp_path / "store" / "g-e.bdseq"

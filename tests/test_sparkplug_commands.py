@@ -14,9 +14,9 @@ import pytest
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.node import Command
-from eskin_industrial.plant import payload as pb
-from eskin_industrial.plant.commands import COMMAND_ALIAS, COMMANDS, BadCommand, parse_device_command
-from eskin_industrial.plant.sparkplug import DEVICE_METRICS, SparkplugOptions
+from eskin_industrial.outputs.sparkplug import payload as pb
+from eskin_industrial.outputs.sparkplug.commands import COMMAND_ALIAS, COMMANDS, BadCommand, parse_device_command
+from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS, SparkplugOptions
 from eskin_industrial.profile import Profile
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, to_raw, wait_for

@@ -25,11 +25,11 @@ from eskin_industrial.bus.replay import ReplaySource
 from eskin_industrial.calibration import Calibrator
 from eskin_industrial.errors import ProfileError
 from eskin_industrial.frames import Frame
-from eskin_industrial.plant import payload as pb
-from eskin_industrial.plant.sparkplug import FRAME_ALIAS, SparkplugOptions
+from eskin_industrial.outputs.base import Sink
+from eskin_industrial.outputs.sparkplug import payload as pb
+from eskin_industrial.outputs.sparkplug.sparkplug import FRAME_ALIAS, SparkplugOptions
 from eskin_industrial.profile import load_profile
 from eskin_industrial.scenes import render
-from eskin_industrial.sinks.base import Sink
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, running_bridge, wait_for
 from tests.helpers.modbus import need
@@ -309,7 +309,7 @@ def test_float_arrays_round_trip_through_protobuf(values):
 
 # -- eskin-bus plant ----------------------------------------------------------------------
 def test_the_plant_view_shows_the_newest_frames_peak_and_total_and_survives_a_bad_one():
-    from eskin_industrial.plant.watch import PlantModel
+    from eskin_industrial.outputs.sparkplug.watch import PlantModel
     from eskin_industrial.view.plant_table import plant_lines
 
     def payload(seq: int, **metric) -> bytes:
@@ -336,8 +336,8 @@ def test_the_plant_view_shows_the_newest_frames_peak_and_total_and_survives_a_ba
 
 
 def test_the_frame_alias_is_its_own_in_the_device_block():
-    from eskin_industrial.plant.commands import COMMAND_ALIAS, COMMANDS
-    from eskin_industrial.plant.sparkplug import DEVICE_METRICS
+    from eskin_industrial.outputs.sparkplug.commands import COMMAND_ALIAS, COMMANDS
+    from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS
 
     aliases = [*range(len(DEVICE_METRICS)), FRAME_ALIAS, *range(COMMAND_ALIAS, COMMAND_ALIAS + len(COMMANDS))]
     assert len(set(aliases)) == len(aliases) and max(aliases) < 1000, "a device's block is 1000 aliases"

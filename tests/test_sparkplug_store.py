@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 from eskin_industrial.node import NodeSnapshot
-from eskin_industrial.plant.sparkplug import DEVICE_METRICS, EdgeNode, SparkplugOptions, open_edge
+from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS, EdgeNode, SparkplugOptions, open_edge
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import wait_for
 from tests.helpers.modbus import free_port
@@ -266,7 +266,7 @@ def test_store_options_are_checked():
 
 
 def test_check_finds_a_store_dir_that_cannot_be_written(tmp_path):
-    from eskin_industrial.plant.sparkplug import SparkplugDevice
+    from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugDevice
 
     f = tmp_path / "a-file"
     f.write_text("")
@@ -276,7 +276,7 @@ def test_check_finds_a_store_dir_that_cannot_be_written(tmp_path):
 
 
 def test_a_store_that_fails_to_write_is_counted_and_logged_and_goes_on():
-    from eskin_industrial.plant.store import Forwarder, Held
+    from eskin_industrial.outputs.sparkplug.store import Forwarder, Held
 
     events: list = []
     f = Forwarder(":memory:", 10, lambda *a: False, lambda: False, lambda *a, **k: events.append((a, k))).start()

@@ -14,8 +14,8 @@ from eskin_industrial.bus.source import Source
 from eskin_industrial.frames import RawScan
 from eskin_industrial.node import NodeSnapshot
 from eskin_industrial.node.staleness import Staleness
+from eskin_industrial.outputs.base import Sink
 from eskin_industrial.profile import load_profile
-from eskin_industrial.sinks.base import Sink
 from tests.helpers.bridge import PAPER, hold_raw
 
 

@@ -21,9 +21,9 @@ from eskin_industrial.detect.updates import Update
 from eskin_industrial.evaluation import conditions
 from eskin_industrial.evaluation.suite import DEFAULT_SETTINGS, by_name, evaluate, run_one
 from eskin_industrial.frames import FrameFlag
-from eskin_industrial.plc.export import slip_guard_st
-from eskin_industrial.plc.image import IMAGE_COUNT, REG, Status
-from eskin_industrial.plc.server import PlcServer
+from eskin_industrial.outputs.plc.export import slip_guard_st
+from eskin_industrial.outputs.plc.image import IMAGE_COUNT, REG, Status
+from eskin_industrial.outputs.plc.server import PlcServer
 from eskin_industrial.recording import read_updates, write_recording
 from eskin_industrial.scenes import load_scene, render
 from tests.helpers.modbus import free_port, mbpoll, mbpoll_values

@@ -9,7 +9,7 @@ import pytest
 from eskin_industrial.detect.settings import DetectorSettings, VaryingForceSettings
 from eskin_industrial.detect.updates import Update
 from eskin_industrial.node import Health
-from eskin_industrial.plc.image import read_back, status_names
+from eskin_industrial.outputs.plc.image import read_back, status_names
 from eskin_industrial.profile import ModbusPlcSection
 from eskin_industrial.view import IndicatorScale, Snapshot, indicator_scale, render
 from eskin_industrial.view.screen import HEAT_COLORS, RAMP, fit_number
@@ -208,8 +208,8 @@ def test_numbers_fit_their_cells():
 def test_a_watch_snapshots_the_newest_values_of_a_running_pipeline(hand_profile):
     from eskin_industrial.calibration import Calibrator
     from eskin_industrial.frames import RawScan
+    from eskin_industrial.outputs.plc.kept import KeptRegisters
     from eskin_industrial.pipeline import Pipeline
-    from eskin_industrial.plc.kept import KeptRegisters
     from eskin_industrial.view.live import Watch
     from eskin_industrial.view.snapshot import RegisterTable
     from tests.helpers.scenes import grasp
@@ -252,8 +252,8 @@ def test_a_watch_snapshots_the_newest_values_of_a_running_pipeline(hand_profile)
 def test_the_monitor_view_shows_the_deciding_methods_scores_with_the_registers(hand_profile):
     """SCORE_A and SCORE_B are published in a second run (after COMMAND and ENABLE):
     the view's register block shows them too, as a sink kept them."""
+    from eskin_industrial.outputs.plc.kept import KeptRegisters
     from eskin_industrial.pipeline import Pipeline
-    from eskin_industrial.plc.kept import KeptRegisters
     from eskin_industrial.view.live import Watch
     from eskin_industrial.view.snapshot import RegisterTable
     from tests.helpers.snapshots import node_status, snapshot_of

@@ -11,7 +11,7 @@ Nothing here knows the kinds: a ``[[node]]`` table has the keys every node has
 see :mod:`eskin_industrial.bus.source`), and a sub-table per output kind that has
 keys of its own for a node (``[node.plc] base_address``: the kind's ``NodeOptions``);
 every other top-level section names an output kind (``[plc]``, ``[recorder]``, see
-:mod:`eskin_industrial.sinks.base`).
+:mod:`eskin_industrial.outputs.base`).
 
 Where a setting can come from, the first that gives it wins: the command line, the
 bridge configuration, the node's profile, the defaults (``bridge --check`` prints
@@ -54,11 +54,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from ..bus.source import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES, Source, source_class
+from ..bus.source import Source, source_class
 from ..errors import DeprecatedKey, ProfileError
+from ..outputs.base import DEFAULT_OUTPUT, Sink, sink_class, sink_kinds
 from ..profile import MAX_RATE_HZ, STALE_MAX_FACTOR, Profile, derived_stale_s, load_profile
 from ..schema import SchemaError, build, in_range, positive_at_most, read_toml_file
-from ..sinks.base import DEFAULT_OUTPUT, Sink, sink_class, sink_kinds
+from ..seam import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES
 
 COMMAND_LINE = "<command line>"
 

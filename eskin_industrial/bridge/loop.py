@@ -28,9 +28,9 @@ from ..bus.source import Source
 from ..detect.updates import Update
 from ..node import Health, NodeSnapshot, NodeStatus, refusal
 from ..node.staleness import Staleness
+from ..outputs.base import Sink
 from ..pipeline import Pipeline
 from ..profile import Profile
-from ..sinks.base import Sink
 
 
 class NodeLoop:

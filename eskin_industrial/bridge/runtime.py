@@ -27,13 +27,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..bus.source import Feeder, OpenContext, Source
+from ..bus.source import Feeder, Source
 from ..detect.state import GraspState
 from ..detect.updates import Update
 from ..errors import ListenError
 from ..frames import FrameFlag
+from ..outputs.base import Sink
 from ..ratelimit import Throttle
-from ..sinks.base import Sink
+from ..seam import OpenContext
 from .config import BridgeConfig, ResolvedNode, output_classes
 from .logs import EventLog
 from .loop import NodeLoop

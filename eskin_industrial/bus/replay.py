@@ -14,7 +14,8 @@ from ..calibration import Calibrator
 from ..errors import EskinError
 from ..frames import RawScan
 from ..profile import Profile
-from .source import NodeLike, OpenContext, OptionsT, Source
+from ..seam import NodeLike, OpenContext
+from .source import OptionsT, Source
 
 
 def _rate_problem(t: np.ndarray, node: NodeLike[Any]) -> str | None:

@@ -32,11 +32,12 @@ import abc
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypeVar
 
 from ..frames import RawScan
 from ..registry import SOURCE_GROUP, kinds, load_kind
+from ..seam import NodeLike, OpenContext
 
 if TYPE_CHECKING:
     from ..profile import Profile
@@ -50,11 +51,6 @@ SOURCES: dict[str, str] = {
     "scene": "eskin_industrial.bus.replay:SceneSource",
     "recording": "eskin_industrial.bus.replay:RecordingSource",
 }
-#: Frames a reader may hold for its consumer before it drops (and counts) the newest:
-#: about 25 s of a saturated 1 Mbit/s classic bus.
-DEFAULT_QUEUE_FRAMES = 200_000
-#: ``queue_frames`` at most (``bridge.toml``, ``receive --queue-frames``): ten times the default.
-MAX_QUEUE_FRAMES = 10 * DEFAULT_QUEUE_FRAMES
 
 #: Shorter spellings accepted on ``--source`` (``log:FILE``, ``rtu:PORT``).
 ALIASES: dict[str, str] = {"log": "can-log", "rtu": "modbus-rtu"}
@@ -81,36 +77,6 @@ class SourceHealth:
 
 #: A source kind's options (its ``Options``, the ``[[node]]`` keys of its own).
 OptionsT = TypeVar("OptionsT")
-OptionsT_co = TypeVar("OptionsT_co", covariant=True)
-
-
-class NodeLike(Protocol[OptionsT_co]):
-    """What a kind is handed to open a node: a resolved ``[[node]]`` (see
-    :class:`eskin_industrial.bridge.config.ResolvedNode`), its source options of type
-    ``OptionsT_co``.  Read-only: a resolved node is frozen."""
-
-    @property
-    def name(self) -> str: ...
-
-    @property
-    def profile(self) -> Profile: ...
-
-    @property
-    def rate_hz(self) -> float: ...
-
-    @property
-    def options(self) -> OptionsT_co: ...
-
-
-@dataclass
-class OpenContext:
-    """Bridge-wide settings and the place to register what must be closed at the end."""
-
-    queue_frames: int = DEFAULT_QUEUE_FRAMES
-    #: A receiver watching one node: it also gets the other frames of its bus (counted
-    #: as foreign), where a bridge routes each frame to its node only.
-    all_frames: bool = False
-    closers: list[Callable[[], None]] = field(default_factory=list)
 
 
 class Source(abc.ABC, Generic[OptionsT]):

@@ -100,7 +100,7 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
 def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> DemoResult:
     """The demo under the live view; the lines it would have printed are kept and
     printed once the view has left the screen."""
-    from ..plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names
+    from ..outputs.plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names
     from ..sim.demo import DemoParts, run_demo
     from ..view.live import Watch, live_screen
     from ..view.snapshot import RegisterTable
@@ -180,7 +180,7 @@ def _cell_live(objects: tuple[str, ...], seed: int, method: str, chain: ChainSpe
                profile_for: Callable[[str], Profile], plc_log: bool, stdout: TextIO) -> list[CellRun]:
     """The closed loop under the live view, with the cell's lines (grip force, distance
     slid); the lines it would have printed are printed once the view has gone."""
-    from ..plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names
+    from ..outputs.plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names
     from ..sim.cell.demo import cell_lines, run_objects
     from ..view.live import Watch, live_screen
     from ..view.snapshot import RegisterTable

@@ -36,7 +36,7 @@ def monitor(profile_path: str, interface: str | None, channel: str | None, bitra
     from ..bridge.runtime import SingleNode
     from ..detect.updates import Update
     from ..errors import EskinError
-    from ..plc.kept import KeptRegisters
+    from ..outputs.plc.kept import KeptRegisters
     from ..view.live import Watch, change_line, live_screen
     from ..view.snapshot import RegisterTable
     from ..view.terminal import color_wanted

@@ -23,8 +23,8 @@ def nodeset_cmd(output: str) -> None:
     """Write the type model (GraspStateEnumeration, GraspSensorType, SlipAlarmType, in
     the namespace urn:eskin-industrial:opcua:grasp) as a NodeSet2 XML file, for an
     engineering tool or another OPC UA stack to import."""
-    from ..opcua.nodeset import write_nodeset
-    from ..opcua.sink import need_asyncua
+    from ..outputs.opcua.nodeset import write_nodeset
+    from ..outputs.opcua.sink import need_asyncua
 
     need_asyncua("eskin-bus opcua nodeset")
     _check_folder(output, "--output")
@@ -41,8 +41,8 @@ def _check_folder(path: str, flag: str) -> None:
 def _options(config: str | None, pki_dir: str | None, endpoint: str | None) -> tuple[str, str, str, str]:
     """(pki_dir, application URI, application name, endpoint host) from a bridge
     configuration's [opcua] or the options."""
-    from ..opcua.options import OpcuaOptions, parse_endpoint_url
-    from ..opcua.pki import default_application_uri
+    from ..outputs.opcua.options import OpcuaOptions, parse_endpoint_url
+    from ..outputs.opcua.pki import default_application_uri
 
     if config is not None:
         if pki_dir is not None or endpoint is not None:
@@ -79,8 +79,8 @@ def cert_cmd(config: str | None, pki_dir: str | None, endpoint: str | None, forc
     name) in PKI_DIR/own, and the trusted/ and rejected/ folders.  The bridge makes
     one on its first start when there is none; this makes it before, to hand to the
     clients' administrators."""
-    from ..opcua.pki import make_certificate, own_paths, thumbprint
-    from ..opcua.sink import need_asyncua
+    from ..outputs.opcua.pki import make_certificate, own_paths, thumbprint
+    from ..outputs.opcua.sink import need_asyncua
 
     need_asyncua("eskin-bus opcua cert")
     pki, uri, name, host = _options(config, pki_dir, endpoint)
@@ -148,7 +148,7 @@ def user_add(file: str, name: str, role: str) -> None:
     password and role.  The password is asked for on a terminal, or read from the
     first line of standard input; it is stored as a salted scrypt hash.  No option
     takes the password: the command line shows in ps and the shell's history."""
-    from ..opcua.users import add_user
+    from ..outputs.opcua.users import add_user
 
     if sys.stdin.isatty():
         password = click.prompt("password", hide_input=True, confirmation_prompt=True)

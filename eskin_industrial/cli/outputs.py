@@ -1,5 +1,5 @@
 """Command-line options of the output kinds, built from what each kind declares
-(:attr:`eskin_industrial.sinks.base.Sink.cli_options`), and read back into options."""
+(:attr:`eskin_industrial.outputs.base.Sink.cli_options`), and read back into options."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Any, TypeVar
 
 import click
 
-from ..sinks.base import CliOption, sink_class, sink_kinds
+from ..outputs.base import CliOption, sink_class, sink_kinds
 
 F = TypeVar("F", bound=Callable[..., Any])
 

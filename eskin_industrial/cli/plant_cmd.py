@@ -16,7 +16,7 @@ import click
 
 @dataclass(frozen=True)
 class _Conn:
-    """What :mod:`eskin_industrial.plant.transport` reads of a connection."""
+    """What :mod:`eskin_industrial.outputs.sparkplug.transport` reads of a connection."""
 
     broker: str
     ca_file: str | None = None
@@ -55,8 +55,8 @@ def plant(broker: str, group_id: str, plain: bool, as_json: bool, rebirth: bool,
     births and deaths), state, data valid, last slip, slip count, message rate, seq gaps.
     Live on a terminal; one line (--plain) or one JSON object (--json) per event
     otherwise.  Read-only (it publishes nothing) unless --rebirth."""
-    from ..plant.transport import check_files, check_security, configure, parse_broker
-    from ..plant.watch import PlantModel, rebirth_command
+    from ..outputs.sparkplug.transport import check_files, check_security, configure, parse_broker
+    from ..outputs.sparkplug.watch import PlantModel, rebirth_command
 
     conn = _Conn(broker, ca_file, cert_file, key_file, username, password_file, password_env)
     try:

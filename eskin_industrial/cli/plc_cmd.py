@@ -7,7 +7,7 @@ import sys
 
 import click
 
-from ..plc.image import map_rows
+from ..outputs.plc.image import map_rows
 from .common import open_profile, profile_option
 from .console import echo_json, json_alias
 

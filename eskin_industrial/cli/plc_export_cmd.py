@@ -10,8 +10,8 @@ from pathlib import Path
 import click
 
 from .. import __version__
-from ..plc.export import codesys_st, flat_csv, ident, tia_xlsx
-from ..plc.plcopen import plcopen_xml
+from ..outputs.plc.export import codesys_st, flat_csv, ident, tia_xlsx
+from ..outputs.plc.plcopen import plcopen_xml
 from ..profile import ModbusPlcSection
 from .common import open_profile
 

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import click
 
-from ..bus.source import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES
+from ..seam import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES
 from .can_common import bus_options, nothing_received
 from .common import profile_option
 
@@ -42,7 +42,7 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
     from ..bridge.config import BridgeConfig, NodeConfig, resolve
     from ..bridge.runtime import SingleNode
     from ..errors import EskinError
-    from ..sinks.recorder import RecorderOptions
+    from ..outputs.recorder.sink import RecorderOptions
 
     if can_log is None:
         node = NodeConfig.of("node", profile_path, "can", rate_hz=rate_hz, interface=interface, channel=channel,

@@ -4,7 +4,7 @@ Modbus registers are 16 bits; the protocol says nothing of wider values, so each
 device chooses which word comes first (``word_order``).  :func:`split32` /
 :func:`join32` are the one place a 32-bit value meets two registers: the sensor
 node's scan codec (``bus/modbus/codec.py``) and the PLC register image
-(``plc/image.py``) both use them.
+(``outputs/plc/image.py``) both use them.
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ from ..bus.can.reader import open_bus
 from ..calibration import Calibrator
 from ..detect.updates import Update, UpdateTable
 from ..evaluation.metrics import SceneScore, score_scene
-from ..plc.sink import PlcOptions
+from ..outputs.plc.sink import PlcOptions
 from ..profile import Profile
 from ..scenes import Rendered
 from ..view.live import change_line
@@ -35,7 +35,7 @@ from .can_node import CanNode, Faults
 from .plc import PlcSimulator
 
 if TYPE_CHECKING:
-    from ..plc.client import PlcWriter
+    from ..outputs.plc.client import PlcWriter
 
 
 @dataclass

@@ -22,7 +22,7 @@ from ..modbus.pdu import Identity, Table
 from ..modbus.pymodbus_io import RegisterServer
 from ..modbus.rtu_server import RtuServer
 from ..modbus.serial_line import SerialSettings
-from ..plc.image import (
+from ..outputs.plc.image import (
     CMD_ACK,
     IMAGE_COUNT,
     REG,

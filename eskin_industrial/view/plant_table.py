@@ -1,5 +1,5 @@
 """The live table of ``eskin-bus plant``: one line per edge node and per device, from
-:meth:`eskin_industrial.plant.watch.PlantModel.rows` (no I/O: lines out)."""
+:meth:`eskin_industrial.outputs.sparkplug.watch.PlantModel.rows` (no I/O: lines out)."""
 
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ from typing import Any
 import pytest
 
 from eskin_industrial.node import NodeSnapshot
-from eskin_industrial.sinks.base import Sink
+from eskin_industrial.outputs.base import Sink
 from tests.helpers.paths import ROOT
 
 PEER_DIR = ROOT / "tests" / "opcua_peer"
@@ -179,7 +179,7 @@ def opcua_config(*nodes: Any, **options: Any) -> Any:
     """A bridge of these nodes with the OPC UA output alone, on a free loopback port
     (``options``: more ``[opcua]`` keys)."""
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings
-    from eskin_industrial.opcua.options import OpcuaOptions
+    from eskin_industrial.outputs.opcua.options import OpcuaOptions
     from tests.helpers.modbus import free_port
 
     keys = {"endpoint": f"opc.tcp://127.0.0.1:{free_port()}", "offline_linger_s": 0.3, **options}

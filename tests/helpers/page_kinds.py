@@ -17,13 +17,14 @@ from typing import Any
 
 import numpy as np
 
-from eskin_industrial.bus.source import NodeLike, OpenContext, Source
+from eskin_industrial.bus.source import Source
+from eskin_industrial.seam import NodeLike, OpenContext
 from eskin_industrial.detect.methods import UNUSED, Method, Score, batch_via_stream
 from eskin_industrial.detect.scored import ScoredDetector
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.frames import RawScan
 from eskin_industrial.node import NodeSnapshot
-from eskin_industrial.sinks.base import CliOption, Sink
+from eskin_industrial.outputs.base import CliOption, Sink
 '''
 
 #: The registry lines the page shows (the tests register the kinds themselves).

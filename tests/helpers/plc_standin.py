@@ -27,7 +27,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-from eskin_industrial.plc.image import REG
+from eskin_industrial.outputs.plc.image import REG
 
 
 @dataclass

@@ -42,7 +42,7 @@ class StatusImage:
     output compose them: updates and commands in, registers out."""
 
     def __init__(self, settings: Any, stale_s: float = STALE_S, *, enabled: bool = True, method_code: int = 0) -> None:
-        from eskin_industrial.plc.image import PlcImage
+        from eskin_industrial.outputs.plc.image import PlcImage
 
         self.status = NodeStatus(stale_s, "", method_code, enabled=enabled)
         self.image = PlcImage(settings)
@@ -92,7 +92,7 @@ class StatusImage:
 def rendering_sink(settings: Any) -> Any:
     """A sink that renders every snapshot into the PLC's registers, as the PLC output
     does, and keeps them all (``published``) with the snapshots (``snapshots``)."""
-    from eskin_industrial.plc.kept import KeptRegisters
+    from eskin_industrial.outputs.plc.kept import KeptRegisters
 
     class Rendering(KeptRegisters):
         def __init__(self) -> None:

@@ -16,7 +16,7 @@ import pytest
 
 from eskin_industrial import Calibrator, load_profile
 from eskin_industrial.bus.can.layout import CanLayout
-from eskin_industrial.plc.image import REG, Status, join32
+from eskin_industrial.outputs.plc.image import REG, Status, join32
 from eskin_industrial.scenes import render
 
 PAPER = str(Path(__file__).resolve().parents[2] / "profiles" / "paper-5x5.toml")

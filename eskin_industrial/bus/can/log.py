@@ -24,7 +24,7 @@ from ...preflight import check_readable
 from ...profile import Profile
 from ...progress import NO_PROGRESS, Progress
 from ...schema import in_range
-from ..source import DEFAULT_QUEUE_FRAMES, NodeLike, OpenContext
+from ...seam import DEFAULT_QUEUE_FRAMES, NodeLike, OpenContext
 from .layout import ID_RANGE, CanLayout, ScanAssembler, decode_messages
 from .logcheck import MISMATCH_FLOOR, READ_ERRORS, check_complete, layout_mismatch
 from .reader import FrameThread

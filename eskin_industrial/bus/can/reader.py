@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any, Self
 import can
 
 from ...errors import CanBusError, EskinError, SocketCanMissing
-from ..source import DEFAULT_QUEUE_FRAMES
+from ...seam import DEFAULT_QUEUE_FRAMES
 from .busargs import NO_BITRATE, configured, make_timing, parse_filters
 
 if TYPE_CHECKING:

@@ -22,7 +22,8 @@ from ...frames import RawScan
 from ...preflight import check_writable_dir
 from ...profile import MAX_BITRATE_BPS, MAX_DATA_BITRATE_BPS, Profile
 from ...schema import in_range, positive_at_most
-from ..source import NodeLike, OpenContext, Source
+from ...seam import NodeLike, OpenContext
+from ..source import Source
 from .busargs import make_timing, parse_filters
 from .group import CanGroup
 from .layout import ID_RANGE, CanLayout, ScanAssembler

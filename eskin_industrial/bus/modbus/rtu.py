@@ -31,7 +31,8 @@ from ...modbus.serial_line import SerialSettings
 from ...preflight import check_serial
 from ...profile import Profile
 from ...schema import in_range, positive
-from ..source import NodeLike, OpenContext, Source
+from ...seam import NodeLike, OpenContext
+from ..source import Source
 from .codec import decode_scans, register_count
 
 _STREAM = int(FrameFlag.STREAM)

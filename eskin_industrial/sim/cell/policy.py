@@ -29,7 +29,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
-from ...plc.image import Status
+from ...outputs.plc.image import Status
 from ...schema import non_negative, positive
 
 _TRUST_BREAKERS = int(Status.SENSOR_STALE | Status.BUS_FAULT | Status.BRIDGE_OFFLINE)

@@ -37,8 +37,8 @@ from ...detect.updates import Update
 from ...errors import ModbusFault
 from ...modbus.pymodbus_io import RegisterServer
 from ...modbus.tcp_master import PipelinedTcpMaster
-from ...plc.image import CMD_ACK, REG, STATUS_COUNT, TAIL_AT, TAIL_COUNT, decode_registers, decode_tail
-from ...plc.sink import PlcOptions
+from ...outputs.plc.image import CMD_ACK, REG, STATUS_COUNT, TAIL_AT, TAIL_COUNT, decode_registers, decode_tail
+from ...outputs.plc.sink import PlcOptions
 from ...profile import ModbusPlcSection, Profile
 from ..can_node import CanNode, Faults
 from ..demo import free_port

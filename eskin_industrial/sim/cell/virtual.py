@@ -36,8 +36,8 @@ from ...detect.state import GraspState
 from ...detect.updates import Update
 from ...frames import RawScan
 from ...node import Command, Health, NodeStatus
+from ...outputs.plc.image import PlcImage, decode_registers
 from ...pipeline import Pipeline
-from ...plc.image import PlcImage, decode_registers
 from ...profile import Profile
 from .actuator import ActuatorSpec
 from .gripper import from_register, to_register

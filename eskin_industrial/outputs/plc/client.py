@@ -50,14 +50,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from ..errors import ModbusFault, Refused
-from ..modbus.pymodbus_io import RtuMaster
-from ..modbus.serial_line import SerialSettings
-from ..modbus.tcp_master import PipelinedTcpMaster
-from ..node import Command, NodeSnapshot
-from ..profile import ModbusPlcSection
-from ..ratelimit import Throttle
-from ..sinks.base import Sink, SinkHealth
+from ...errors import ModbusFault, Refused
+from ...modbus.pymodbus_io import RtuMaster
+from ...modbus.serial_line import SerialSettings
+from ...modbus.tcp_master import PipelinedTcpMaster
+from ...node import Command, NodeSnapshot
+from ...profile import ModbusPlcSection
+from ...ratelimit import Throttle
+from ..base import Sink, SinkHealth
 from .image import CMD_REFUSED, REG, TAIL_AT, PlcImage, parse_register_write
 
 if TYPE_CHECKING:

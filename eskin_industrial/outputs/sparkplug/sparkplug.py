@@ -24,7 +24,7 @@ only by the opt-in ``nonconforming_qos1``, warned about.
 
 With ``frame_interval_s`` the device also publishes the calibrated taxel frame as a
 ``FloatArray`` metric (``Taxels/Frame``): the node's loop hands it the newest frame
-once that interval has passed (:attr:`~eskin_industrial.sinks.base.Sink.frame_every_s`),
+once that interval has passed (:attr:`~eskin_industrial.outputs.base.Sink.frame_every_s`),
 and it goes out as a DDATA of its own, QoS 0, or not at all while the node cannot
 publish (a frame is a sample of now: the store keeps the states, not stale frames).
 """
@@ -45,13 +45,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
-from .. import __version__
-from ..detect.state import LABELS
-from ..errors import EskinError, ProfileError
-from ..node import Command, NodeSnapshot, refusal
-from ..ratelimit import Throttle
-from ..schema import SchemaError, build, in_range
-from ..sinks.base import CliOption, Sink, SinkHealth
+from ... import __version__
+from ...detect.state import LABELS
+from ...errors import EskinError, ProfileError
+from ...node import Command, NodeSnapshot, refusal
+from ...ratelimit import Throttle
+from ...schema import SchemaError, build, in_range
+from ..base import CliOption, Sink, SinkHealth
 from . import payload as pb
 from .bdseq import BdSeqFile, bdseq_path, writable
 from .commands import COMMAND_ALIAS, COMMANDS, BadCommand, birth_metrics, parse_device_command
@@ -60,8 +60,8 @@ from .store import Forwarder, Held, store_path
 from .transport import check_files, check_security, configure, parse_broker
 
 if TYPE_CHECKING:
-    from ..bus.source import NodeLike, OpenContext
-    from ..frames import Frame
+    from ...frames import Frame
+    from ...seam import NodeLike, OpenContext
 
 NAMESPACE = "spBv1.0"
 FRAME_INTERVAL_MIN_S = 0.05
@@ -1008,7 +1008,7 @@ def open_edge(options: SparkplugOptions, devices: Sequence[tuple[str, dict[str, 
     try:
         import paho.mqtt.client as mqtt
     except ImportError:  # pragma: no cover - a runtime dependency
-        from ..errors import MissingExtra
+        from ...errors import MissingExtra
 
         # a dependency of the package itself: only a damaged install lacks it
         raise MissingExtra("the sparkplug output needs paho-mqtt: pip install 'paho-mqtt>=2.1,<2.3'") from None

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 from . import payload as pb
 
 if TYPE_CHECKING:
-    from ..profile import Profile
+    from ...profile import Profile
 
 Property = tuple[str, tuple[int, Any]]
 
@@ -48,7 +48,7 @@ def frame_properties(profile: Profile, interval_s: float) -> tuple[Property, ...
 def score_properties(profile: Profile) -> dict[str, tuple[Property, ...]]:
     """The DBIRTH properties of ``Score A`` and ``Score B``: the deciding method, the
     score's name (as in the updates CSV and ``eskin-bus plc map``) and what it is."""
-    from ..methods import get_method
+    from ...methods import get_method
 
     method = get_method(profile.detector.method)
     return {metric: (("method", (pb.STRING, method.name)), ("score", (pb.STRING, s.name)),

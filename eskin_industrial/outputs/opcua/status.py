@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from typing import Literal, NamedTuple
 
-from ..node import NodeSnapshot
+from ...node import NodeSnapshot
 
 GOOD = 0x00000000
 UNCERTAIN = 0x40000000

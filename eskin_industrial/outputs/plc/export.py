@@ -1,7 +1,7 @@
 """PLC import files for the register image: a flat tag list, a Codesys source and a
 TIA Portal PLC tag table.  Pure: the settings in, text (or a workbook's bytes) out.
 
-Everything is derived from the tables of :mod:`~eskin_industrial.plc.image`
+Everything is derived from the tables of :mod:`~eskin_industrial.outputs.plc.image`
 (``REGISTERS``, ``COILS``, ``BITS`` and the numbering of :func:`map_rows`), so that a
 register added there appears in every file (read through the module, at each call).
 
@@ -25,8 +25,8 @@ from dataclasses import dataclass
 from typing import Literal, NamedTuple
 from xml.sax.saxutils import escape
 
-from ..frames import FrameFlag
-from ..profile import ModbusPlcSection
+from ...frames import FrameFlag
+from ...profile import ModbusPlcSection
 from . import image
 from .image import BIT_DOC, BITS, COILS, Register, Status, map_rows
 

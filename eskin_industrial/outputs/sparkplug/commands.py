@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from ..node import Command, CommandName
+from ...node import Command, CommandName
 from . import payload as pb
 
 

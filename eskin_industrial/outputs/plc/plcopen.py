@@ -28,7 +28,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from ..profile import ModbusPlcSection
+from ...profile import ModbusPlcSection
 from .export import (
     JOIN32_DOC,
     Member,

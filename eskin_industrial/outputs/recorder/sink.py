@@ -24,15 +24,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, Literal
 
-from ..detect.state import LABELS
-from ..detect.updates import COLUMNS, Update
-from ..preflight import check_writable_dir
-from ..recording import update_row
-from ..schema import in_range
-from .base import CliOption, Sink, SinkHealth
+from ...detect.state import LABELS
+from ...detect.updates import COLUMNS, Update
+from ...preflight import check_writable_dir
+from ...recording import update_row
+from ...schema import in_range
+from ..base import CliOption, Sink, SinkHealth
 
 if TYPE_CHECKING:
-    from ..bus.source import NodeLike, OpenContext
+    from ...seam import NodeLike, OpenContext
 
 
 @dataclass(frozen=True)
@@ -172,7 +172,7 @@ class Recorder(Sink[RecorderOptions]):
 
     @classmethod
     def open_nodes(cls, options: RecorderOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
-        from ..errors import EskinError
+        from ...errors import EskinError
 
         out: list[Sink[Any]] = []
         for n in nodes:

@@ -14,18 +14,18 @@ import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
-from .. import __version__
-from ..errors import MissingExtra, ProfileError
-from ..netaddr import listen_problem
-from ..preflight import check_readable
-from ..schema import SchemaError, build
-from ..sinks.base import CliOption, Sink, SinkHealth
+from ... import __version__
+from ...errors import MissingExtra, ProfileError
+from ...netaddr import listen_problem
+from ...preflight import check_readable
+from ...schema import SchemaError, build
+from ..base import CliOption, Sink, SinkHealth
 from .options import OpcuaOptions
 
 if TYPE_CHECKING:
-    from ..bus.source import NodeLike, OpenContext
-    from ..frames import Frame
-    from ..node import Command, NodeSnapshot
+    from ...frames import Frame
+    from ...node import Command, NodeSnapshot
+    from ...seam import NodeLike, OpenContext
     from .build import NodeInfo
     from .server import OpcuaServer
 
@@ -43,7 +43,7 @@ def need_asyncua(what: str = "the opcua output") -> None:
 
 def node_info(node: NodeLike[Any], frame_interval_s: float) -> NodeInfo:
     """What the model says about a node, from its profile and the package."""
-    from ..methods import get_method
+    from ...methods import get_method
     from .build import NodeInfo
 
     p = node.profile

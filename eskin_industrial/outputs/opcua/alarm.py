@@ -22,7 +22,7 @@ from __future__ import annotations
 import uuid
 from typing import Literal
 
-from ..node import NodeSnapshot
+from ...node import NodeSnapshot
 from .status import BAD_CONDITION_BRANCH_ALREADY_ACKED, BAD_EVENT_ID_UNKNOWN, GOOD
 
 _SLIP = 3  #: GraspState.SLIP

@@ -27,14 +27,14 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-from ..detect.methods import METHODS
-from ..detect.state import GraspState
-from ..errors import Refused
-from ..methods import get_method
-from ..modbus.exception_codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE
-from ..modbus.words import WordOrder, join32, split32
-from ..node import Command, NodeSnapshot
-from ..profile import ModbusPlcSection
+from ...detect.methods import METHODS
+from ...detect.state import GraspState
+from ...errors import Refused
+from ...methods import get_method
+from ...modbus.exception_codes import ILLEGAL_ADDRESS, ILLEGAL_VALUE
+from ...modbus.words import WordOrder, join32, split32
+from ...node import Command, NodeSnapshot
+from ...profile import ModbusPlcSection
 
 
 class Status(enum.IntFlag):
@@ -141,7 +141,7 @@ _LAST_RW = max(r.offset + r.words for r in REGISTERS if r.access == "RW")
 MAIN: tuple[Register, ...] = tuple(r for r in PUBLISHED if r.offset < _FIRST_RW)
 STATUS_COUNT = max(r.offset + r.words for r in MAIN)
 #: The second run, after the command registers: the method's scores (client mode
-#: writes them in a request of their own, at each refresh: see ``plc/client.py``).
+#: writes them in a request of their own, at each refresh: see ``outputs/plc/client.py``).
 TAIL: tuple[Register, ...] = tuple(r for r in PUBLISHED if r.offset >= _LAST_RW)
 TAIL_AT = min(r.offset for r in TAIL)
 TAIL_COUNT = max(r.offset + r.words for r in TAIL) - TAIL_AT

@@ -26,16 +26,16 @@ import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from ..errors import Refused
-from ..modbus.exception_codes import DEVICE_FAILURE, ILLEGAL_ADDRESS
-from ..modbus.pdu import Identity, Table
-from ..modbus.rtu_server import RtuServer
-from ..modbus.serial_line import SerialSettings
-from ..modbus.serving import RateLimitedLog
-from ..modbus.tcp_server import PEER, Policy, TcpServer, networks
-from ..node import Command, NodeSnapshot, refusal
-from ..profile import ModbusPlcSection
-from ..sinks.base import Sink
+from ...errors import Refused
+from ...modbus.exception_codes import DEVICE_FAILURE, ILLEGAL_ADDRESS
+from ...modbus.pdu import Identity, Table
+from ...modbus.rtu_server import RtuServer
+from ...modbus.serial_line import SerialSettings
+from ...modbus.serving import RateLimitedLog
+from ...modbus.tcp_server import PEER, Policy, TcpServer, networks
+from ...node import Command, NodeSnapshot, refusal
+from ...profile import ModbusPlcSection
+from ..base import Sink
 from .image import (
     BITS,
     COILS,

@@ -20,7 +20,7 @@ The public methods are written once here over private hooks (``_publish``,
 
 An *output kind* is one module plus one entry in :data:`SINKS` (section name ->
 ``module:Class``, imported on first use), or a plug-in: an entry point of the group
-``eskin_industrial.sinks`` in another distribution (:mod:`eskin_industrial.registry`).  The class declares what the bridge
+``eskin_industrial.outputs`` in another distribution (:mod:`eskin_industrial.registry`).  The class declares what the bridge
 configuration (its own ``[SECTION]`` of ``bridge.toml``), the command line
 (:attr:`Sink.cli_options`) and ``--check`` need, and opens one sink per node
 (:meth:`Sink.open_nodes`; a kind may share one connection between its nodes, as the
@@ -41,19 +41,19 @@ from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar, cast
 from ..registry import SINK_GROUP, kinds, load_kind
 
 if TYPE_CHECKING:
-    from ..bus.source import NodeLike, OpenContext
     from ..detect.updates import Update
     from ..frames import Frame
     from ..node import Command, NodeSnapshot
     from ..profile import Profile
+    from ..seam import NodeLike, OpenContext
 
 #: section name -> "module:Class", imported on first use.  The order is the order of
 #: the outputs in logs and ``--check``.
 SINKS: dict[str, str] = {
-    "plc": "eskin_industrial.plc.sink:PlcSink",
-    "recorder": "eskin_industrial.sinks.recorder:Recorder",
-    "sparkplug": "eskin_industrial.plant.sparkplug:SparkplugDevice",
-    "opcua": "eskin_industrial.opcua.sink:OpcuaSink",
+    "plc": "eskin_industrial.outputs.plc.sink:PlcSink",
+    "recorder": "eskin_industrial.outputs.recorder.sink:Recorder",
+    "sparkplug": "eskin_industrial.outputs.sparkplug.sparkplug:SparkplugDevice",
+    "opcua": "eskin_industrial.outputs.opcua.sink:OpcuaSink",
 }
 #: A sink's own events held until a handler is attached (the first ones of a writer
 #: that starts before the bridge's log is wired); beyond it the oldest are dropped.
@@ -267,5 +267,5 @@ def sink_class(kind: str) -> type[Sink[Any]]:
 
 def sink_kinds() -> dict[str, str]:
     """Every output kind: :data:`SINKS`, then the plug-ins (entry-point group
-    ``eskin_industrial.sinks``), in the order of logs, ``--check`` and the options."""
+    ``eskin_industrial.outputs``), in the order of logs, ``--check`` and the options."""
     return kinds(SINKS, SINK_GROUP)

@@ -17,7 +17,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from ..errors import DecodeError
+from ...errors import DecodeError
 
 # Datatypes (the specification's table; the same codes serve PropertyValue types).
 INT8, INT16, INT32, INT64 = 1, 2, 3, 4

@@ -3,9 +3,9 @@ shows beside the node's snapshot when no PLC is connected."""
 
 from __future__ import annotations
 
-from ..node import NodeSnapshot
-from ..profile import ModbusPlcSection
-from ..sinks.base import Sink
+from ...node import NodeSnapshot
+from ...profile import ModbusPlcSection
+from ..base import Sink
 from .image import PlcImage, read_back, status_names
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from typing import Any, NamedTuple
 
-from ..detect.state import LABELS
+from ...detect.state import LABELS
 from .status import Group
 
 #: Our namespace (the types and the nodes' objects).

@@ -1,7 +1,7 @@
 """The PLC as an output kind (``[plc]`` in the bridge configuration, ``--plc`` on the
 command line): each node's register image, written into the PLC (client mode, one
-:class:`~eskin_industrial.plc.client.PlcWriter` per node) or served to it (server
-mode, one :class:`~eskin_industrial.plc.server.PlcServer` with one block per node).
+:class:`~eskin_industrial.outputs.plc.client.PlcWriter` per node) or served to it (server
+mode, one :class:`~eskin_industrial.outputs.plc.server.PlcServer` with one block per node).
 
 Where a setting can come from, the first that gives it wins: the command line
 (``--plc``), the bridge configuration's ``[plc]``, the node profile's ``[modbus.plc]``
@@ -14,15 +14,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
 
-from ..netaddr import check_host, listen_problem, parse_endpoint
-from ..preflight import check_serial
-from ..profile import ModbusPlcSection, Profile
-from ..schema import in_range, ip_network, positive
-from ..sinks.base import CliOption, Sink
+from ...netaddr import check_host, listen_problem, parse_endpoint
+from ...preflight import check_serial
+from ...profile import ModbusPlcSection, Profile
+from ...schema import in_range, ip_network, positive
+from ..base import CliOption, Sink
 from .image import IMAGE_COUNT
 
 if TYPE_CHECKING:
-    from ..bus.source import NodeLike, OpenContext
+    from ...seam import NodeLike, OpenContext
 
 
 @dataclass(frozen=True)
@@ -220,7 +220,7 @@ class PlcSink(Sink[PlcOptions]):
 
     @classmethod
     def open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
-        from ..modbus.serial_line import SerialSettings
+        from ...modbus.serial_line import SerialSettings
         from .client import PlcWriter
         from .server import PlcServer, identity_of, policy_of
 

@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..errors import EskinError
+from ...errors import EskinError
 from . import payload as pb
 
 RATE_WINDOW_S = 10.0

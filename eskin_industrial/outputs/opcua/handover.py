@@ -20,7 +20,7 @@ import itertools
 from collections.abc import Callable
 from typing import Any
 
-from ..node import NodeSnapshot
+from ...node import NodeSnapshot
 
 URGENT_MAX = 32
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
-from ..netaddr import check_host
+from ...netaddr import check_host
 
 DEFAULT_PORTS = {"mqtt": 1883, "mqtts": 8883}
 

@@ -25,10 +25,10 @@ from typing import Any
 from asyncua import Server, ua
 from asyncua.common.events import get_event_obj_from_type_node
 
-from .. import __version__
-from ..errors import ProfileError, TransportError
-from ..netaddr import listen_error
-from ..node import Command, NodeSnapshot, refusal
+from ... import __version__
+from ...errors import ProfileError, TransportError
+from ...netaddr import listen_error
+from ...node import Command, NodeSnapshot, refusal
 from . import model, status
 from .access import Logins, Permissions
 from .alarm import AlarmState

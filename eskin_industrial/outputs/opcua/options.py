@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 from typing import Literal
 from urllib.parse import urlsplit
 
-from ..netaddr import check_host
-from ..schema import in_range
+from ...netaddr import check_host
+from ...schema import in_range
 
 DEFAULT_PORT = 4840
 FRAME_INTERVAL_MIN_S = 0.05

@@ -1,0 +1,1 @@
+"""The recorder output: every update to a CSV or JSONL file."""
