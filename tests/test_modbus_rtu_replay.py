@@ -110,7 +110,8 @@ def test_a_replayed_answer_is_no_verdict_from_the_next_poll(paper_profile, tmp_p
             mitm.replay.clear()
             back = time.perf_counter()
             wait_for(lambda: run.log.events("sensor_ok"), timeout_s=3, what="the verdict back")
-            time.sleep(0.3)
+            wait_for(lambda: any(at > back and s & Status.DATA_VALID for at, s, _, _ in plc.reads), timeout_s=1.5,
+                     what="DATA_VALID after the detector's warm-up")
             counters = run.counters("grip")
             events = [e for e in run.log.events() if e["event"] in ("sensor_fault", "sensor_ok")]
     assert mitm.kept is not None and mitm.replayed > 50 and mitm.first_replay is not None
