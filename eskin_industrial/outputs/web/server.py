@@ -14,9 +14,11 @@ files on asyncio, with no ASGI server beside it (docs/web.md).
 - ``GET /ws``: the live state, JSON; the Origin header must be the console's own.
 
 Each WebSocket has a sender that waits for a wake-up, builds one message of what is
-new for it (the newest frame replaces one it was not sent: a slow browser is
-decimated) and sends it; a send that does not complete within :data:`SEND_TIMEOUT_S`
-drops the browser.  Nothing is queued per browser.
+new for it and sends it.  The page acknowledges each message once it has drawn it;
+at most :data:`IN_FLIGHT` messages go unacknowledged, so a browser that draws slowly
+is sent fewer messages, each with the newest frame (the one it missed is never sent:
+it is decimated), and one that takes none for :data:`SEND_TIMEOUT_S` is dropped.
+Nothing is queued per browser.
 """
 
 from __future__ import annotations
@@ -41,15 +43,17 @@ from ...errors import ListenError
 from ...netaddr import listen_error
 from ...node import Command, refusal
 from ...recording import write_recording
-from .hub import NodeFeed, num
+from .hub import EPISODES_MAX, NodeFeed, num
 from .users import Role, WebUser, login
 
 if TYPE_CHECKING:
     from .options import WebOptions
 
 STATIC = Path(__file__).parent / "static"
-#: A browser that has not taken a message within this time is dropped.
+#: A browser that has not taken (acknowledged) a message within this time is dropped.
 SEND_TIMEOUT_S = 5.0
+#: Messages sent and not yet acknowledged by the page, at most.
+IN_FLIGHT = 2
 SESSIONS_MAX = 256
 COOKIE = "eskin_session"
 _COMMANDS = ("ack", "tare", "enable", "disable")
@@ -75,8 +79,11 @@ class Client:
     """One browser's WebSocket: what it watches, and what it has been sent."""
 
     ws: web.WebSocketResponse
+    peer: str = "-"
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     watch: int | None = None
+    in_flight: int = 0
+    acked: asyncio.Event = field(default_factory=asyncio.Event)
     snap_seq: dict[int, int] = field(default_factory=dict)
     lane_seq: dict[int, int] = field(default_factory=dict)
     frame_seq: int = 0
@@ -394,7 +401,7 @@ class WebServer:
             return self._refuse(503, "too many browsers connected")
         ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4096)
         await ws.prepare(request)
-        client = Client(ws)
+        client = Client(ws, peer=request.remote or "-")
         self.clients.add(client)
         self.counts["web_clients"] += 1
         client.wake.set()
@@ -404,8 +411,15 @@ class WebServer:
                 if msg.type != WSMsgType.TEXT:
                     continue
                 try:
-                    watch = json.loads(msg.data).get("watch")
+                    body = json.loads(msg.data)
+                    watch = body.get("watch", client.watch)
+                    acks = body.get("ack", 0)
                 except (ValueError, AttributeError):
+                    continue
+                if isinstance(acks, int) and acks > 0:
+                    client.in_flight = max(0, client.in_flight - acks)
+                    client.acked.set()
+                if "watch" not in body:
                     continue
                 client.watch = watch if isinstance(watch, int) and 0 <= watch < len(self.feeds) else None
                 client.frame_seq = client.trend_seq = 0
@@ -419,17 +433,22 @@ class WebServer:
         try:
             while not client.ws.closed:
                 await client.wake.wait()
-                client.wake.clear()
-                message = self._message(client)
-                if message is None:
-                    continue
                 try:
+                    while client.in_flight >= IN_FLIGHT:  # the page has not drawn what it has
+                        client.acked.clear()
+                        await asyncio.wait_for(client.acked.wait(), SEND_TIMEOUT_S)
+                    client.wake.clear()
+                    message = self._message(client)
+                    if message is None:
+                        continue
                     await asyncio.wait_for(client.ws.send_str(message), SEND_TIMEOUT_S)
                 except TimeoutError:
                     self.counts["web_clients_dropped"] += 1
-                    self.on_event("web_client_dropped", "warning", reason=f"no message taken in {SEND_TIMEOUT_S:g} s")
+                    self.on_event("web_client_dropped", "warning", peer=client.peer,
+                                  reason=f"no message taken in {SEND_TIMEOUT_S:g} s")
                     await client.ws.close()
                     return
+                client.in_flight += 1
                 self.counts["web_messages"] += 1
         except (ConnectionError, RuntimeError):
             return  # the browser went away
@@ -455,6 +474,9 @@ class WebServer:
             for e, summary in zip(eps, summaries):
                 client.episodes[(i, e.id)] = summary["capture"]
             episodes += summaries
+        if len(client.episodes) > 2 * EPISODES_MAX * len(self.feeds):  # bounded: what the feeds still list
+            present = {(i, e.id) for i, feed in enumerate(self.feeds) for e in list(feed.episodes)}
+            client.episodes = {k: v for k, v in client.episodes.items() if k in present}
         if nodes:
             out["nodes"] = nodes
         if lane:

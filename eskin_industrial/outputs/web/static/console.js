@@ -115,6 +115,7 @@ function connect() {
     const msg = JSON.parse(ev.data);
     msg.received = nowMs();
     for (const h of Console.handlers) h(msg);
+    ws.send('{"ack":1}');  // drawn: the server may send the next (a slow page is sent fewer, newer ones)
   };
   ws.onclose = () => {
     if (status) status.textContent = "disconnected: reconnecting";

@@ -1,0 +1,207 @@
+"""The web console over HTTP and WebSocket, without a browser: a bridge playing case 2
+in real time with the console beside it, and aiohttp's client as the browser.  Who may
+command (an operator's session, its CSRF token, the console's own Origin), the Origin
+checked on every WebSocket upgrade, a console with no users read-only, an open bind
+refused without TLS and users, and a browser that takes nothing sent at most two
+messages, then dropped."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import aiohttp
+import pytest
+from click.testing import CliRunner
+
+from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
+from eskin_industrial.cli import main
+from eskin_industrial.outputs.base import SINKS, sink_class
+from eskin_industrial.outputs.opcua.users import add_user
+from eskin_industrial.outputs.web import server as web_server
+from eskin_industrial.outputs.web.options import WebOptions
+from tests.helpers.bridge import PAPER, Running, running_bridge, wait_for
+from tests.helpers.modbus import free_port
+
+PASSWORDS = {"olga": "operator-pass", "rita": "reader-pass"}
+
+
+def users_file(tmp: Path) -> str:
+    """The users file the OPC UA output's command writes: one file serves both outputs."""
+    path = tmp / "users.toml"
+    add_user(path, "olga", "operator", PASSWORDS["olga"])
+    add_user(path, "rita", "reader", PASSWORDS["rita"])
+    return str(path)
+
+
+def scene_config(port: int, users: str | None = None, scene: str = "case2") -> BridgeConfig:
+    node = NodeConfig.of("grip", PAPER, "scene", scene=scene)
+    return BridgeConfig(node=(node,), outputs={"web": WebOptions(bind=f"127.0.0.1:{port}", users_file=users)},
+                        log=LogSettings(format="json", status_every_s=0))
+
+
+@contextlib.contextmanager
+def console(tmp: Path, users: bool = True, scene: str = "case2") -> Iterator[tuple[Running, str]]:
+    port = free_port()
+    with running_bridge(scene_config(port, users_file(tmp) if users else None, scene)) as run:
+        yield run, f"http://127.0.0.1:{port}"
+
+
+def browser() -> aiohttp.ClientSession:
+    """A client that keeps the console's cookies as a browser does (aiohttp's jar
+    refuses cookies of an IP address unless told)."""
+    return aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True))
+
+
+def call(coro):  # a test's coroutine, run to its end within 20 s
+    return asyncio.run(asyncio.wait_for(coro, 20))
+
+
+async def login(http: aiohttp.ClientSession, base: str, user: str, password: str | None = None) -> tuple[int, dict]:
+    r = await http.post(f"{base}/api/login", json={"user": user, "password": password or PASSWORDS[user]},
+                        headers={"Origin": base})
+    return r.status, await r.json()
+
+
+async def command(http: aiohttp.ClientSession, base: str, name: str, csrf: str | None,
+                  origin: str | None = None) -> tuple[int, str | None]:
+    headers = {"Origin": origin or base}
+    if csrf is not None:
+        headers["X-CSRF-Token"] = csrf
+    r = await http.post(f"{base}/api/nodes/0/command", json={"command": name}, headers=headers)
+    return r.status, (await r.json()).get("error")
+
+
+def test_the_kind_is_one_registry_entry() -> None:
+    assert SINKS["web"] == "eskin_industrial.outputs.web.sink:WebSink"
+    assert sink_class("web").kind == "web"
+    assert [o.flag for o in sink_class("web").cli_options][0] == "--web"
+
+
+def test_an_open_bind_needs_tls_and_users() -> None:
+    assert WebOptions().loopback and WebOptions().bind == "127.0.0.1:8080"
+    with pytest.raises(ValueError, match=r"bind: on 0\.0\.0\.0, not loopback, the console needs TLS .* and users"):
+        WebOptions(bind="0.0.0.0:8080")
+    with pytest.raises(ValueError, match=r"needs TLS \(tls_cert, tls_key\)$"):
+        WebOptions(bind="0.0.0.0:8080", users_file="users.toml")
+    with pytest.raises(ValueError, match="tls_cert: give tls_cert and tls_key together"):
+        WebOptions(tls_cert="cert.pem")
+    assert not WebOptions(bind="[::]:8443", users_file="u.toml", tls_cert="c.pem", tls_key="k.pem").loopback
+
+
+@pytest.mark.slow
+def test_check_refuses_an_open_bind_and_describes_a_loopback_one(tmp_path: Path) -> None:
+    res = CliRunner().invoke(main, ["bridge", "-p", PAPER, "--source", "scene:case2", "--web", "0.0.0.0:8080",
+                                    "--check"])
+    assert res.exit_code == 2, res.output
+    assert "not loopback, the console needs TLS (tls_cert, tls_key) and users (users_file)" in res.output
+    port = free_port()
+    res = CliRunner().invoke(main, ["bridge", "-p", PAPER, "--source", "scene:case2", "--web", f"127.0.0.1:{port}",
+                                    "--web-users-file", users_file(tmp_path), "--check"])
+    assert res.exit_code == 0, res.output
+    assert f"web console http://127.0.0.1:{port}/ (no TLS; users from" in res.output
+
+
+@pytest.mark.slow
+def test_commands_need_an_operators_session_its_csrf_token_and_the_consoles_origin(tmp_path: Path) -> None:
+    with console(tmp_path) as (run, base):
+        wait_for(lambda: run.counters("grip")["scans"] > 250, what="the hold under way")  # 8 N held from 1.5 s
+
+        async def go() -> None:
+            async with browser() as anonymous:
+                assert await command(anonymous, base, "ack", None) == (401, "login")
+                r = await anonymous.get(f"{base}/api/info")
+                assert "nodes" not in await r.json()  # with users, no value without a login
+                assert await login(anonymous, base, "olga", "wrong") == (401, {"error": "wrong user name or password"})
+                assert await login(anonymous, base, "nobody", "x") == (401, {"error": "wrong user name or password"})
+            async with browser() as reader:
+                status, body = await login(reader, base, "rita")
+                assert status == 200 and body["session"]["role"] == "reader"
+                assert await command(reader, base, "ack", body["session"]["csrf"]) == (403, "role")
+            async with browser() as operator:
+                r = await operator.post(f"{base}/api/login", json={"user": "olga", "password": PASSWORDS["olga"]},
+                                        headers={"Origin": base})
+                cookie = r.headers["Set-Cookie"]
+                assert "HttpOnly" in cookie and "SameSite=Strict" in cookie, cookie
+                csrf = (await r.json())["session"]["csrf"]
+                assert await command(operator, base, "ack", None) == (403, "csrf")
+                assert await command(operator, base, "ack", "not-the-token") == (403, "csrf")
+                assert await command(operator, base, "ack", csrf, origin="http://evil.example") == (403, "origin")
+                # the one refusal rule: no tare while something is held
+                assert await command(operator, base, "tare", csrf) == (409, "in_contact")
+                before = run.counters("grip")["commands"]
+                assert await command(operator, base, "disable", csrf) == (202, None)
+                wait_for(lambda: run.counters("grip")["commands"] == before + 1, what="the disable applied")
+                assert not run.bridge.runs[0].loop.status.enabled
+                assert await command(operator, base, "enable", csrf) == (202, None)
+                wait_for(lambda: run.bridge.runs[0].loop.status.enabled, what="the enable applied")
+
+        call(go())
+        c = run.counters("grip")
+        assert c["web_commands"] == 2 and c["web_commands_refused"] == 6 and c["web_logins_refused"] == 2
+        refused = run.log.events("web_command_refused")
+        assert {e["reason"] for e in refused} == {"login", "role", "csrf", "origin", "in_contact"}
+
+
+@pytest.mark.slow
+def test_the_websocket_upgrade_checks_the_origin(tmp_path: Path) -> None:
+    with console(tmp_path, users=False, scene="hold") as (run, base):
+        async def go() -> None:
+            async with browser() as http:
+                for origin in ("http://evil.example", f"{base}.evil.example", None):
+                    headers = {"Origin": origin} if origin else {}
+                    with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                        await http.ws_connect(f"{base}/ws", headers=headers)
+                    assert refused.value.status == 403
+                async with http.ws_connect(f"{base}/ws", headers={"Origin": base}) as ws:
+                    await ws.send_str(json.dumps({"watch": 0}))
+                    msg = json.loads((await ws.receive(timeout=5)).data)
+                    assert msg["nodes"][0]["i"] == 0
+                # no users: the console is read-only, for everyone
+                assert await command(http, base, "ack", None) == (403, "read_only")
+
+        call(go())
+        assert run.counters("grip")["web_origin_refused"] == 3
+
+
+@pytest.mark.slow
+def test_a_browser_that_takes_nothing_gets_two_messages_then_is_dropped(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setattr(web_server, "SEND_TIMEOUT_S", 1.0)
+    with console(tmp_path, users=False, scene="hold") as (run, base):
+        async def go() -> tuple[int, list[float], float]:
+            async with browser() as http:
+                # a page that draws slowly: it acknowledges a message every 0.3 s
+                slow_t: list[float] = []
+                async with http.ws_connect(f"{base}/ws", headers={"Origin": base}) as ws:
+                    await ws.send_str(json.dumps({"watch": 0}))
+                    end = time.monotonic() + 2.0
+                    while time.monotonic() < end:
+                        msg = json.loads((await ws.receive(timeout=5)).data)
+                        if "frame" in msg:
+                            slow_t.append(msg["frame"]["t"])
+                        await asyncio.sleep(0.3)
+                        await ws.send_str('{"ack":1}')
+                # a page that acknowledges nothing: two messages, then nothing, then dropped
+                got = 0
+                async with http.ws_connect(f"{base}/ws", headers={"Origin": base}) as ws:
+                    await ws.send_str(json.dumps({"watch": 0}))
+                    t0 = time.monotonic()
+                    while True:
+                        msg = await ws.receive(timeout=5)
+                        if msg.type != aiohttp.WSMsgType.TEXT:
+                            break
+                        got += 1
+                    return got, slow_t, time.monotonic() - t0
+
+        got, slow_t, dropped_after = call(go())
+        assert got == web_server.IN_FLIGHT
+        assert 0.8 < dropped_after < 3.0, dropped_after
+        assert run.counters("grip")["web_clients_dropped"] == 1
+        assert run.log.events("web_client_dropped")
+        # the slow page saw the newest frame each time, not a backlog 30 ms apart
+        steps = [b - a for a, b in zip(slow_t, slow_t[1:])]
+        assert steps and min(steps) >= 0.2, steps
