@@ -69,5 +69,6 @@ def chromium(download_dir: str | None = None) -> Iterator[Any]:
 
 
 def console_errors(driver: Any) -> list[str]:
-    """The browser console's errors and warnings since the last call."""
-    return [e["message"] for e in driver.get_log("browser") if e["level"] in ("SEVERE", "WARNING")]
+    """The browser console's errors since the last call (a script's exception, a
+    resource that failed to load, a refused connection)."""
+    return [e["message"] for e in driver.get_log("browser") if e["level"] == "SEVERE"]

@@ -14,8 +14,8 @@ start((info) => {
         for (let k = 0; k < 6; k++) tr.append(el("td", k === 2 || k === 4 ? { class: "num" } : {}));
         rows.set(key, tr);
         body.prepend(tr);
-        if (e.state === "slip" && !Console.seen.eventSlip) {
-          Console.seen.eventSlip = { page: nowMs(), decided: e.wall * 1000, t: e.t };
+        if (e.state === "slip") {  // listed now: when it appeared, by this page's clock
+          (Console.seen.eventSlips = Console.seen.eventSlips || []).push({ page: nowMs(), decided: e.wall * 1000, t: e.t });
         }
       }
       const c = tr.children;

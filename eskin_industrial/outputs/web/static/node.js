@@ -52,6 +52,7 @@ start((info) => {
       heat.draw(msg.frame.forces, msg.frame.t, snap);
       Console.seen.frames += 1;
       Console.seen.lastFrame = msg.received;
+      Console.seen.lastFrameT = msg.frame.t;
     }
     if (msg.trend && msg.trend.node === index) {
       for (const [, t, rcoe, rdw, a, b] of msg.trend.points) { scores.add(t, a, b); indicators.add(t, rcoe, rdw); }
@@ -65,9 +66,9 @@ start((info) => {
         el("td", { text: c.valid ? "valid" : "not valid" }), el("td", { text: new Date(c.wall * 1000).toLocaleTimeString() }));
       changes.prepend(tr);
       while (changes.children.length > 20) changes.lastChild.remove();
-      if (c.state === "slip" && !Console.seen.laneSlip) {
+      if (c.state === "slip") {  // drawn now: when it appeared, by this page's clock
         lane.draw(Math.max(lastT || c.t, c.t));
-        Console.seen.laneSlip = { page: nowMs(), decided: c.wall * 1000, t: c.t };
+        (Console.seen.laneSlips = Console.seen.laneSlips || []).push({ page: nowMs(), decided: c.wall * 1000, t: c.t });
       }
     }
     if (lastT !== null || (msg.lane && msg.lane.length)) lane.draw(lastT);
