@@ -10,6 +10,9 @@ page where the one before left it); they skip when chromium is absent, unless CI
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -29,6 +32,7 @@ from eskin_industrial.scenes import render
 from tests.helpers.bridge import PAPER, Running, running_bridge, wait_for
 from tests.helpers.browser import chromium, console_errors, need_chromium
 from tests.helpers.modbus import free_port
+from tests.helpers.paths import ROOT
 from tests.helpers.raw_modbus import connect, read_registers
 from tests.test_web import PASSWORDS, users_file
 
@@ -51,8 +55,14 @@ class Cell:
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory) -> Iterator[Cell]:
+def browser() -> Iterator[Any]:
     need_chromium()
+    with chromium() as driver:
+        yield driver
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory, browser) -> Iterator[Cell]:
     tmp = tmp_path_factory.mktemp("web")
     web_port, plc_port = free_port(), free_port()
     node = NodeConfig.of("grip", PAPER, "scene", scene="case2")
@@ -60,12 +70,21 @@ def cell(tmp_path_factory) -> Iterator[Cell]:
         "plc": PlcOptions(mode="server", host="127.0.0.1", port=plc_port, offline_linger_s=0.0),
         "web": WebOptions(bind=f"127.0.0.1:{web_port}", users_file=users_file(tmp), capture_pre_s=3.0)},
         log=LogSettings(format="json", status_every_s=0))
-    with chromium() as driver, running_bridge(config) as run:
-        yield Cell(run, f"http://127.0.0.1:{web_port}", plc_port, driver, {}, time.time())
+    with running_bridge(config) as run:
+        yield Cell(run, f"http://127.0.0.1:{web_port}", plc_port, browser, {}, time.time())
+    for handle in browser.window_handles[1:]:  # one tab left for the next test
+        browser.switch_to.window(handle)
+        browser.close()
+    browser.switch_to.window(browser.window_handles[0])
 
 
 def seen(driver: Any, key: str) -> Any:
     return driver.execute_script(f"return window.Console && window.Console.seen[{key!r}];")
+
+
+def text(driver: Any, css: str) -> str:
+    """An element's text now (the register block is redrawn at every message: no element kept)."""
+    return driver.execute_script(f"const e = document.querySelector({css!r}); return e ? e.textContent : '';")
 
 
 def js_command(driver: Any, name: str) -> dict:
@@ -185,13 +204,13 @@ def test_acknowledge_clears_the_latch_a_modbus_client_reads(cell: Cell) -> None:
     d = cell.driver
     d.switch_to.window(cell.tabs["node"])
     wait_for(lambda: slip_latched(cell.plc_port), timeout_s=10, what="SLIP_LATCHED read over Modbus")
-    wait_for(lambda: d.find_element("id", "state").text != "SLIP", timeout_s=10, what="the slip over")
+    wait_for(lambda: text(d, "#state") != "SLIP", timeout_s=10, what="the slip over")
     assert slip_latched(cell.plc_port)  # the latch outlasts the slip
     d.find_element("css selector", "#commands button[data-command=ack]").click()
     wait_for(lambda: (seen(d, "lastCommand") or {}).get("status") == 202, timeout_s=5, what="the ack queued")
     wait_for(lambda: not slip_latched(cell.plc_port), timeout_s=5, what="SLIP_LATCHED cleared over Modbus")
-    flag = d.find_element("css selector", "#flags .flag[data-flag='slip latched']")
-    wait_for(lambda: "on" not in flag.get_attribute("class").split(), timeout_s=5, what="the page's latch off")
+    latched = "return document.querySelector(\"#flags .flag[data-flag='slip latched']\").classList.contains('on');"
+    wait_for(lambda: not d.execute_script(latched), timeout_s=5, what="the page's latch off")
 
 
 def test_a_reader_cannot_command(cell: Cell) -> None:
@@ -224,3 +243,30 @@ def test_a_downloaded_capture_is_detected_again(cell: Cell, tmp_path: Path) -> N
     assert res.exit_code == 0, res.output
     states = [line.split(",")[3] for line in res.output.splitlines()[1:] if line]
     assert "slip" in states, res.output
+
+
+def test_the_demo_shows_the_hands_glass_slip_and_the_register_block_flipping(browser) -> None:
+    port = free_port()
+    demo = subprocess.Popen([sys.executable, "-m", "eskin_industrial", "demo", "--scene", "hand", "--plain",
+                             "--web", f"127.0.0.1:{port}"], env=dict(os.environ, PYTHONPATH=str(ROOT)),
+                            stdout=subprocess.PIPE, text=True)
+    d = browser
+    try:
+        assert demo.stdout is not None
+        assert f"the web console at http://127.0.0.1:{port}/node/0" in demo.stdout.readline() + demo.stdout.readline()
+        console_errors(d)  # (what the tests before left in the log)
+        d.get(f"http://127.0.0.1:{port}/node/0")
+        wait_for(lambda: d.find_elements("id", "status-bits"), timeout_s=15, what="the register block")
+        assert d.find_element("id", "title").text == "node demo"
+        assert "SLIP" not in text(d, "#status-bits").split()
+        wait_for(lambda: (seen(d, "frames") or 0) >= 20, timeout_s=10, what="the glass drawn")
+        wait_for(lambda: seen(d, "laneSlips"), timeout_s=40, what="the glass's slip in the state lane")
+        wait_for(lambda: "SLIP_LATCHED" in text(d, "#status-bits").split(), timeout_s=2,
+                 what="SLIP_LATCHED in the register block")
+        assert text(d, "[data-register=STATE]") in ("2", "3")  # slip, or the pour after
+        assert console_errors(d) == []
+    finally:
+        demo.terminate()
+        demo.wait(timeout=10)
+        if demo.stdout is not None:
+            demo.stdout.close()
