@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -205,3 +206,28 @@ def test_a_browser_that_takes_nothing_gets_two_messages_then_is_dropped(tmp_path
         # the slow page saw the newest frame each time, not a backlog 30 ms apart
         steps = [b - a for a, b in zip(slow_t, slow_t[1:])]
         assert steps and min(steps) >= 0.2, steps
+
+
+@pytest.mark.slow
+def test_monitor_serves_the_console_beside_its_view() -> None:
+    port = free_port()
+    answers: list[dict] = []
+
+    async def ask() -> None:
+        async with browser() as http:
+            for _ in range(100):
+                try:
+                    r = await http.get(f"http://127.0.0.1:{port}/api/info")
+                    answers.append(await r.json())
+                    return
+                except aiohttp.ClientConnectionError:
+                    await asyncio.sleep(0.05)
+
+    asker = threading.Thread(target=lambda: call(ask()))
+    asker.start()
+    res = CliRunner().invoke(main, ["monitor", "-p", PAPER, "-i", "virtual", "-c", f"web-{port}", "--duration", "2",
+                                    "--plain", "--web", f"127.0.0.1:{port}"])
+    asker.join(timeout=10)
+    assert res.exit_code == 0, res.output
+    assert answers and answers[0]["nodes"][0]["method"] == "cof-track", answers
+    assert answers[0]["session"] == {"user": None, "role": None, "csrf": None, "login": False, "commands": False}
