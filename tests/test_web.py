@@ -231,3 +231,34 @@ def test_monitor_serves_the_console_beside_its_view() -> None:
     assert res.exit_code == 0, res.output
     assert answers and answers[0]["nodes"][0]["method"] == "cof-track", answers
     assert answers[0]["session"] == {"user": None, "role": None, "csrf": None, "login": False, "commands": False}
+
+
+@pytest.mark.slow
+def test_the_bridge_shows_the_served_plc_block_on_the_node_page() -> None:
+    port, plc_port = free_port(), free_port()
+    blocks: list[dict] = []
+
+    async def watch() -> None:
+        async with browser() as http:
+            for _ in range(200):
+                try:
+                    ws = await http.ws_connect(f"http://127.0.0.1:{port}/ws", headers={"Origin": f"http://127.0.0.1:{port}"})
+                    break
+                except aiohttp.ClientConnectionError:
+                    await asyncio.sleep(0.05)
+            async with ws:
+                await ws.send_str(json.dumps({"watch": 0}))
+                while not blocks:
+                    msg = json.loads((await ws.receive(timeout=5)).data)
+                    await ws.send_str('{"ack":1}')
+                    if "registers" in msg and "DATA_VALID" in msg["registers"]["bits"]:
+                        blocks.append(msg["registers"])
+
+    watcher = threading.Thread(target=lambda: call(watch()))
+    watcher.start()
+    res = CliRunner().invoke(main, ["bridge", "-p", PAPER, "--source", "scene:hold", "--plc",
+                                    f"serve:127.0.0.1:{plc_port}", "--web", f"127.0.0.1:{port}", "--duration", "4"])
+    watcher.join(timeout=10)
+    assert res.exit_code == 0, res.output
+    assert blocks, "no register block on the node page"
+    assert "DATA_VALID" in blocks[0]["bits"] and blocks[0]["values"]["METHOD_ID"] > 0
