@@ -16,6 +16,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import aiohttp
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -262,3 +263,35 @@ def test_the_bridge_shows_the_served_plc_block_on_the_node_page() -> None:
     assert res.exit_code == 0, res.output
     assert blocks, "no register block on the node page"
     assert "DATA_VALID" in blocks[0]["bits"] and blocks[0]["values"]["METHOD_ID"] > 0
+
+
+def test_the_feed_keeps_each_capture_window_and_at_most_the_newest_captures() -> None:
+    from eskin_industrial.detect.state import GraspState
+    from eskin_industrial.detect.updates import Update
+    from eskin_industrial.frames import Frame
+    from eskin_industrial.outputs.web.hub import CAPTURES_MAX, NodeFeed
+
+    feed = NodeFeed(0, 100.0, capture_pre_s=0.5, capture_post_s=0.2, frame_interval_s=0.03)
+    kicks = []
+    feed.kick = lambda: kicks.append(1)
+    forces = np.zeros(25)
+    k = 0
+    for _episode in range(CAPTURES_MAX + 3):
+        for state in (GraspState.STABLE, GraspState.SLIP):
+            for _ in range(100):  # 1 s of each, a scan every 10 ms
+                t = k / 100.0
+                forces[:] = t
+                feed.frame(Frame(k, t, forces))
+                feed.update(Update(t, 0.0, 0.0, int(state), True, 1.0, 0.0, 0.0, 0))
+                feed.freeze_captures()
+                k += 1
+    assert len(feed.ring) <= (0.5 + 0.2 + 1.0) * 100 + 8  # the window and a margin: bounded
+    kept = [e for e in feed.episodes if e.rows is not None]
+    assert len(kept) == CAPTURES_MAX and len(feed.episodes) == CAPTURES_MAX + 3
+    assert [e.id for e in kept] == [e.id for e in list(feed.episodes)[-CAPTURES_MAX:]]
+    for e in kept:
+        t = e.rows[:, 0]
+        assert t[0] == pytest.approx(e.t - 0.5) and t[-1] == pytest.approx(e.t + 0.2)
+        assert np.allclose(e.rows[:, 1], t)  # each scan's own forces, not the newest frame's
+    assert not any(e.waiting for e in feed.episodes)
+    assert 0 < len(kicks) < k  # woken, and not once a scan

@@ -58,11 +58,11 @@ class Episode:
     wall_time_s: float
     delay_s: float | None  #: since the scene's own onset (None: no truth)
     rows: np.ndarray | None = None  #: (K, 1 + taxels): t, forces (N); None until the window is over
-    columns: int = 0
+    waiting: bool = False  #: its window is not over yet (no rows, and none let go)
 
     def summary(self) -> dict[str, Any]:
         return {"id": self.id, "node": self.node, "state": self.state, "t": self.t, "wall": self.wall_time_s,
-                "delay_s": num(self.delay_s), "capture": self.rows is not None,
+                "delay_s": num(self.delay_s), "capture": self.rows is not None, "waiting": self.waiting,
                 "scans": 0 if self.rows is None else int(self.rows.shape[0])}
 
 
@@ -161,6 +161,7 @@ class NodeFeed:
                 ep = Episode(self._episode_ids, self.index, label, u.t, wall, delay)
                 self.episodes.append(ep)
                 if self.ring is not None:
+                    ep.waiting = True
                     self.pending.append(ep)
         self._wake(time.monotonic(), True)
 
@@ -215,6 +216,7 @@ class NodeFeed:
             else:
                 rows = np.empty((0, 1), dtype=np.float64)
             ep.rows = rows
+            ep.waiting = False
         with self.lock:
             self.pending = [ep for ep in self.pending if ep not in due]
             kept = [ep for ep in self.episodes if ep.rows is not None]

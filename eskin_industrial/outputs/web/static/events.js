@@ -26,7 +26,7 @@ start((info) => {
       c[4].textContent = e.delay_s === null ? "-" : (e.delay_s * 1000).toFixed(0);
       c[5].replaceChildren(e.capture
         ? el("a", { class: "capture", href: `/api/episodes/${e.node}/${e.id}.csv`, download: "", text: `CSV (${e.scans} scans)` })
-        : el("span", { text: "recording the window..." }));
+        : el("span", { text: e.waiting ? "recording the window..." : "let go (the newest 16 are kept)" }));
     }
   });
 });
