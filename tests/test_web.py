@@ -295,3 +295,39 @@ def test_the_feed_keeps_each_capture_window_and_at_most_the_newest_captures() ->
         assert np.allclose(e.rows[:, 1], t)  # each scan's own forces, not the newest frame's
     assert not any(e.waiting for e in feed.episodes)
     assert 0 < len(kicks) < k  # woken, and not once a scan
+
+
+@pytest.mark.slow
+def test_tls_serves_https_and_wss_with_secure_cookies(tmp_path: Path) -> None:
+    import ssl
+
+    from tests.helpers.sparkplug import certificates
+
+    pem = certificates(tmp_path)
+    port = free_port()
+    base = f"https://127.0.0.1:{port}"
+    # a key that is not the certificate's: refused before the run
+    res = CliRunner().invoke(main, ["bridge", "-p", PAPER, "--source", "scene:hold", "--web", f"127.0.0.1:{port}",
+                                    "--web-tls-cert", str(pem["server"]), "--web-tls-key", str(pem["client_key"]),
+                                    "--check"])
+    assert res.exit_code == 2 and "tls_cert: " in res.output and "cannot load with its key" in res.output, res.output
+    options = WebOptions(bind=f"127.0.0.1:{port}", users_file=users_file(tmp_path), tls_cert=str(pem["server"]),
+                         tls_key=str(pem["server_key"]))
+    config = BridgeConfig(node=(NodeConfig.of("grip", PAPER, "scene", scene="hold"),), outputs={"web": options},
+                          log=LogSettings(format="json", status_every_s=0))
+    trust = ssl.create_default_context(cafile=str(pem["ca"]))
+
+    async def go() -> None:
+        async with browser() as http:
+            r = await http.post(f"{base}/api/login", json={"user": "olga", "password": PASSWORDS["olga"]},
+                                headers={"Origin": base}, ssl=trust)
+            assert r.status == 200
+            assert "Secure" in r.headers["Set-Cookie"] and "max-age" in r.headers["Strict-Transport-Security"]
+            async with http.ws_connect(f"wss://127.0.0.1:{port}/ws", headers={"Origin": base}, ssl=trust) as ws:
+                msg = json.loads((await ws.receive(timeout=5)).data)
+                assert msg["nodes"][0]["i"] == 0
+            with pytest.raises(aiohttp.ClientError):  # plain HTTP is not served
+                await http.get(f"http://127.0.0.1:{port}/api/info")
+
+    with running_bridge(config):
+        call(go())
