@@ -145,6 +145,7 @@ def test_commands_need_an_operators_session_its_csrf_token_and_the_consoles_orig
         call(go())
         c = run.counters("grip")
         assert c["web_commands"] == 2 and c["web_commands_refused"] == 6 and c["web_logins_refused"] == 2
+        wait_for(lambda: len(run.log.events("web_command_refused")) == 6, what="each refusal logged")
         refused = run.log.events("web_command_refused")
         assert {e["reason"] for e in refused} == {"login", "role", "csrf", "origin", "in_contact"}
 
@@ -203,7 +204,7 @@ def test_a_browser_that_takes_nothing_gets_two_messages_then_is_dropped(tmp_path
         assert got == web_server.IN_FLIGHT
         assert 0.8 < dropped_after < 3.0, dropped_after
         assert run.counters("grip")["web_clients_dropped"] == 1
-        assert run.log.events("web_client_dropped")
+        wait_for(lambda: run.log.events("web_client_dropped"), what="web_client_dropped logged")
         # the slow page saw the newest frame each time, not a backlog 30 ms apart
         steps = [b - a for a, b in zip(slow_t, slow_t[1:])]
         assert steps and min(steps) >= 0.2, steps
@@ -331,3 +332,16 @@ def test_tls_serves_https_and_wss_with_secure_cookies(tmp_path: Path) -> None:
 
     with running_bridge(config):
         call(go())
+
+
+@pytest.mark.slow
+def test_logins_are_hashed_one_at_a_time_and_a_flood_is_refused(tmp_path: Path) -> None:
+    with console(tmp_path, scene="hold") as (run, base):
+        async def go() -> list[int]:
+            async with browser() as http:
+                answers = await asyncio.gather(*(login(http, base, "olga", f"guess-{i}") for i in range(12)))
+                return [status for status, _ in answers]
+
+        statuses = call(go())
+        assert set(statuses) == {401, 429}, statuses
+        assert run.counters("grip")["web_logins_refused"] == 12

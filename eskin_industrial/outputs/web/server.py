@@ -24,6 +24,7 @@ Nothing is queued per browser.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import hmac
 import io
 import json
@@ -55,6 +56,9 @@ SEND_TIMEOUT_S = 5.0
 #: Messages sent and not yet acknowledged by the page, at most.
 IN_FLIGHT = 2
 SESSIONS_MAX = 256
+#: Logins waiting for their scrypt at most (one is hashed at a time, on a thread of its
+#: own): a guessing client takes at most one core's share, never the node's loop's.
+LOGINS_PENDING_MAX = 4
 COOKIE = "eskin_session"
 _COMMANDS = ("ack", "tare", "enable", "disable")
 _SECURITY_HEADERS = {
@@ -127,6 +131,8 @@ class WebServer:
                        "web_origin_refused": 0}
         self.on_event: Callable[..., None] = lambda name, level, **fields: None
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._logins = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="web-login")
+        self._logins_pending = 0
         self._kicked = False
         self._stop: asyncio.Event | None = None
         self._ready = threading.Event()
@@ -154,6 +160,7 @@ class WebServer:
                 pass  # already closed
         if self._thread is not None:
             self._thread.join(timeout=10)
+        self._logins.shutdown(wait=False, cancel_futures=True)
 
     def kick(self) -> None:
         """Something is new (any thread): wake the server's loop, once until it has looked."""
@@ -292,7 +299,14 @@ class WebServer:
             name, password = str(body["user"]), str(body["password"])
         except (ValueError, KeyError, TypeError):
             return self._refuse(400, "expected JSON {user, password}")
-        role = await asyncio.get_running_loop().run_in_executor(None, login, self.users, name, password)
+        if self._logins_pending >= LOGINS_PENDING_MAX:
+            self.counts["web_logins_refused"] += 1
+            return self._refuse(429, "too many logins at once: try again")
+        self._logins_pending += 1
+        try:
+            role = await asyncio.get_running_loop().run_in_executor(self._logins, login, self.users, name, password)
+        finally:
+            self._logins_pending -= 1
         if role is None:
             self.counts["web_logins_refused"] += 1
             self.on_event("web_login_refused", "warning", user=name, peer=request.remote or "-")
