@@ -261,9 +261,9 @@ def test_the_demo_shows_the_hands_glass_slip_and_the_register_block_flipping(bro
         assert "SLIP" not in text(d, "#status-bits").split()
         wait_for(lambda: (seen(d, "frames") or 0) >= 20, timeout_s=10, what="the glass drawn")
         wait_for(lambda: seen(d, "laneSlips"), timeout_s=40, what="the glass's slip in the state lane")
-        wait_for(lambda: "SLIP_LATCHED" in text(d, "#status-bits").split(), timeout_s=2,
+        wait_for(lambda: "SLIP_LATCHED" in text(d, "#status-bits").split(), timeout_s=5,
                  what="SLIP_LATCHED in the register block")
-        assert text(d, "[data-register=STATE]") in ("2", "3")  # slip, or the pour after
+        assert int(text(d, "[data-register=SLIP_EVENTS]")) >= 1
         assert console_errors(d) == []
     finally:
         demo.terminate()
