@@ -119,6 +119,10 @@ class Sink(abc.ABC, Generic[OptionsT]):
     moved_node_keys: ClassVar[dict[str, str]] = {}
     #: A key of :attr:`NodeOptions` -> the profile key (dotted) it overrides, for ``--explain``.
     node_profile_keys: ClassVar[dict[str, str]] = {}
+    #: Beginnings of the names of the threads the kind runs that are not named
+    #: ``KIND-...`` (a library's own, paho's): a death of one is this output's failure
+    #: (:mod:`eskin_industrial.bridge.supervise`), not the bridge's.
+    thread_names: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self) -> None:
         self._closed = False
@@ -131,6 +135,11 @@ class Sink(abc.ABC, Generic[OptionsT]):
         self._events_lock = threading.Lock()
         self._events_held: collections.deque[tuple[str, str, dict[str, Any]]] = collections.deque(maxlen=EVENTS_HELD)
         self._event_handler: EventHandler | None = None
+
+    def overrides(self, name: str) -> bool:
+        """The kind has a method ``name`` of its own (the loop calls only those per
+        update and for commands)."""
+        return getattr(type(self), name) is not getattr(Sink, name)
 
     # -- the data path --------------------------------------------------------------
     def on_update(self, update: Update) -> None:
