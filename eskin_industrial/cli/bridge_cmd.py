@@ -170,11 +170,11 @@ def _registers_to_the_console(bridge: Bridge) -> None:
     """The web console's register block: each node's served PLC block, read as the PLC
     reads it (server mode; a client-mode PLC's writes are the writer's own)."""
     from ..outputs.plc.kept import served_table
-    from ..outputs.web.sink import WebSink
+    from ..outputs.web.sink import web_sinks
 
     for run in bridge.runs:
-        webs = [s for s in run.sinks if isinstance(s, WebSink)]
-        tables = [t for t in map(served_table, run.sinks) if t is not None]
+        webs = web_sinks(run.sinks)
+        tables = [t for t in (served_table(getattr(s, "inner", s)) for s in run.sinks) if t is not None]
         for web in webs:
             if tables:
                 web.set_registers(tables[0])

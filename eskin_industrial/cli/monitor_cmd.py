@@ -40,7 +40,7 @@ def monitor(profile_path: str, interface: str | None, channel: str | None, bitra
     from ..detect.updates import Update
     from ..errors import EskinError
     from ..outputs.plc.kept import KeptRegisters
-    from ..outputs.web.sink import WebSink
+    from ..outputs.web.sink import web_sinks
     from ..view.live import Watch, change_line, live_screen
     from ..view.snapshot import RegisterTable
     from ..view.terminal import color_wanted
@@ -57,9 +57,8 @@ def monitor(profile_path: str, interface: str | None, channel: str | None, bitra
     # a bus that cannot be opened: one line, exit 3
     single = SingleNode(cfg, resolved, extra_sinks=[sink], default_output=False, all_frames=True, method=method)
     loop = single.loop
-    for web in loop.sinks:
-        if isinstance(web, WebSink):  # the register block as the bridge would publish it
-            web.set_registers(sink.table)
+    for web in web_sinks(loop.sinks):  # the register block as the bridge would publish it
+        web.set_registers(sink.table)
     where = loop.source.describe_where() if channel is None else channel
     stdout = sys.stdout
     live = not plain and stdout.isatty()

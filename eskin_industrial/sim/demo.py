@@ -29,7 +29,7 @@ from ..detect.updates import Update, UpdateTable
 from ..evaluation.metrics import SceneScore, score_scene
 from ..outputs.plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names
 from ..outputs.plc.sink import PlcOptions
-from ..outputs.web.sink import WebSink
+from ..outputs.web.sink import WebSink, web_sinks
 from ..profile import Profile
 from ..scenes import Rendered
 from ..view.live import change_line
@@ -120,9 +120,8 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
         raise
     loop = single.loop
     writer = cast("PlcWriter", loop.sinks[0])  # the first output: the PLC in client mode
-    for sink in loop.sinks:
-        if isinstance(sink, WebSink):
-            show_the_scene(sink, rec, plc)
+    for web in web_sinks(loop.sinks):
+        show_the_scene(web, rec, plc)
     tx = open_bus("virtual", channel)
     sim = CanNode(layout, tx, raw, rec.rate_hz, profile.can.heartbeat_s, Faults(), False, 1, None)
     node_thread = threading.Thread(target=sim.run, name="demo-node", daemon=True)

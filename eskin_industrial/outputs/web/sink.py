@@ -85,6 +85,19 @@ def scene_truth(node: NodeLike[Any]) -> Truth | None:
     return Truth(onsets, period)
 
 
+def web_sinks(sinks: Sequence[Sink[Any]]) -> list[WebSink]:
+    """The web console's sinks among a loop's (each as the kind opened it: a supervised
+    output's sink holds its instance as ``inner``), for whoever wires the console's
+    truth and register block.  (A restart of the output opens a fresh instance
+    without them.)"""
+    out = []
+    for sink in sinks:
+        inner = getattr(sink, "inner", sink)
+        if isinstance(inner, WebSink):
+            out.append(inner)
+    return out
+
+
 class WebSink(Sink[WebOptions]):
     """One node's pages on the bridge's console."""
 
