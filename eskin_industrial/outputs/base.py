@@ -54,6 +54,7 @@ SINKS: dict[str, str] = {
     "recorder": "eskin_industrial.outputs.recorder.sink:Recorder",
     "sparkplug": "eskin_industrial.outputs.sparkplug.sparkplug:SparkplugDevice",
     "opcua": "eskin_industrial.outputs.opcua.sink:OpcuaSink",
+    "web": "eskin_industrial.outputs.web.sink:WebSink",
 }
 #: A sink's own events held until a handler is attached (the first ones of a writer
 #: that starts before the bridge's log is wired); beyond it the oldest are dropped.
@@ -118,6 +119,10 @@ class Sink(abc.ABC, Generic[OptionsT]):
     moved_node_keys: ClassVar[dict[str, str]] = {}
     #: A key of :attr:`NodeOptions` -> the profile key (dotted) it overrides, for ``--explain``.
     node_profile_keys: ClassVar[dict[str, str]] = {}
+    #: Beginnings of the names of the threads the kind runs that are not named
+    #: ``KIND-...`` (a library's own, paho's): a death of one is this output's failure
+    #: (:mod:`eskin_industrial.bridge.supervise`), not the bridge's.
+    thread_names: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self) -> None:
         self._closed = False
@@ -130,6 +135,11 @@ class Sink(abc.ABC, Generic[OptionsT]):
         self._events_lock = threading.Lock()
         self._events_held: collections.deque[tuple[str, str, dict[str, Any]]] = collections.deque(maxlen=EVENTS_HELD)
         self._event_handler: EventHandler | None = None
+
+    def overrides(self, name: str) -> bool:
+        """The kind has a method ``name`` of its own (the loop calls only those per
+        update and for commands)."""
+        return getattr(type(self), name) is not getattr(Sink, name)
 
     # -- the data path --------------------------------------------------------------
     def on_update(self, update: Update) -> None:

@@ -62,7 +62,7 @@ class Recorder(Sink[RecorderOptions]):
     )
 
     def __init__(self, stream: IO[str], fmt: str, node: str, *, where: str, owned: bool,
-                 flush_every_s: float = 1.0) -> None:
+                 flush_every_s: float = 1.0, header: bool = True) -> None:
         super().__init__()
         self.where = where
         self._out = stream
@@ -75,7 +75,7 @@ class Recorder(Sink[RecorderOptions]):
         self.write_errors = 0
         self.last_error = ""
         self._failing = False  #: since a write failed, until one succeeds
-        if not self._jsonl:
+        if not self._jsonl and header:
             self._write(",".join(COLUMNS) + "\n")
 
     def on_update(self, update: Update) -> None:
@@ -181,12 +181,13 @@ class Recorder(Sink[RecorderOptions]):
                 rec = cls(sys.stdout, options.resolved_format, n.name, where="stdout", owned=False,
                           flush_every_s=options.flush_every_s)
             else:
-                try:
-                    stream: IO[str] = RowFile(path)  # type: ignore[assignment]  # write, flush, close
+                try:  # opened again after a failure: what was recorded stays, the rows go on
+                    row_file = RowFile(path, append=context.reopen)
                 except OSError as exc:
                     raise EskinError(f"{path}: cannot write the record: {exc.strerror or exc}") from None
+                stream: IO[str] = row_file  # type: ignore[assignment]  # write, flush, close
                 rec = cls(stream, options.resolved_format, n.name, where=path, owned=True,
-                          flush_every_s=options.flush_every_s)
+                          flush_every_s=options.flush_every_s, header=row_file.size == 0)
             context.closers.append(rec.close)
             out.append(rec)
         return out
@@ -200,10 +201,12 @@ class RowFile:
     #: Written out when the buffer holds this much, flushed or not.
     BUFFER_BYTES = 65536
 
-    def __init__(self, path: str) -> None:
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+    def __init__(self, path: str, append: bool = False) -> None:
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | (0 if append else os.O_TRUNC), 0o666)
+        #: the file's length when opened (appended to: after the rows already there)
+        self.size = os.lseek(self._fd, 0, os.SEEK_END)
         self._buf = bytearray()
-        self._end = 0  #: the end of the last whole row on disk
+        self._end = self.size  #: the end of the last whole row on disk
         self.lost_rows = 0
 
     def write(self, text: str) -> int:
