@@ -13,6 +13,13 @@ from typing import Any
 
 import click
 
+from .outputs import kind_options, outputs_from_cli
+
+#: A row online by its births with nothing from it for this long is shown stale.
+STALE_S = 10.0
+#: The web page's rows are refreshed this often (and at every event) when served.
+WEB_REFRESH_S = 0.25
+
 
 @dataclass(frozen=True)
 class _Conn:
@@ -48,13 +55,17 @@ def _line(e: dict[str, Any]) -> str:
 @click.option("--username", default=None, help="MQTT username.")
 @click.option("--password-file", default=None, metavar="FILE", help="MQTT password: the first line of this file.")
 @click.option("--password-env", default=None, metavar="NAME", help="MQTT password: this environment variable.")
+@click.option("--stale-s", type=click.FloatRange(min=0.5), default=STALE_S, show_default=True,
+              help="An edge node or device online with nothing from it for this long is shown stale (--web).")
+@kind_options("web")
 def plant(broker: str, group_id: str, plain: bool, as_json: bool, rebirth: bool, duration_s: float | None,
           ca_file: str | None, cert_file: str | None, key_file: str | None, username: str | None,
-          password_file: str | None, password_env: str | None) -> None:
+          password_file: str | None, password_env: str | None, stale_s: float, **web_values: Any) -> None:
     """Watch every Sparkplug B edge node and device on a broker: online or offline (from
     births and deaths), state, data valid, last slip, slip count, message rate, seq gaps.
     Live on a terminal; one line (--plain) or one JSON object (--json) per event
-    otherwise.  Read-only (it publishes nothing) unless --rebirth."""
+    otherwise.  Read-only (it publishes nothing) unless --rebirth.  With --web HOST:PORT
+    the plant page shows the same rows in a browser, live (docs/web.md)."""
     from ..outputs.sparkplug.transport import check_files, check_security, configure, parse_broker
     from ..outputs.sparkplug.watch import PlantModel, rebirth_command
 
@@ -73,8 +84,10 @@ def plant(broker: str, group_id: str, plain: bool, as_json: bool, rebirth: bool,
         from ..errors import MissingExtra
 
         raise MissingExtra("eskin-bus plant needs paho-mqtt (pip install paho-mqtt)") from None
+    web_options = outputs_from_cli(web_values, ("web",)).get("web")
     live = not plain and not as_json and sys.stdout.isatty()
     model = PlantModel()
+    served = _serve(web_options) if web_options is not None else None
     events: queue.Queue[dict[str, Any]] = queue.Queue()
     lock = threading.Lock()
 
@@ -118,13 +131,20 @@ def plant(broker: str, group_id: str, plain: bool, as_json: bool, rebirth: bool,
             return plant_lines(rows, title, width, height)
 
         screen = LiveScreen(frame, sys.stdout, fps=4)
+    next_rows = 0.0
     try:
         with screen:
             while end is None or time.monotonic() < end:
+                if served is not None and time.monotonic() >= next_rows:
+                    with lock:
+                        rows, messages = model.rows(time.monotonic()), model.messages
+                    served[1].put(plant_rows(rows, stale_s), messages)
+                    next_rows = time.monotonic() + WEB_REFRESH_S
                 try:
                     e = events.get(timeout=0.1)
                 except queue.Empty:
                     continue
+                next_rows = 0.0  # an event: the page's rows at once
                 if not live:
                     click.echo(json.dumps(e) if as_json else _line(e))
     except KeyboardInterrupt:
@@ -132,6 +152,8 @@ def plant(broker: str, group_id: str, plain: bool, as_json: bool, rebirth: bool,
     finally:
         client.disconnect()
         client.loop_stop()
+        if served is not None:
+            served[0].stop()
     with lock:
         rows = model.rows(time.monotonic())
     if as_json:
@@ -140,3 +162,46 @@ def plant(broker: str, group_id: str, plain: bool, as_json: bool, rebirth: bool,
     click.echo(f"plant: {model.messages} messages, {model.malformed} malformed, "
                f"{sum('device' not in r for r in rows)} edge nodes, {sum('device' in r for r in rows)} devices",
                err=True)
+
+
+def _serve(options: Any) -> tuple[Any, Any]:
+    """The plant page's server, started (a port in use: ListenError, exit 2)."""
+    from ..outputs.web.plant_feed import PlantFeed
+    from ..outputs.web.plant_server import PlantServer
+    from ..outputs.web.sink import need_aiohttp
+    from ..outputs.web.users import load_users
+
+    need_aiohttp("eskin-bus plant --web")
+    users = load_users(options.users_file) if options.users_file else ()
+    feed = PlantFeed()
+    server = PlantServer(options, feed, users)
+    server.on_event = lambda name, level, **fields: click.echo(
+        f"{time.strftime('%H:%M:%S')} {name} " + " ".join(f"{k}={v}" for k, v in fields.items()), err=True)
+    server.start()
+    return server, feed
+
+
+def plant_rows(rows: list[dict[str, Any]], stale_s: float) -> list[Any]:
+    """The host view's rows as the page's neutral :class:`PlantRow` (stale: online, and
+    nothing from it for ``stale_s``; an edge node is stale when all its devices are)."""
+    from ..outputs.web.plant_feed import PlantRow
+
+    out: list[PlantRow] = []
+    for r in rows:
+        if "device" not in r:
+            out.append(PlantRow(r["group"], r["edge"], None, "online" if r["online"] else "offline",
+                                seq_gaps=r["seq_gaps"], bd_seq=r["bdSeq"]))
+            continue
+        age = r.get("age_s")
+        status = "offline" if not r["online"] else ("stale" if age is not None and age > stale_s else "online")
+        out.append(PlantRow(r["group"], r["edge"], r["device"], status, state=r["state"], valid=r["valid"],
+                            method=r.get("method"), slips=r["slips"], last_slip_ms=r["last_slip_ms"],
+                            rate=r["rate"], frame_max=r.get("frame_max"), frame_sum=r.get("frame_sum")))
+    # an edge node online whose devices are all stale is stale itself
+    for i, e in enumerate(out):
+        if e.device is not None or e.status != "online":
+            continue
+        devices = [d for d in out[i + 1:] if d.device is not None and (d.group, d.edge) == (e.group, e.edge)]
+        if devices and all(d.status == "stale" for d in devices):
+            out[i] = PlantRow(e.group, e.edge, None, "stale", seq_gaps=e.seq_gaps, bd_seq=e.bd_seq)
+    return out

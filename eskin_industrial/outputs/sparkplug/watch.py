@@ -36,6 +36,8 @@ class DeviceView:
     last_slip_ms: int | None = None  #: the timestamp of the message that set Slip
     frame_max: float | None = None  #: of the newest taxel frame (N; NaN taxels left out)
     frame_sum: float | None = None
+    method: str | None = None  #: the deciding method, from the DBIRTH's ``Score A`` properties
+    last_seen: float | None = None  #: the clock handed in, at its newest birth or data
     aliases: dict[int, str] = field(default_factory=dict)
     arrivals: collections.deque[float] = field(default_factory=lambda: collections.deque(maxlen=10000))
 
@@ -107,12 +109,16 @@ class PlantModel:
             dwhere = {**where, "device": device_id}
             if kind == "DBIRTH":
                 dev.aliases = {m.alias: m.name for m in p.metrics if m.alias is not None and m.name is not None}
+                dev.method = next((str(v) for m in p.metrics if m.name == "Score A"
+                                   for k, (_, v) in m.properties if k == "method"), dev.method)
+                dev.last_seen = now
                 if not dev.online:
                     out.append({"event": "online", **dwhere})
                 dev.online = True
                 out += self._values(dev, p, dwhere)
             elif kind == "DDATA":
                 dev.arrivals.append(now)
+                dev.last_seen = now
                 out += self._values(dev, p, dwhere)
             elif kind == "DDEATH":
                 if dev.online:
@@ -157,7 +163,8 @@ class PlantModel:
             for name, d in sorted(e.devices.items()):
                 out.append({"group": group, "edge": edge_id, "device": name, "online": d.online, "state": d.state,
                             "valid": d.valid, "last_slip_ms": d.last_slip_ms, "slips": d.slips,
-                            "rate": round(d.rate(now), 2), "frame_max": d.frame_max, "frame_sum": d.frame_sum})
+                            "rate": round(d.rate(now), 2), "frame_max": d.frame_max, "frame_sum": d.frame_sum,
+                            "method": d.method, "age_s": None if d.last_seen is None else now - d.last_seen})
         return out
 
 
