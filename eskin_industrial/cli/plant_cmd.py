@@ -184,7 +184,7 @@ def _serve(options: Any) -> tuple[Any, Any]:
 def plant_rows(rows: list[dict[str, Any]], stale_s: float) -> list[Any]:
     """The host view's rows as the page's neutral :class:`PlantRow` (stale: online, and
     nothing from it for ``stale_s``; an edge node is stale when all its devices are)."""
-    from ..outputs.web.plant_feed import PlantRow
+    from ..outputs.web.plant_feed import PlantRow, Status
 
     out: list[PlantRow] = []
     for r in rows:
@@ -193,7 +193,7 @@ def plant_rows(rows: list[dict[str, Any]], stale_s: float) -> list[Any]:
                                 seq_gaps=r["seq_gaps"], bd_seq=r["bdSeq"]))
             continue
         age = r.get("age_s")
-        status = "offline" if not r["online"] else ("stale" if age is not None and age > stale_s else "online")
+        status: Status = "offline" if not r["online"] else ("stale" if age is not None and age > stale_s else "online")
         out.append(PlantRow(r["group"], r["edge"], r["device"], status, state=r["state"], valid=r["valid"],
                             method=r.get("method"), slips=r["slips"], last_slip_ms=r["last_slip_ms"],
                             rate=r["rate"], frame_max=r.get("frame_max"), frame_sum=r.get("frame_sum")))
