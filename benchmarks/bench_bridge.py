@@ -5,6 +5,7 @@ or SocketCAN vcan) and Modbus RTU; and the CPU the bridge takes.
     .venv/bin/python benchmarks/bench_bridge.py                 # every path, 60 s each (~5 min)
     .venv/bin/python benchmarks/bench_bridge.py --paths can-1k --duration 30
     .venv/bin/python benchmarks/bench_bridge.py --paths can-100 --duration 30 --breakdown   # where the time goes
+    .venv/bin/python benchmarks/bench_bridge.py --paths can-100,can-1k --duration 20 --viewers 5   # the web console's cost
     python tests/vcan/vm.py -- .venv/bin/python benchmarks/bench_bridge.py --paths vcan-100,vcan-1k
 
 What runs: the product's own :class:`~eskin_industrial.bridge.runtime.Bridge` (reader
@@ -172,7 +173,9 @@ def latencies(decisions: list[tuple[int, int]], arrival: dict[int, float], write
 # -- our bridge -------------------------------------------------------------------------
 
 def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, channel: str,
-             breakdown: bool = False):
+             breakdown: bool = False, viewers: int | None = None):
+    """``viewers``: None, no web console; else the console attached with that many
+    viewers (:mod:`web_viewers`) watching the node."""
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
@@ -195,8 +198,16 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
             node_cfg = NodeConfig.of("n1", str(PROFILE), "modbus-rtu", serial_port=str(b), rate_hz=rate)
         else:
             node_cfg = NodeConfig.of("n1", str(PROFILE), "can", interface=interface, channel=channel, fd=fd, rate_hz=rate)
-        cfg = BridgeConfig(node=(node_cfg,), outputs={"plc": PlcOptions(mode="client", host="127.0.0.1", port=plc.port)},
-                           log=LogSettings(status_every_s=0))
+        outputs: dict = {"plc": PlcOptions(mode="client", host="127.0.0.1", port=plc.port)}
+        web_base = None
+        if viewers is not None:
+            from eskin_industrial.outputs.web.options import WebOptions
+            from tests.helpers.modbus import free_port
+
+            web_port = free_port()
+            web_base = f"http://127.0.0.1:{web_port}"
+            outputs["web"] = WebOptions(bind=f"127.0.0.1:{web_port}")
+        cfg = BridgeConfig(node=(node_cfg,), outputs=outputs, log=LogSettings(status_every_s=0))
         nodes = resolve(cfg)
         decisions: list[tuple[int, int]] = []
         last = [-1]
@@ -225,7 +236,7 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
         pushed: dict[int, tuple[float, float]] = {}  # scan -> wall time at the start and end of detection
         sends: list[tuple[float, int]] = []  # (wall time, STATE) of each write the bridge sends
         if breakdown:
-            loop, writer = br.runs[0].loop, br.runs[0].sinks[0]
+            loop, writer = br.runs[0].loop, next(s for s in br.runs[0].sinks if hasattr(s, "master"))
             push, send_write = loop.pipeline.push, writer.master.send_write
 
             def timed_push(scan):
@@ -243,9 +254,12 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
         node_thread = None
         if not path.startswith("rtu"):
             node_thread = start_can_node(nodes[0].profile, scene_file, rate, fd, interface, channel)
+        from web_viewers import Viewers
+
         cpu0, t0 = thread_cpu_s(), time.monotonic()
         br.start()
-        br.wait(duration_s)
+        with Viewers(web_base or "", viewers or 0) as seen:
+            br.wait(duration_s)
         wall = time.monotonic() - t0
         cpu1 = thread_cpu_s()
         br.stop()
@@ -261,10 +275,10 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
     if node_thread is not None:
         node_thread.join(timeout=5)
     ours = {k: cpu1.get(k, 0.0) - cpu0.get(k, 0.0) for k in cpu1}
-    bridge_cpu = sum(v for k, v in ours.items() if k not in ("bench-node", "MainThread"))
+    bridge_cpu = sum(v for k, v in ours.items() if k not in ("bench-node", "MainThread", "bench-viewers"))
     lat_all, lat_slip, skipped = latencies(decisions, arrival, writes)
     return dict(rate=rate, decisions=decisions, lat_all=lat_all, lat_slip=lat_slip, skipped=skipped, arrival=arrival, writes=writes,
-                cpu=bridge_cpu / wall, counters=counters,
+                cpu=bridge_cpu / wall, counters=counters, viewer_messages_s=[m / wall for m in seen.messages],
                 breakdown=stages(decisions, arrival, pushed, sends) if breakdown else None)
 
 
@@ -361,6 +375,22 @@ def run_reference(path: str, decisions: list[tuple[int, int]], scene_file: Path,
     return dict(lat_all=lat_all, lat_slip=lat_slip, skipped=skipped)
 
 
+def web_row(path: str, duration_s: float, scene: Path, interface: str, channel: str, n: int) -> str:
+    """The console attached with 0 and with ``n`` viewers, one after the other in the same
+    run (a fresh bus channel each): the latency the viewers add, as a ratio."""
+    suffix = "" if interface != "virtual" else "-web"
+    r0 = run_ours(path, duration_s, scene, interface, channel + suffix + "0", viewers=0)
+    rn = run_ours(path, duration_s, scene, interface, channel + suffix + "n", viewers=n)
+    ratio = "-"
+    if r0["lat_all"] and rn["lat_all"]:
+        ratio = (f"{np.percentile(rn['lat_all'], 50) / np.percentile(r0['lat_all'], 50):.2f}x / "
+                 f"{np.percentile(rn['lat_all'], 99) / np.percentile(r0['lat_all'], 99):.2f}x")
+    rates = rn["viewer_messages_s"]
+    return (f"| {path} | {ms(r0['lat_all'], 50)} / {ms(r0['lat_all'], 99)} | {ms(rn['lat_all'], 50)} / "
+            f"{ms(rn['lat_all'], 99)} | {ratio} | {r0['cpu'] * 100:.1f} / {rn['cpu'] * 100:.1f} % | "
+            f"{min(rates):.0f} to {max(rates):.0f} |" if rates else "-")
+
+
 def ms(values, q) -> str:
     return f"{np.percentile(np.asarray(values) * 1000, q):.2f}" if len(values) else "-"
 
@@ -373,6 +403,9 @@ def main() -> None:
     ap.add_argument("--breakdown", action="store_true",
                     help="also where our time goes, per decision scan (medians): arrival -> detection, "
                          "detection, detection -> the write's send")
+    ap.add_argument("--viewers", type=int, default=None, metavar="N",
+                    help="also, per path, the bridge with the web console attached, with 0 and with N viewers "
+                         "(WebSocket clients acknowledging as the page does), and the ratio of their latencies")
     ap.add_argument("--capture", nargs=2, metavar=("PORT", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.capture:
@@ -384,13 +417,14 @@ def main() -> None:
 
     quiet_pymodbus()
     cmd = (f".venv/bin/python benchmarks/bench_bridge.py --paths {args.paths} --duration {args.duration:g}"
-           + (" --breakdown" if args.breakdown else ""))
+           + (" --breakdown" if args.breakdown else "") + (f" --viewers {args.viewers}" if args.viewers else ""))
     print(f"# {cmd}")
     print(f"# {time.strftime('%Y-%m-%d', time.gmtime())} on {describe()}")
     print("| path | rate | decisions timed (slips) | ours p50 / p99 ms | slips p50 / p99 ms | reference p50 / p99 ms "
           "| ratio p50 / p99 | bridge CPU | drops |")
     print("|---|---|---|---|---|---|---|---|---|")
     breakdowns: list[str] = []
+    web_rows: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
         scene = Path(tmp) / "slip-train.toml"
         scene.write_text(slip_train_toml(args.duration))
@@ -423,8 +457,17 @@ def main() -> None:
                 breakdowns.append(f"# {path}: arrival -> detection {a:.2f} ms (p90 {a9:.2f}), detection {d:.2f} ms "
                                   f"(p90 {d9:.2f}), detection -> send {s:.2f} ms (p90 {s9:.2f}) "
                                   f"(medians and p90s of {len(b)} decision scans)")
+            if args.viewers:
+                web_rows.append(web_row(path, args.duration, scene, interface, channel, args.viewers))
     for line in breakdowns:
         print(line)
+    if web_rows:
+        print()
+        print(f"| path | console, 0 viewers: p50 / p99 ms | {args.viewers} viewers: p50 / p99 ms | ratio p50 / p99 "
+              "| bridge CPU 0 / N | messages/s per viewer |")
+        print("|---|---|---|---|---|---|")
+        for row in web_rows:
+            print(row)
 
 
 if __name__ == "__main__":
