@@ -16,7 +16,7 @@ from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
 from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.outputs.plc.image import Status
-from eskin_industrial.outputs.plc.sink import PlcOptions
+from eskin_industrial.outputs.plc.options import PlcOptions
 from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS
 from tests.helpers.bridge import PAPER, LogCapture, TimedPlc, hold_raw
 from tests.helpers.can_frames import scans_to_messages

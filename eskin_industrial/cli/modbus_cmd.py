@@ -92,7 +92,7 @@ def modbus_bridge(profile_path: str, rtu_port: str | None, recording: str | None
     from ..bridge.runtime import SingleNode
     from ..bridge.signals import EXIT_FAILED, handled_signals
     from ..modbus.pymodbus_io import quiet_pymodbus
-    from ..outputs.plc.sink import PlcOptions
+    from ..outputs.plc.options import PlcOptions
 
     quiet_pymodbus()
     prof = open_profile(profile_path)

@@ -27,7 +27,7 @@ from ..bus.can.reader import open_bus
 from ..calibration import Calibrator
 from ..detect.updates import Update, UpdateTable
 from ..evaluation.metrics import SceneScore, score_scene
-from ..outputs.plc.sink import PlcOptions
+from ..outputs.plc.options import PlcOptions
 from ..profile import Profile
 from ..scenes import Rendered
 from ..view.live import change_line
