@@ -82,10 +82,8 @@ def test_identical_scans_freeze_and_a_rate_far_from_the_profile_is_refused():
 
 # -- through the bridge: every output --------------------------------------------
 
-class Snapshots(Sink[None]):
+class Snapshots(Sink):
     """Keeps every snapshot the loop publishes (what Sparkplug and OPC UA render)."""
-
-    kind = "snapshots"
 
     def __init__(self) -> None:
         super().__init__()

@@ -77,8 +77,6 @@ def _matches(frames: list[np.ndarray], expected: np.ndarray) -> list[int]:
 
 # -- the loop: the frames due, nothing for a sink that wants none ------------------------
 class _FrameSink(Sink):
-    kind = "frames"
-
     def __init__(self, every_s: float | None) -> None:
         super().__init__()
         self.frame_every_s = every_s

@@ -266,13 +266,13 @@ def test_store_options_are_checked():
 
 
 def test_check_finds_a_store_dir_that_cannot_be_written(tmp_path):
-    from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugDevice
+    from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugKind
 
     f = tmp_path / "a-file"
     f.write_text("")
     with pytest.raises(ValueError, match="store_dir: .* is not a writable folder"):
-        SparkplugDevice.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(f / "sub")), [])
-    SparkplugDevice.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(tmp_path / "new" / "dir")), [])
+        SparkplugKind.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(f / "sub")), [])
+    SparkplugKind.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(tmp_path / "new" / "dir")), [])
 
 
 def test_a_store_that_fails_to_write_is_counted_and_logged_and_goes_on():

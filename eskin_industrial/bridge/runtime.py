@@ -76,7 +76,7 @@ def open_nodes(config: BridgeConfig, nodes: list[ResolvedNode], closers: list[Ca
         try:
             opened = cls.open_nodes(options, nodes, context)
         except ListenError as exc:  # a port in use: the line --check gives (probe_outputs)
-            raise ListenError(f"{config.source}: [{cls.kind}] port: {exc}") from None
+            raise ListenError(f"{config.source}: [{cls.name}] port: {exc}") from None
         for i, sink in enumerate(opened):
             per_node[i].append(sink)
     sources: list[Source | None] = [None] * len(nodes)

@@ -24,7 +24,7 @@ from eskin_industrial.detect.scored import ScoredDetector
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.frames import RawScan
 from eskin_industrial.node import NodeSnapshot
-from eskin_industrial.outputs.base import CliOption, Sink
+from eskin_industrial.outputs.base import CliOption, OutputKind, Sink
 '''
 
 #: The registry lines the page shows (the tests register the kinds themselves).

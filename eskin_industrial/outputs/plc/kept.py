@@ -9,11 +9,10 @@ from ..base import Sink
 from .image import PlcImage, read_back, status_names
 
 
-class KeptRegisters(Sink[None]):
+class KeptRegisters(Sink):
     """Renders every snapshot into the node's register image, as the PLC output
     would, and keeps the newest (read by a view's redraw thread)."""
 
-    kind = "plc"
 
     def __init__(self, settings: ModbusPlcSection) -> None:
         super().__init__()

@@ -48,7 +48,6 @@ from .image import (
     parse_coil_write,
     parse_register_write,
 )
-from .options import PlcOptions
 
 
 class PlcRegisterHandler:
@@ -268,11 +267,9 @@ def identity_of(settings: ModbusPlcSection, model_name: str = "") -> Identity:
                     product_name=ident.product_name, model_name=ident.model_name or model_name)
 
 
-class PlcBlockSink(Sink[PlcOptions]):
+class PlcBlockSink(Sink):
     """One node's block of a shared :class:`PlcServer`, as that node's sink."""
 
-    # A sink of the "plc" output kind, opened by plc.sink.PlcSink.
-    kind = "plc"
 
     def __init__(self, server: PlcServer, handler: PlcRegisterHandler) -> None:
         super().__init__()

@@ -51,7 +51,7 @@ from ...errors import EskinError, ProfileError
 from ...node import Command, NodeSnapshot, refusal
 from ...ratelimit import Throttle
 from ...schema import SchemaError, build, in_range
-from ..base import CliOption, Sink, SinkHealth
+from ..base import CliOption, OutputKind, Sink, SinkHealth
 from . import payload as pb
 from .bdseq import BdSeqFile, bdseq_path, writable
 from .commands import COMMAND_ALIAS, COMMANDS, BadCommand, birth_metrics, parse_device_command
@@ -735,59 +735,8 @@ def nonconforming(options: SparkplugOptions, bd_error: str | None, bd_file: str)
     return out
 
 
-class SparkplugDevice(Sink[SparkplugOptions]):
-    """One sensor node as a Sparkplug device of the edge node."""
-
-    kind = "sparkplug"
-    Options = SparkplugOptions
-    cli_options = (
-        CliOption("--sparkplug", "sparkplug", "Publish as a Sparkplug B edge node to this MQTT broker "
-                  "(mqtt://HOST:PORT, or mqtts:// for TLS); needs --group-id and --edge-node-id.", metavar="URL"),
-        CliOption("--group-id", "group_id", "Sparkplug group id (with --sparkplug).", metavar="ID"),
-        CliOption("--edge-node-id", "edge_node_id", "Sparkplug edge node id (with --sparkplug).", metavar="ID"),
-        CliOption("--sparkplug-nonconforming-qos1", "sparkplug_nonconforming_qos1", "Publish births, data and "
-                  "DDEATH at MQTT QoS 1, against the specification's QoS 0 (a strict host may reject the node).",
-                  type=bool),
-        CliOption("--sparkplug-keepalive", "sparkplug_keepalive_s", "MQTT keepalive, seconds.", type=int,
-                  metavar="S"),
-        CliOption("--sparkplug-deadband", "sparkplug_deadband", "An analog metric is sent when it moved by more "
-                  "than this, in its own unit (default 0.01).", type=float, metavar="X"),
-        CliOption("--sparkplug-min-interval", "sparkplug_min_interval_s", "An analog metric is sent at most this "
-                  "often, seconds (default 0.5; a state change goes at once).", type=float, metavar="S"),
-        CliOption("--sparkplug-reconnect-min", "sparkplug_reconnect_min_s", "Back-off between connection "
-                  "attempts, from this (seconds, default 0.2) ...", type=float, metavar="S"),
-        CliOption("--sparkplug-reconnect-max", "sparkplug_reconnect_max_s", "... doubling up to this (seconds, "
-                  "default 5).", type=float, metavar="S"),
-        CliOption("--sparkplug-frame-interval", "sparkplug_frame_interval_s", "Publish each node's calibrated "
-                  "taxel frame (metric Taxels/Frame, a FloatArray) at most this often, seconds (default 0: off).",
-                  type=float, metavar="S"),
-        CliOption("--sparkplug-store-dir", "sparkplug_store_dir", "Folder of the on-disk queue of the data "
-                  "messages of a broker outage (default: in memory).", metavar="DIR"),
-        CliOption("--sparkplug-store-max", "sparkplug_store_max", "Data messages held at most during an "
-                  "outage (the rest are counted).", type=int, metavar="N"),
-        CliOption("--sparkplug-ca-file", "sparkplug_ca_file", "mqtts: CA certificates (PEM) of the broker's "
-                  "certificate (default: the system's).", metavar="FILE"),
-        CliOption("--sparkplug-cert-file", "sparkplug_cert_file", "mqtts: client certificate (PEM), with "
-                  "--sparkplug-key-file.", metavar="FILE"),
-        CliOption("--sparkplug-key-file", "sparkplug_key_file", "mqtts: the client certificate's key (PEM).",
-                  metavar="FILE"),
-        CliOption("--sparkplug-primary-host", "sparkplug_primary_host_id", "Publish only while this Sparkplug "
-                  "primary host application is online (its STATE topic).", metavar="ID"),
-        CliOption("--sparkplug-username", "sparkplug_username", "MQTT username.", metavar="NAME"),
-        CliOption("--sparkplug-password-file", "sparkplug_password_file", "MQTT password: the first line of "
-                  "this file (no password option takes the secret itself).", metavar="FILE"),
-        CliOption("--sparkplug-password-env", "sparkplug_password_env", "MQTT password: this environment "
-                  "variable.", metavar="NAME"),
-    )
-    #: ``--sparkplug-*`` option -> the ``[sparkplug]`` key it sets.
-    _CLI_KEYS = {"sparkplug_nonconforming_qos1": "nonconforming_qos1", "sparkplug_keepalive_s": "keepalive_s",
-                 "sparkplug_deadband": "deadband", "sparkplug_min_interval_s": "min_interval_s",
-                 "sparkplug_reconnect_min_s": "reconnect_min_s", "sparkplug_reconnect_max_s": "reconnect_max_s",
-                 "sparkplug_frame_interval_s": "frame_interval_s",
-                 "sparkplug_store_dir": "store_dir", "sparkplug_store_max": "store_max",
-                 "sparkplug_ca_file": "ca_file", "sparkplug_cert_file": "cert_file", "sparkplug_key_file": "key_file",
-                 "sparkplug_username": "username", "sparkplug_primary_host_id": "primary_host_id", "sparkplug_password_file": "password_file",
-                 "sparkplug_password_env": "password_env"}
+class SparkplugDevice(Sink):
+    """One sensor node as a Sparkplug device of the edge node (opened by :class:`SparkplugKind`)."""
 
     def __init__(self, node: EdgeNode, device_id: str, index: int,
                  properties: dict[str, tuple[Property, ...]] | None = None) -> None:
@@ -933,7 +882,62 @@ class SparkplugDevice(Sink[SparkplugOptions]):
     def _close(self) -> None:
         self.death()
 
-    # -- the kind ----------------------------------------------------------------------
+
+class SparkplugKind(OutputKind[SparkplugOptions]):
+    """The output kind "sparkplug": one edge node for the bridge, one
+    :class:`SparkplugDevice` per node."""
+
+    name = "sparkplug"
+    Options = SparkplugOptions
+    cli_options = (
+        CliOption("--sparkplug", "sparkplug", "Publish as a Sparkplug B edge node to this MQTT broker "
+                  "(mqtt://HOST:PORT, or mqtts:// for TLS); needs --group-id and --edge-node-id.", metavar="URL"),
+        CliOption("--group-id", "group_id", "Sparkplug group id (with --sparkplug).", metavar="ID"),
+        CliOption("--edge-node-id", "edge_node_id", "Sparkplug edge node id (with --sparkplug).", metavar="ID"),
+        CliOption("--sparkplug-nonconforming-qos1", "sparkplug_nonconforming_qos1", "Publish births, data and "
+                  "DDEATH at MQTT QoS 1, against the specification's QoS 0 (a strict host may reject the node).",
+                  type=bool),
+        CliOption("--sparkplug-keepalive", "sparkplug_keepalive_s", "MQTT keepalive, seconds.", type=int,
+                  metavar="S"),
+        CliOption("--sparkplug-deadband", "sparkplug_deadband", "An analog metric is sent when it moved by more "
+                  "than this, in its own unit (default 0.01).", type=float, metavar="X"),
+        CliOption("--sparkplug-min-interval", "sparkplug_min_interval_s", "An analog metric is sent at most this "
+                  "often, seconds (default 0.5; a state change goes at once).", type=float, metavar="S"),
+        CliOption("--sparkplug-reconnect-min", "sparkplug_reconnect_min_s", "Back-off between connection "
+                  "attempts, from this (seconds, default 0.2) ...", type=float, metavar="S"),
+        CliOption("--sparkplug-reconnect-max", "sparkplug_reconnect_max_s", "... doubling up to this (seconds, "
+                  "default 5).", type=float, metavar="S"),
+        CliOption("--sparkplug-frame-interval", "sparkplug_frame_interval_s", "Publish each node's calibrated "
+                  "taxel frame (metric Taxels/Frame, a FloatArray) at most this often, seconds (default 0: off).",
+                  type=float, metavar="S"),
+        CliOption("--sparkplug-store-dir", "sparkplug_store_dir", "Folder of the on-disk queue of the data "
+                  "messages of a broker outage (default: in memory).", metavar="DIR"),
+        CliOption("--sparkplug-store-max", "sparkplug_store_max", "Data messages held at most during an "
+                  "outage (the rest are counted).", type=int, metavar="N"),
+        CliOption("--sparkplug-ca-file", "sparkplug_ca_file", "mqtts: CA certificates (PEM) of the broker's "
+                  "certificate (default: the system's).", metavar="FILE"),
+        CliOption("--sparkplug-cert-file", "sparkplug_cert_file", "mqtts: client certificate (PEM), with "
+                  "--sparkplug-key-file.", metavar="FILE"),
+        CliOption("--sparkplug-key-file", "sparkplug_key_file", "mqtts: the client certificate's key (PEM).",
+                  metavar="FILE"),
+        CliOption("--sparkplug-primary-host", "sparkplug_primary_host_id", "Publish only while this Sparkplug "
+                  "primary host application is online (its STATE topic).", metavar="ID"),
+        CliOption("--sparkplug-username", "sparkplug_username", "MQTT username.", metavar="NAME"),
+        CliOption("--sparkplug-password-file", "sparkplug_password_file", "MQTT password: the first line of "
+                  "this file (no password option takes the secret itself).", metavar="FILE"),
+        CliOption("--sparkplug-password-env", "sparkplug_password_env", "MQTT password: this environment "
+                  "variable.", metavar="NAME"),
+    )
+    #: ``--sparkplug-*`` option -> the ``[sparkplug]`` key it sets.
+    _CLI_KEYS = {"sparkplug_nonconforming_qos1": "nonconforming_qos1", "sparkplug_keepalive_s": "keepalive_s",
+                 "sparkplug_deadband": "deadband", "sparkplug_min_interval_s": "min_interval_s",
+                 "sparkplug_reconnect_min_s": "reconnect_min_s", "sparkplug_reconnect_max_s": "reconnect_max_s",
+                 "sparkplug_frame_interval_s": "frame_interval_s",
+                 "sparkplug_store_dir": "store_dir", "sparkplug_store_max": "store_max",
+                 "sparkplug_ca_file": "ca_file", "sparkplug_cert_file": "cert_file", "sparkplug_key_file": "key_file",
+                 "sparkplug_username": "username", "sparkplug_primary_host_id": "primary_host_id", "sparkplug_password_file": "password_file",
+                 "sparkplug_password_env": "password_env"}
+
     @classmethod
     def options_from_cli(cls, values: dict[str, Any]) -> SparkplugOptions | None:
         url = values.get("sparkplug")
@@ -989,7 +993,7 @@ class SparkplugDevice(Sink[SparkplugOptions]):
             sys.stderr.write(f"eskin-bus: warning: [sparkplug] {line}\n")
 
     @classmethod
-    def open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
+    def _open_nodes(cls, options: SparkplugOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink]:
         edge = open_edge(options, [(n.name, {METHOD_METRIC: method_properties(n.profile),
                                      LAYOUT_METRIC: layout_properties(n.profile),
                                      FRAME_METRIC.name: frame_properties(n.profile, options.frame_interval_s),

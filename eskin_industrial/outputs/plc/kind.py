@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 from ...netaddr import listen_problem
 from ...preflight import check_serial
 from ...profile import Profile
-from ..base import CliOption, Sink
+from ..base import CliOption, OutputKind, Sink
 from .image import IMAGE_COUNT
 from .options import SERVER_KEYS, PlcNodeOptions, PlcOptions, parse_plc_spec, plc_mode, serve_address, server_settings
 
@@ -25,11 +25,11 @@ if TYPE_CHECKING:
     from ...seam import NodeLike, OpenContext
 
 
-class PlcSink(Sink[PlcOptions]):
+class PlcKind(OutputKind[PlcOptions]):
     """The output kind "plc"; its sinks are :class:`PlcWriter` (client mode) and
     :class:`PlcBlockSink` (one node's block of the server)."""
 
-    kind = "plc"
+    name = "plc"
     Options = PlcOptions
     NodeOptions = PlcNodeOptions
     moved_node_keys = {"base_address": "base_address"}
@@ -115,7 +115,7 @@ class PlcSink(Sink[PlcOptions]):
             raise ValueError(f"port: {problem}")
 
     @classmethod
-    def open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
+    def _open_nodes(cls, options: PlcOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink]:
         from ...modbus.serial_line import SerialSettings
         from .client import PlcWriter
         from .server import PlcServer, identity_of, policy_of
@@ -134,7 +134,7 @@ class PlcSink(Sink[PlcOptions]):
                                ).start()
             context.closers.append(server.stop)
             return [server.block(i) for i in range(len(nodes))]
-        sinks: list[Sink[Any]] = []
+        sinks: list[Sink] = []
         for n in nodes:
             w = PlcWriter(options.client_settings(n.profile.modbus.plc), options.host, options.port,
                           serial=serial, refresh_s=n.profile.output.refresh_s).start()
