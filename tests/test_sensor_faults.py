@@ -24,7 +24,7 @@ from eskin_industrial.node import NodeSnapshot
 from eskin_industrial.outputs.base import Sink
 from eskin_industrial.outputs.opcua.status import BAD_SENSOR_FAILURE, quality
 from eskin_industrial.outputs.plc.image import Status
-from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS, metric_values
+from eskin_industrial.outputs.sparkplug.metrics import DEVICE_METRICS, metric_values
 from eskin_industrial.profile import load_profile
 from eskin_industrial.recording import write_recording
 from tests.helpers.bridge import CLAIMS, PAPER, hold_raw, running_bridge, server_config, wait_for

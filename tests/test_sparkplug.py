@@ -19,7 +19,9 @@ from eskin_industrial.errors import ProfileError
 from eskin_industrial.outputs.base import SINKS, output_kind
 from eskin_industrial.outputs.sparkplug import payload as pb
 from eskin_industrial.outputs.sparkplug.commands import COMMANDS
-from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS, SparkplugKind, SparkplugOptions, open_edge
+from eskin_industrial.outputs.sparkplug.kind import SparkplugKind, open_edge
+from eskin_industrial.outputs.sparkplug.metrics import DEVICE_METRICS
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, server_config, slip_raw, wait_for
 from tests.helpers.paths import PROFILES
@@ -272,7 +274,7 @@ def test_check_describes_the_output(tmp_path):
 
 
 def test_the_metric_table_in_the_docs_is_the_code():
-    from eskin_industrial.outputs.sparkplug.sparkplug import metric_table
+    from eskin_industrial.outputs.sparkplug.metrics import metric_table
     from tests.helpers.paths import ROOT
 
     text = (ROOT / "docs" / "plant.md").read_text()

@@ -15,7 +15,8 @@ import pytest
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.cli.outputs import output_options
-from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugKind, SparkplugOptions
+from eskin_industrial.outputs.sparkplug.kind import SparkplugKind
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from eskin_industrial.outputs.sparkplug.transport import check_files, parse_broker, password
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, running_bridge

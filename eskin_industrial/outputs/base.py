@@ -52,7 +52,7 @@ if TYPE_CHECKING:
 SINKS: dict[str, str] = {
     "plc": "eskin_industrial.outputs.plc.kind:PlcKind",
     "recorder": "eskin_industrial.outputs.recorder.kind:RecorderKind",
-    "sparkplug": "eskin_industrial.outputs.sparkplug.sparkplug:SparkplugKind",
+    "sparkplug": "eskin_industrial.outputs.sparkplug.kind:SparkplugKind",
     "opcua": "eskin_industrial.outputs.opcua.sink:OpcuaKind",
 }
 #: A sink's own events held until a handler is attached (the first ones of a writer
