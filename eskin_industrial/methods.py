@@ -13,8 +13,15 @@ neither 0 (no method) nor another method's: a plug-in that breaks either rule is
 refused with one line naming it, never silently given another number.  A plug-in
 never replaces a built-in method of the same name.
 
-This lookup sits above ``detect`` (the numeric core reads no entry points) and below
-everything that names a method: profiles, the evaluation, the outputs, the commands.
+A method that needs a model (``learned``) is bound here to the one given, or else to
+the model the package ships (:mod:`~eskin_industrial.models`, read from package data:
+nothing trains at run time).  The pipeline (hence the bridge and every live command),
+the offline path (``detect``, ``plot``) and the evaluation all build their methods
+through :func:`ready_method`, so that a method name means the same detector everywhere.
+
+This lookup sits above ``detect`` (the numeric core reads no entry points and no
+files) and below everything that names a method: profiles, the evaluation, the
+outputs, the commands.
 """
 
 from __future__ import annotations
@@ -24,9 +31,17 @@ import functools
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
+from .detect.learned import Model
 from .detect.methods import METHODS, Method
+from .detect.settings import DetectorSettings
 from .errors import ProfileError
+from .models import default_model
 from .registry import METHOD_GROUP, load_attr, plugins
+
+#: A stream factory: (settings, x_mm, y_mm, rate_hz) -> a detector.
+Factory = Callable[[DetectorSettings, np.ndarray, np.ndarray, float], Any]
 
 
 def method_names() -> list[str]:
@@ -105,4 +120,29 @@ def method_of_stream(factory: Callable[..., Any]) -> Method | None:
     return next((m for m in all_methods().values() if factory is m.stream), None)
 
 
-__all__ = ["all_methods", "detector_names", "get_method", "method_of_code", "method_of_stream", "method_names"]
+def bind(method: Method, model: Model | None = None) -> Method:
+    """``method`` ready to build from (settings, x_mm, y_mm, rate_hz): one that needs
+    a model is handed ``model``, or else the shipped one (read once per process; a
+    missing or unreadable file is a one-line :class:`~eskin_industrial.models.ModelFileError`);
+    any other is returned as it is."""
+    if not method.needs_model:
+        return method
+    return method.with_model(default_model() if model is None else model)
+
+
+def ready_method(name: str | None, settings: DetectorSettings, model: Model | None = None) -> Method:
+    """The method ``name`` (None: the settings' own, a profile's ``detector.method``),
+    bound by :func:`bind`; an unknown name is a ``KeyError`` naming the known ones."""
+    return bind(get_method(name or settings.method), model)
+
+
+def ready_factory(factory: Factory) -> Factory:
+    """A bare stream factory ready to call: a registered method's factory that needs a
+    model (``get_method("learned").stream``) is bound by :func:`bind`; any other
+    factory (a bound one, one of the sweeps' own) is returned as it is."""
+    method = method_of_stream(factory)
+    return factory if method is None or not method.needs_model else bind(method).stream
+
+
+__all__ = ["Factory", "all_methods", "bind", "detector_names", "get_method", "method_of_code", "method_of_stream",
+           "method_names", "ready_factory", "ready_method"]

@@ -4,7 +4,7 @@ to detector updates.
 
 The one path every command that detects from a file takes (``eskin-bus detect``,
 ``eskin-bus plot``): the same calibration, the same rate checks, the method chosen and
-bound to its model in one place (``evaluation.binding``, as the bridge and the
+bound to its model in one place (``methods.ready_method``, as the bridge and the
 evaluation do), batch or stream.  What is transport-specific is reading, and stays
 with the transport (``bus/can/log.py``: records, scan assembly, the log's checks); a
 log's scans go through the live path's :class:`~eskin_industrial.pipeline.Pipeline`,
@@ -28,8 +28,8 @@ from .detect.hygiene import TIME_FAULTS, rate_problem, time_verdicts
 from .detect.methods import Method
 from .detect.updates import Update, UpdateTable
 from .errors import InputFormatError
-from .evaluation.binding import ready_method
 from .frames import Frame, RawScan
+from .methods import ready_method
 from .pipeline import Pipeline
 from .profile import Profile
 from .progress import NO_PROGRESS, Progress

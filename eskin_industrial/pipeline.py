@@ -12,8 +12,8 @@ from .detect.integrity import IntegrityWatch
 from .detect.learned import Model
 from .detect.protocol import Detector
 from .detect.updates import Update, state_changed
-from .evaluation.binding import ready_method
 from .frames import Frame, FrameFlag, RawScan
+from .methods import ready_method
 from .profile import Profile
 
 _INVALID = int(FrameFlag.INVALID)  # plain ints: IntFlag arithmetic costs microseconds per scan
@@ -40,7 +40,7 @@ class Pipeline:
     def __init__(self, profile: Profile, rate_hz: float | None = None, method: str | None = None,
                  model: Model | None = None) -> None:
         """``method`` overrides the profile's; a method that needs a model (``learned``)
-        gets ``model``, or else the default one (trained on first use)."""
+        gets ``model``, or else the one the package ships (read from package data)."""
         self.profile = profile
         self.calibrator = Calibrator.from_section(profile.calibration, profile.taxels)
         self.rate_hz = rate_hz or profile.sensor.rate_hz

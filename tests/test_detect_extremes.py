@@ -81,7 +81,7 @@ def test_any_finite_force_and_any_time(paper_profile, name, rec):
                                                                   HealthCheck.too_slow])
 @given(rec=recordings())
 def test_the_learned_method_too(paper_profile, rec):
-    from eskin_industrial.evaluation.binding import bind
+    from eskin_industrial.methods import bind
 
     t, f = rec
     run_both(bind(METHODS["learned"]), paper_profile, t, f)

@@ -1,20 +1,21 @@
 """The learned ceiling: trained on the tuning seeds only, scored on held-out seeds,
-defined output on the edge cases, and a clear error without its optional extra."""
+defined output on the edge cases; its model shipped as package data, read with numpy
+alone (no training at run time), and scikit-learn needed only to train it."""
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
-pytest.importorskip("sklearn")
-
 from eskin_industrial.detect import GraspState, get_method
 from eskin_industrial.detect.learned import CLASSES, FEATURES, Learned
 from eskin_industrial.evaluation.suite import EVALUATION_SEEDS, SUITE, TUNING_SEEDS, evaluate
-from eskin_industrial.evaluation.train import TrainConfig, default_model
-from tests.helpers.paths import PROFILES
+from eskin_industrial.evaluation.train import TrainConfig, config_record
+from eskin_industrial.models import default_model, read_model, shipped_model_file
+from tests.helpers.paths import PROFILES, ROOT
 from tests.helpers.scenes import grasp
 
 RATE = 100.0
@@ -44,6 +45,7 @@ def test_trains_on_tuning_seeds_only():
 
 
 def test_tabulated_trees_equal_sklearn():
+    pytest.importorskip("sklearn")
     from sklearn.ensemble import HistGradientBoostingClassifier
 
     from eskin_industrial.evaluation.train import trees_from_sklearn
@@ -97,21 +99,164 @@ def test_classes_and_features_are_named():
     assert len(FEATURES) == len(set(FEATURES))
 
 
-def test_without_scikit_learn_the_cli_names_the_extra(tmp_path):
+def _without_sklearn(tmp_path, code: str) -> subprocess.CompletedProcess[str]:
     # a site directory whose sklearn cannot be imported stands in for a missing extra
     (tmp_path / "sklearn.py").write_text("raise ImportError('no scikit-learn here')\n")
-    code = (f"import sys; sys.path.insert(0, {str(tmp_path)!r}); from eskin_industrial.cli import main; "
-            "main(['evaluate', '-m', 'learned', '-s', 'case2', '--seeds', '1000'])")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert out.returncode == 4  # every missing extra: one format, one exit code (tests/test_cli_conventions.py)
-    assert out.stderr.strip().splitlines() == [
-        "eskin-bus: error: the learned method needs scikit-learn: pip install 'eskin-industrial[learn]'"]
+    return subprocess.run([sys.executable, "-c", f"import sys; sys.path.insert(0, {str(tmp_path)!r}); {code}"],
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.slow
+def test_without_scikit_learn_the_method_runs_and_only_training_names_the_extra(tmp_path):
+    rec = tmp_path / "case2.csv"
+    subprocess.run([sys.executable, "-m", "eskin_industrial", "simulate", "case2", "-o", str(rec)], check=True,
+                   capture_output=True, timeout=60)
+    run = "from eskin_industrial.cli import main; main({})"
+    detect = _without_sklearn(tmp_path, run.format(["detect", "-p", "paper-5x5", "--method", "learned", "--changes",
+                                                    str(rec)]))
+    assert detect.returncode == 0 and "slip" in detect.stdout, detect.stderr
+    evaluated = _without_sklearn(tmp_path, run.format(["evaluate", "-m", "learned", "-s", "case2", "--seeds", "1000"]))
+    assert evaluated.returncode == 0 and "learned" in evaluated.stdout, evaluated.stderr
+    # training is what needs it: one line, exit 4 as every missing extra (tests/test_cli_conventions.py)
+    script = str(ROOT / "scripts" / "train-learned")
+    train = _without_sklearn(tmp_path, f"import runpy; sys.argv = [{script!r}, '--check']; "
+                                       f"runpy.run_path({script!r}, run_name='__main__')")
+    assert train.returncode == 4, train.stderr
+    assert train.stderr.strip().splitlines() == [
+        "train-learned: error: training the learned method needs scikit-learn: pip install 'eskin-industrial[learn]'"]
 
 
 def test_nothing_imports_sklearn_at_import_time():
     code = "import sys, eskin_industrial.cli, eskin_industrial.evaluation.charts; print('sklearn' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+@pytest.mark.slow
+def test_a_learned_pipeline_loads_neither_the_evaluation_nor_scikit_learn():
+    # the bridge's path, built and run: the model comes from package data (the layer
+    # contract in pyproject.toml forbids the import; this is the same, at run time)
+    code = ("import sys, numpy as np; from eskin_industrial.pipeline import Pipeline; "
+            "from eskin_industrial.profile import load_profile; from eskin_industrial.frames import RawScan; "
+            f"pipe = Pipeline(load_profile({str(PROFILES / 'paper-5x5.toml')!r}), method='learned'); "
+            "[pipe.push(RawScan(seq=k, t=k / 100, raw=np.full(25, 5e4))) for k in range(200)]; "
+            "print(pipe.last_update.valid, sorted({m.split('.')[1] for m in sys.modules "
+            "if m.startswith('eskin_industrial.')} & {'evaluation', 'scenes'}), 'sklearn' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.split() == ["True", "[]", "False"], out.stderr
+
+
+def test_the_shipped_model_says_what_it_was_trained_on(model):
+    stored = read_model(shipped_model_file())
+    assert stored.trained == config_record(TrainConfig())  # the evaluation's default training
+    assert set(stored.trained["seeds"]) <= set(TUNING_SEEDS) and not set(stored.trained["seeds"]) & set(
+        EVALUATION_SEEDS)
+    assert set(stored.made_with) == {"numpy", "scikit-learn"}
+    assert len(model.table) == 3 * TrainConfig().trees  # one tree per class and round
+    p = model(np.zeros(len(FEATURES)))
+    assert p.shape == (3,) and abs(p.sum() - 1.0) < 1e-12
+
+
+def test_the_model_file_is_written_deterministically(model, tmp_path):
+    from eskin_industrial.models import write_model
+
+    a, b = tmp_path / "a.npz", tmp_path / "b" / "b.npz"
+    stored = read_model(shipped_model_file())
+    write_model(a, model, stored.trained, stored.made_with)
+    write_model(b, read_model(a).model, stored.trained, stored.made_with)
+    assert a.read_bytes() == b.read_bytes()
+    again = read_model(b)
+    for name in ("feature", "threshold", "table", "init"):
+        assert np.array_equal(getattr(again.model, name), getattr(model, name))
+
+
+def test_a_model_file_that_is_not_the_training_s_is_told_apart(model):
+    from dataclasses import replace
+
+    from eskin_industrial.evaluation.train import differences
+
+    shipped = read_model(shipped_model_file())
+    assert differences(shipped, shipped) == []
+    table = model.table.copy()
+    table[5, 17] += 1e-9  # one leaf, off in its last digits
+    other = replace(shipped, model=type(model)(model.feature, model.threshold, table, model.init))
+    assert differences(shipped, other) == ["table differs"]
+    fewer = replace(shipped, trained={**shipped.trained, "seeds": [0, 1]})
+    assert differences(shipped, fewer) == [f"trained on {shipped.trained}, the training is {fewer.trained}"]
+
+
+@pytest.mark.slow
+def test_the_shipped_model_is_what_the_training_gives(paper_profile, model, tmp_path):
+    """Trains afresh (about 16 s of CPU): the same arrays, hence the same verdicts
+    (``scripts/train-learned --check`` is the same comparison)."""
+    pytest.importorskip("sklearn")
+    from eskin_industrial.evaluation.train import differences, write_trained
+    from eskin_industrial.scenes import render
+
+    fresh = write_trained(tmp_path / "learned.npz")
+    assert differences(read_model(shipped_model_file()), fresh) == []
+    rec = render("case2", RATE, EVALUATION_SEEDS[0])
+    x, y = paper_profile.coordinates_mm
+    shipped, trained = (Learned(paper_profile.detector, x, y, RATE, model=m).feed(rec.t, rec.forces)
+                        for m in (model, fresh.model))
+    assert [u.state for u in shipped] == [u.state for u in trained]
+    assert GraspState.SLIP in {u.state for u in shipped}
+
+
+def _broken_files(tmp_path, model):
+    from eskin_industrial.models import write_model
+
+    good = tmp_path / "good.npz"
+    write_model(good, model, {}, {})
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(good.read_bytes()[:3000])
+    text = tmp_path / "text.npz"
+    text.write_text("feature,threshold\n1,2\n")
+    arrays = {n: getattr(model, n) for n in ("feature", "threshold", "table", "init")}
+    meta = {"format": 1, "features": list(FEATURES), "classes": list(CLASSES)}
+    fewer = tmp_path / "fewer.npz"  # a model of other features
+    np.savez(fewer, **arrays, meta=np.array(json.dumps({**meta, "features": list(FEATURES[:-1])})))
+    newer = tmp_path / "newer.npz"  # a format this version does not know
+    np.savez(newer, **arrays, meta=np.array(json.dumps({**meta, "format": 2})))
+    short = tmp_path / "short.npz"  # one tree short of whole rounds
+    np.savez(short, **{**arrays, "feature": model.feature[:-1]}, meta=np.array(json.dumps(meta)))
+    return {"missing": tmp_path / "none.npz", "truncated": truncated, "text": text, "fewer": fewer, "newer": newer,
+            "short": short}
+
+
+def test_a_missing_or_damaged_model_file_is_one_line_naming_it(model, tmp_path):
+    from eskin_industrial.models import ModelFileError
+
+    said = {}
+    for kind, path in _broken_files(tmp_path, model).items():
+        with pytest.raises(ModelFileError) as err:
+            read_model(path)
+        said[kind] = str(err.value)
+        assert said[kind].startswith(f"{path}: ") and "\n" not in said[kind], (kind, said[kind])
+    assert "model file is missing" in said["missing"]
+    assert "features" in said["fewer"] and "format 2" in said["newer"]
+    assert "shape (120, 7), expected (119, 7)" in said["short"]
+
+
+def test_a_damaged_shipped_model_stops_the_command_with_one_line(model, tmp_path, monkeypatch):
+    from click.testing import CliRunner
+
+    from eskin_industrial import models
+    from eskin_industrial.cli import main
+    from eskin_industrial.recording import write_recording
+
+    rec = tmp_path / "rec.csv"
+    write_recording(rec, np.arange(300) / RATE, grasp(300, seed=1))
+    bad = _broken_files(tmp_path, model)["truncated"]
+    monkeypatch.setattr(models, "shipped_model_file", lambda: bad)  # the package's file, as if damaged
+    models.default_model.cache_clear()
+    try:
+        res = CliRunner().invoke(main, ["detect", "-p", "paper-5x5", "--method", "learned", str(rec)])
+    finally:
+        models.default_model.cache_clear()
+    assert res.exit_code == 2, res.output
+    (line,) = res.output.strip().splitlines()
+    assert line.startswith(f"eskin-bus: error: {bad}: not a model file the learned method can read ("), line
 
 
 def test_every_path_that_builds_by_name_hands_the_default_model(paper_profile, model, tmp_path):

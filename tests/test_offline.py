@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from eskin_industrial import offline
+from eskin_industrial import methods, offline
 from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.bus.can.log import LiveLogScans, log_scans
 from eskin_industrial.calibration import Calibrator
@@ -23,7 +23,6 @@ from eskin_industrial.cli import main, plot_cmd
 from eskin_industrial.detect.methods import get_method
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.detect.updates import UpdateTable
-from eskin_industrial.evaluation import train
 from eskin_industrial.evaluation.suite import run_one
 from eskin_industrial.frames import RawScan
 from eskin_industrial.pipeline import Pipeline
@@ -105,14 +104,14 @@ def test_detect_plot_and_the_evaluation_give_one_answer(case2: tuple[Path, Any],
 
 def test_the_learned_method_is_bound_to_one_model_everywhere(case2: tuple[Path, Any], tmp_path: Path,
                                                              monkeypatch: pytest.MonkeyPatch) -> None:
-    # a stand-in for the default model (no training): slip while the contact lasts
+    # a stand-in for the shipped model: slip while the contact lasts
     asked: list[int] = []
 
     def default_model() -> Callable[[np.ndarray], np.ndarray]:
         asked.append(1)
         return lambda x: np.array([0.3, 0.1, 0.6]) if x[10] > 1.0 else np.array([0.8, 0.1, 0.1])
 
-    monkeypatch.setattr(train, "default_model", default_model)
+    monkeypatch.setattr(methods, "default_model", default_model)
     path, rendered = case2
     detected, plotted, scored, said = detect_plot_and_evaluate("learned", path, rendered, tmp_path, monkeypatch)
     assert len(asked) == 3  # detect, plot, the evaluation: each bound the one default model

@@ -63,6 +63,7 @@ def test_wheel_carries_profiles_examples_license_and_metadata(installed: tuple[P
         assert f"eskin_industrial/data/deploy/{example}" in names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
     assert any(n.startswith("eskin_industrial/scenes/builtin/") for n in names)
+    assert "eskin_industrial/data/models/learned.npz" in names  # the learned method's model
     assert meta["License-Expression"] == "MIT"
     # the index's description: README.md with its links into the checkout made plain (tests/test_index_readme.py)
     assert meta["Description-Content-Type"] == "text/markdown"
@@ -109,6 +110,16 @@ def test_installed_demo_runs_from_an_empty_folder(installed: tuple[Path, Path], 
     assert {"paper-5x5", "hand-4x5", "strip-1x5"} <= {line.split()[0] for line in listed.splitlines()}
     demo = _run([eskin, "demo", "--plain", "--scene", "case2"], tmp_path, timeout=120).stdout
     assert "slip events 1, found 1, false alarms 0" in demo
+
+
+def test_the_base_install_runs_the_learned_method(installed: tuple[Path, Path], tmp_path: Path) -> None:
+    # no extra, so no scikit-learn: the model is the wheel's package data, and nothing trains
+    _, bin_dir = installed
+    eskin = str(bin_dir / "eskin-bus")
+    assert subprocess.run([str(bin_dir / "python"), "-c", "import sklearn"], capture_output=True).returncode != 0
+    _run([eskin, "examples", "copy", "case2.csv"], tmp_path)
+    found = _run([eskin, "detect", "-p", "paper-5x5", "case2.csv", "--method", "learned", "--changes"], tmp_path)
+    assert ",slip," in found.stdout, found.stdout + found.stderr
 
 
 def test_installed_profiles_and_examples_copy_out_and_check(installed: tuple[Path, Path], tmp_path: Path) -> None:

@@ -245,7 +245,7 @@ def test_the_bridge_and_every_wavelet_method_run_with_memory_deny_write_execute(
     rec = tmp_path / "case2.csv"
     subprocess.run([sys.executable, "-m", "eskin_industrial", "simulate", "case2", "-o", str(rec)], check=True,
                    capture_output=True, timeout=60, env={**os.environ, "PYTHONPATH": os.getcwd()})
-    for method in ("paper", "learned"):  # PyWavelets; scikit-learn
+    for method in ("paper", "learned"):  # PyWavelets; the shipped model (numpy)
         res = _under_mdwe(mode, "detect", "-p", profile, "--method", method, "--changes", str(rec))
         assert res.returncode == 0 and "slip" in res.stdout, (method, res.stderr[-2000:])
 

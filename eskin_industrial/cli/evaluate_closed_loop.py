@@ -54,20 +54,10 @@ def setup_of(rate_hz: float, plc_cycle_ms: float, conditions: tuple[str, ...]) -
 
 def controls_of(methods: tuple[str, ...]) -> tuple[str, ...]:
     """The controls to run: the methods asked for (baselines by name too), or every
-    detector between the baselines; ``learned`` left out when scikit-learn is missing
-    and it was not asked for."""
+    detector between the baselines."""
     if methods:
         return tuple(dict.fromkeys(methods))
-    names: tuple[str, ...] = ("fixed", "none", *detector_names(), "oracle")
-    from ..errors import MissingExtra
-    from ..evaluation.train import INSTALL_HINT, require_sklearn
-
-    try:
-        require_sklearn()
-    except MissingExtra:
-        click.echo(f"# learned left out: {INSTALL_HINT}", err=True)
-        names = tuple(n for n in names if n != "learned")
-    return names
+    return ("fixed", "none", *detector_names(), "oracle")
 
 
 def closed_loop(methods: tuple[str, ...], seeds_opt: str, parse_seeds: Any, rate_hz: float, plc_cycle_ms: float,

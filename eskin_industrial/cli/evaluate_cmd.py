@@ -166,7 +166,7 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
     names = methods or detector_names()
     start = time.perf_counter()
     if "learned" in names:
-        names = _prepare_learned(names, explicit=bool(methods))
+        names = _prepare_learned(names)
     settings = open_profile(profile_path).detector if profile_path else DEFAULT_SETTINGS
     scene_set = tuple(scenes) or SUITE
     with Ticker(len(scene_set) * len(seed_set) * len(names), "scoring") as ticker:
@@ -258,7 +258,7 @@ def _families(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, rat
     families = family_names(family_opt or ("all",))  # (a misspelt family is refused before any training)
     names = methods or detector_names()
     if "learned" in names:
-        names = _prepare_learned(names, explicit=bool(methods))
+        names = _prepare_learned(names)
     shares = (lambda s: ", ".join(f"{_within(s, ms):.0f} % within {ms} ms" for ms in within_ms)) if within_ms else None
     per_family(names, families, seeds, _seeds(seeds), rate_hz, settings, tolerance_s,
                fmt, _figures, _delays, per_scene, shares, _conditions(conditions), conditions,
@@ -372,22 +372,11 @@ def _within(score: Any, ms: int) -> float:
     return 100.0 * hits / score.events if score.events else float("nan")
 
 
-def _prepare_learned(names: tuple[str, ...], explicit: bool) -> tuple[str, ...]:
-    """Train the learned method's model up front (tuning seeds only), so that its
-    time is reported apart; without scikit-learn, asking for it is an error (one
-    line, from the CLI's error handler) and the default run leaves it out."""
-    from ..errors import MissingExtra
-    from ..evaluation.train import INSTALL_HINT, default_model, require_sklearn
+def _prepare_learned(names: tuple[str, ...]) -> tuple[str, ...]:
+    """Read the learned method's shipped model up front, so that a missing or damaged
+    file is one line before any scene is scored (the model is trained on the tuning
+    seeds by scripts/train-learned, never here)."""
+    from ..models import default_model
 
-    try:
-        require_sklearn()
-    except MissingExtra:
-        if explicit:
-            raise
-        click.echo(f"# learned left out: {INSTALL_HINT}", err=True)
-        return tuple(n for n in names if n != "learned")
-    start = time.perf_counter()
     default_model()
-    click.echo(f"# learned: model trained on the tuning seeds {TUNING_SEEDS} in {time.perf_counter() - start:.1f} s",
-               err=True)
     return names

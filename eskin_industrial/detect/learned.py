@@ -15,7 +15,8 @@ The model is handed in (``model=``): anything with ``__call__(x) -> probabilitie
 :class:`TreeEnsemble` is the numpy-only form the training code fills.  Nothing in
 ``detect/`` trains, loads or imports scikit-learn: the layers that build detectors by
 name (the pipeline, the offline path, the evaluation) see the registry's ``needs_model``
-and hand the default model over (``eskin_industrial.evaluation.binding``).
+and hand over the model the package ships (``eskin_industrial.methods.bind``, which
+reads it through ``eskin_industrial.models``).
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ Each entry gives a streaming factory ``(settings, x_mm, y_mm, rate_hz) -> detect
 A method with ``needs_model`` (``learned``) must also be handed ``model=``; the
 registry does not know where models come from.  :meth:`Method.with_model` binds one;
 every layer that builds detectors by name does so through one function that hands
-over the default model (``eskin_industrial.evaluation.binding``).
+over the shipped model (``eskin_industrial.methods.bind``).
 """
 
 from __future__ import annotations

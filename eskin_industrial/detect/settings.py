@@ -303,6 +303,13 @@ class DetectorSettings:
     contact_noise_k: float = field(default=5.0, metadata=in_range(0.0, 100.0))
     #: A change of contact must hold this long to be made (each way).
     contact_dwell_s: float = field(default=0.03, metadata=in_range(0.0, 5.0))
+    #: After a start (or a restart), the contact rule settles this long before it
+    #: judges: only a load of ``contact_threshold_n + 2 x contact_baseline_max_n``
+    #: enters contact meanwhile, and a total below ``contact_threshold_n +
+    #: contact_baseline_max_n`` is learnt as the unloaded baseline, so that an idle
+    #: film reading above the threshold from its first frame is no contact
+    #: (``detect/state.py``, ContactRule; 0: judge from the first frame).
+    contact_settle_s: float = field(default=0.1, metadata=in_range(0.0, 10.0))
     #: A timestamp gap longer than this restarts the detector (shorter gaps are
     #: filled by holding the last frame, so that lags stay in time, not in samples).
     max_gap_s: float = field(default=0.4, metadata=in_range(0.0001, 600.0))

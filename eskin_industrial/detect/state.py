@@ -91,11 +91,21 @@ class ContactRule:
 
     The baseline is bounded so that it can never hide a real load: it learns only out
     of contact and below the stay level, moves at most ``baseline_max_n`` from zero,
-    and starts at zero (a sensor loaded from its first frame is in contact, and
-    learns nothing); the noise floor raises the threshold by at most as much.  A load
+    and starts at zero; the noise floor raises the threshold by at most as much.  A load
     of ``enter_n + 2 x baseline_max_n`` (0.7 N by default) is thus always contact,
     however slowly it crept on.  ``baseline_s = 0`` learns nothing (the plain
     hysteresis).
+
+    For its first ``settle_s`` (after a start or a restart) the rule settles before it
+    judges: nothing below that always-contact level enters contact, and a total below
+    ``enter_n + baseline_max_n`` is learnt as the unloaded baseline and its noise.
+    Without it, an idle film whose offset or rectified noise alone reads above the
+    threshold from its first frame (0.3 N on a 5 x 5 array: 0.012 N of offset a
+    taxel, or 0.03 N of noise, which a taxel reading no tension rectifies) entered
+    contact before anything was learnt, and then never left it: ``stable`` with
+    DATA_VALID, nothing gripped.  A sensor loaded from its first frame (a bridge
+    restarted while a part is held) is in contact once the settling ends, and learns
+    nothing.
 
     :meth:`touching` is the per-frame form (``was``, the previous answer, is kept by
     the rule itself; the argument stays for callers that restart it), :meth:`mask`
@@ -105,16 +115,19 @@ class ContactRule:
     #: Contact, once made, lasts while the loaded force stays above this share of the threshold.
     STAY_FRACTION = 0.5
 
-    __slots__ = ("enter_n", "stay_n", "noise_k", "dwell", "alpha", "max_n", "baseline", "var", "seen", "on", "run")
+    __slots__ = ("enter_n", "stay_n", "noise_k", "dwell", "alpha", "max_n", "settle", "baseline", "var", "seen",
+                 "on", "run", "age")
 
     def __init__(self, enter_n: float, *, rate_hz: float = 100.0, baseline_s: float = 0.0, dwell_s: float = 0.0,
-                 noise_k: float = 5.0, baseline_max_n: float = 0.0) -> None:
+                 noise_k: float = 5.0, baseline_max_n: float = 0.0, settle_s: float = 0.0) -> None:
         self.enter_n = enter_n
         self.stay_n = self.STAY_FRACTION * enter_n
         self.noise_k = noise_k
         self.dwell = max(int(round(dwell_s * rate_hz)), 1)  #: frames a change must hold
         self.alpha = 1.0 / (baseline_s * rate_hz) if baseline_s > 0 else 0.0
         self.max_n = baseline_max_n if baseline_s > 0 else 0.0
+        #: frames of settling after a start (none without a baseline to learn)
+        self.settle = int(round(settle_s * rate_hz)) if self.alpha else 0
         self.reset()
 
     def reset(self) -> None:
@@ -123,12 +136,13 @@ class ContactRule:
         self.seen = 0  #: unloaded frames learnt from (the mean's first steps are exact)
         self.on = False
         self.run = 0  #: consecutive frames that ask for the other answer
+        self.age = 0  #: frames since the start, counted while it settles
 
     @classmethod
     def from_settings(cls, settings: DetectorSettings, rate_hz: float = 100.0) -> ContactRule:
         return cls(settings.contact_threshold_n, rate_hz=rate_hz, baseline_s=settings.contact_baseline_s,
                    dwell_s=settings.contact_dwell_s, noise_k=settings.contact_noise_k,
-                   baseline_max_n=settings.contact_baseline_max_n)
+                   baseline_max_n=settings.contact_baseline_max_n, settle_s=settings.contact_settle_s)
 
     def levels(self) -> tuple[float, float]:
         """The loaded force that enters contact, and the one below which it ends."""
@@ -141,8 +155,15 @@ class ContactRule:
         """Contact at total force ``s`` (frames in time order, one call each)."""
         if not s > 0.0:  # zero (or NaN): never in contact, and nothing to learn
             self.on, self.run = False, 0
+            if self.age < self.settle:  # (the settling is time: a zero frame counts)
+                self.age += 1
             return False
         loaded = s - self.baseline
+        if self.age < self.settle:
+            if not self.on:
+                self.age += 1
+                return self._settling(s, loaded)
+            self.age = self.settle  # in contact: settled
         enter, stay = self.levels() if self.alpha else (self.enter_n, self.stay_n)
         want = loaded >= stay if self.on else loaded >= enter
         if want == self.on:
@@ -156,6 +177,19 @@ class ContactRule:
                 self.on, self.run = want, 0
         if self.alpha and not self.on and self.run == 0 and loaded < stay:
             self._learn(s)
+        return self.on
+
+    def _settling(self, s: float, loaded: float) -> bool:
+        """A frame of the settling: only a load that is always contact enters (held for
+        the dwell, as any change); a total that may be the film's own is learnt."""
+        if loaded >= self.enter_n + 2.0 * self.max_n:
+            self.run += 1
+            if self.run >= self.dwell:
+                self.on, self.run = True, 0
+        else:
+            self.run = 0
+            if s < self.enter_n + self.max_n:
+                self._learn(s)
         return self.on
 
     def _learn(self, s: float) -> None:

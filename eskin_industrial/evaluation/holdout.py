@@ -13,8 +13,8 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from ..detect.settings import DetectorSettings
+from ..methods import ready_method
 from ..progress import NO_PROGRESS, Progress
-from .binding import ready_method
 from .families import FAMILIES, evaluate_families
 from .metrics import SceneScore
 from .suite import DEFAULT_SETTINGS, EVALUATION_SEEDS, TUNING_SEEDS, Factory

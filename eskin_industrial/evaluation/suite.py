@@ -10,10 +10,9 @@ from dataclasses import dataclass, field
 
 from ..detect.settings import DetectorSettings
 from ..detect.updates import UpdateTable
-from ..methods import get_method
+from ..methods import Factory, get_method, ready_factory
 from ..progress import NO_PROGRESS, Progress
 from ..scenes import Rendered, SceneSpec, load_scene, render
-from .binding import Factory, ready_factory
 from .corpus import (
     EVALUATION_SEEDS,
     HOLD_EVALUATION_SEEDS,
@@ -48,8 +47,8 @@ class Result:
 
 def run_one(factory: Factory, settings: DetectorSettings, rendered: Rendered) -> tuple[UpdateTable, float]:
     """One detector over one rendered scene; its updates and the seconds it took.
-    (A method that needs a model is handed the default one: trained, on first use,
-    on the tuning seeds.)"""
+    (A method that needs a model is handed the shipped one, trained on the tuning
+    seeds by scripts/train-learned.)"""
     x, y = coordinates(rendered)
     det = ready_factory(factory)(settings, x, y, rendered.rate_hz)
     t, f = rendered.t, rendered.forces

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 from collections.abc import Callable
 from dataclasses import replace
 from functools import partial
@@ -15,8 +14,7 @@ from ..detect.cof_track import CofTrack
 from ..detect.paper import PaperDetector
 from ..detect.scored import CofVelocity, ForceRate, HfEnergy
 from ..detect.settings import DetectorSettings
-from ..methods import get_method
-from .binding import bind
+from ..methods import bind, get_method
 
 
 def _paper(rule: Literal["both", "coe", "dw"], **changes: Any) -> Callable[..., Any]:
@@ -62,10 +60,9 @@ def sweep() -> list[tuple[str, str, Callable[..., Any]]]:
     points.append(("cof-track", "no step channel", partial(CofTrack, step_s=0.0)))
     for step_z in (5.5, 6.0, 7.5):
         points.append(("cof-track", f"step z{step_z:g}", partial(CofTrack, step_z=step_z)))
-    if importlib.util.find_spec("sklearn") is not None:  # the optional extra: one model, several decision rules
-        learned = bind(get_method("learned")).stream  # the default model, trained here once per process
-        for p, hops in ((0.5, 1), (0.7, 1), (0.5, 2), (0.7, 2), (0.5, 3), (0.7, 3)):
-            points.append(("learned", f"p>{p} x{hops} hops", partial(learned, slip_p=p, confirm_hops=hops)))
+    learned = bind(get_method("learned")).stream  # the shipped model: one model, several decision rules
+    for p, hops in ((0.5, 1), (0.7, 1), (0.5, 2), (0.7, 2), (0.5, 3), (0.7, 3)):
+        points.append(("learned", f"p>{p} x{hops} hops", partial(learned, slip_p=p, confirm_hops=hops)))
     return points
 
 

@@ -18,8 +18,8 @@ from ..detect.settings import DetectorSettings
 from ..detect.state import ContactRule, GraspState
 from ..detect.updates import UpdateTable
 from ..detect.vforce import force_variation_batch
+from ..methods import ready_method
 from ..scenes import Rendered, render
-from .binding import ready_method
 from .corpus import TUNING_SEEDS
 from .shading import shade_labels
 from .suite import DEFAULT_SETTINGS, run_one

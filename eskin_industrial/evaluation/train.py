@@ -1,16 +1,21 @@
 """Training the ``learned`` method's model (scikit-learn, the optional extra ``learn``).
 
 Only the tuning seeds of the built-in scenes are rendered for training; the held-out
-evaluation seeds never are (``TrainConfig`` refuses them).  Training is in-process
-and takes a few seconds; the model is kept for the rest of the process.  The fitted
-estimator is turned into the numpy-only forms of ``detect.learned`` so that the
-detector neither imports scikit-learn nor pays its per-call overhead.
+evaluation seeds never are (``TrainConfig`` refuses them).  The fitted estimator is
+turned into the numpy-only forms of ``detect.learned`` so that the detector neither
+imports scikit-learn nor pays its per-call overhead.
+
+Nothing trains at run time: ``scripts/train-learned`` calls :func:`write_trained` to
+write the package's model file (``eskin_industrial/models.py`` reads it), and
+``scripts/train-learned --check`` trains again and compares.  A training is about
+16 s of CPU, almost all of it rendering the scenes and running the detector over them.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import lru_cache
+from dataclasses import asdict, dataclass
+from importlib import metadata
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,11 +23,11 @@ import numpy as np
 from ..detect.learned import CLASSES, FEATURES, Learned, TreeEnsemble
 from ..detect.settings import DetectorSettings
 from ..errors import MissingExtra
+from ..models import StoredModel, read_model, write_model
 from ..scenes import load_scene, render
 from .corpus import EVALUATION_SEEDS, SUITE, TUNING_SEEDS, coordinates
 
-MISSING = MissingExtra.of("the learned method", "scikit-learn", "learn")
-INSTALL_HINT = str(MISSING)
+MISSING = MissingExtra.of("training the learned method", "scikit-learn", "learn")
 
 
 @dataclass(frozen=True)
@@ -132,18 +137,32 @@ def trees_from_sklearn(clf: Any) -> TreeEnsemble:
     return TreeEnsemble(feature, threshold, table, init)
 
 
-def default_model(config: TrainConfig = TrainConfig()) -> TreeEnsemble:
-    """The model ``learned`` runs with unless given another: trained once per process
-    (methods are handed it by ``binding.bind``).  The extra is checked at every call,
-    so that the method needs it alike whether or not this process trained already."""
-    require_sklearn()
-    return _trained(config)
+def config_record(config: TrainConfig) -> dict[str, Any]:
+    """``config`` as the model file records it (JSON: lists for tuples)."""
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(config).items()}
 
 
-@lru_cache(maxsize=4)
-def _trained(config: TrainConfig) -> TreeEnsemble:
-    return fit(config)
+def write_trained(path: Path, config: TrainConfig = TrainConfig()) -> StoredModel:
+    """Train on ``config`` and write the model file to ``path`` (the same bytes for the
+    same config and package versions); returns what was written."""
+    model = fit(config)
+    made_with = {name: metadata.version(name) for name in ("numpy", "scikit-learn")}
+    write_model(path, model, config_record(config), made_with)
+    return read_model(path)
 
 
-__all__ = ["FEATURES", "INSTALL_HINT", "TrainConfig", "dataset", "default_model", "fit", "require_sklearn",
-           "trees_from_sklearn"]
+def differences(shipped: StoredModel, trained: StoredModel) -> list[str]:
+    """What differs between two stored models (the versions that made them aside):
+    nothing when the shipped file is what the training gives."""
+    out = []
+    if shipped.trained != trained.trained:
+        out.append(f"trained on {shipped.trained}, the training is {trained.trained}")
+    for name in ("feature", "threshold", "table", "init"):
+        a, b = getattr(shipped.model, name), getattr(trained.model, name)
+        if a.shape != b.shape or not np.array_equal(a, b):
+            out.append(f"{name} differs")
+    return out
+
+
+__all__ = ["FEATURES", "TrainConfig", "config_record", "dataset", "differences", "fit",
+           "require_sklearn", "trees_from_sklearn", "write_trained"]
