@@ -13,6 +13,12 @@ neither 0 (no method) nor another method's: a plug-in that breaks either rule is
 refused with one line naming it, never silently given another number.  A plug-in
 never replaces a built-in method of the same name.
 
+A plug-in's settings (``Method.settings``, a frozen dataclass) are read from
+``[detector.<key>]`` of a profile (``key``: its name with ``-`` as ``_``), checked
+like every section: :func:`section_class` tells the profile loader which class a
+section is, so that the plug-in is imported only when a profile names it.  The key
+must not be one of ``[detector]``'s own.
+
 A method that needs a model (``learned``) is bound here to the one given, or else to
 the model the package ships (:mod:`~eskin_industrial.models`, read from package data:
 nothing trains at run time).  The pipeline (hence the bridge and every live command),
@@ -26,6 +32,7 @@ outputs, the commands.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import functools
 from collections.abc import Callable
@@ -39,6 +46,10 @@ from .detect.settings import DetectorSettings
 from .errors import ProfileError
 from .models import default_model
 from .registry import METHOD_GROUP, load_attr, plugins
+from .schema import SchemaError, build
+
+#: The keys of ``[detector]`` itself and its built-in sections (no plug-in's section).
+_DETECTOR_KEYS = frozenset(f.name for f in dataclasses.fields(DetectorSettings))
 
 #: A stream factory: (settings, x_mm, y_mm, rate_hz) -> a detector.
 Factory = Callable[[DetectorSettings, np.ndarray, np.ndarray, float], Any]
@@ -76,7 +87,22 @@ def _plugin(name: str) -> Method:
     if method.code in taken:
         raise ProfileError(f"{where}: code {method.code} is already {taken[method.code]!r}'s METHOD_ID; "
                            f"give the plug-in a number of its own (the built-in ones use 1..{max(taken)})")
+    if method.settings is not None:
+        _check_settings(method, where)
     return method
+
+
+def _check_settings(method: Method, where: str) -> None:
+    cls = method.settings
+    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls) and cls.__dataclass_params__.frozen):  # type: ignore[attr-defined]
+        raise ProfileError(f"{where}: its settings must be a frozen dataclass, got {cls!r}")
+    if not method.key.isidentifier() or method.key in _DETECTOR_KEYS:
+        raise ProfileError(f"{where}: its settings cannot be [detector.{method.key}] (a key of [detector] itself, "
+                           f"or no TOML key); give the Method a section of its own")
+    try:
+        build(cls, {}, f"detector.{method.key}")
+    except SchemaError as exc:
+        raise ProfileError(f"{where}: its settings need a default for every key ({exc})") from None
 
 
 def _plugins_checked() -> dict[str, Method]:
@@ -107,6 +133,23 @@ def get_method(name: str) -> Method:
 def all_methods() -> dict[str, Method]:
     """Every method by name, the plug-ins loaded and checked."""
     return {**METHODS, **_plugins_checked()}
+
+
+def section_class(owner: type, key: str) -> type | None:
+    """The settings dataclass of the method whose section is ``[detector.<key>]`` when
+    ``[detector]`` has no key of that name (a plug-in's; None: no method's), for the
+    profile loader (``schema.build``'s ``sections``)."""
+    if owner is not DetectorSettings or key in _DETECTOR_KEYS:
+        return None
+    for method in METHODS.values():
+        if method.settings is not None and method.key == key:
+            return method.settings
+    named = [n for n in plugins(METHOD_GROUP) if n not in METHODS and n.replace("-", "_") == key]
+    # the plug-in of that name first (imported alone), then any that names its section itself
+    for method in [get_method(n) for n in named] or list(_plugins_checked().values()):
+        if method.settings is not None and method.key == key:
+            return method.settings
+    return None
 
 
 def method_of_code(code: int) -> Method | None:
@@ -145,4 +188,4 @@ def ready_factory(factory: Factory) -> Factory:
 
 
 __all__ = ["Factory", "all_methods", "bind", "detector_names", "get_method", "method_of_code", "method_of_stream",
-           "method_names", "ready_factory", "ready_method"]
+           "method_names", "ready_factory", "ready_method", "section_class"]

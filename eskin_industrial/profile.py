@@ -9,7 +9,7 @@ See ``docs/profiles.md`` for every key.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Literal
@@ -68,6 +68,10 @@ MAX_RAW = 1e12
 #: ... and per_newton at least this in magnitude (a slope of 1e-300 makes every reading
 #: a meganewton).
 MIN_SLOPE = 1e-9
+
+
+#: ``[detector]``'s own keys and sections; any other section is a plug-in method's.
+_DETECTOR_KEYS = frozenset(f.name for f in fields(DetectorSettings))
 
 
 def derived_stale_s(rate_hz: float, poll_hz: float | None) -> float:
@@ -376,10 +380,16 @@ class Profile:
         for index in cal.overrides:
             if int(index) >= n:
                 raise SchemaError(f"calibration.overrides.{index}", f"expected a taxel index below {n}")
-        from .methods import method_names  # the registry imports detectors, not profiles
+        from .methods import get_method, method_names  # the registry imports detectors, not profiles
 
         if self.detector.method not in (known := method_names()):
             raise SchemaError("detector.method", f"expected one of {', '.join(sorted(known))}, got {self.detector.method!r}")
+        method = get_method(self.detector.method)
+        if method.settings is not None and method.key and method.key not in _DETECTOR_KEYS \
+                and method.key not in dict(self.detector.plugins):
+            # a plug-in's section the file leaves out: its defaults, shown and published like a built-in's
+            det = self.detector.with_section(method.key, method.settings_of(self.detector))
+            object.__setattr__(self, "detector", det)
         try:
             geo = self.detector.geometry(self.sensor.rate_hz)
         except (ValueError, OverflowError):
@@ -473,6 +483,8 @@ def load_profile(path: str | Path, base: Path | None = None) -> Profile:
 
 
 def parse_profile(text: str, source: str = "<profile>") -> Profile:
-    profile = parse_toml(Profile, text, source, MOVED_KEYS)
+    from .methods import section_class  # (a plug-in method's [detector.<key>])
+
+    profile = parse_toml(Profile, text, source, MOVED_KEYS, section_class)
     object.__setattr__(profile, "source", source)
     return profile

@@ -9,6 +9,11 @@ and key.
 
 No value is ever read as a string and guessed into a type: TOML already carries
 types, and a wrong one is an error, not a conversion.
+
+A section may be open to tables that its class cannot name: a field marked
+:func:`open_sections` collects the sub-tables that ``sections`` (given to
+:func:`build` by the loader) names a class for, each built and checked like any other
+(a plug-in method's ``[detector.<key>]``); ``to_table`` writes them back in place.
 """
 
 from __future__ import annotations
@@ -30,6 +35,9 @@ from .errors import DeprecatedKey, ProfileError
 T = TypeVar("T")
 
 Check = tuple[Callable[[Any], bool], str]
+#: ``(owner class, key) -> the dataclass a sub-table of that key is`` (None: no such
+#: section): how an open section's tables are known (:func:`open_sections`).
+Sections = Callable[[type, str], "type | None"]
 
 
 class SchemaError(ValueError):
@@ -58,6 +66,12 @@ def positive_at_most(hi: float, what: str = "a number") -> dict[str, Check]:
     lists each), so that an absurd value is refused before the run, not met in it."""
     shown = f"{int(hi)}" if float(hi).is_integer() else f"{hi:g}"
     return {"check": (lambda v: 0 < v <= hi, f"{what} > 0 and at most {shown}")}
+
+
+def open_sections() -> dict[str, bool]:
+    """The metadata of the one field of a section that holds its open sub-tables, as
+    ``(key, built dataclass)`` pairs sorted by key: no TOML key of its own."""
+    return {"sections": True}
 
 
 def _is_network(v: Any) -> bool:
@@ -96,7 +110,7 @@ def _describe(tp: Any) -> str:
     return str(tp)
 
 
-def _convert(tp: Any, value: Any, key: str) -> Any:
+def _convert(tp: Any, value: Any, key: str, sections: Sections | None = None) -> Any:
     origin = get_origin(tp)
     if origin in (Union, types.UnionType):
         args = get_args(tp)
@@ -107,7 +121,7 @@ def _convert(tp: Any, value: Any, key: str) -> Any:
             if arg is type(None):
                 continue
             try:
-                return _convert(arg, value, key)
+                return _convert(arg, value, key, sections)
             except SchemaError as exc:
                 errors.append(exc)
         # Prefer the error of a branch that got past the type check (a table with a
@@ -153,16 +167,16 @@ def _convert(tp: Any, value: Any, key: str) -> Any:
         if not isinstance(value, list):
             raise SchemaError(key, f"expected {_describe(tp)}, got {_show(value)}")
         (item_tp, *_rest) = get_args(tp)
-        return tuple(_convert(item_tp, v, f"{key}[{i}]") for i, v in enumerate(value))
+        return tuple(_convert(item_tp, v, f"{key}[{i}]", sections) for i, v in enumerate(value))
     if origin is dict:
         if not isinstance(value, dict):
             raise SchemaError(key, f"expected a table, got {_show(value)}")
         _k_tp, v_tp = get_args(tp)
-        return {k: _convert(v_tp, v, f"{key}.{k}") for k, v in value.items()}
+        return {k: _convert(v_tp, v, f"{key}.{k}", sections) for k, v in value.items()}
     if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise SchemaError(key, f"expected a table, got {_show(value)}")
-        return build(tp, value, key)
+        return build(tp, value, key, sections)
     raise TypeError(f"schema type {tp!r} at {key} is not supported")  # a bug, not input
 
 
@@ -176,16 +190,26 @@ def _show(value: Any) -> str:
     return repr(value)
 
 
-def build(cls: type, table: dict[str, Any], where: str = "") -> Any:
+def build(cls: type, table: dict[str, Any], where: str = "", sections: Sections | None = None) -> Any:
     """Build dataclass ``cls`` from ``table``; every key is checked, none guessed.
 
-    ``where`` is the dotted path of ``table`` in the file, used in messages.
+    ``where`` is the dotted path of ``table`` in the file, used in messages;
+    ``sections`` names the classes of open sections' tables (:func:`open_sections`).
     """
     hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    every = [f for f in dataclasses.fields(cls) if f.init]
+    fields = {f.name: f for f in every if not f.metadata.get("sections")}
+    held = next((f.name for f in every if f.metadata.get("sections")), None)
     prefix = f"{where}." if where else ""
+    opened: dict[str, Any] = {}
     for name in table:
         if name not in fields:
+            found = sections(cls, name) if held is not None and sections is not None else None
+            if found is not None:
+                if not isinstance(table[name], dict):
+                    raise SchemaError(f"{prefix}{name}", f"expected a table, got {_show(table[name])}")
+                opened[name] = build(found, table[name], f"{prefix}{name}", sections)
+                continue
             near = difflib.get_close_matches(name, list(fields), n=1, cutoff=0.6)
             hint = f"; did you mean {near[0]!r}?" if near else f"; valid keys: {', '.join(fields)}"
             raise SchemaError(f"{prefix}{name}", f"unknown key{hint}")
@@ -197,7 +221,7 @@ def build(cls: type, table: dict[str, Any], where: str = "") -> Any:
                 what = "section" if dataclasses.is_dataclass(hints[name]) else "key"
                 raise SchemaError(key, f"missing {what} (expected {_describe(hints[name])})")
             continue
-        value = _convert(hints[name], table[name], key)
+        value = _convert(hints[name], table[name], key, sections)
         check = f.metadata.get("check")
         if check is not None and value is not None:
             predicate, expected = check
@@ -206,6 +230,9 @@ def build(cls: type, table: dict[str, Any], where: str = "") -> Any:
                 if not predicate(item):
                     raise SchemaError(key, f"expected {expected}, got {_show(item)}")
         kwargs[name] = value
+    if opened:
+        assert held is not None
+        kwargs[held] = tuple(sorted(opened.items()))
     try:
         return cls(**kwargs)
     except SchemaError:
@@ -225,9 +252,12 @@ def build(cls: type, table: dict[str, Any], where: str = "") -> Any:
 def to_table(obj: Any) -> Any:
     """The inverse of :func:`build`, for ``profile show``: dataclasses to plain dicts."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        out = {}
+        out: dict[str, Any] = {}
         for f in dataclasses.fields(obj):
             if not f.init:
+                continue
+            if f.metadata.get("sections"):  # written back where they were read
+                out.update((key, to_table(section)) for key, section in getattr(obj, f.name))
                 continue
             value = to_table(getattr(obj, f.name))
             if value is not None:
@@ -286,10 +316,12 @@ def move_keys(table: dict[str, Any], moved: Mapping[str, str], source: str) -> N
         warnings.warn(DeprecatedKey(f"{source}: {_spell(old)} is deprecated: write {_spell(new)}"), stacklevel=2)
 
 
-def parse_toml(cls: type[T], text: str, source: str, moved: Mapping[str, str] | None = None) -> T:
+def parse_toml(cls: type[T], text: str, source: str, moved: Mapping[str, str] | None = None,
+               sections: Sections | None = None) -> T:
     """TOML text to ``cls``; any problem is one :class:`ProfileError` line:
     ``SOURCE: [section] key: what was expected``.  ``moved``: keys that moved
-    (:func:`move_keys`), still read under their old spelling."""
+    (:func:`move_keys`), still read under their old spelling; ``sections``: the
+    classes of open sections' tables (:func:`build`)."""
     try:
         table = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -297,7 +329,7 @@ def parse_toml(cls: type[T], text: str, source: str, moved: Mapping[str, str] | 
     if moved:
         move_keys(table, moved, source)
     try:
-        return build(cls, table)
+        return build(cls, table, sections=sections)
     except SchemaError as exc:
         section, _, key = exc.key.partition(".")
         where = f"[{section}] {key}" if key else f"[{section}]"

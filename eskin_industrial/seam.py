@@ -51,3 +51,6 @@ class OpenContext:
     #: as foreign), where a bridge routes each frame to its node only.
     all_frames: bool = False
     closers: list[Callable[[], None]] = field(default_factory=list)
+    #: An output opened again after a failure (its supervisor's restart): a file is
+    #: appended to, not started anew.
+    reopen: bool = False

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from eskin_industrial.evaluation import holdout
-from eskin_industrial.evaluation.families import FAMILIES, STEP_HZ, STEP_REST, get_family
+from eskin_industrial.evaluation.families import FAMILIES, FORCE_DROP, STEP_HZ, STEP_REST, get_family
 from eskin_industrial.evaluation.holdout import CANDIDATES, choose, hold_out
 from eskin_industrial.evaluation.metrics import SceneScore
 from eskin_industrial.evaluation.suite import SUITE
@@ -40,10 +40,32 @@ def test_each_new_family_switches_on_its_effect(name):
         "line-contact": lambda: spec.footprint.shape == "cylinder",
         "point-contact": lambda: spec.footprint.shape == "sphere",
         "step-slip": lambda: all(e.step_hz == STEP_HZ and e.step_rest == STEP_REST for e in slides),
+        "force-drop": lambda: all(e.force_drop == FORCE_DROP for e in slides),
     }
     assert checks[name]()
     rec = render(spec, 100.0, 0)
     assert np.isfinite(rec.forces).all() and (rec.labels == "slip").any()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_force_drop_slide_loses_its_drawn_share_of_the_force_at_onset_and_stays_down(seed):
+    """The force-drop family: the normal force falls by 10-30 % (drawn per seed and
+    slide) within force_drop_s of the slide's start, and stays there, against the
+    plain scene (whose footprint leaves the array as it slides: the sensed total falls
+    there too)."""
+    spec = get_family("force-drop").hook(load_scene("case2"))
+    (slide,) = [e for e in spec.events if e.kind == "slide"]
+    rec = render(spec, 1000.0, seed)
+    plain = render(load_scene("case2"), 1000.0, seed)
+    before = (rec.t > slide.t_s - 0.5) & (rec.t < slide.t_s)
+    after = (rec.t > slide.t_s + slide.force_drop_s + 0.02) & (rec.t < slide.end_s)
+
+    def kept(forces: np.ndarray) -> float:
+        total = forces.sum(axis=1)
+        return float(total[after].mean() / total[before].mean())
+
+    ratio = kept(rec.forces) / kept(plain.forces)
+    assert 1.0 - FORCE_DROP[1] - 0.03 < ratio < 1.0 - FORCE_DROP[0] + 0.03, ratio
 
 
 def test_torsion_turns_as_far_as_the_slide_moved():

@@ -11,6 +11,7 @@ plug-in itself is built and installed by pip as any third-party package would be
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import subprocess
 import sys
@@ -22,7 +23,9 @@ import pytest
 from eskin_industrial import methods
 from eskin_industrial.detect.methods import Method
 from eskin_industrial.errors import ProfileError
-from tests.helpers.page_kinds import page_examples
+from eskin_industrial.profile import parse_profile
+from eskin_industrial.schema import in_range
+from tests.helpers.page_kinds import page_examples, page_plugin_test
 from tests.helpers.paths import PROFILES, ROOT
 
 PYPROJECT = """\
@@ -59,6 +62,7 @@ def plugin_python(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (package / "eskin_pagekinds").mkdir(parents=True)
     (package / "eskin_pagekinds" / "__init__.py").write_text(page_examples())
     (package / "pyproject.toml").write_text(PYPROJECT)
+    (root / "test_pagekinds.py").write_text(page_plugin_test())  # the plug-in's own test, beside it
     venv = root / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
     site = next((venv / "lib").glob("python*/site-packages"))
@@ -90,6 +94,37 @@ def test_only_the_environment_with_the_plugin_knows_its_kinds(plugin_python, tmp
     assert here.returncode == 2 and "[detector] method" in here.stderr and "'peak-shift'" in here.stderr
     missing = run(sys.executable, "bridge", "-p", profile, "--source", "scene:case2", "--state-log", "x", "--check")
     assert missing.returncode == 2 and "--state-log" in missing.stderr
+
+
+def test_the_plugin_methods_section_is_checked_and_shown(plugin_python, tmp_path):
+    profile = peak_profile(tmp_path)
+    base = profile.read_text()
+    shown = run(plugin_python, "profile", "show", str(profile))
+    assert shown.returncode == 0, shown.stderr
+    assert "[detector.peak_shift]\nmargin = 1.2  # default\n" in shown.stdout  # left out: its defaults, shown
+    profile.write_text(base + "\n[detector.peak_shift]\nmargin = 2.5\n")
+    assert run(plugin_python, "profile", "check", str(profile)).returncode == 0
+    assert "[detector.peak_shift]\nmargin = 2.5\n" in run(plugin_python, "profile", "show", str(profile)).stdout
+    profile.write_text(base + "\n[detector.peak_shift]\nmargn = 2.5\n")
+    typo = run(plugin_python, "profile", "check", str(profile))
+    assert typo.returncode == 2
+    assert typo.stderr == (f"eskin-bus: error: {profile}: [detector] peak_shift.margn: unknown key; "
+                           f"did you mean 'margin'?\n")
+    profile.write_text(base + "\n[detector.peak_shift]\nmargin = 0.5\n")
+    check = run(plugin_python, "bridge", "-p", str(profile), "--source", "scene:case2", "--check")
+    assert check.returncode == 2 and "[detector] peak_shift.margin: expected a value in [1, 10], got 0.5" in check.stderr
+    # this environment, without the plug-in, knows no such section
+    profile.write_text(base.replace('method = "peak-shift"', 'method = "paper"') + "\n[detector.peak_shift]\nmargin = 2.5\n")
+    here = run(sys.executable, "profile", "check", str(profile))
+    assert here.returncode == 2 and "[detector] peak_shift: unknown key" in here.stderr
+
+
+def test_the_plugins_own_test_calls_the_conformance_checks(plugin_python):
+    test = plugin_python.parents[2] / "test_pagekinds.py"
+    res = subprocess.run([str(plugin_python), "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:xdist",
+                          "-W", "error", str(test)], capture_output=True, text=True, timeout=300, cwd=test.parent)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "1 passed" in res.stdout
 
 
 def test_the_plugin_output_and_method_from_the_command_line(plugin_python, tmp_path):
@@ -148,6 +183,21 @@ TWIN = Method("twin", "a plug-in", _base.stream, _base.batch, code=4242)
 NOT_A_METHOD = object()
 
 
+@dataclasses.dataclass
+class LooseSettings:  # not frozen
+    z: float = 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class SpareSettings:
+    z: float = dataclasses.field(default=1.0, metadata=in_range(0.5, 2.0))
+
+
+LOOSE = Method("loose", "a plug-in", _base.stream, _base.batch, code=4244, settings=LooseSettings)
+SHADOW = Method("varying-force", "a plug-in", _base.stream, _base.batch, code=4245, settings=SpareSettings)
+SPARE = Method("spare", "a plug-in", _base.stream, _base.batch, code=4242, scores=_base.scores, settings=SpareSettings)
+
+
 def test_a_plugin_method_is_found_by_name_and_code(entry_points):
     entry_points["spare"] = "tests.test_plugins:GOOD"
     assert methods.method_names()[-1] == "spare" and methods.get_method("spare") is GOOD
@@ -161,6 +211,8 @@ def test_a_plugin_method_is_found_by_name_and_code(entry_points):
     ("zero", "ZERO", r"code 0 is not a METHOD_ID"),
     ("misnamed", "MISNAMED", r"its Method is named 'other'"),
     ("thing", "NOT_A_METHOD", r"expected an eskin_industrial.detect.methods.Method, got object"),
+    ("loose", "LOOSE", r"its settings must be a frozen dataclass"),
+    ("varying-force", "SHADOW", r"its settings cannot be \[detector.varying_force\] \(a key of \[detector\] itself"),
 ])
 def test_a_plugin_method_that_breaks_a_rule_is_refused_naming_it(entry_points, name, target, message):
     entry_points[name] = f"tests.test_plugins:{target}"
@@ -177,3 +229,15 @@ def test_two_plugins_cannot_share_a_code(entry_points):
 def test_a_plugin_never_replaces_a_built_in_method(entry_points):
     entry_points["cof-track"] = "tests.test_plugins:GOOD"
     assert methods.get_method("cof-track") is _base and methods.method_names().count("cof-track") == 1
+
+
+def test_a_plugin_methods_section_is_read_only_from_its_profile_key(entry_points, tmp_path):
+    entry_points["spare"] = "tests.test_plugins:SPARE"
+    base = re.sub(r'(?m)^method = "[^"]*"', 'method = "spare"', (PROFILES / "paper-5x5.toml").read_text(), count=1)
+    assert SPARE.settings_of(parse_profile(base).detector) == SpareSettings()  # left out: the defaults
+    detector = parse_profile(base + "\n[detector.spare]\nz = 1.5\n").detector
+    assert SPARE.settings_of(detector) == SpareSettings(1.5) and detector.plugins == (("spare", SpareSettings(1.5)),)
+    with pytest.raises(ProfileError, match=r"^p.toml: \[detector\] spare.z: expected a value in \[0.5, 2\], got 3.0$"):
+        parse_profile(base + "\n[detector.spare]\nz = 3.0\n", "p.toml")
+    with pytest.raises(ProfileError, match=r"^p.toml: \[detector\] spare: expected a table, got 1$"):
+        parse_profile(base.replace('method = "spare"', 'method = "spare"\nspare = 1', 1), "p.toml")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import re
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -95,3 +96,38 @@ def test_the_page_method_finds_its_slip(kinds):
     states = [u.state for u in det.feed(np.arange(200) / 100.0, forces)]
     assert int(GraspState.SLIP) not in states[:8] and int(GraspState.SLIP) in states
     assert kinds.METHOD.scores[0].name == "peak_moves" == det.columns[0]
+
+
+def test_the_page_method_reads_its_own_section(kinds, tmp_path):
+    """``[detector.peak_shift]`` is the page's method's: read into its dataclass, checked
+    (an unknown key and a value past its bounds are one line naming the file), shown,
+    and handed to its detector."""
+    from eskin_industrial.profile import load_profile
+
+    path = peak_shift_profile(tmp_path)
+    base = Path(path).read_text()
+    assert kinds.METHOD.settings_of(load_profile(path).detector).margin == 1.2  # left out: the defaults
+    Path(path).write_text(base + "\n[detector.peak_shift]\nmargin = 3.0\n")
+    detector = load_profile(path).detector
+    assert kinds.METHOD.settings_of(detector) == kinds.PeakShiftSettings(margin=3.0)
+    assert load_profile(path).to_table()["detector"]["peak_shift"] == {"margin": 3.0}
+    # and the Sparkplug DBIRTH's Method properties carry it, as a built-in method's
+    from eskin_industrial.outputs.sparkplug import payload as pb
+    from eskin_industrial.outputs.sparkplug.properties import method_properties
+
+    assert method_properties(load_profile(path)) == (
+        ("method", (pb.STRING, "peak-shift")), ("detector.peak_shift.margin", (pb.DOUBLE, 3.0)),
+        ("detector.contact_threshold_n", (pb.DOUBLE, 0.2)))
+    x, y = np.tile(np.arange(5) * 5.0, 5), np.repeat(np.arange(5) * 5.0, 5)
+    assert kinds.METHOD.stream(detector, x, y, 100.0).margin == 3.0
+    for bad, message in (("margn = 3.0", r"\[detector\] peak_shift.margn: unknown key; did you mean 'margin'\?"),
+                         ("margin = 0.5", r"\[detector\] peak_shift.margin: expected a value in \[1, 10\], got 0.5")):
+        (tmp_path / "bad.toml").write_text(base + f"\n[detector.peak_shift]\n{bad}\n")
+        with pytest.raises(ProfileError, match=rf"^{re.escape(str(tmp_path / 'bad.toml'))}: {message}$"):
+            load_profile(tmp_path / "bad.toml")
+
+
+def test_the_page_method_keeps_the_promises(kinds):
+    from eskin_industrial.testing import check_method
+
+    check_method("peak-shift")

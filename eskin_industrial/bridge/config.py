@@ -121,12 +121,67 @@ class LogSettings:
 
 
 @dataclass(frozen=True)
+class OutputSupervision:
+    """``[supervision.output.KIND]``: one output's own supervision (unset: ``[supervision]``'s)."""
+
+    on_failure: Literal["restart", "stop"] | None = None
+    backoff_s: float | None = field(default=None, metadata=in_range(0.01, 60))
+    backoff_max_s: float | None = field(default=None, metadata=in_range(0.01, 600))
+    hang_s: float | None = field(default=None, metadata=in_range(0.05, 600))
+
+
+@dataclass(frozen=True)
+class SupervisionSettings:
+    """``[supervision]``: what an output's failure does (docs/bridge.md, "What stops
+    the bridge"): an exception from it, a call of it that hangs, a thread of its own
+    that dies."""
+
+    #: Outputs called on the loop's thread (their latency is the product); the others
+    #: are handed their data through a mailbox and a thread of their own.
+    essential: tuple[str, ...] = ("plc",)
+    #: ``restart``: the output is closed and opened again after a back-off, the bridge
+    #: goes on; ``stop``: the bridge stops with a failure.
+    on_failure: Literal["restart", "stop"] = "restart"
+    #: The first wait before a restart, doubling (jittered) up to ``backoff_max_s``.
+    backoff_s: float = field(default=1.0, metadata=in_range(0.01, 60))
+    backoff_max_s: float = field(default=30.0, metadata=in_range(0.01, 600))
+    #: A call of a non-essential output still in progress after this long is a failure.
+    hang_s: float = field(default=5.0, metadata=in_range(0.05, 600))
+    #: Output kind -> its own settings, over the ones above.
+    output: dict[str, OutputSupervision] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for key, names in (("essential", self.essential), ("output", tuple(self.output))):
+            for name in names:
+                if name not in sink_kinds():
+                    near = difflib.get_close_matches(name, list(sink_kinds()), n=1, cutoff=0.6)
+                    hint = f"did you mean {near[0]!r}?" if near else f"output kinds: {', '.join(sink_kinds())}"
+                    raise ValueError(f"{key}: {name!r} is no output kind; {hint}")
+        kinds: tuple[str | None, ...] = (None, *self.output)
+        for kind in kinds:
+            low, high = self.backoff_of(kind), self.policy_value(kind, "backoff_max_s")
+            if high < low:
+                where = "backoff_max_s" if kind is None else f"output.{kind}.backoff_max_s"
+                raise ValueError(f"{where}: expected at least backoff_s ({high:g} < {low:g})")
+
+    def policy_value(self, kind: str | None, key: str) -> Any:
+        own = self.output.get(kind) if kind is not None else None
+        value = getattr(own, key) if own is not None else None
+        return getattr(self, key) if value is None else value
+
+    def backoff_of(self, kind: str | None) -> float:
+        value: float = self.policy_value(kind, "backoff_s")
+        return value
+
+
+@dataclass(frozen=True)
 class _Top:
     """The top-level keys that are not an output kind's section."""
 
     log: LogSettings = field(default_factory=LogSettings)
     #: Received CAN frames held per bus; past it, new frames are dropped (counted).
     queue_frames: int = field(default=DEFAULT_QUEUE_FRAMES, metadata=positive_at_most(MAX_QUEUE_FRAMES, "an integer"))
+    supervision: SupervisionSettings = field(default_factory=SupervisionSettings)
 
 
 @dataclass(frozen=True)
@@ -138,6 +193,7 @@ class BridgeConfig:
     queue_frames: int = DEFAULT_QUEUE_FRAMES
     #: The file it came from, for messages.
     source: str = COMMAND_LINE
+    supervision: SupervisionSettings = field(default_factory=SupervisionSettings)
 
     def __post_init__(self) -> None:
         if not self.node:
@@ -200,7 +256,7 @@ def parse_bridge_config(text: str, source: str) -> BridgeConfig:
     try:
         top = build(_Top, table)
     except SchemaError as exc:
-        if exc.message.startswith("unknown key"):
+        if exc.message.startswith("unknown key") and "." not in exc.key:
             valid = ["node", *sink_kinds(), *(f.name for f in dataclasses.fields(_Top))]
             near = difflib.get_close_matches(exc.key, valid, n=1, cutoff=0.6)
             hint = f"did you mean {near[0]!r}?" if near else f"valid sections: {', '.join(valid)}"
@@ -210,7 +266,7 @@ def parse_bridge_config(text: str, source: str) -> BridgeConfig:
     if not isinstance(nodes_raw, list) or not nodes_raw:
         raise ProfileError(f"{source}: [node]: expected at least one [[node]] table")
     nodes = tuple(_node(raw, i, source) for i, raw in enumerate(nodes_raw))
-    return BridgeConfig(nodes, outputs, top.log, top.queue_frames, source)
+    return BridgeConfig(nodes, outputs, top.log, top.queue_frames, source, top.supervision)
 
 
 def _section(cls: type, raw: Any, name: str, source: str) -> Any:

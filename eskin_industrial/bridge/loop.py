@@ -80,9 +80,9 @@ class NodeLoop:
 
     def add_sink(self, sink: Sink) -> None:
         self.sinks.append(sink)
-        if type(sink).on_update is not Sink.on_update:
+        if sink.overrides("on_update"):
             self._update_sinks.append(sink.on_update)
-        if type(sink).take_commands is not Sink.take_commands:
+        if sink.overrides("take_commands"):
             self._command_sinks.append(sink)
         if sink.frame_every_s is not None:
             self._frame_sinks.append([sink.on_frame, sink.frame_every_s, float("-inf")])

@@ -9,6 +9,9 @@ Threads, and why each exists:
   scene) has its own loop thread, paced by its source;
 - whatever the sinks run themselves: a writer per node in PLC client mode (a slow or
   absent PLC never stalls detection), one Modbus server for all blocks in server mode;
+- per output, its supervisor (``supervise-KIND``: a failure restarts that output, not
+  the bridge) and, unless the output is essential, the thread that hands it the
+  loops' data (``KIND-output``: a hang there never stalls a loop), :mod:`.supervise`;
 - the caller's thread supervises: it logs what changed (sensor stale, bus fault, an
   output's connection) and the counters, feeds systemd's watchdog while every loop
   thread turns (bridge/notify.py), and handles the stop.
@@ -40,6 +43,7 @@ from .logs import EventLog
 from .loop import NodeLoop
 from .notify import Notifier
 from .signals import SignalFlags
+from .supervise import Output, Policy, Supervision
 
 #: The interpreter hands the GIL between threads every 5 ms by default; a reader
 #: thread waiting that long would add 5 ms to a 1 kHz scan's latency.  Every command
@@ -65,16 +69,33 @@ class NodeRun:
         return self.loop.sinks
 
 
+def policy_of(config: BridgeConfig, kind: str) -> Policy:
+    """How the output ``kind`` is supervised, from ``[supervision]``."""
+    sup = config.supervision
+    return Policy(essential=kind in sup.essential, on_failure=sup.policy_value(kind, "on_failure"),
+                  backoff_s=sup.policy_value(kind, "backoff_s"), backoff_max_s=sup.policy_value(kind, "backoff_max_s"),
+                  hang_s=sup.policy_value(kind, "hang_s"))
+
+
 def open_nodes(config: BridgeConfig, nodes: list[ResolvedNode], closers: list[Callable[[], None]],
-               default_output: bool = True, all_frames: bool = False, **loop_kw: Any) -> list[NodeLoop]:
+               default_output: bool = True, all_frames: bool = False, supervision: Supervision | None = None,
+               **loop_kw: Any) -> list[NodeLoop]:
     """Open every output and every source, and build one loop per node; what must be
     closed is appended to ``closers`` (also when a later one fails to open).  The one
-    wiring path of every command."""
+    wiring path of every command.  With ``supervision``, each output is opened
+    supervised (:mod:`.supervise`): the loops hold its supervised sinks."""
     context = OpenContext(queue_frames=config.queue_frames, all_frames=all_frames, closers=closers)
     per_node: list[list[Sink]] = [[] for _ in nodes]
     for cls, options in output_classes(config, default_output):
         try:
-            opened = cls.open_nodes(options, nodes, context)
+            opened: list[Sink]
+            if supervision is None:
+                opened = cls.open_nodes(options, nodes, context)
+            else:
+                output = Output(cls, options, nodes, context, policy_of(config, cls.name), supervision.log,
+                                supervision.stop)
+                opened = list(supervision.add(output))
+                closers.append(output.close)
         except ListenError as exc:  # a port in use: the line --check gives (probe_outputs)
             raise ListenError(f"{config.source}: [{cls.name}] port: {exc}") from None
         for i, sink in enumerate(opened):
@@ -106,11 +127,17 @@ class SingleNode:
     failure = ""
 
     def __init__(self, config: BridgeConfig, node: ResolvedNode, *, extra_sinks: Sequence[Sink] = (),
-                 default_output: bool = True, all_frames: bool = False, **loop_kw: Any) -> None:
+                 default_output: bool = True, all_frames: bool = False,
+                 on_event: Callable[[str, str, dict[str, Any]], None] | None = None, **loop_kw: Any) -> None:
         self.closers: list[Callable[[], None]] = []
         self.offline_written = False  #: every sink took the offline image (set on exit)
+        #: the outputs' failures and restarts (``output_failed``): to ``on_event``, else a line on stderr
+        self.on_event = on_event or _stderr_event
+        self.supervision = Supervision(lambda name, level, **fields: self.on_event(name, level, fields),
+                                       self._output_stops)
         try:
-            (self.loop,) = open_nodes(config, [node], self.closers, default_output, all_frames, **loop_kw)
+            (self.loop,) = open_nodes(config, [node], self.closers, default_output, all_frames, self.supervision,
+                                      **loop_kw)
         except BaseException:
             self.close()
             raise
@@ -144,8 +171,17 @@ class SingleNode:
         if args.exc_type is SystemExit:
             return
         name = args.thread.name if args.thread is not None else "-"
+        error = f"{args.exc_type.__name__}: {args.exc_value}"
+        if self.supervision.thread_died(args.thread, error):
+            return  # an output's: it restarts, the loop goes on
         if not self.failure:
-            self.failure = f"thread {name} died: {args.exc_type.__name__}: {args.exc_value}"
+            self.failure = f"thread {name} died: {error}"
+        self.loop.stop()
+
+    def _output_stops(self, reason: str) -> None:
+        """An output failed, and its ``on_failure`` is ``stop``."""
+        if not self.failure:
+            self.failure = reason
         self.loop.stop()
 
     def close(self) -> None:
@@ -153,6 +189,11 @@ class SingleNode:
         for close in reversed(self.closers):
             close()
         self.closers.clear()
+
+
+def _stderr_event(name: str, level: str, fields: dict[str, Any]) -> None:
+    """An output's failure or restart in a command that has no log of its own: one line."""
+    sys.stderr.write(f"eskin-bus: {level}: {name} " + " ".join(f"{k}={v}" for k, v in fields.items()) + "\n")
 
 
 class Bridge:
@@ -181,6 +222,9 @@ class Bridge:
         self._excepthook: Callable[[threading.ExceptHookArgs], Any] | None = None
         self.stop_reason = ""  #: the signal's name, when one stopped the bridge
         self.failed_sources: list[str] = []  #: "node: error" of each source that failed
+        #: Every output, watched: a failure is logged and restarts it (``[supervision]``).
+        self.supervision = Supervision(lambda name, level, **fields: self.log.event(name, level, **fields),
+                                       self._output_stops)
 
     # -- building: everything is opened before anything runs ----------------------
     def open(self) -> Bridge:
@@ -190,7 +234,7 @@ class Bridge:
         self._excepthook = threading.excepthook
         threading.excepthook = self._thread_died
         try:
-            loops = open_nodes(self.config, self.nodes, self._closers)
+            loops = open_nodes(self.config, self.nodes, self._closers, supervision=self.supervision)
         except BaseException:
             self._close_all()
             threading.excepthook = self._excepthook
@@ -296,15 +340,25 @@ class Bridge:
             self._stop.set()
 
     def _thread_died(self, args: threading.ExceptHookArgs) -> None:
-        """A thread of the process ended by an exception (the loops catch theirs:
-        this is an output's): logged, and the bridge stops with a failure."""
+        """A thread of the process ended by an exception (the loops catch theirs).  An
+        output's (by its name) is that output's failure: it restarts, the bridge goes
+        on (:mod:`.supervise`); any other's (a source's reader), or an output's whose
+        ``on_failure`` is ``stop``: logged, and the bridge stops with a failure."""
         if args.exc_type is SystemExit:
             return
         name = args.thread.name if args.thread is not None else "-"
         error = f"{args.exc_type.__name__}: {args.exc_value}"
+        if self.supervision.thread_died(args.thread, error):
+            return
         if not self.failure:
             self.failure = f"thread {name} died: {error}"
         self.log.event("thread_failed", level="error", thread=name, error=error)
+        self._stop.set()
+
+    def _output_stops(self, reason: str) -> None:
+        """An output failed, and its ``on_failure`` is ``stop``: the bridge stops with a failure."""
+        if not self.failure:
+            self.failure = reason
         self._stop.set()
 
     def _node_loop(self, run: NodeRun, beat: int) -> None:

@@ -5,6 +5,12 @@ Each entry gives a streaming factory ``(settings, x_mm, y_mm, rate_hz) -> detect
 (with ``push(t, forces, flags) -> list[Update]``) and a batch function
 ``(settings, x_mm, y_mm, rate_hz, t, forces, flags) -> UpdateTable``.
 
+A method declares its own settings: a frozen dataclass (``settings``), read from
+``[detector.<key>]`` of a profile (``key``: the name with ``-`` as ``_``, as
+``cof-track``'s ``[detector.cof_track]``; the paper's rule from ``[detector]`` itself),
+and :meth:`Method.settings_of` finds them in a :class:`DetectorSettings`, a plug-in's
+as well as a built-in's.
+
 A method with ``needs_model`` (``learned``) must also be handed ``model=``; the
 registry does not know where models come from.  :meth:`Method.with_model` binds one;
 every layer that builds detectors by name does so through one function that hands
@@ -13,6 +19,7 @@ over the shipped model (``eskin_industrial.methods.bind``).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
@@ -27,7 +34,16 @@ from .learned import Learned, Model
 from .paper import PaperDetector, paper_batch
 from .protocol import Detector
 from .scored import CofVelocity, ForceRate, HfEnergy, NoSlip
-from .settings import DetectorSettings
+from .settings import (
+    CofStepSettings,
+    CofTrackSettings,
+    CofVelocitySettings,
+    DetectorSettings,
+    ForceRateSettings,
+    HfEnergySettings,
+    LearnedSettings,
+    PaperRuleSettings,
+)
 from .updates import UpdateTable
 
 
@@ -64,6 +80,26 @@ class Method:
     code: int = 0
     #: What ``score_a`` and ``score_b`` hold.
     scores: tuple[Score, Score] = PAPER_SCORES
+    #: The method's own settings: a frozen dataclass whose fields are its profile keys
+    #: (types, defaults and bounds as :mod:`eskin_industrial.schema` reads them); None:
+    #: none of its own.
+    settings: type | None = None
+    #: Where they sit in a profile: ``[detector.<section>]``; "" for ``[detector]``
+    #: itself (the paper's rule).  Default (None): the name with ``-`` as ``_``.
+    section: str | None = None
+
+    @property
+    def key(self) -> str:
+        """The section of the method's settings under ``[detector]`` ("": ``[detector]`` itself)."""
+        return self.name.replace("-", "_") if self.section is None else self.section
+
+    def settings_of(self, settings: DetectorSettings) -> Any:
+        """The method's own settings out of ``settings`` (None: it has none)."""
+        if self.settings is None:
+            return None
+        if self.key == "":
+            return self.settings(**{f.name: getattr(settings, f.name) for f in dataclasses.fields(self.settings)})
+        return settings.section(self.key, self.settings)
 
     def with_model(self, model: Model) -> Method:
         """This method with ``model`` bound into both factories."""
@@ -90,34 +126,41 @@ def _paper_rule(rule: Literal["both", "coe", "dw"]) -> Callable[..., Detector]:
 
 
 def _method(name: str, summary: str, stream: Callable[..., Any], code: int, scores: tuple[Score, Score],
-            needs_model: bool = False) -> Method:
-    return Method(name, summary, stream, batch_via_stream(stream), needs_model, code=code, scores=scores)
+            needs_model: bool = False, settings: type | None = None, section: str | None = None) -> Method:
+    return Method(name, summary, stream, batch_via_stream(stream), needs_model, code=code, scores=scores,
+                  settings=settings, section=section)
 
 
 METHODS: dict[str, Method] = {
     "paper": Method("paper", "R_coe and R_dw both above their slip thresholds (the reference paper)", PaperDetector,
-                    paper_batch, vectorized=True, code=1),
+                    paper_batch, vectorized=True, code=1, settings=PaperRuleSettings, section=""),
+    # (slip_rule is the variants' own: the profile's is shown, theirs decides)
     "paper-coe": _method("paper-coe", "the paper's R_coe alone above its slip threshold", _paper_rule("coe"), 2,
-                         PAPER_SCORES),
+                         PAPER_SCORES, settings=PaperRuleSettings, section=""),
     "paper-dw": _method("paper-dw", "the paper's R_dw alone above its slip threshold", _paper_rule("dw"), 3,
-                        PAPER_SCORES),
+                        PAPER_SCORES, settings=PaperRuleSettings, section=""),
     "force-rate": _method("force-rate", "rival: total-force derivative above a threshold", ForceRate, 4, (
-        Score("force_rate_per_s", "|dS/dt| / S over lag_s, 1/s (slip above threshold_per_s)"), UNUSED)),
+        Score("force_rate_per_s", "|dS/dt| / S over lag_s, 1/s (slip above threshold_per_s)"), UNUSED),
+        settings=ForceRateSettings),
     "hf-energy": _method("hf-energy", "rival: high-frequency energy of the taxel signals over its baseline", HfEnergy, 5, (
-        Score("hf_energy_ratio", "high-frequency energy over its baseline (slip above threshold)"), UNUSED)),
+        Score("hf_energy_ratio", "high-frequency energy over its baseline (slip above threshold)"), UNUSED),
+        settings=HfEnergySettings),
     "cof-velocity": _method("cof-velocity", "rival: centre-of-force speed above a threshold", CofVelocity, 6, (
-        Score("cof_speed_mm_s", "centre-of-force speed, mm/s (slip above threshold_mm_s)"), UNUSED)),
+        Score("cof_speed_mm_s", "centre-of-force speed, mm/s (slip above threshold_mm_s)"), UNUSED),
+        settings=CofVelocitySettings),
     "cof-track": _method("cof-track", "ours: centre-of-force displacement against its learnt noise", CofTrack, 7, (
         Score("onset_score", "onset: the largest of the fast displacement, the ramp and the turn about the "
                              "normal, over their noise thresholds (slip above 1)"),
-        Score("slow_score", "the slow displacement still moving onward, over its threshold (slip above 1)"))),
+        Score("slow_score", "the slow displacement still moving onward, over its threshold (slip above 1)")),
+        settings=CofTrackSettings),
     "cof-step": _method("cof-step", "rival: the newest 20 ms of the centre of force against the mean and spread of "
                         "the half-second that ended 100 ms earlier", CofStep, 10, (
         Score("step_score", "the newest CoF's distance from the base's mean in its standard deviations, over "
-                            "threshold (slip above 1)"), UNUSED)),
+                            "threshold (slip above 1)"), UNUSED), settings=CofStepSettings),
     "learned": _method("learned", "accuracy ceiling: a small classifier on the other methods' features (extra: learn)", Learned,
                        8, (Score("p_slip", "the model's slip probability (slip above slip_p, confirm_hops in a row)"),
-                           Score("p_variable_force", "the model's varying-force probability")), needs_model=True),
+                           Score("p_variable_force", "the model's varying-force probability")), needs_model=True,
+                       settings=LearnedSettings),
     # A baseline, not a detector: the closed loop's fixed grip (no slip sensing), with
     # the state, contact and validity of any other method.
     "none": _method("none", "baseline: never reports slip (no slip sensing; contact and varying force as the others)",

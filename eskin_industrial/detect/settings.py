@@ -7,14 +7,17 @@ equations each setting enters.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Literal
+from typing import Any, Literal, TypeVar
 
 import numpy as np
 import pywt
 
-from ..schema import in_range
+from ..schema import in_range, open_sections
+
+T = TypeVar("T")
 
 #: Methods known to the registry (``detect.methods``); validated at profile load.
 MethodName = str
@@ -323,6 +326,10 @@ class DetectorSettings:
     cof_step: CofStepSettings = field(default_factory=CofStepSettings)
     hf_energy: HfEnergySettings = field(default_factory=HfEnergySettings)
     learned: LearnedSettings = field(default_factory=LearnedSettings)
+    #: The plug-in methods' sections, ``(key, settings)`` sorted by key: each read from
+    #: ``[detector.<key>]`` into the method's own dataclass (``eskin_industrial.methods``
+    #: names it), and written back there; no key of its own.
+    plugins: tuple[tuple[str, Any], ...] = field(default=(), metadata=open_sections())
 
     def __post_init__(self) -> None:
         hops = self.window_s / self.hop_s
@@ -341,8 +348,55 @@ class DetectorSettings:
         if self.variable_r_coe > self.slip_r_coe or self.variable_r_dw > self.slip_r_dw:
             raise ValueError("variable_r_coe: expected the varying-force thresholds below the slip thresholds")
 
+    def section(self, key: str, cls: type[T]) -> T:
+        """``[detector.<key>]`` as a ``cls``: a built-in method's section, or a plug-in
+        method's as the profile gave it (its defaults when the profile leaves it out)."""
+        if key in _OWN_FIELDS:
+            value = getattr(self, key)
+        else:
+            value = next((v for k, v in self.plugins if k == key), None)
+            if value is None:
+                return cls()
+        if not isinstance(value, cls):
+            raise TypeError(f"[detector.{key}] holds {type(value).__name__}, not {cls.__name__}")  # a bug, not input
+        return value
+
+    def with_section(self, key: str, value: Any) -> DetectorSettings:
+        """These settings with a plug-in method's ``[detector.<key>]`` set to ``value``."""
+        if key in _OWN_FIELDS:
+            raise ValueError(f"{key}: a key of [detector] itself, not a plug-in method's section")
+        kept = tuple((k, v) for k, v in self.plugins if k != key)
+        return dataclasses.replace(self, plugins=tuple(sorted((*kept, (key, value)))))
+
     def geometry(self, rate_hz: float) -> Geometry:
         return _geometry(self.window_s, self.hop_s, self.lag_s, self.wavelet, self.max_gap_s, rate_hz)
+
+
+#: The keys of ``[detector]`` itself (and its built-in sections): no plug-in method's
+#: section may take one of these names.
+_OWN_FIELDS = frozenset(f.name for f in dataclasses.fields(DetectorSettings) if not f.metadata.get("sections"))
+
+#: The keys of ``[detector]`` itself that set the paper's rule (and that of its
+#: one-indicator variants): the settings of ``paper``, ``paper-coe`` and ``paper-dw``.
+PAPER_RULE_KEYS = ("slip_r_coe", "slip_r_dw", "slip_rule", "variable_r_coe", "variable_r_dw", "hysteresis",
+                   "slip_confirm_updates", "hold_s", "hold_from")
+
+
+def _subset(cls: type, names: tuple[str, ...], name: str, doc: str) -> type:
+    """A frozen dataclass of some of ``cls``'s fields, with their types, defaults and
+    bounds (written once, in ``cls``)."""
+    hints = {f.name: f for f in dataclasses.fields(cls)}
+    made = dataclasses.make_dataclass(
+        name, [(n, hints[n].type, field(default=hints[n].default, metadata=hints[n].metadata)) for n in names],
+        frozen=True)
+    made.__module__, made.__doc__ = __name__, doc  # (the module's names resolve its type hints)
+    return made
+
+
+#: The paper's rule, as a method's settings: the fields of :class:`DetectorSettings`
+#: named in :data:`PAPER_RULE_KEYS`, read from ``[detector]`` itself.
+PaperRuleSettings: type = _subset(DetectorSettings, PAPER_RULE_KEYS, "PaperRuleSettings",
+                                  "The paper's decision rule: the keys of [detector] itself that set it.")
 
 
 @dataclass(frozen=True)

@@ -65,6 +65,10 @@ def _footprint(**changes: Any) -> Hook:
 STEP_HZ: tuple[float, float] = (6.0, 18.0)
 STEP_REST: tuple[float, float] = (0.5, 0.8)
 
+#: The force-drop family's loss of normal force at slip onset, drawn per seed and slide
+#: (slides measured elsewhere lose 13-20 % at onset; the range reaches past both ends).
+FORCE_DROP: tuple[float, float] = (0.1, 0.3)
+
 #: Radius at which a turn moves the footprint's edge as far as the slide it replaces
 #: (the 20 mm block's half-width).
 TORSION_RADIUS_MM = 10.0
@@ -122,6 +126,9 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("step-slip", "the paper's slides in jumps with rests: 6-18 jumps a second, at rest 50-80 % of each period "
            "(drawn per seed and slide); and the steps scene (2 mm/s on 4 N)", (*SLIDES, "steps"),
            _slides(step_hz=STEP_HZ, step_rest=STEP_REST)),
+    Family("force-drop", "the paper's slides losing 10-30 % of their normal force over the first 30 ms "
+           "(drawn per seed and slide): a grasp that gives way as the object starts to slide", SLIDES,
+           _slides(force_drop=FORCE_DROP)),
 )}
 
 

@@ -117,6 +117,11 @@ class Sink:
         self._events_held: collections.deque[tuple[str, str, dict[str, Any]]] = collections.deque(maxlen=EVENTS_HELD)
         self._event_handler: EventHandler | None = None
 
+    def overrides(self, name: str) -> bool:
+        """The kind has a method ``name`` of its own (the loop calls only those per
+        update and for commands)."""
+        return getattr(type(self), name) is not getattr(Sink, name)
+
     # -- the data path --------------------------------------------------------------
     def on_update(self, update: Update) -> None:
         """Every detector update, in order, on the loop's thread: keep it short."""
@@ -219,6 +224,10 @@ class OutputKind(Generic[OptionsT]):
     moved_node_keys: ClassVar[dict[str, str]] = {}
     #: A key of :attr:`NodeOptions` -> the profile key (dotted) it overrides, for ``--explain``.
     node_profile_keys: ClassVar[dict[str, str]] = {}
+    #: Beginnings of the names of the threads the kind runs that are not named
+    #: ``KIND-...`` (a library's own, paho's): a death of one is this output's failure
+    #: (:mod:`eskin_industrial.bridge.supervise`), not the bridge's.
+    thread_names: ClassVar[tuple[str, ...]] = ()
 
     @classmethod
     def options_from_cli(cls, values: dict[str, Any]) -> OptionsT | None:

@@ -71,6 +71,8 @@ def render(name_or_path: str | SceneSpec, rate_hz: float, seed: int, stream: int
     t = np.arange(int(round(spec.scene.duration_s * rate_hz))) / rate_hz
     events = spec.events
     force = physics.force_profile(t, events) * physics.oscillation_factor(t, events)
+    if any(e.kind == "slide" and e.force_drop for e in events):
+        force = force * physics.force_drop_factor(t, events, rng)
     jitter, ripple = physics.stick_slip(t, events, rng)
     centre = np.asarray(spec.footprint.centre_mm)[None, :] + physics.slide_offset(t, events) + jitter
     if physics.needs_sampling(spec.footprint, events):

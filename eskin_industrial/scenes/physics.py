@@ -40,6 +40,18 @@ def oscillation_factor(t: np.ndarray, events: tuple[Event, ...]) -> np.ndarray:
     return factor
 
 
+def force_drop_factor(t: np.ndarray, events: tuple[Event, ...], rng: np.random.Generator) -> np.ndarray:
+    """The normal force's drop at each slide's onset (``force_drop``): a factor (K,)
+    falling by the drawn fraction over ``force_drop_s`` and staying there.  A scene
+    with no drop draws nothing (its other draws stay as they were)."""
+    factor = np.ones_like(t)
+    for e in events:
+        if e.kind == "slide" and e.force_drop:
+            drop = drawn(e.force_drop, rng)
+            factor *= 1.0 - drop * smooth_ramp((t - e.t_s) / e.force_drop_s)
+    return factor
+
+
 def slide_offset(t: np.ndarray, events: tuple[Event, ...]) -> np.ndarray:
     """Footprint displacement (K, 2) in mm: each slide moves it at constant speed."""
     offset = np.zeros((t.size, 2))

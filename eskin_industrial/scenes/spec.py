@@ -103,6 +103,12 @@ class Event:
     #: trailing part of the footprint carries nothing (the normal force is unchanged).
     lift_off_per_mm: float = field(default=0.0, metadata=non_negative())
     lift_off_s: float = field(default=0.1, metadata=positive())
+    #: A normal-force drop at slip onset (a grasp losing part of its squeeze as the
+    #: object gives way): the force falls by this fraction over ``force_drop_s`` from
+    #: the slide's start and stays down; one value or a range ``[low, high]`` drawn
+    #: per seed and slide.  Empty (the default): the force as the other events set it.
+    force_drop: tuple[float, ...] = field(default=(), metadata=in_range(0.0, 0.9))
+    force_drop_s: float = field(default=0.03, metadata=positive())
     #: Rotation (``rotate``): angle (degrees, signed) and speed.
     angle_deg: float = 0.0
     angular_speed_deg_s: float = field(default=30.0, metadata=positive())
@@ -112,7 +118,7 @@ class Event:
             raise ValueError(f"force_n: expected a force for a {self.kind} event")
         if len(self.distance_mm) != 2:
             raise ValueError("distance_mm: expected [x, y]")
-        for key, empty in (("step_hz", True), ("step_rest", False)):
+        for key, empty in (("step_hz", True), ("step_rest", False), ("force_drop", True)):
             value = getattr(self, key)
             if not (empty or value) or len(value) > 2 or (len(value) == 2 and value[0] > value[1]):
                 raise ValueError(f"{key}: expected one value or a range [low, high]{' (or none)' if empty else ''}, "

@@ -237,6 +237,7 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
         folders[folder] = await b.obj(nid(folder), parent, folder, ua.ObjectIds.FolderType)
         await rule(folders[folder])
     frame_shape = None if info is None else info.frame_shape
+    units_only: list[tuple[str, str, ua.NodeId]] = []
     for v in (*VARIABLES, FRAME):
         if v is FRAME and not declare and frame_shape is None:
             continue
@@ -262,6 +263,8 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
                               ua.VariantType.ExtensionObject, ns=0)
             await rule(p1)
             await rule(p2)
+        elif v.unit:
+            units_only.append((path, v.unit, node))
         yield ("frame" if v is FRAME else f"var:{v.path}"), node
     for name, arg, doc in METHODS:
         inputs = [] if arg is None else [ua.Argument(Name=arg[0], DataType=node_id(_BUILTIN[arg[1]][0]),
@@ -276,6 +279,14 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
     if declare:
         cond = await b.obj(nid("SlipAlarm"), parent, "SlipAlarm", types.alarm, "raised at each entry into slip")
         await rule(cond)
+    # a value with a unit says which, as an analog one does (Health/FrameAge); made last,
+    # so that the type's other instance declarations keep the numeric ids they had
+    for path, unit, node in units_only:
+        code, unit_name = model.UNITS[unit]
+        eu = ua.EUInformation(NamespaceUri=model.UNECE_NAMESPACE, UnitId=code, DisplayName=ua.LocalizedText(unit),
+                              Description=ua.LocalizedText(unit_name))
+        await rule(await b.prop(nid(f"{path}.EngineeringUnits"), node, "EngineeringUnits", ua.ObjectIds.EUInformation,
+                                eu, ua.VariantType.ExtensionObject, ns=0))
 
 
 async def build_machines(server: Server, idx: int) -> ua.NodeId:

@@ -31,6 +31,8 @@ class PlcKind(OutputKind[PlcOptions]):
 
     name = "plc"
     Options = PlcOptions
+    #: server mode's Modbus server (the writer's thread is ``plc-writer``)
+    thread_names = ("modbus-server", "modbus-rtu-server")
     NodeOptions = PlcNodeOptions
     moved_node_keys = {"base_address": "base_address"}
     node_profile_keys = {"base_address": "modbus.plc.base_address"}

@@ -79,12 +79,13 @@ class RecorderKind(OutputKind[RecorderOptions]):
                 rec = Recorder(sys.stdout, options.resolved_format, n.name, where="stdout", owned=False,
                           flush_every_s=options.flush_every_s)
             else:
-                try:
-                    stream: IO[str] = RowFile(path)  # type: ignore[assignment]  # write, flush, close
+                try:  # opened again after a failure: what was recorded stays, the rows go on
+                    row_file = RowFile(path, append=context.reopen)
                 except OSError as exc:
                     raise EskinError(f"{path}: cannot write the record: {exc.strerror or exc}") from None
+                stream: IO[str] = row_file  # type: ignore[assignment]  # write, flush, close
                 rec = Recorder(stream, options.resolved_format, n.name, where=path, owned=True,
-                          flush_every_s=options.flush_every_s)
+                          flush_every_s=options.flush_every_s, header=row_file.size == 0)
             context.closers.append(rec.close)
             out.append(rec)
         return out

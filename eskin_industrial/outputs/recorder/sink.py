@@ -30,7 +30,7 @@ class Recorder(Sink):
     """One node's updates, written to a stream (opened by :class:`.kind.RecorderKind`)."""
 
     def __init__(self, stream: IO[str], fmt: str, node: str, *, where: str, owned: bool,
-                 flush_every_s: float = 1.0) -> None:
+                 flush_every_s: float = 1.0, header: bool = True) -> None:
         super().__init__()
         self.where = where
         self._out = stream
@@ -43,7 +43,7 @@ class Recorder(Sink):
         self.write_errors = 0
         self.last_error = ""
         self._failing = False  #: since a write failed, until one succeeds
-        if not self._jsonl:
+        if not self._jsonl and header:
             self._write(",".join(COLUMNS) + "\n")
 
     def on_update(self, update: Update) -> None:
@@ -122,10 +122,12 @@ class RowFile:
     #: Written out when the buffer holds this much, flushed or not.
     BUFFER_BYTES = 65536
 
-    def __init__(self, path: str) -> None:
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+    def __init__(self, path: str, append: bool = False) -> None:
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | (0 if append else os.O_TRUNC), 0o666)
+        #: the file's length when opened (appended to: after the rows already there)
+        self.size = os.lseek(self._fd, 0, os.SEEK_END)
         self._buf = bytearray()
-        self._end = 0  #: the end of the last whole row on disk
+        self._end = self.size  #: the end of the last whole row on disk
         self.lost_rows = 0
 
     def write(self, text: str) -> int:

@@ -39,6 +39,8 @@ class SparkplugKind(OutputKind[SparkplugOptions]):
 
     name = "sparkplug"
     Options = SparkplugOptions
+    #: paho's network thread (``paho-mqtt-client-GROUP-EDGE``) is this output's.
+    thread_names = ("paho-mqtt-client-",)
     cli_options = (
         CliOption("--sparkplug", "sparkplug", "Publish as a Sparkplug B edge node to this MQTT broker "
                   "(mqtt://HOST:PORT, or mqtts:// for TLS); needs --group-id and --edge-node-id.", metavar="URL"),

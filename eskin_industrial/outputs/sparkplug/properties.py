@@ -14,11 +14,6 @@ if TYPE_CHECKING:
 
 Property = tuple[str, tuple[int, Any]]
 
-#: The ``[detector]`` keys of the paper's rule (and of the methods built on its indicators).
-PAPER_KEYS = ("slip_r_coe", "slip_r_dw", "slip_rule", "variable_r_coe", "variable_r_dw", "hysteresis",
-              "slip_confirm_updates", "hold_s", "hold_from")
-
-
 def _typed(value: Any) -> tuple[int, Any] | None:
     if isinstance(value, bool):
         return (pb.BOOLEAN, value)
@@ -57,21 +52,23 @@ def score_properties(profile: Profile) -> dict[str, tuple[Property, ...]]:
 
 
 def method_properties(profile: Profile) -> tuple[Property, ...]:
-    """``method`` and the keys that set its decision, by their profile name
-    (``detector.slip_r_coe``, ``detector.cof_track.z``); ``detector.contact_threshold_n``
-    for every method."""
+    """``method`` and the keys that set its decision, as the method declares them, by
+    their profile name (``detector.slip_r_coe``, ``detector.cof_track.z``);
+    ``detector.contact_threshold_n`` for every method."""
+    from ...methods import get_method
+
     det = profile.detector
+    method = get_method(det.method)
+    # A method with no settings of its own (the ``none`` baseline) lists the paper's
+    # rule, as every DBIRTH has since the keys were first published: a host that reads
+    # them finds them still.
+    described = method if method.settings is not None else get_method("paper")
+    own = described.settings_of(det)
+    prefix = f"detector.{described.key}." if described.key else "detector."
     out: list[Property] = [("method", (pb.STRING, det.method))]
-    section = getattr(det, det.method.replace("-", "_"), None)
-    if dataclasses.is_dataclass(section):
-        prefix = f"detector.{det.method.replace('-', '_')}."
-        items = [(f.name, getattr(section, f.name)) for f in dataclasses.fields(section)]
-    else:  # the paper's rule and its one-indicator variants
-        prefix = "detector."
-        items = [(k, getattr(det, k)) for k in PAPER_KEYS]
-    items.append(("contact_threshold_n", det.contact_threshold_n))
-    for key, value in items:
-        typed = _typed(value)
+    for f in dataclasses.fields(own):
+        typed = _typed(getattr(own, f.name))
         if typed is not None:
-            out.append((("detector." if key == "contact_threshold_n" else prefix) + key, typed))
+            out.append((prefix + f.name, typed))
+    out.append(("detector.contact_threshold_n", (pb.DOUBLE, float(det.contact_threshold_n))))
     return tuple(out)
