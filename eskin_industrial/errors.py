@@ -36,6 +36,13 @@ class InputFormatError(EskinError):
     exit_code = 2
 
 
+class OutputFileError(EskinError):
+    """A file a command writes cannot be created or written (no such folder, no
+    permission, the disk full); the message names the option and the path."""
+
+    exit_code = 2
+
+
 class DecodeError(EskinError):
     """A frame from a transport does not decode; sources count and drop these."""
 

@@ -42,6 +42,10 @@ class FrameFlag(enum.IntFlag):
     #: the scans' own timestamps show a rate more than ``[output] rate_tolerance`` times
     #: away from the rate the detector assumes
     RATE = 4096
+    #: the transport's frames are not one sensor's fresh scans: two scan counters at
+    #: once, a sustained rate of late or torn frames, a heartbeat naming another node
+    #: (CAN, bus/can/stream.py); an answer repeated to the bit (Modbus RTU)
+    STREAM = 8192
 
     @classmethod
     def describe(cls, value: int) -> str:
@@ -50,7 +54,7 @@ class FrameFlag(enum.IntFlag):
 
 
 #: The sensor-fault bits: any of them makes a state no verdict.
-SENSOR_FAULTS = int(FrameFlag.DEAD_TAXELS | FrameFlag.FROZEN | FrameFlag.RATE)
+SENSOR_FAULTS = int(FrameFlag.DEAD_TAXELS | FrameFlag.FROZEN | FrameFlag.RATE | FrameFlag.STREAM)
 
 
 @dataclass(frozen=True, slots=True)

@@ -12,7 +12,7 @@ from .detect.integrity import IntegrityWatch
 from .detect.learned import Model
 from .detect.protocol import Detector
 from .detect.updates import Update, state_changed
-from .frames import Frame, FrameFlag, RawScan
+from .frames import SENSOR_FAULTS, Frame, FrameFlag, RawScan
 from .methods import ready_method
 from .profile import Profile
 
@@ -29,7 +29,7 @@ class Counters:
     lost_scans: int = 0  #: gaps in the sequence numbers
     dropped_by_detector: int = 0  #: duplicate or out-of-order times
     state_changes: int = 0  #: :func:`~.detect.updates.state_changed` (the STATE_CHANGES register's count)
-    fault_scans: int = 0  #: scans with a sensor fault (DEAD_TAXELS, FROZEN, RATE): no verdict
+    fault_scans: int = 0  #: scans with a sensor fault (DEAD_TAXELS, FROZEN, RATE, STREAM): no verdict
     sensor_faults: int = 0  #: entries into a sensor fault
     extra: dict[str, int] = field(default_factory=dict)  #: transport-specific counters
 
@@ -80,14 +80,17 @@ class Pipeline:
         if frame.flags & _SATURATED:
             c.saturated_scans += 1
         self.last_frame = frame
-        fault = self.integrity.push(frame.t, frame.forces, scan.raw, bool(frame.flags & _INVALID))
+        # the transport's own verdict (a CAN stream that is not one node's) joins the scans' own
+        fault = self.integrity.push(frame.t, frame.forces, scan.raw, bool(frame.flags & _INVALID)) \
+            | (scan.flags & SENSOR_FAULTS)
         if fault:
             c.fault_scans += 1
             if not self.fault:
                 c.sensor_faults += 1
         self.fault = fault
         before = self.detector.dropped
-        updates = self.detector.push(frame.t, frame.forces, frame.flags)
+        # (a fault bit is the moment's, in the snapshot: not one the detector's updates carry on)
+        updates = self.detector.push(frame.t, frame.forces, frame.flags & ~SENSOR_FAULTS)
         c.dropped_by_detector += self.detector.dropped - before
         for u in updates:
             if state_changed(self.last_update, u):

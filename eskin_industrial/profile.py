@@ -239,6 +239,13 @@ class ModbusNodeSection:
     #: taxels: scans are then timed on the node's clock (counter / rate_hz), a scan
     #: polled twice is used once, and skipped scans count as lost.
     counter_register: bool = False
+    #: Without a scan counter: an answer bit-identical to the one before is the node's
+    #: scan polled again (dropped: a scan is used once) while it comes within this of
+    #: the first of them; later, the node has scanned since and the answer is replayed
+    #: (a man in the middle, a gateway's cache): FLAGS STREAM, no verdict until a
+    #: different answer.  A live array's noise never repeats a scan to the bit.
+    #: Default: 1.5 scan periods of ``[sensor] rate_hz``; 0: every repeat is a replay.
+    repeat_s: float | None = field(default=None, metadata=in_range(0.0, 60.0))
 
     @property
     def words_per_taxel(self) -> int:

@@ -115,6 +115,7 @@ SINK_SETUPS: dict[str, Callable[[Path], contextlib.AbstractContextManager[dict[s
     "recorder": lambda tmp: _given({"path": str(tmp / "updates.csv")}),
     "sparkplug": _sparkplug,
     "opcua": lambda tmp: _given({"endpoint": f"opc.tcp://127.0.0.1:{free_port()}", "pki_dir": str(tmp / "pki")}),
+    "web": lambda tmp: _given({"bind": f"127.0.0.1:{free_port()}"}),
 }
 
 

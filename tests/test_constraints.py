@@ -13,7 +13,7 @@ from packaging.requirements import Requirement
 
 from tests.helpers.paths import ROOT
 
-EXTRAS = ("plot", "learn", "opcua")
+EXTRAS = ("plot", "learn", "opcua", "web")
 
 
 def norm(name: str) -> str:

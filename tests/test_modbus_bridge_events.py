@@ -75,5 +75,6 @@ def test_a_refused_write_of_the_server_is_a_line(hold_csv: str, tmp_path: Path) 
         if proc.poll() is None:
             proc.kill()
             proc.communicate(timeout=5)
-    refusals = [line for line in err.splitlines() if line.startswith("modbus-bridge: ") and "read_only" in line]
+    # the bridge's log lines (modbus-bridge runs the bridge): TIME LEVEL EVENT key=value ...
+    refusals = [line for line in err.splitlines() if " modbus_write_denied " in line and "reason=read_only" in line]
     assert refusals, err

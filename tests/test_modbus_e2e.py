@@ -126,7 +126,10 @@ def test_the_cli_path_end_to_end(paper_profile, tmp_path):
     assert "Traceback" not in err + bridge.stderr
     assert "SLIP: grip force raised to 7 N" in out, out + err
     assert "SLIP_LATCHED" in out and "data trusted" in out
-    counters = dict(kv.split("=") for kv in bridge.stderr.strip().splitlines()[-1].split()[1:])
+    # the bridge's final line (modbus-bridge runs the bridge): TIME info final node=node key=value ...
+    final = bridge.stderr.strip().splitlines()[-1].split()
+    assert final[2] == "final", bridge.stderr
+    counters = dict(kv.split("=") for kv in final[3:])
     assert int(counters["scans"]) > 200 and int(counters["plc_writes"]) > 10
     assert int(counters["rtu_timeouts"]) <= 0.05 * int(counters["rtu_polls"])  # 50 ms timeout on a busy machine
 
@@ -138,7 +141,10 @@ def test_cli_errors_are_one_line(tmp_path):
                         "--serve", "127.0.0.1:" + str(free_port()), "--duration", "1"],
                        capture_output=True, text=True, timeout=30)
     assert r.returncode != 0 and "Traceback" not in r.stderr
-    assert r.stderr.strip().count("\n") == 0 and "no-such-tty" in r.stderr
+    # the deprecation line (the bridge's command line), then the error in one line
+    deprecated, error = r.stderr.strip().splitlines()
+    assert deprecated.startswith("eskin-bus: warning: modbus-bridge is deprecated; it runs: eskin-bus bridge ")
+    assert error.startswith("eskin-bus: error: ") and "no-such-tty" in error
     r = subprocess.run([*exe, "modbus-node", "-p", profile, "--port", str(tmp_path / "x"), "--scene", "nope"],
                        capture_output=True, text=True, timeout=30)
     assert r.returncode != 0 and "Traceback" not in r.stderr and r.stderr.strip().count("\n") == 0

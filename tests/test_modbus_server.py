@@ -186,7 +186,9 @@ def test_connection_cap_lets_a_polling_plc_in_by_replacing_an_idle_socket(paper_
     port = port_of(server)
     idle = [connect(port) for _ in range(3)]
     try:
-        # The cap is reached by connections just made (none quiet yet): the next is closed.
+        for s in idle:  # each asks once (a socket that never asks is replaced at once: test_modbus_rotation.py)
+            read_registers(s, 0, 1)
+        # The cap is reached by connections that asked just now (none quiet yet): the next is closed.
         with connect(port) as extra:
             assert closed_by_peer(extra)
         assert server.counters()["modbus_over_cap"] == 1
@@ -269,7 +271,7 @@ def test_hundreds_of_idle_sockets_under_a_low_descriptor_limit_leave_room_for_th
     assert proc.returncode == 0, err
     assert "Traceback" not in err
     assert len(err.splitlines()) < 40, err[:2000]
-    assert "modbus_client_refused" in err
+    assert "modbus_client_refused" in err or "modbus_client_evicted" in err  # (silent ones make room)
 
 
 # -- access ---------------------------------------------------------------------------

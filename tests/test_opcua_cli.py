@@ -26,9 +26,10 @@ def run(*args: str, input: str | None = None):
 
 
 def usage_error(res, expected: str) -> None:
-    """click's usage error: exit 2, the message on its Error: line."""
+    """A usage error: exit 2, the message on its one line."""
     assert res.exit_code == 2, res.output
-    assert any(line.startswith("Error: ") and expected in line for line in res.output.splitlines()), res.output
+    lines = [line for line in res.output.splitlines() if line]
+    assert len(lines) == 1 and lines[0].startswith("eskin-bus: error: ") and expected in lines[0], res.output
 
 
 def refused(res, *expected: str) -> str:

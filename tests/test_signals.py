@@ -236,9 +236,11 @@ def test_modbus_bridge_leaves_the_plc_reading_offline(plc, hold_csv, how):
             proc.communicate(timeout=5)
     assert proc.returncode == (0 if how == "duration" else STOPPING[getattr(signal, how)]), err
     assert_offline(read_block(plc.port))
-    assert f"stopped ({how}), offline written: yes" in err
-    counter_lines = [line for line in err.splitlines() if line.startswith("modbus-bridge: scans=")]
-    assert len(counter_lines) == (1 if how == "duration" else 2)  # USR1's, then the final one
+    # the bridge's log lines (modbus-bridge runs the bridge), as plain key=value
+    assert f"stopped reason={'end' if how == 'duration' else how} offline_written=node" in err
+    assert len([line for line in err.splitlines() if " final node=node scans=" in line]) == 1
+    usr1 = [line for line in err.splitlines() if " counters node=node scans=" in line]
+    assert len(usr1) == (0 if how == "duration" else 1)
 
 
 # -- an output that fails on the way out ------------------------------------------------

@@ -524,8 +524,10 @@ class Bridge:
             fault = run.loop.pipeline.fault
             c = run.loop.pipeline.counters
             if value:
+                # what the transport saw, when it raised the fault (STREAM: which frames)
+                seen = {"detail": source.fault_reason} if source.fault_reason else {}
                 self.log.event("sensor_fault", level="warning", node=run.name, why=FrameFlag.describe(fault),
-                               fault_scans=c.fault_scans, invalid_scans=c.invalid_scans)
+                               fault_scans=c.fault_scans, invalid_scans=c.invalid_scans, **seen)
             else:
                 self.log.event("sensor_ok", level="info", node=run.name, fault_scans=c.fault_scans)
         elif key == "bus_fault":

@@ -139,6 +139,12 @@ class Source(abc.ABC, Generic[OptionsT]):
         what it gave up to then cannot be trusted to be all there is."""
         return self.done and bool(self.last_error)
 
+    @property
+    def fault_reason(self) -> str:
+        """What the transport saw when it marked its scans with a sensor fault (FLAGS
+        STREAM: frames not one node's, an answer repeated), for the log; "" for none."""
+        return ""
+
     def bus_errors(self) -> int:
         """Bus errors counted since start (the register image's BUS_ERRORS)."""
         return 0

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import sys
 import warnings
-from typing import Any, TextIO
+from typing import Any, NoReturn, TextIO
 
 import click
 
 from ..errors import DeprecatedKey, EskinError
 from .bridge_cmd import bridge
-from .console import add_envvars, add_global_verbosity, add_verbosity
+from .console import add_envvars, add_global_verbosity, add_verbosity, sigterm_as_interrupt
 from .demo_cmd import demo
 from .detect_cmd import detect
 from .evaluate_cmd import evaluate_cmd
@@ -30,12 +30,33 @@ from .receive_cmd import receive
 from .simulate_cmd import simulate
 
 
+def _usage_line(exc: click.UsageError) -> NoReturn:
+    """A usage error as one line, as every other error (click's own is three:
+    ``Usage: ...``, ``Try ...``, ``Error: ...``), the help to see named at its end."""
+    where = f"; help: {exc.ctx.command_path} -h" if exc.ctx is not None else ""
+    click.echo(f"eskin-bus: error: {exc.format_message().rstrip('.')}{where}", err=True)
+    sys.exit(exc.exit_code)
+
+
 class _Group(click.Group):
     """Turn expected errors into one line on stderr and an exit code, never a traceback."""
+
+    def make_context(self, info_name: str | None, args: list[str], parent: click.Context | None = None,
+                     **extra: Any) -> click.Context:
+        try:  # the group's own options (eskin-bus --bogus)
+            return super().make_context(info_name, args, parent, **extra)
+        except click.exceptions.NoArgsIsHelpError:
+            raise  # the help page, as click shows it
+        except click.UsageError as exc:
+            _usage_line(exc)
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
+        except click.exceptions.NoArgsIsHelpError:
+            raise  # a group given no command (eskin-bus plc): its help page
+        except click.UsageError as exc:  # a command's options, arguments and checks
+            _usage_line(exc)
         except EskinError as exc:
             if ctx.obj and ctx.obj.get("debug"):
                 raise
@@ -65,6 +86,7 @@ def main(ctx: click.Context, debug: bool) -> None:
     """Electronic-skin tactile arrays on industrial grippers: decode, detect slip, tell the PLC."""
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
+    sigterm_as_interrupt(ctx)  # SIGTERM as Ctrl-C: each long command's own clean end
     warnings.showwarning = _one_line_warning
     warnings.simplefilter("always", DeprecatedKey)  # each moved key of each file, every time
 

@@ -20,6 +20,7 @@ from ..errors import DeprecatedKey
 
 if TYPE_CHECKING:
     from ..bridge.config import NodeConfig
+    from ..bridge.runtime import Bridge
 from .can_common import bus_options
 from .console import verbosity
 from .outputs import given_output_options, node_outputs_from_cli, output_options, outputs_from_cli
@@ -150,6 +151,7 @@ def bridge(config_path: str | None, profile_path: str | None, source: str, inter
         except BaseException:
             log.close()
             raise
+        _registers_to_the_console(br)
         try:
             if not flags.reason:  # a signal during open: straight to the offline image
                 br.start()
@@ -162,6 +164,20 @@ def bridge(config_path: str | None, profile_path: str | None, source: str, inter
     if failure:
         _say(f"eskin-bus: error: bridge stopped: {failure}")
         sys.exit(EXIT_FAILED)
+
+
+def _registers_to_the_console(bridge: Bridge) -> None:
+    """The web console's register block: each node's served PLC block, read as the PLC
+    reads it (server mode; a client-mode PLC's writes are the writer's own)."""
+    from ..outputs.plc.kept import served_table
+    from ..outputs.web.sink import web_sinks
+
+    for run in bridge.runs:
+        webs = web_sinks(run.sinks)
+        tables = [t for t in (served_table(getattr(s, "inner", s)) for s in run.sinks) if t is not None]
+        for web in webs:
+            if tables:
+                web.set_registers(tables[0])
 
 
 def _say(line: str) -> None:

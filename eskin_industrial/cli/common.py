@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -10,7 +11,7 @@ import click
 import numpy as np
 
 from ..calibration import Calibrator, full_scale
-from ..errors import InputFormatError
+from ..errors import InputFormatError, OutputFileError
 from ..profile import Profile, load_profile
 from ..recording import read_recording
 
@@ -56,6 +57,34 @@ def host_value(ctx: click.Context, param: click.Parameter, value: str | None) ->
         return check_host(value)
     except ValueError as exc:
         raise click.BadParameter(str(exc)) from None
+
+
+def check_output(path: str | None, option: str) -> None:
+    """Before the work: the folder of a file to write (``-o``, ``--labels``) is there
+    and writable, or one line naming the option, exit 2 (as ``receive -o`` and
+    ``bridge --check`` refuse it).  ``-`` (stdout) and None pass."""
+    from ..preflight import check_writable_dir
+
+    if path is None or path == "-":
+        return
+    try:
+        check_writable_dir(path, option)
+    except ValueError as exc:
+        raise OutputFileError(str(exc)) from None
+
+
+@contextmanager
+def writing(path: str, option: str) -> Iterator[None]:
+    """Around the writing of ``path``: what the folder check cannot know (a file
+    without write permission, a full disk) as one line naming the option, exit 2."""
+    try:
+        yield
+    except BrokenPipeError:
+        raise  # stdout's reader went away: the group's business (exit 0)
+    except OSError as exc:
+        if path == "-":
+            raise
+        raise OutputFileError(f"{option}: {path}: cannot write: {(exc.strerror or str(exc)).lower()}") from None
 
 
 def open_profile(path: str) -> Profile:

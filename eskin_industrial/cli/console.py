@@ -13,10 +13,13 @@ import functools
 import json
 import logging
 import shutil
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
+from types import FrameType
 from typing import Any, TypeVar
 
 import click
@@ -73,13 +76,15 @@ def add_global_verbosity(root: click.Group) -> None:
     root.params.extend([_verbose_option(), _quiet_option()])
 
 
-def add_verbosity(cmd: click.Command) -> None:
-    """Give ``cmd`` (and every command under a group) ``-v/--verbose`` and
-    ``-q/--quiet``, unless it has them already."""
+def add_verbosity(cmd: click.Command, root: bool = True) -> None:
+    """Give ``cmd`` (and every command under a group, and the group itself but the
+    root: ``eskin-bus plc -q map``) ``-v/--verbose`` and ``-q/--quiet``, unless it has
+    them already.  The root's are :func:`add_global_verbosity`'s."""
     if isinstance(cmd, click.Group):
         for sub in cmd.commands.values():
-            add_verbosity(sub)
-        return
+            add_verbosity(sub, root=False)
+        if root:
+            return
     taken = {opt for p in cmd.params for opt in getattr(p, "opts", [])}
     for p in cmd.params:
         if "-q" in getattr(p, "opts", []) and p.callback is None:
@@ -88,6 +93,26 @@ def add_verbosity(cmd: click.Command) -> None:
         cmd.params.append(_verbose_option())
     if "-q" not in taken:
         cmd.params.append(_quiet_option())
+
+
+def sigterm_as_interrupt(ctx: click.Context) -> None:
+    """SIGTERM (``kill``, ``systemctl stop``, ``timeout``) ends a command as Ctrl-C
+    does: a KeyboardInterrupt in the main thread, so that each command's own Ctrl-C
+    path runs (the output flushed, the counters printed), where the default action
+    would end the process mid-write.  Commands that handle the signals themselves
+    (``bridge``: bridge/signals.py) install their own handlers over this one for their
+    run.  Only a default handler is replaced; the previous one is back when the
+    invocation ends."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    if signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
+        return  # an embedding program's own handler stays
+    before = signal.signal(signal.SIGTERM, _interrupt)
+    ctx.call_on_close(lambda: signal.signal(signal.SIGTERM, before))
+
+
+def _interrupt(_signum: int, _frame: FrameType | None) -> None:
+    raise KeyboardInterrupt
 
 
 def json_alias(f: Callable[..., Any]) -> Callable[..., Any]:

@@ -5,12 +5,14 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 from dataclasses import replace
-from typing import TYPE_CHECKING, TextIO, TypeVar
+from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 
 import click
 import numpy as np
 
+from ..methods import method_names
 from .common import open_profile
+from .outputs import kind_options, outputs_from_cli
 
 if TYPE_CHECKING:
     from ..profile import Profile
@@ -20,9 +22,6 @@ if TYPE_CHECKING:
     from ..sim.demo import DemoResult
     from ..view.terminal import LiveScreen
 
-#: The methods' names, without importing the detectors at start-up.
-_METHODS = ("paper", "paper-coe", "paper-dw", "force-rate", "hf-energy", "cof-velocity", "cof-track", "learned",
-            "none")
 
 T = TypeVar("T")
 
@@ -39,7 +38,7 @@ T = TypeVar("T")
 @click.option("--closed-loop", is_flag=True,
               help="The closed loop instead of a scene: the gripper reacts and the object is held or dropped "
                    "(docs/cell.md).")
-@click.option("-m", "--method", type=click.Choice(_METHODS), default=None,
+@click.option("-m", "--method", type=click.Choice(method_names()), default=None,
               help="The bridge's detection method (default: the profile's; 'none' never reports slip: the fixed "
                    "light grip).")
 @click.option("--object", "objects", multiple=True, metavar="NAME",
@@ -47,8 +46,10 @@ T = TypeVar("T")
                    "hand's glass; glass, part, box, egg, cup).")
 @click.option("--plc-cycle", "plc_cycle_ms", type=click.IntRange(min=1, max=100), default=10, show_default=True,
               help="With --closed-loop: the PLC's scan cycle (ms).")
+@kind_options("web")
 def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain: bool, plc_log: bool,
-         closed_loop: bool, method: str | None, objects: tuple[str, ...], plc_cycle_ms: int) -> None:
+         closed_loop: bool, method: str | None, objects: tuple[str, ...], plc_cycle_ms: int,
+         **output_values: object) -> None:
     """Play a scene as a CAN sensor node on python-can's virtual bus, run the bridge
     (decode, detect) and write the registers over Modbus TCP on loopback into a PLC
     stand-in.  In a terminal: a live view (taxel heat map, scores against their
@@ -58,8 +59,13 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
     With --closed-loop the node renders what happens in a virtual cell (docs/cell.md):
     the PLC stand-in runs a grip policy and commands a gripper over Modbus TCP, whose
     force decides whether the object sticks or slides; the summary says held,
-    dropped or crushed for each object."""
+    dropped or crushed for each object.
+
+    With --web HOST:PORT the web console shows the chain too (docs/web.md)."""
     ctx = click.get_current_context()
+    outputs = outputs_from_cli(dict(output_values), ("web",))
+    if closed_loop and outputs:
+        raise click.UsageError("--web shows a scene's chain; the closed loop has none yet")
     if closed_loop:
         if ctx.get_parameter_source("scene") != click.core.ParameterSource.DEFAULT:
             raise click.UsageError("--scene plays an open-loop scene; with --closed-loop choose --object")
@@ -78,11 +84,13 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
     say(f"demo: scene {rec.name} ({rec.spec.scene.description}), {len(rec.t)} scans at {rate_hz:g} Hz on a "
         f"virtual CAN bus -> bridge ({prof.detector.method}) -> Modbus TCP -> PLC stand-in; "
         f"about {rec.t[-1]:.0f} s in real time")
+    if "web" in outputs:
+        say(f"demo: the web console at {outputs['web'].url}node/0")
     stdout = sys.stdout
     if plain or not stdout.isatty():
-        res = run_demo(prof, rec, say, (lambda line: say(f"    PLC {line}")) if plc_log else None)
+        res = run_demo(prof, rec, say, (lambda line: say(f"    PLC {line}")) if plc_log else None, outputs=outputs)
     else:
-        res = _run_live(prof, rec, plc_log, stdout)
+        res = _run_live(prof, rec, plc_log, stdout, outputs)
     s, c = res.score, res.counters
     say("summary:")
     if s is not None:
@@ -97,7 +105,7 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
         f"PLC status changes {res.plc_status_changes}, grip force raised {res.grip_raises} times")
 
 
-def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> DemoResult:
+def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO, outputs: dict[str, Any]) -> DemoResult:
     """The demo under the live view; the lines it would have printed are kept and
     printed once the view has left the screen."""
     from ..outputs.plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names
@@ -132,7 +140,7 @@ def _run_live(prof: Profile, rec: Rendered, plc_log: bool, stdout: TextIO) -> De
         return live_screen(watch, stdout, color_wanted())
 
     return _then_echo(kept, lambda: run_demo(prof, rec, say, (lambda line: kept.append(f"    PLC {line}"))
-                                             if plc_log else None, live=view))
+                                             if plc_log else None, live=view, outputs=outputs))
 
 
 def _closed_loop(objects: tuple[str, ...], profile_path: str | None, rate_hz: float, seed: int, plain: bool,

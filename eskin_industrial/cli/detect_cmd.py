@@ -17,7 +17,7 @@ from ..methods import method_names
 from ..offline import Detected, Engine, detect_can_log, detect_live_log, detect_recording
 from ..profile import Profile
 from ..recording import update_row, write_updates
-from .common import open_profile, profile_option
+from .common import check_output, open_profile, profile_option, writing
 from .console import PROGRESS_DELAY_S, Counter, Ticker
 
 
@@ -30,7 +30,7 @@ from .console import PROGRESS_DELAY_S, Counter, Ticker
                    "(candump -L can0 | eskin-bus detect -p P --can-log -).")
 @click.option("-o", "--output", default="-", type=click.Path(dir_okay=False, allow_dash=True), show_default=True,
               help="Output CSV, one row per detector update ('-' for stdout).")
-@click.option("--method", type=click.Choice(sorted(method_names())), default=None,
+@click.option("-m", "--method", type=click.Choice(sorted(method_names())), default=None,
               help="Detection method (default: the profile's).")
 @click.option("--rate", "rate_hz", type=float, default=None,
               help="Sample rate in Hz (default: from the timestamps; the profile's if there are too few).")
@@ -53,6 +53,7 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
     prof = open_profile(profile_path)
     if (input_path is None) == (can_log is None):
         raise click.UsageError("give exactly one of INPUT.csv or --can-log LOG")
+    check_output(output, "-o")  # before the input is read
     if can_log == "-":  # live: a row as soon as its scan is complete
         _detect_live(prof, output, rate_hz, method, changes, as_json, quiet)
         return
@@ -70,7 +71,8 @@ def detect(profile_path: str, input_path: str | None, can_log: str | None, outpu
         keep = np.ones(len(table), bool)
         keep[1:] = table.state[1:] != table.state[:-1]
         table = UpdateTable(**{c: getattr(table, c)[keep] for c in COLUMNS})
-    write_updates(output, table)
+    with writing(output, "-o"):
+        write_updates(output, table)
     refused = sum(found.time_faults.values())
     # (a log's scans are timed by the node's counter: its refused times are the transport's)
     if fail_on_time_faults and refused and found.transport is None:
@@ -115,7 +117,7 @@ def _detect_live(prof: Profile, output: str, rate_hz: float | None, method: str 
     last: list[int] = []
 
     # no length to show a share of: a count of the updates, once it has run a second
-    with click.open_file(output, "w", encoding="utf-8") as out, \
+    with writing(output, "-o"), click.open_file(output, "w", encoding="utf-8") as out, \
             Counter("updates", own_quiet=quiet, delay_s=PROGRESS_DELAY_S, stdout_data=output == "-") as counter:
         out.write(",".join(COLUMNS) + "\n")
         out.flush()

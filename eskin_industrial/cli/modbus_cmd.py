@@ -1,20 +1,20 @@
 """``eskin-bus modbus-node`` (a sensor node simulator, Modbus RTU slave) and
-``eskin-bus modbus-bridge`` (RTU node -> detector -> PLC registers, client or server)."""
+``eskin-bus modbus-bridge`` (deprecated: ``eskin-bus bridge --source rtu:PORT`` under
+its old option names)."""
 
 from __future__ import annotations
 
-import logging
-import sys
+import shlex
 import threading
-import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
+from .bridge_cmd import bridge
 from .common import host_port, host_value, open_profile, profile_option, scene_or_recording
+from .console import quiet
 
 if TYPE_CHECKING:
-    from ..bridge.loop import NodeLoop
     from ..profile import Profile
 
 
@@ -61,121 +61,104 @@ def run_rtu_node(prof: Profile, port: str, scene: str | None, recording: str | N
 
 @click.command("modbus-bridge")
 @profile_option()
-@click.option("--rtu", "rtu_port", default=None, help="Serial port of the sensor node (Modbus RTU master).")
+@click.option("--rtu", "rtu_port", default=None, help="Serial port of the sensor node: bridge --source rtu:PORT.")
 @click.option("--recording", type=click.Path(dir_okay=False), default=None,
-              help="Replay a recording instead of polling a node.")
-@click.option("--baud", "baudrate", type=int, default=None, help="Node baud rate (default: the profile's).")
-@click.option("--plc-host", default=None, callback=host_value, help="Client mode: the PLC's host (default: the profile's).")
-@click.option("--plc-port", type=int, default=None, help="Client mode: the PLC's port (default: the profile's).")
-@click.option("--plc-rtu", default=None, metavar="PORT", help="Client mode over Modbus RTU: the PLC's serial port.")
+              help="Replay a recording instead of polling a node: bridge --source recording:FILE.")
+@click.option("--baud", "baudrate", type=int, default=None,
+              help="Node baud rate (default: the profile's): bridge --source rtu:PORT@BAUD.")
+@click.option("--plc-host", default=None, callback=host_value,
+              help="Client mode: the PLC's host (default: the profile's): bridge --plc tcp:HOST:PORT.")
+@click.option("--plc-port", type=int, default=None,
+              help="Client mode: the PLC's port (default: the profile's): bridge --plc tcp:HOST:PORT.")
+@click.option("--plc-rtu", default=None, metavar="PORT",
+              help="Client mode over Modbus RTU, the PLC's serial port: bridge --plc rtu:PORT.")
 @click.option("--plc-baud", type=int, default=115200, show_default=True, help="Baud rate for --plc-rtu.")
 @click.option("--plc-timeout", type=click.FloatRange(0.01, 30.0), default=None,
               help="Client mode: seconds the PLC has to answer (default: the profile's timeout_s).")
 @click.option("--serve", "serve", default=None, metavar="HOST:PORT",
-              help="Server mode over TCP (default host: the profile's [modbus.plc] bind).")
-@click.option("--serve-rtu", default=None, metavar="PORT", help="Server mode over Modbus RTU on this serial port.")
-@click.option("--serve-baud", type=int, default=115200, show_default=True)
+              help="Server mode over TCP (default host: the profile's [modbus.plc] bind): bridge --plc serve:HOST:PORT.")
+@click.option("--serve-rtu", default=None, metavar="PORT",
+              help="Server mode over Modbus RTU on this serial port: bridge --plc serve-rtu:PORT.")
+@click.option("--serve-baud", type=int, default=115200, show_default=True, help="Baud rate for --serve-rtu.")
 @click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,
               help="Stop after this many seconds (default: until interrupted).")
-@click.option("--status-every", type=click.FloatRange(min=0.0), default=0.0,
-              help="Print counters every N seconds (0: only at the end).")
-def modbus_bridge(profile_path: str, rtu_port: str | None, recording: str | None, baudrate: int | None,
-                  plc_host: str | None, plc_port: int | None, plc_rtu: str | None, plc_baud: int,
-                  plc_timeout: float | None, serve: str | None, serve_rtu: str | None, serve_baud: int,
-                  duration_s: float | None, status_every: float) -> None:
-    """Poll the node over Modbus RTU, detect, and publish the PLC register image:
-    written to the PLC (client mode, the default when the profile says so) or served
-    (--serve / --serve-rtu).  The same loop as ``eskin-bus bridge --source rtu:PORT``,
-    and the same signals: SIGTERM, SIGINT, SIGHUP or SIGQUIT (or --duration) leave the
-    PLC reading BRIDGE_OFFLINE; SIGUSR1 prints the counters."""
-    from ..bridge.config import BridgeConfig, NodeConfig, resolve
-    from ..bridge.runtime import SingleNode
-    from ..bridge.signals import EXIT_FAILED, handled_signals
-    from ..modbus.pymodbus_io import quiet_pymodbus
-    from ..outputs.plc.options import PlcOptions
+@click.option("--status-every", type=click.FloatRange(min=0.0), default=None,
+              help="Log the counters every N seconds (default: the bridge's, 60; 0: only at the end).")
+@click.pass_context
+def modbus_bridge(ctx: click.Context, profile_path: str, rtu_port: str | None, recording: str | None,
+                  baudrate: int | None, plc_host: str | None, plc_port: int | None, plc_rtu: str | None,
+                  plc_baud: int, plc_timeout: float | None, serve: str | None, serve_rtu: str | None,
+                  serve_baud: int, duration_s: float | None, status_every: float | None) -> None:
+    """Deprecated: ``eskin-bus bridge --source rtu:PORT`` (or ``recording:FILE``) under
+    the old option names.  It prints the equivalent ``bridge`` command line on stderr,
+    then runs it: the same loop, log lines, signals and exit codes."""
+    args = bridge_args(profile_path, rtu_port, recording, baudrate, plc_host, plc_port, plc_rtu, plc_baud,
+                       plc_timeout, serve, serve_rtu, serve_baud, duration_s, status_every)
+    if not quiet():
+        line = shlex.join(["eskin-bus", "bridge", *(word for flag, _, value in args for word in (flag, _word(value)))])
+        click.echo(f"eskin-bus: warning: modbus-bridge is deprecated; it runs: {line}", err=True)
+    # From the group's context, as if `bridge` had been typed (-q/-v before the
+    # command still apply); a usage error of the bridge's names its command.
+    parent = ctx.parent or ctx
+    try:
+        parent.invoke(bridge, **{dest: value for _, dest, value in args})
+    except click.UsageError as exc:
+        if exc.ctx is None or exc.ctx is parent:
+            exc.ctx = click.Context(bridge, info_name="bridge", parent=parent)
+        raise
 
-    quiet_pymodbus()
-    prof = open_profile(profile_path)
-    plc = prof.modbus.plc
+
+def bridge_args(profile_path: str, rtu_port: str | None, recording: str | None, baudrate: int | None,
+                plc_host: str | None, plc_port: int | None, plc_rtu: str | None, plc_baud: int,
+                plc_timeout: float | None, serve: str | None, serve_rtu: str | None, serve_baud: int,
+                duration_s: float | None, status_every: float | None) -> list[tuple[str, str, Any]]:
+    """``modbus-bridge``'s options as ``bridge``'s: ``(flag, parameter, value)`` each,
+    one table for both the printed command line and the call (so they cannot differ).
+    Combinations the old command refused are refused the same way."""
     if (rtu_port is None) == (recording is None):
         raise click.UsageError("give one of --rtu PORT or --recording REC.csv")
+    if recording is not None and baudrate is not None:
+        raise click.UsageError("--baud is the node's serial line: it goes with --rtu, not --recording")
     if serve and serve_rtu:
         raise click.UsageError("--serve and --serve-rtu exclude each other")
-    client_asked = plc_host is not None or plc_port is not None or plc_rtu is not None or plc_timeout is not None
-    if client_asked and (serve or serve_rtu):
+    tcp_client = plc_host is not None or plc_port is not None
+    if (tcp_client or plc_rtu is not None or plc_timeout is not None) and (serve or serve_rtu):
         raise click.UsageError("client options (--plc-*) and server options (--serve*) exclude each other")
+    if tcp_client and plc_rtu is not None:
+        raise click.UsageError("--plc-rtu and --plc-host/--plc-port exclude each other")
+    source = f"rtu:{rtu_port}" + (f"@{baudrate}" if baudrate is not None else "") if rtu_port is not None \
+        else f"recording:{recording}"
+    args: list[tuple[str, str, Any]] = [("-p", "profile_path", profile_path), ("--source", "source", source)]
+    baud = None
     if serve_rtu:
-        out = PlcOptions(mode="server", transport="rtu", serial_port=serve_rtu, baudrate=serve_baud)
+        plc, baud = f"serve-rtu:{serve_rtu}", serve_baud
     elif serve:
         host, port = host_port(serve, "--serve", require_port=True)
-        out = PlcOptions(mode="server", host=host, port=port)  # no host: the profile's bind
+        plc = f"serve:{_endpoint(host, port)}"
     elif plc_rtu:
-        out = PlcOptions(mode="client", transport="rtu", serial_port=plc_rtu, baudrate=plc_baud, timeout_s=plc_timeout)
+        plc, baud = f"rtu:{plc_rtu}", plc_baud
+    elif tcp_client or plc_timeout is not None:  # as before: any client option asks for client mode
+        plc = f"tcp:{_endpoint(plc_host, plc_port)}"
     else:
-        out = PlcOptions(mode="client" if client_asked else None, host=plc_host, port=plc_port, timeout_s=plc_timeout)
-    if rtu_port is not None:
-        node = NodeConfig.of("node", profile_path, "modbus-rtu", serial_port=rtu_port, baudrate=baudrate)
-    else:
-        node = NodeConfig.of("node", profile_path, "recording", path=recording)
-    cfg = BridgeConfig(node=(node,), outputs={"plc": out})
-    (resolved,) = resolve(cfg)
-    # The signals of `eskin-bus bridge`: each stopping one leaves the block reading
-    # BRIDGE_OFFLINE (SingleNode's exit), USR1 prints the counters.
-    package_log = logging.getLogger("eskin_industrial")  # the server's refusals: a line each
-    lines, level = _Lines(), package_log.level
-    package_log.addHandler(lines)
-    package_log.setLevel(logging.INFO)
-    try:
-        with handled_signals() as flags:
-            single = SingleNode(cfg, resolved)
-            loop = single.loop
-            for sink in loop.sinks:  # the writer's outages: a line each
-                sink.on_events(_event_line)
-            where = "; ".join(s.where for s in loop.sinks)
-            _say(f"modbus-bridge: {prof.name}: {rtu_port or recording} -> {where}, base address {plc.base_address}")
-            end = None if duration_s is None else time.monotonic() + duration_s
-            next_status = time.monotonic() + status_every if status_every else None
-            usr1 = 0
-            with single:
-                while not flags.reason and not single.failure and (end is None or time.monotonic() < end):
-                    loop.step()
-                    if flags.counters != usr1:
-                        usr1 = flags.counters
-                        _say(_counters(loop))
-                    if next_status is not None and time.monotonic() >= next_status:
-                        next_status += status_every
-                        _say(_counters(loop))
-            _say(f"modbus-bridge: stopped ({flags.reason or 'duration'}), offline written: "
-                 f"{'yes' if single.offline_written else 'no'}")
-            _say(_counters(loop))
-    finally:
-        package_log.removeHandler(lines)
-        package_log.setLevel(level)
-    if single.failure:
-        _say(f"eskin-bus: error: modbus-bridge stopped: {single.failure}")
-        sys.exit(EXIT_FAILED)
-    if flags.failing:
-        sys.exit(EXIT_FAILED)
+        plc = None  # the profile's [modbus.plc], as the bridge has it
+    if plc is not None:
+        args.append(("--plc", "plc", plc))
+    if baud is not None and baud != 115200:  # the bridge's default too
+        args.append(("--plc-baud", "plc_baud", baud))
+    for flag, dest, value in (("--plc-timeout", "plc_timeout", plc_timeout),
+                              ("--status-every", "status_every", status_every),
+                              ("--duration", "duration_s", duration_s)):
+        if value is not None:
+            args.append((flag, dest, value))
+    return args
 
 
-def _counters(loop: NodeLoop) -> str:
-    return "modbus-bridge: " + " ".join(f"{k}={v}" for k, v in loop.counters().items())
+def _endpoint(host: str | None, port: int | None) -> str:
+    """``HOST:PORT``, ``HOST``, ``:PORT`` or nothing, an IPv6 host in brackets (what
+    :func:`eskin_industrial.netaddr.parse_endpoint` reads back)."""
+    text = "" if host is None else f"[{host}]" if ":" in host else host
+    return text if port is None else f"{text}:{port}"
 
 
-class _Lines(logging.Handler):
-    """The package's own log records (the Modbus server's events) as lines on stderr."""
-
-    def emit(self, record: logging.LogRecord) -> None:
-        _event_line(record.getMessage(), record.levelname.lower(), getattr(record, "fields", {}))
-
-
-def _event_line(name: str, level: str, fields: dict) -> None:
-    _say(f"modbus-bridge: {level} {name} " + " ".join(f"{k}={v}" for k, v in fields.items()))
-
-
-def _say(line: str) -> None:
-    """A line on stderr, which may be gone (a closed terminal, a dead pipe)."""
-    try:
-        click.echo(line, err=True)
-    except OSError:
-        pass
+def _word(value: Any) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)

@@ -12,6 +12,7 @@ import click
 from ..methods import method_names
 from .can_common import bus_options, nothing_received
 from .common import profile_option
+from .outputs import kind_options, outputs_from_cli
 
 
 @click.command()
@@ -25,18 +26,21 @@ from .common import profile_option
               help="Stop once no scan came for this many seconds, counted from the start (none at all: exit 6).")
 @click.option("--plain", is_flag=True,
               help="One line per state change instead of the live view (the default when stdout is not a terminal).")
+@kind_options("web")
 def monitor(profile_path: str, interface: str | None, channel: str | None, bitrate: int | None, fd: bool | None, data_bitrate: int | None, bus_extra: dict[str, Any],
             rate_hz: float | None, method: str | None, duration_s: float | None, idle_s: float | None,
-            plain: bool) -> None:
+            plain: bool, **output_values: Any) -> None:
     """Watch a sensor node on a CAN bus: its scans decoded and detected, shown live
     (taxel heat map, scores against their thresholds, state, the register image the
     bridge would publish, counters) until Ctrl-C, --duration or --idle-exit; then one
-    line of counters.  No PLC is contacted."""
+    line of counters.  No PLC is contacted.  With --web HOST:PORT the web console shows
+    the node too (docs/web.md)."""
     from ..bridge.config import BridgeConfig, NodeConfig, resolve
     from ..bridge.runtime import SingleNode
     from ..detect.updates import Update
     from ..errors import EskinError
     from ..outputs.plc.kept import KeptRegisters
+    from ..outputs.web.sink import web_sinks
     from ..view.live import Watch, change_line, live_screen
     from ..view.snapshot import RegisterTable
     from ..view.terminal import color_wanted
@@ -45,7 +49,7 @@ def monitor(profile_path: str, interface: str | None, channel: str | None, bitra
         raise click.BadParameter(f"expected a positive rate, got {rate_hz}", param_hint="--rate")
     node = NodeConfig.of("node", profile_path, "can", rate_hz=rate_hz, interface=interface, channel=channel,
                          bitrate_bps=bitrate, fd=fd, data_bitrate_bps=data_bitrate, **bus_extra)
-    cfg = BridgeConfig(node=(node,))
+    cfg = BridgeConfig(node=(node,), outputs=outputs_from_cli(output_values, ("web",)))
     (resolved,) = resolve(cfg)
     prof = resolved.profile
     chosen = method or prof.detector.method
@@ -53,6 +57,8 @@ def monitor(profile_path: str, interface: str | None, channel: str | None, bitra
     # a bus that cannot be opened: one line, exit 3
     single = SingleNode(cfg, resolved, extra_sinks=[sink], default_output=False, all_frames=True, method=method)
     loop = single.loop
+    for web in web_sinks(loop.sinks):  # the register block as the bridge would publish it
+        web.set_registers(sink.table)
     where = loop.source.describe_where() if channel is None else channel
     stdout = sys.stdout
     live = not plain and stdout.isatty()

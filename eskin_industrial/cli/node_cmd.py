@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from typing import TYPE_CHECKING, Any
 
 import click
@@ -86,7 +87,12 @@ def node(profile_path: str, interface: str | None, channel: str | None, bitrate:
         bus = open_bus(**kw)
     try:
         sim = CanNode(layout, bus, raw, rate, prof.can.heartbeat_s, faults, burst, repeat, duration_s)
-        stats = sim.run()
+        start = time.monotonic()
+        try:
+            stats = sim.run()
+        except KeyboardInterrupt:  # Ctrl-C or SIGTERM: a stop as asked, the summary of what was sent
+            stats = sim.stats
+            stats.elapsed_s = time.monotonic() - start
     finally:
         bus.shutdown()
     if not quiet:

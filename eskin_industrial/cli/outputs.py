@@ -21,8 +21,18 @@ def _all_cli_options(kind: str) -> tuple[CliOption, ...]:
 def output_options(func: F) -> F:
     """Every output kind's options (its section's and a one-node bridge's node keys),
     in registry order."""
+    return _options(func, list(sink_kinds()))
+
+
+def kind_options(*kinds: str) -> Callable[[F], F]:
+    """The options of these output kinds only, for a command that runs its own chain
+    and takes some outputs beside it (``demo --web``, ``monitor --web``)."""
+    return lambda func: _options(func, list(kinds))
+
+
+def _options(func: F, kinds: list[str]) -> F:
     opts = []
-    for kind in sink_kinds():
+    for kind in kinds:
         for o in _all_cli_options(kind):
             if o.secret:
                 continue  # secrets come from files or the environment, never argv
@@ -37,10 +47,11 @@ def output_options(func: F) -> F:
     return func
 
 
-def outputs_from_cli(values: dict[str, Any]) -> dict[str, Any]:
-    """``kind -> options`` for every kind asked for on the command line."""
+def outputs_from_cli(values: dict[str, Any], kinds: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """``kind -> options`` for every kind asked for on the command line (of ``kinds``
+    only, when given: the ones :func:`kind_options` added)."""
     out = {}
-    for kind in sink_kinds():
+    for kind in kinds or sink_kinds():
         cls = output_kind(kind)
         try:
             options = cls.options_from_cli(values)

@@ -21,8 +21,8 @@ from .common import host_value, open_profile, profile_option
               help="Newtons added to the grip force at each slip.")
 def plc_sim(profile_path: str, host: str, port: int | None, rtu_port: str | None, baudrate: int,
             duration_s: float | None, grip_step: float) -> None:
-    """Serve the PLC's receive registers over Modbus TCP (for `modbus-bridge` in client
-    mode), print every status change, and run the example gripper logic: raise the
+    """Serve the PLC's receive registers over Modbus TCP (for `bridge --plc tcp:HOST:PORT`,
+    client mode), print every status change, and run the example gripper logic: raise the
     grip force when the slip flag comes, acknowledge the latch, hold when the data
     is not valid."""
     from ..sim.plc import Gripper, PlcSimulator
@@ -37,9 +37,9 @@ def plc_sim(profile_path: str, host: str, port: int | None, rtu_port: str | None
     sim = PlcSimulator(plc, host, port or plc.port, gripper=Gripper(step_n=grip_step),
                        echo=lambda s: click.echo(s), serial=serial)
     sim.start()
-    click.echo(f"plc-sim: listening on {sim.server.where}, registers from {plc.base_address} "
-               f"(40001 + {plc.base_address}), grip force {sim.gripper.force_n:g} N", err=True)
-    try:
+    try:  # from the start line on, Ctrl-C or SIGTERM end with the summary
+        click.echo(f"plc-sim: listening on {sim.server.where}, registers from {plc.base_address} "
+                   f"(40001 + {plc.base_address}), grip force {sim.gripper.force_n:g} N", err=True)
         if duration_s is None:
             while True:
                 time.sleep(1.0)

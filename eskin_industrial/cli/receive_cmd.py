@@ -39,7 +39,7 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
     """Receive scans from a CAN bus until stopped (Ctrl-C, --duration, --idle-exit,
     --scans), run the detector, and report the transport counters as JSON on stderr.
     The same source and loop as ``eskin-bus bridge --source can``."""
-    from ..bridge.config import BridgeConfig, NodeConfig, resolve
+    from ..bridge.config import BridgeConfig, NodeConfig, check_sources, resolve
     from ..bridge.runtime import SingleNode
     from ..errors import EskinError
     from ..outputs.recorder.kind import RecorderOptions
@@ -56,15 +56,16 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
     outputs = {"recorder": RecorderOptions(path=output)} if output is not None else {}
     cfg = BridgeConfig(node=(node,), outputs=outputs, queue_frames=queue_frames)
     (resolved,) = resolve(cfg)
+    check_sources(cfg, [resolved])  # --log's folder, --can-log's file: one line, exit 2, before the bus opens
     single = SingleNode(cfg, resolved, default_output=False, all_frames=True)  # a bus that cannot be opened: one line, exit 3 (5: no SocketCAN)
     loop, source = single.loop, cast("CanSource", single.loop.source)  # the node's source is "can" or "can-log"
     ended, where = "", source.describe_where()
-    if not quiet:
-        layout = source.assembler.layout
-        click.echo(f"eskin-bus: receiving {resolved.profile.name} on {where} "
-                   f"({layout.segments} frame{'s' if layout.segments > 1 else ''} per scan)", err=True)
     with single:
-        try:
+        try:  # from the start line on, Ctrl-C or SIGTERM end with the counters
+            if not quiet:
+                layout = source.assembler.layout
+                click.echo(f"eskin-bus: receiving {resolved.profile.name} on {where} "
+                           f"({layout.segments} frame{'s' if layout.segments > 1 else ''} per scan)", err=True)
             ended = loop.run(duration_s=duration_s, idle_timeout_s=idle_s, max_scans=max_scans)
         except KeyboardInterrupt:
             pass

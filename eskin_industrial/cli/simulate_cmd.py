@@ -6,7 +6,7 @@ import click
 
 from ..recording import write_recording
 from ..scenes import Rendered, list_scenes, render
-from .common import open_profile
+from .common import check_output, open_profile, writing
 from .console import PROGRESS_DELAY_S, Ticker
 
 
@@ -50,6 +50,8 @@ def simulate(scene: str | None, output: str | None, labels_path: str | None, rat
             raise click.BadParameter(str(exc), param_hint="--can-log") from None
     if output is None:
         output = "-" if can_log is None else None
+    check_output(output, "-o")  # before the scene is rendered
+    check_output(labels_path, "--labels")
     with Ticker(delay_s=PROGRESS_DELAY_S, stdout_data="-" in (output, can_log)) as ticker:
         rec = render(scene, rate_hz, seed)
         if can_log is not None:
@@ -57,7 +59,7 @@ def simulate(scene: str | None, output: str | None, labels_path: str | None, rat
         if output is not None:
             _simulate(rec, output, raw_profile, ticker)
     if labels_path is not None:
-        with open(labels_path, "w", encoding="utf-8") as f:
+        with writing(labels_path, "--labels"), open(labels_path, "w", encoding="utf-8") as f:
             f.write("t,label\n")
             f.writelines(f"{t:.6f},{label}\n" for t, label in zip(rec.t.tolist(), rec.labels.tolist()))
 
@@ -90,6 +92,8 @@ def _simulate(rec: Rendered, output: str, raw_profile: str | None, ticker: Ticke
         if prof.taxels != rec.forces.shape[1]:
             raise click.UsageError(f"scene {rec.name} has {rec.forces.shape[1]} taxels, profile {prof.name} has {prof.taxels}")
         raw = Calibrator.from_section(prof.calibration, prof.taxels).to_raw(rec.forces)
-        write_recording(output, rec.t, raw.round(), unit="raw", progress=ticker)
+        with writing(output, "-o"):
+            write_recording(output, rec.t, raw.round(), unit="raw", progress=ticker)
     else:
-        write_recording(output, rec.t, rec.forces, progress=ticker)
+        with writing(output, "-o"):
+            write_recording(output, rec.t, rec.forces, progress=ticker)

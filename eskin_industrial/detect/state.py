@@ -181,10 +181,13 @@ class ContactRule:
 
     def _settling(self, s: float, loaded: float) -> bool:
         """A frame of the settling: only a load that is always contact enters (held for
-        the dwell, as any change); a total that may be the film's own is learnt."""
-        if loaded >= self.enter_n + 2.0 * self.max_n:
+        the dwell, as any change, or at once when twice that); a total that may be the
+        film's own is learnt."""
+        always = self.enter_n + 2.0 * self.max_n
+        if loaded >= always:
             self.run += 1
-            if self.run >= self.dwell:
+            # (a clear load, twice that, at once: as after the settling)
+            if self.run >= self.dwell or loaded >= 2.0 * always:
                 self.on, self.run = True, 0
         else:
             self.run = 0

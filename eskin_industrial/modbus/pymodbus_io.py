@@ -33,7 +33,7 @@ from pymodbus.exceptions import ModbusException
 from pymodbus.pdu import ModbusPDU
 from pymodbus.server import ModbusTcpServer
 
-from ..errors import EskinError, ModbusFault
+from ..errors import EskinError, ListenError, ModbusFault
 from ..netaddr import listen_problem
 from .pdu import RegisterHandler, Table
 from .rtu_frame import intact
@@ -108,8 +108,8 @@ class RegisterServer:
         if self._error is not None:
             # pymodbus says only "please check address": try the bind ourselves for why
             problem = listen_problem(*self.tcp)
-            if problem:
-                raise EskinError(f"modbus server: {problem}")
+            if problem:  # a port in use: a setting to change, exit 2 (as the bridge's server)
+                raise ListenError(f"modbus server: {problem}")
             raise EskinError(f"modbus server ({self.where}): cannot listen: {self._error}")
         return self
 
@@ -200,7 +200,7 @@ class RtuMaster:
     framing) and exception responses apart."""
 
     def __init__(self, settings: SerialSettings, unit_id: int, timeout_s: float) -> None:
-        self.settings, self.unit_id = settings, unit_id
+        self.settings, self.unit_id, self.timeout_s = settings, unit_id, timeout_s
         self._rx = bytearray()
         self._client = ModbusSerialClient(
             settings.port, framer=FramerType.RTU, baudrate=settings.baudrate, parity=settings.parity,
@@ -224,11 +224,23 @@ class RtuMaster:
         try:
             r = call(address, count=count, device_id=self.unit_id)
         except (ModbusException, OSError) as exc:
-            kind = "crc" if self._rx and not intact(bytes(self._rx)) else "timeout"
-            if not self._client.connected:
-                kind = "connection"
-            raise ModbusFault(kind, f"{self.settings.port}: {kind}: {exc}") from None
+            raise self._fault(exc) from None
         return list(_raise_on_error(r, f"{self.settings.port}").registers)
+
+    def _fault(self, exc: BaseException) -> ModbusFault:
+        """What went wrong, from the bytes that came back, in our words: pymodbus says
+        "No response received" of an answer from another unit and of a garbled one
+        alike (and "CLOSING CONNECTION" of a serial line that stays open)."""
+        port, rx = self.settings.port, bytes(self._rx)
+        if not self._client.connected:
+            return ModbusFault("connection", f"{port}: connection: {exc}")
+        if rx and intact(rx) and rx[0] != self.unit_id:
+            return ModbusFault("unit", f"{port}: unit: the answer came from unit {rx[0]}, unit {self.unit_id} was "
+                                       "asked ([modbus.node] unit_id, or a bridge node's unit_id)")
+        if rx:
+            what = "not a whole frame" if len(rx) < 4 else "bad CRC" if not intact(rx) else "not the answer asked for"
+            return ModbusFault("crc", f"{port}: crc: a garbled answer ({len(rx)} bytes, {what}), dropped")
+        return ModbusFault("timeout", f"{port}: timeout: no answer from unit {self.unit_id} within {self.timeout_s:g} s")
 
     def write_registers(self, address: int, values: Sequence[int]) -> None:
         try:

@@ -19,7 +19,7 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import EskinError
+from ..errors import TransportError
 from . import pdu, rtu_frame
 from .exception_codes import ILLEGAL_FUNCTION
 from .serial_line import SerialSettings
@@ -78,7 +78,8 @@ class RtuServer:
         try:
             self._port = self._open()
         except (OSError, ValueError) as exc:  # serial.SerialException is an OSError
-            raise EskinError(f"cannot open serial port {self.settings.port}: {exc}") from None
+            # a transport that cannot be opened: exit 3, as the bridge's serial line
+            raise TransportError(f"cannot open serial port {self.settings.port}: {exc}") from None
         self._thread = threading.Thread(target=self._run, name="modbus-rtu-server", daemon=True)
         self._thread.start()
         return self

@@ -4,11 +4,16 @@ moves the bytes and applies the :class:`Policy`.
 
 - Every complete request in the receive buffer is answered, in order: requests sent
   back to back in one TCP segment each get their response.
-- At most ``max_connections`` at once.  A connection beyond the cap replaces the one
-  idle the longest, if that one has been quiet for :data:`EVICT_IDLE_S` or more (an
-  idle socket left behind, never a PLC that polls); otherwise it is closed at once.
-  A client on ``allow_write`` (the PLC, when the list names it) always gets in: it
-  replaces the quietest connection that is not on ``allow_write``.
+- At most ``max_connections`` at once.  A connection beyond the cap replaces, first,
+  the oldest connection that has sent no whole request yet (a socket that holds a
+  slot and says nothing: connections opened and replaced faster than any quiet time
+  must not keep a reconnecting PLC out); else the one idle the longest, if that one
+  has been quiet for :data:`EVICT_IDLE_S` or more (an idle socket left behind, never
+  a PLC that polls); otherwise it is closed at once.  The PLC's slot is kept: a
+  client on ``allow_write`` (the PLC, when the list names it) always gets in, and
+  replaces the quietest connection that is not on ``allow_write``; with no
+  ``allow_write``, the longest-established connection that has sent requests is the
+  PLC's, and never replaced.
 - A connection quiet for ``idle_timeout_s`` is closed.  Only whole requests are
   activity: bytes of a frame never completed are not, and a frame still incomplete
   after ``frame_timeout_s`` closes its connection (one byte a second keeps no socket).
@@ -147,13 +152,15 @@ class _Connection(asyncio.Protocol):
         self.server = server
         self.transport: asyncio.Transport | None = None
         self.buf = bytearray()
-        self.last = time.monotonic()  #: the last whole request (or the connection's start)
+        self.since = self.last = time.monotonic()  #: the last whole request (or the connection's start)
+        self.served = 0  #: whole requests answered
         self.partial_since: float | None = None  #: the first byte of a frame not yet complete
         self.unread_since: float | None = None  #: answers left unread past the limit, since
         self.backlog = False  #: requests left for the next turn
         self.peer = "-"
         self.may_write = False
         self.kept = False  #: on allow_write: never replaced to let another in
+        self.ip: Address | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
@@ -202,6 +209,7 @@ class _Connection(asyncio.Protocol):
         now = time.monotonic()
         if out:
             self.last = now
+            self.served += len(out)
             transport.write(b"".join(out))  # the answers, in order, in one send
         if bad:  # the requests before it are answered; the stream cannot be resynchronised
             self.server.malformed(self, bad)
@@ -292,26 +300,44 @@ class TcpServer:
             self.log.event("modbus_client_refused", peer=conn.peer, reason="not in allow_read")
             conn.close()
             return
-        conn.kept = p.kept_slot(ip)
+        conn.kept, conn.ip = p.kept_slot(ip), ip
         if len(self.conns) >= p.max_connections:
             now = time.monotonic()
-            oldest = min(self.conns, key=lambda k: k.last)
-            others = [k for k in self.conns if not k.kept]
-            if conn.kept and others:  # the PLC's slot: the quietest of the others makes room
-                oldest = min(others, key=lambda k: k.last)
-            elif now - oldest.last < EVICT_IDLE_S:
+            victim, why = self._room_for(conn, now)
+            if victim is None:
                 c.over_cap += 1
                 self.log.event("modbus_client_refused", peer=conn.peer, reason="connection cap",
                                max_connections=p.max_connections)
                 conn.close()
                 return
             c.evicted += 1
-            self.log.event("modbus_client_evicted", level=logging.INFO, peer=oldest.peer,
-                           idle_s=round(now - oldest.last, 1), by=conn.peer)
-            oldest.close()
+            self.log.event("modbus_client_evicted", level=logging.INFO, peer=victim.peer, reason=why,
+                           idle_s=round(now - victim.last, 1), by=conn.peer)
+            victim.close()
         conn.may_write = p.may_write(ip)
         self.conns.add(conn)
         c.connections += 1
+
+    def _room_for(self, conn: _Connection, now: float) -> tuple[_Connection | None, str]:
+        """The connection a newcomer at the cap replaces, and why; None: none may go."""
+        others = [k for k in self.conns if not k.kept]
+        silent = [k for k in others if not k.served]
+        if silent:  # holds a slot and has asked nothing: the oldest such goes first
+            return min(silent, key=lambda k: k.since), "silent"
+        if conn.kept and others:  # the PLC's slot: the quietest of the others makes room
+            return min(others, key=lambda k: k.last), "plc_slot"
+        if not self.policy.allow_write and others:
+            # no PLC named: the longest-established connection that asks is the PLC's,
+            # replaced only by its own address (the PLC back after a cable fault, its
+            # old connection dead and quiet)
+            plc = min(others, key=lambda k: k.since)
+            if plc.ip != conn.ip:
+                others.remove(plc)
+        if others:
+            quietest = min(others, key=lambda k: k.last)
+            if now - quietest.last >= EVICT_IDLE_S:
+                return quietest, "idle"
+        return None, ""
 
     def answer(self, request: bytes, conn: _Connection) -> bytes:
         tid, unit, req = mbap.split_request(request)

@@ -42,7 +42,7 @@ class NodeSnapshot(NamedTuple):
 
     #: The claimed grasp state (:class:`~eskin_industrial.detect.state.GraspState`
     #: code); None when no state is claimed: no update yet, detection disabled, the
-    #: sensor stale or faulty (FLAGS DEAD_TAXELS, FROZEN, RATE), or the bridge offline.
+    #: sensor stale or faulty (FLAGS DEAD_TAXELS, FROZEN, RATE, STREAM), or the bridge offline.
     state: int | None
     #: The state is a verdict: claimed, the detector's indicators valid, no bus fault.
     valid: bool
@@ -99,7 +99,7 @@ class NodeSnapshot(NamedTuple):
 
     @property
     def sensor_fault(self) -> int:
-        """The sensor's fault bits in :attr:`flags` (DEAD_TAXELS, FROZEN, RATE; 0: none)."""
+        """The sensor's fault bits in :attr:`flags` (DEAD_TAXELS, FROZEN, RATE, STREAM; 0: none)."""
         return self.flags & SENSOR_FAULTS
 
     @property

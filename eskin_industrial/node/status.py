@@ -23,7 +23,7 @@ _SLIP = int(GraspState.SLIP)
 # ints: this runs at every scan).
 _STALE, _BUS_FAULT, _ENABLED, _LATCHED, _VALID = 1, 2, 4, 8, 16
 _STATE_SHIFT = 5  #: the claimed state's code + 1 from here (0: none claimed)
-_FAULT_SHIFT = 8  #: the sensor's fault bits (FrameFlag 1024..4096) from here on
+_FAULT_SHIFT = 8  #: the sensor's fault bits (FrameFlag 1024..8192) from here on
 
 
 @dataclass

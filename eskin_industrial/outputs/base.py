@@ -54,6 +54,7 @@ SINKS: dict[str, str] = {
     "recorder": "eskin_industrial.outputs.recorder.kind:RecorderKind",
     "sparkplug": "eskin_industrial.outputs.sparkplug.kind:SparkplugKind",
     "opcua": "eskin_industrial.outputs.opcua.sink:OpcuaKind",
+    "web": "eskin_industrial.outputs.web.kind:WebKind",
 }
 #: A sink's own events held until a handler is attached (the first ones of a writer
 #: that starts before the bridge's log is wired); beyond it the oldest are dropped.

@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -27,7 +27,9 @@ from ..bus.can.reader import open_bus
 from ..calibration import Calibrator
 from ..detect.updates import Update, UpdateTable
 from ..evaluation.metrics import SceneScore, score_scene
+from ..outputs.plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names
 from ..outputs.plc.options import PlcOptions
+from ..outputs.web.sink import WebSink, web_sinks
 from ..profile import Profile
 from ..scenes import Rendered
 from ..view.live import change_line
@@ -59,6 +61,22 @@ class DemoParts:
     started: float  #: ``time.monotonic()`` at the start
 
 
+def show_the_scene(sink: WebSink, rec: Rendered, plc: PlcSimulator) -> None:
+    """The web console's node page: the scene's own onsets (its detection delays) and
+    the register block as the PLC stand-in holds it."""
+    onsets = [(float(e.t_s), "slip" if e.kind in ("slide", "rotate") else "variable_force")
+              for e in rec.spec.events if e.kind not in ("press", "release")]
+    sink.set_truth(onsets)
+    word_order = plc.settings.word_order
+
+    def registers() -> tuple[dict[str, int], tuple[str, ...]]:
+        regs = list(plc.memory.regs)
+        values = read_back(regs[:STATUS_COUNT], regs[TAIL_AT:TAIL_AT + TAIL_COUNT], word_order)
+        return values, tuple(status_names(values["STATUS"]))
+
+    sink.set_registers(registers)
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -67,13 +85,16 @@ def free_port() -> int:
 
 def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_echo: Callable[[str], None] | None,
              drain_s: float = 1.0,
-             live: Callable[[DemoParts], AbstractContextManager[object]] | None = None) -> DemoResult:
+             live: Callable[[DemoParts], AbstractContextManager[object]] | None = None,
+             outputs: dict[str, Any] | None = None) -> DemoResult:
     """Run the chain until the node has played ``rec`` and ``drain_s`` more.
 
     The bridge side is the product's own: the CAN source and the PLC client sink of a
     one-node bridge configuration, and the per-node loop, on this thread.  ``live``,
     when given, is entered once the chain is up and left before it is torn down (also
     on Ctrl-C or an error): a live view that only reads the chain's newest values.
+    ``outputs``: more output kinds beside the PLC (``--web``: the web console, shown
+    the scene's own onsets and the registers the PLC stand-in received).
     """
     layout = CanLayout.from_profile(profile, fd=False)
     raw = np.rint(Calibrator.from_section(profile.calibration, profile.taxels).to_raw(rec.forces))
@@ -89,7 +110,8 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
 
     node = NodeConfig.of("demo", profile.source, "can", rate_hz=rec.rate_hz, interface="virtual", channel=channel,
                          fd=False)
-    cfg = BridgeConfig(node=(node,), outputs={"plc": PlcOptions(mode="client", host="127.0.0.1", port=port)})
+    cfg = BridgeConfig(node=(node,), outputs={"plc": PlcOptions(mode="client", host="127.0.0.1", port=port),
+                                              **(outputs or {})})
     plc = PlcSimulator(profile.modbus.plc, "127.0.0.1", port, echo=plc_echo).start()
     try:
         single = SingleNode(cfg, ResolvedNode(node, profile), on_update=observed)
@@ -97,7 +119,9 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
         plc.stop()
         raise
     loop = single.loop
-    writer = cast("PlcWriter", loop.sinks[0])  # the one output: the PLC in client mode
+    writer = cast("PlcWriter", loop.sinks[0])  # the first output: the PLC in client mode
+    for web in web_sinks(loop.sinks):
+        show_the_scene(web, rec, plc)
     tx = open_bus("virtual", channel)
     sim = CanNode(layout, tx, raw, rec.rate_hz, profile.can.heartbeat_s, Faults(), False, 1, None)
     node_thread = threading.Thread(target=sim.run, name="demo-node", daemon=True)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, replace
 
 import can
 import numpy as np
+from pymodbus.client import ModbusTcpClient
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
 from eskin_industrial.bridge.logs import EventLog
@@ -233,3 +234,32 @@ class TimedPlc:
     def last(self) -> dict[str, int] | None:
         with self._lock:
             return self.writes[-1][1] if self.writes else None
+
+
+class BlockPoller:
+    """A PLC polling the served block with pymodbus: (time, STATUS, F_SUM in N, FLAGS) per read."""
+
+    def __init__(self, port: int, every_s: float = 0.004) -> None:
+        self.client = ModbusTcpClient("127.0.0.1", port=port, timeout=2)
+        self.every_s = every_s
+        self.reads: list[tuple[float, int, float, int]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="plc-poller", daemon=True)
+
+    def _run(self) -> None:
+        n = REG["FLAGS"].offset + 1
+        while not self._stop.wait(self.every_s):
+            reply = self.client.read_holding_registers(0, count=n)
+            assert not reply.isError(), reply
+            v = decode(list(reply.registers) + [0, 0], "big")
+            self.reads.append((time.perf_counter(), v["STATUS"], v["F_SUM"] / 1000.0, v["FLAGS"]))
+
+    def __enter__(self) -> BlockPoller:
+        assert self.client.connect()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(5)
+        self.client.close()

@@ -17,6 +17,7 @@ Summary (node range ``base_id .. base_id + 15``):
 
 from __future__ import annotations
 
+import collections
 import enum
 import math
 from collections.abc import Iterable
@@ -30,6 +31,7 @@ import numpy as np
 from ...errors import DecodeError, ProfileError
 from ...frames import RawScan
 from ...profile import Profile
+from .stream import StreamWatch
 
 SEQ_BITS = 12
 SEQ_MODULO = 1 << SEQ_BITS
@@ -257,6 +259,8 @@ ASSEMBLER_COUNTERS = (
     "bus_off",  #: error frames reporting bus-off
     "heartbeats",
     "node_id_mismatch",  #: heartbeats naming another node number
+    "interleaved_frames",  #: late frames of a counter the stream never started: a second sender
+    "stream_faults",  #: entries into FLAGS STREAM (:mod:`.stream`): the frames are not one node's
 )
 
 _CAN_ERR_BUSOFF = 0x040  # linux/can/error.h: error class bit in the error frame's ID
@@ -268,6 +272,9 @@ ERROR_RUN_FAULT = 5
 #: decades): the unwrap then trusts the counter alone.  It also bounds the wraps the
 #: clock can add, so ``RawScan.t`` stays a finite float.
 _CLOCK_LIMIT_S = 1e9
+#: Counters of the scans last begun, kept to tell a reordered frame (its scan was
+#: begun) from a second sender's (a counter the stream skipped).
+_STARTED_KEPT = 64
 
 
 class ScanAssembler:
@@ -301,6 +308,10 @@ class ScanAssembler:
         self._last12: int | None = None  # counter of the last delivered scan
         self._last_rx = math.nan
         self._abs = 0
+        #: whether the frames are one node's (FLAGS STREAM on the scans while they are not)
+        self.stream = StreamWatch(self.rate_hz, layout.segments, self.counters)
+        self._started: collections.deque[int] = collections.deque(maxlen=_STARTED_KEPT)  # counters begun
+        self._last_start_rx = math.nan  # receipt time of the last delivered scan's first frame
         # the newest run of error frames: ``frames`` when it began (a frame of the node
         # since ends it), its length, and whether it reported bus-off
         self._err_mark = -1
@@ -338,6 +349,7 @@ class ScanAssembler:
             self.status = self.layout.decode_status(bytes(data), msg.timestamp)
             if self.status.node_id != self.layout.node_id:
                 c["node_id_mismatch"] += 1
+            self.stream.heartbeat(self.status.node_id, self.layout.node_id)
             return None
         expect = self._expect.get(can_id)
         if expect is None or len(data) != expect[1]:
@@ -351,29 +363,46 @@ class ScanAssembler:
         rx = msg.timestamp
         if self._cur is not None and seq != self._cur:
             if (seq - self._cur) % SEQ_MODULO > SEQ_MODULO // 2:
-                c["late_frames"] += 1  # older than the scan under way
+                self._late(seq, self._cur)  # older than the scan under way
                 return None
             c["torn_scans"] += 1
+            self.stream.event(c["frames"], f"scan {self._cur} torn by scan {seq}")
             self._cur = None
         if self._cur is None:
             if self._last12 is not None and not self._clock_wraps(rx - self._last_rx):
                 d = (seq - self._last12) % SEQ_MODULO
                 if d == 0:
                     c["duplicate_frames"] += 1
+                    self.stream.event(c["frames"], f"scan {seq} repeated")
                     return None
                 if d > SEQ_MODULO // 2:
-                    c["late_frames"] += 1
+                    self._late(seq, self._last12)
                     return None
+                self.stream.counter_ahead(d, rx - self._last_start_rx)
             self._cur, self._cur_rx, self._have = seq, rx, 0
+            self._started.append(seq)
         bit = 1 << segment
         if self._have & bit:
             c["duplicate_frames"] += 1
+            self.stream.event(c["frames"], f"segment {segment} of scan {seq} repeated")
             return None
         self._have |= bit
         self._parts[segment] = bytes(data)
         if self._have != self._full:
             return None
         return self._emit(seq, rx)
+
+    def _late(self, seq: int, newer: int) -> None:
+        """A frame of scan ``seq``, older than scan ``newer`` (under way or delivered):
+        reordered when its scan was begun, a second sequence when it never was."""
+        c = self.counters
+        c["late_frames"] += 1
+        # (a scan just before the newest, swapped with it on the way, is a reorder too)
+        if seq in self._started or (newer - seq) % SEQ_MODULO == 1:
+            self.stream.event(c["frames"], f"a frame of scan {seq} after scan {newer}")
+        else:
+            c["interleaved_frames"] += 1
+            self.stream.trip(f"two scan counters interleaved (a frame of scan {seq}, never begun, after scan {newer})")
 
     @property
     def error_fault(self) -> bool:
@@ -411,13 +440,13 @@ class ScanAssembler:
                 # the same counter value after a silence is at least one wrap later
                 d += SEQ_MODULO * (max(wraps, 1) if d == 0 else wraps)
             self._abs += d
-        self._last12, self._last_rx, self._cur = seq, rx, None
+        self._last12, self._last_rx, self._last_start_rx, self._cur = seq, rx, self._cur_rx, None
         if lay.segments == 1:
             payload = self._parts[0][HEADER_BYTES:HEADER_BYTES + lay.packed_bytes(lay.taxels)]
         else:
             payload = b"".join(p[HEADER_BYTES:] for p in self._parts)
         raw = lay.unpack_one(payload)
-        return RawScan(self._abs, self._abs / self.rate_hz, raw, 0, rx)
+        return RawScan(self._abs, self._abs / self.rate_hz, raw, self.stream.scan(), rx)
 
     def flush(self) -> None:
         """End of traffic: a scan still incomplete is torn."""

@@ -7,6 +7,8 @@ Reading only: what is detected from the scans is the offline path's business
 
 from __future__ import annotations
 
+import logging
+import math
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -28,21 +30,35 @@ from .logcheck import MISMATCH_FLOOR, READ_ERRORS, check_complete, layout_mismat
 from .reader import FrameThread
 from .source import CanSource
 
+LOG = logging.getLogger(__name__)
+#: A log's clock going back by more than this (or on by more than CLOCK_JUMP_ON_S) is
+#: a clock that was set, not time that passed: the replay logs it once and paces on
+#: from the new clock.  (Frames a few milliseconds out of order, as a multi-channel
+#: log interleaves them, are no jump; a silence on the bus, however long up to
+#: CLOCK_JUMP_ON_S, is replayed as one: the assembler counts counter wraps by it.)
+CLOCK_JUMP_BACK_S = 0.5
+CLOCK_JUMP_ON_S = 3600.0
+
 
 class LogPlayer(FrameThread):
     """A CAN log replayed at its own pace into a bounded queue, as if received.
 
     Frames keep their relative timing; their timestamps are moved to the replay's
-    clock (the assembler times scans by them).  A log that fails to parse half-way
-    stops the replay; the error is kept in ``last_error`` and counted in
-    ``bus_errors`` (the node's source then reports ``failed``).
+    clock (the assembler times scans by them).  A jump of the log's clock (back by
+    more than :data:`CLOCK_JUMP_BACK_S`, on by more than :data:`CLOCK_JUMP_ON_S`) is
+    logged once (``can_log_clock_jump``), counted (``log_clock_jumps``) and paced
+    across from the new clock, as a live bus's frames would be; a frame whose time
+    is not a number or infinite is dropped and counted (``log_bad_times``, logged at
+    its first).  A log that fails to parse half-way stops the replay; the error is
+    kept in ``last_error`` and counted in ``bus_errors`` (the node's source then
+    reports ``failed``).
     """
 
     thread_name = "can-log-player"
 
     def __init__(self, path: str | Path, messages: Iterator[can.Message], queue_frames: int = DEFAULT_QUEUE_FRAMES,
                  speed: float = 1.0) -> None:
-        super().__init__(queue_frames, log_frames=0)
+        super().__init__(queue_frames, log_frames=0, log_clock_jumps=0, log_bad_times=0)
         self.path = str(path)
         self._messages = messages
         self.speed = speed
@@ -50,13 +66,28 @@ class LogPlayer(FrameThread):
     def _run(self) -> None:
         first_log: float | None = None
         first_wall = 0.0  # set with first_log
+        last_log, last_due = 0.0, 0.0  # the log time and replay time of the frame before
+        counters = self.counters
         try:
-            for msg in self._messages:
+            for k, msg in enumerate(self._messages, 1):
                 if self._stop.is_set():
                     break
+                ts = msg.timestamp
+                if not math.isfinite(ts):  # no time to pace by (nor to hand the assembler)
+                    counters["log_bad_times"] += 1
+                    if counters["log_bad_times"] == 1:
+                        LOG.warning("can_log_bad_time", extra={"fields": {
+                            "log": self.path, "message": k, "timestamp": str(ts), "action": "dropped"}})
+                    continue
                 if first_log is None:
-                    first_log, first_wall = msg.timestamp, time.time()
-                due = first_wall + (msg.timestamp - first_log) / self.speed
+                    first_log, first_wall = ts, time.time()
+                elif not -CLOCK_JUMP_BACK_S <= ts - last_log <= CLOCK_JUMP_ON_S:
+                    counters["log_clock_jumps"] += 1
+                    LOG.warning("can_log_clock_jump", extra={"fields": {
+                        "log": self.path, "message": k, "jump_s": round(ts - last_log, 6), "from": last_log, "to": ts}})
+                    first_log, first_wall = ts, last_due  # on from the new clock, where the replay was
+                due = first_wall + (ts - first_log) / self.speed
+                last_log, last_due = ts, due
                 delay = due - time.time()
                 if delay > 0 and self._stop.wait(delay):
                     break

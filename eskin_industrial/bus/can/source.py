@@ -120,6 +120,11 @@ class CanSource(Source[Any]):
         return self.reader.last_error or self.assembler.error_reason
 
     @property
+    def fault_reason(self) -> str:
+        stream = self.assembler.stream
+        return stream.reason if stream.fault else ""
+
+    @property
     def failed(self) -> bool:
         # only the reader ends a source on an error (a log that cannot be read further);
         # error frames say the bus fails, not that the source has

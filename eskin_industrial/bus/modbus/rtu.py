@@ -10,6 +10,11 @@ responses are counted apart; ``bus_fault`` is set after ``fault_after_failures``
 consecutive failed polls and cleared by the next good one.  The failed polls of an
 outage under way are lost scans at once (:meth:`RtuSource.lost_pending`), not only
 when a poll succeeds again.
+
+Without a scan counter, an answer identical to the bit to the one before is the same
+scan polled again (a live array's noise never repeats a scan): used once while it
+comes within ``[modbus.node] repeat_s`` of the first of them, and past that an answer
+replayed (FLAGS STREAM: no verdict until a different answer).
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from ...errors import ModbusFault
-from ...frames import RawScan
+from ...frames import FrameFlag, RawScan
 from ...modbus.pymodbus_io import RtuMaster
 from ...modbus.serial_line import SerialSettings
 from ...preflight import check_serial
@@ -29,6 +34,8 @@ from ...schema import in_range, positive
 from ...seam import NodeLike, OpenContext
 from ..source import Source
 from .codec import decode_scans, register_count
+
+_STREAM = int(FrameFlag.STREAM)
 
 
 @dataclass
@@ -40,12 +47,18 @@ class RtuCounters:
     exceptions: int = 0
     retries: int = 0
     failed_polls: int = 0
-    repeats: int = 0  #: with a scan counter: the same scan polled again (not used twice)
+    #: the same scan polled again, not used twice: its counter again, or (without one)
+    #: an answer identical to the one before, within ``repeat_s`` of the first of them
+    repeats: int = 0
     counter_resets: int = 0  #: with a scan counter: the node restarted its count
+    #: without a scan counter: answers identical to the one before later than
+    #: ``repeat_s``, delivered with FLAGS STREAM (an answer replayed: no verdict)
+    replays: int = 0
+    unit_mismatches: int = 0  #: answers from another unit id than the one asked
 
     @property
     def bus_errors(self) -> int:
-        return self.timeouts + self.crc_errors + self.exceptions
+        return self.timeouts + self.crc_errors + self.exceptions + self.unit_mismatches
 
     def as_dict(self) -> dict[str, int]:
         return {f"rtu_{k}": v for k, v in vars(self).items()}
@@ -84,6 +97,12 @@ class RtuSource(Source["RtuOptions"]):
         self._seq = -1
         self._counter: int | None = None  #: the node's last scan counter
         self._last_node_seq = 0
+        self._prev_regs: list[int] | None = None  # without a counter: the answer before
+        self._prev_rx = 0.0  # when it came
+        self._repeats = 0  # answers identical to it since
+        self._replayed = False  # they outlasted repeat_s: an answer replayed
+        self._replay_reason = ""
+        self.repeat_s = 1.5 / profile.sensor.rate_hz if node.repeat_s is None else node.repeat_s
         self._next = time.monotonic()
         #: The newest failure, as the master reported it (the ``bus_fault`` event's
         #: ``error``); kept after a good poll, as a CAN reader keeps its last error.
@@ -104,6 +123,10 @@ class RtuSource(Source["RtuOptions"]):
     def last_error(self) -> str:
         return self._last_error
 
+    @property
+    def fault_reason(self) -> str:
+        return self._replay_reason if self._replayed else ""
+
     def poll_once(self) -> RawScan | None:
         """One poll (with retries), now; None when it failed (counted)."""
         c = self.stats
@@ -121,6 +144,8 @@ class RtuSource(Source["RtuOptions"]):
                 elif exc.kind == "crc":
                     c.crc_errors += 1
                     self.master.reset_input()
+                elif exc.kind == "unit":
+                    c.unit_mismatches += 1
                 else:
                     c.timeouts += 1
                 continue
@@ -130,11 +155,33 @@ class RtuSource(Source["RtuOptions"]):
                 self._last_error = f"{self.settings.port}: {len(regs)} registers in the answer, {self.count} asked"
                 continue
             self.consecutive_failures = 0
-            self._last_rx = rx  # a good answer, even a repeated scan: the node is alive
             if self.node.counter_register:
+                self._last_rx = rx  # a good answer, even a repeated scan: the node is alive
                 return self._counted(regs, rx)
+            flags = 0
+            if regs == self._prev_regs:
+                self._repeats += 1
+                same_s = rx - self._prev_rx
+                if same_s <= self.repeat_s and not self._replayed:
+                    # the scan polled again: used once, none lost (and none fresher: a
+                    # run of them ages the newest scan into stale)
+                    c.repeats += 1
+                    self._seq -= 1
+                    return None
+                c.replays += 1
+                flags = _STREAM
+                if not self._replayed:
+                    self._replayed = True
+                    self._replay_reason = (
+                        f"{self.settings.port}: unit {self.node.unit_id} gave the same answer, to the bit, "
+                        f"{self._repeats + 1} polls in a row over {1000 * same_s:.1f} ms (repeat_s "
+                        f"{1000 * self.repeat_s:g} ms): an answer replayed, not a scan")
+            else:
+                self._repeats, self._replayed = 0, False
+                self._prev_regs, self._prev_rx = regs, rx
+            self._last_rx = rx
             c.scans += 1
-            return RawScan(self._seq, rx - self.t0, decode_scans(self.node, regs), 0, rx)
+            return RawScan(self._seq, rx - self.t0, decode_scans(self.node, regs), flags, rx)
         c.failed_polls += 1
         self.consecutive_failures += 1
         return None

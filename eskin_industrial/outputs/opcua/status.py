@@ -16,7 +16,7 @@ follows from the node's snapshot and its source (pure code, one place):
 | the node's source failed (a corrupt log) | BadDeviceFailure | BadDeviceFailure | Good |
 | the node's source ended (a finished replay) | BadOutOfService | BadOutOfService | Good |
 | bus fault | BadNoCommunication | BadNoCommunication | Good |
-| a sensor fault (Flags DEAD_TAXELS, FROZEN, RATE) | BadSensorFailure | BadSensorFailure | Good |
+| a sensor fault (Flags DEAD_TAXELS, FROZEN, RATE, STREAM) | BadSensorFailure | BadSensorFailure | Good |
 | no scan yet since start | BadWaitingForInitialData | BadWaitingForInitialData | Good |
 | sensor stale (no scan for ``stale_s``) | UncertainLastUsableValue | UncertainLastUsableValue | Good |
 | ... for ``bad_after_s`` (default 1 s) | BadNoCommunication | BadNoCommunication | Good |

@@ -192,11 +192,11 @@ def slip_guard_st() -> str:
     st, hb, age, fl = reg["STATUS"].offset, reg["HEARTBEAT"].offset, reg["FRAME_AGE"].offset, reg["FLAGS"].offset
     b = {s: _bit(s) for s in Status}
     unseen = f"bTurnUnseen  := wFlags.{int(FrameFlag.TURN_UNSEEN).bit_length() - 1};"
-    # the sensor-fault bits of FLAGS (DEAD_TAXELS, FROZEN, RATE): DATA_VALID is already
+    # the sensor-fault bits of FLAGS (DEAD_TAXELS, FROZEN, RATE, STREAM): DATA_VALID is already
     # clear with any of them; the block reads them as well, so that an older bridge
     # or a hand-written image cannot hide one
     faults = " OR ".join(f"wFlags.{int(f).bit_length() - 1}"
-                         for f in (FrameFlag.DEAD_TAXELS, FrameFlag.FROZEN, FrameFlag.RATE))
+                         for f in (FrameFlag.DEAD_TAXELS, FrameFlag.FROZEN, FrameFlag.RATE, FrameFlag.STREAM))
     sensor = f"bSensorBad   := {faults};"
 
     def bit(var: str, s: Status, note: str) -> str:
@@ -216,7 +216,7 @@ VAR_OUTPUT
     rGripSetN   : REAL;   (* new set-point *)
     bAck        : BOOL;   (* pulse: write COMMAND := 1 (or coil ACK_SLIP := TRUE) *)
     bNoVerdict  : BOOL;   (* the skin cannot tell: do not rely on it *)
-    bSensorBad  : BOOL;   (* FLAGS DEAD_TAXELS, FROZEN or RATE: the sensor needs service *)
+    bSensorBad  : BOOL;   (* FLAGS DEAD_TAXELS, FROZEN, RATE or STREAM: the sensor needs service *)
     bTurnUnseen : BOOL;   (* a turn of the part would read stable: no twisting motion on "no slip" *)
 END_VAR
 VAR
@@ -233,7 +233,7 @@ END_VAR
 {bit("bSlipLatched", Status.SLIP_LATCHED, "SLIP_LATCHED")}
 {bit("bOffline", Status.BRIDGE_OFFLINE, "BRIDGE_OFFLINE: the bridge stopped on purpose")}
 {unseen:<29}(* FLAGS TURN_UNSEEN: slides are seen, turns not *)
-{sensor}  (* FLAGS DEAD_TAXELS, FROZEN, RATE *)
+{sensor}  (* FLAGS DEAD_TAXELS, FROZEN, RATE, STREAM *)
 
 (* Bridge watchdog: the heartbeat must move within 500 ms. *)
 tonBridgeDead(IN := (wHeartbeat = wLastHeartbeat), PT := T#500MS);

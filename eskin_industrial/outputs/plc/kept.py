@@ -3,6 +3,8 @@ shows beside the node's snapshot when no PLC is connected."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from ...node import NodeSnapshot
 from ...profile import ModbusPlcSection
 from ..base import Sink
@@ -32,3 +34,22 @@ class KeptRegisters(Sink):
             return None
         values = read_back(regs, self.tail, self.image.settings.word_order)
         return values, status_names(values["STATUS"])
+
+
+def served_table(sink: Sink) -> Callable[[], tuple[dict[str, int], tuple[str, ...]]] | None:
+    """A reader of the block a PLC reads from this sink (server mode: the served
+    registers, by name, and the STATUS bits set), for a view beside the PLC (the web
+    console's register block); None for a sink that serves no block (client mode
+    writes, and its image is the writer's own)."""
+    from .server import PlcBlockSink
+
+    if not isinstance(sink, PlcBlockSink):
+        return None
+    handler = sink.handler
+    word_order = handler.settings.word_order
+
+    def table() -> tuple[dict[str, int], tuple[str, ...]]:
+        values = read_back(list(handler.registers), list(handler.tail), word_order)
+        return values, status_names(values["STATUS"])
+
+    return table

@@ -53,7 +53,7 @@ DEVICE_METRICS: tuple[MetricDef, ...] = (
     MetricDef("Turn Unseen", pb.BOOLEAN, "", False, "in contact, but a turn about the normal would go unseen: "
               "read stable (FLAGS bit TURN_UNSEEN)"),
     MetricDef("Sensor Fault", pb.UINT16, "bits", False, "the sensor's faults (FLAGS bits DEAD_TAXELS 1024, FROZEN "
-              "2048, RATE 4096; 0 none): while one is set no state is claimed and Data Valid is false"),
+              "2048, RATE 4096, STREAM 8192; 0 none): while one is set no state is claimed and Data Valid is false"),
 )
 #: The taxel frame: declared (and sent) only with ``frame_interval_s``; its alias is
 #: the device's base + :data:`FRAME_ALIAS`.

@@ -1,0 +1,543 @@
+"""The console's server: aiohttp on a thread and an asyncio loop of its own.
+
+Why aiohttp: one maintained package gives the HTTP server, WebSockets and static
+files on asyncio, with no ASGI server beside it (docs/web.md).
+
+- ``GET /``, ``/node/N``, ``/events``: the pages (static files of the package);
+  ``/static/...`` their scripts and styles.  No CDN: a plant network is often offline.
+- ``GET /api/info``: the nodes (layout, scores and thresholds) and the session.
+- ``POST /api/login``, ``/api/logout``: a session in an HttpOnly, SameSite=Strict cookie.
+- ``POST /api/nodes/N/command``: tare, ack, enable, disable; an operator's session and
+  its CSRF token (``X-CSRF-Token``), judged under :func:`~eskin_industrial.node.refusal`,
+  then queued for the node's loop (its sink's ``take_commands``).
+- ``GET /api/episodes/ID.csv``: an episode's raw scans as a recording CSV.
+- ``GET /ws``: the live state, JSON; the Origin header must be the console's own.
+
+Each WebSocket has a sender that waits for a wake-up, builds one message of what is
+new for it and sends it.  The page acknowledges each message once it has drawn it;
+at most :data:`IN_FLIGHT` messages go unacknowledged, so a browser that draws slowly
+is sent fewer messages, each with the newest frame (the one it missed is never sent:
+it is decimated), and one that takes none for :data:`SEND_TIMEOUT_S` is dropped.
+Nothing is queued per browser.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import hmac
+import io
+import json
+import math
+import secrets
+import ssl
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from aiohttp import WSMsgType, web
+
+from ...errors import ListenError
+from ...netaddr import listen_error
+from ...node import Command, refusal
+from ...recording import write_recording
+from .hub import EPISODES_MAX, NodeFeed, num
+from .users import Role, WebUser, login
+
+if TYPE_CHECKING:
+    from .options import WebOptions
+
+STATIC = Path(__file__).parent / "static"
+#: A browser that has not taken (acknowledged) a message within this time is dropped.
+SEND_TIMEOUT_S = 5.0
+#: Messages sent and not yet acknowledged by the page, at most.
+IN_FLIGHT = 2
+SESSIONS_MAX = 256
+#: Logins waiting for their scrypt at most (one is hashed at a time, on a thread of its
+#: own): a guessing client takes at most one core's share, never the node's loop's.
+LOGINS_PENDING_MAX = 4
+COOKIE = "eskin_session"
+_COMMANDS = ("ack", "tare", "enable", "disable")
+_SECURITY_HEADERS = {
+    "Content-Security-Policy": "default-src 'self'; img-src 'self' data:; connect-src 'self'; "
+                               "frame-ancestors 'none'; base-uri 'none'; form-action 'self'",
+    "X-Content-Type-Options": "nosniff",
+    "Referrer-Policy": "no-referrer",
+    "Cache-Control": "no-store",
+}
+
+
+@dataclass
+class Session:
+    user: str
+    role: Role
+    csrf: str
+    last_seen: float
+
+
+@dataclass(eq=False)  # one per connection, kept in a set
+class Client:
+    """One browser's WebSocket: what it watches, and what it has been sent."""
+
+    ws: web.WebSocketResponse
+    peer: str = "-"
+    wake: asyncio.Event = field(default_factory=asyncio.Event)
+    watch: int | None = None
+    in_flight: int = 0
+    acked: asyncio.Event = field(default_factory=asyncio.Event)
+    snap_seq: dict[int, int] = field(default_factory=dict)
+    lane_seq: dict[int, int] = field(default_factory=dict)
+    frame_seq: int = 0
+    trend_seq: int = 0
+    episodes: dict[tuple[int, int], bool] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class NodeView:
+    """What the pages need to draw a node (sent once, by /api/info)."""
+
+    name: str
+    rows: int
+    cols: int
+    x_mm: list[float]
+    y_mm: list[float]
+    row_names: list[str]
+    method: str
+    score_names: tuple[str, str]
+    slip: tuple[float | None, float | None]
+    variable: tuple[float | None, float | None]
+    rate_hz: float
+
+
+class WebServer:
+    """One server for the bridge's nodes (``feeds``, in order)."""
+
+    def __init__(self, options: WebOptions, views: list[NodeView], feeds: list[NodeFeed],
+                 users: tuple[WebUser, ...]) -> None:
+        self.options = options
+        self.views = views
+        self.feeds = feeds
+        self.users = {u.name: u for u in users}
+        self.sessions: dict[str, Session] = {}
+        self.clients: set[Client] = set()
+        #: node -> a function giving the register block as the PLC reads it (names ->
+        #: values, the STATUS bits set), or None; set by whoever wires the PLC beside.
+        self.registers: dict[int, Callable[[], tuple[dict[str, int], tuple[str, ...]] | None]] = {}
+        self.counts = {"web_clients": 0, "web_clients_dropped": 0, "web_messages": 0, "web_frames_skipped": 0,
+                       "web_logins": 0, "web_logins_refused": 0, "web_commands": 0, "web_commands_refused": 0,
+                       "web_origin_refused": 0}
+        self.on_event: Callable[..., None] = lambda name, level, **fields: None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._logins = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="web-login")
+        self._logins_pending = 0
+        self._kicked = False
+        self._stop: asyncio.Event | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._thread: threading.Thread | None = None
+        for feed in feeds:
+            feed.kick = self.kick
+
+    # -- the caller's side -------------------------------------------------------------
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="web-server", daemon=True)
+        self._thread.start()
+        self._ready.wait(timeout=15)
+        if self._error is not None:
+            raise self._error
+        if self._loop is None:
+            raise ListenError(f"{self.options.bind}: the web console did not start within 15 s")
+
+    def stop(self) -> None:
+        loop, stop = self._loop, self._stop
+        if loop is not None and stop is not None:
+            try:
+                loop.call_soon_threadsafe(stop.set)
+            except RuntimeError:
+                pass  # already closed
+        if self._thread is not None:
+            self._thread.join(timeout=10)
+        self._logins.shutdown(wait=False, cancel_futures=True)
+
+    def kick(self) -> None:
+        """Something is new (any thread): wake the server's loop, once until it has looked."""
+        if self._kicked:
+            return
+        loop = self._loop
+        if loop is None:
+            return
+        self._kicked = True
+        try:
+            loop.call_soon_threadsafe(self._woken)
+        except RuntimeError:
+            pass  # the loop has closed: the bridge is stopping
+
+    def counters(self) -> dict[str, int]:
+        return dict(self.counts)
+
+    # -- the server's thread -----------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except BaseException as exc:
+            if not self._ready.is_set():
+                self._error = exc
+            else:
+                raise
+        finally:
+            self._ready.set()
+
+    async def _main(self) -> None:
+        self._stop = asyncio.Event()
+        app = web.Application(middlewares=[self._headers], client_max_size=64 * 1024)
+        app.router.add_get("/", self._page("cell.html"))
+        app.router.add_get("/node/{i}", self._page("node.html"))
+        app.router.add_get("/events", self._page("events.html"))
+        app.router.add_get("/api/info", self._info)
+        app.router.add_post("/api/login", self._login)
+        app.router.add_post("/api/logout", self._logout)
+        app.router.add_post("/api/nodes/{i}/command", self._command)
+        app.router.add_get("/api/episodes/{node}/{id}.csv", self._capture)
+        app.router.add_get("/ws", self._ws)
+        app.router.add_static("/static/", STATIC, follow_symlinks=False)
+        runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
+        await runner.setup()
+        context = None
+        if self.options.tls:
+            context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+            context.minimum_version = ssl.TLSVersion.TLSv1_2
+            assert self.options.tls_cert is not None and self.options.tls_key is not None
+            context.load_cert_chain(self.options.tls_cert, self.options.tls_key)
+        site = web.TCPSite(runner, self.options.host, self.options.port, ssl_context=context, reuse_address=True)
+        try:
+            await site.start()
+        except OSError as exc:
+            await runner.cleanup()
+            raise ListenError(listen_error(self.options.host, self.options.port, exc)) from None
+        self._loop = asyncio.get_running_loop()
+        self._ready.set()
+        self.on_event("web_listening", "info", url=self.options.url, users=len(self.users),
+                      tls=self.options.tls)
+        try:
+            await self._stop.wait()
+        finally:
+            for c in list(self.clients):
+                await c.ws.close()
+            await runner.cleanup()
+            self._loop = None
+
+    def _woken(self) -> None:
+        self._kicked = False
+        for feed in self.feeds:
+            feed.freeze_captures()
+        for c in self.clients:
+            c.wake.set()
+
+    @web.middleware
+    async def _headers(self, request: web.Request, handler: Callable[..., Any]) -> web.StreamResponse:
+        response: web.StreamResponse = await handler(request)
+        if not response.prepared:
+            for k, v in _SECURITY_HEADERS.items():
+                response.headers.setdefault(k, v)
+            if self.options.tls:
+                response.headers.setdefault("Strict-Transport-Security", "max-age=31536000")
+        return response
+
+    def _page(self, name: str) -> Callable[[web.Request], Any]:
+        async def page(request: web.Request) -> web.StreamResponse:
+            if "i" in request.match_info:
+                self._node_index(request)
+            return web.FileResponse(STATIC / name)
+
+        return page
+
+    # -- sessions ----------------------------------------------------------------------
+    def _session(self, request: web.Request) -> Session | None:
+        token = request.cookies.get(COOKIE)
+        if not token:
+            return None
+        s = self.sessions.get(token)
+        now = time.monotonic()
+        if s is None or now - s.last_seen > self.options.session_timeout_s:
+            self.sessions.pop(token, None)
+            return None
+        s.last_seen = now
+        return s
+
+    def _may_view(self, request: web.Request) -> bool:
+        """With users, every value needs a login; without, the console is open read-only."""
+        return not self.users or self._session(request) is not None
+
+    def _same_origin(self, request: web.Request) -> bool:
+        origin = request.headers.get("Origin")
+        want = f"{'https' if self.options.tls else 'http'}://{request.host}"
+        return origin is not None and hmac.compare_digest(origin, want)
+
+    def _session_json(self, s: Session | None) -> dict[str, Any]:
+        commands = bool(self.users) and not self.options.read_only
+        if s is None:
+            return {"user": None, "role": None, "csrf": None, "login": bool(self.users), "commands": commands}
+        return {"user": s.user, "role": s.role, "csrf": s.csrf, "login": True, "commands": commands}
+
+    async def _info(self, request: web.Request) -> web.Response:
+        s = self._session(request)
+        body: dict[str, Any] = {"session": self._session_json(s)}
+        if self._may_view(request):
+            body["nodes"] = [v.__dict__ for v in self.views]
+        return web.json_response(body)
+
+    async def _login(self, request: web.Request) -> web.Response:
+        if not self._same_origin(request):
+            return self._refuse(403, "the request's Origin is not this console's")
+        if not self.users:
+            return self._refuse(404, "no users: the console is read-only")
+        try:
+            body = await request.json()
+            name, password = str(body["user"]), str(body["password"])
+        except (ValueError, KeyError, TypeError):
+            return self._refuse(400, "expected JSON {user, password}")
+        if self._logins_pending >= LOGINS_PENDING_MAX:
+            self.counts["web_logins_refused"] += 1
+            return self._refuse(429, "too many logins at once: try again")
+        self._logins_pending += 1
+        try:
+            role = await asyncio.get_running_loop().run_in_executor(self._logins, login, self.users, name, password)
+        finally:
+            self._logins_pending -= 1
+        if role is None:
+            self.counts["web_logins_refused"] += 1
+            self.on_event("web_login_refused", "warning", user=name, peer=request.remote or "-")
+            return self._refuse(401, "wrong user name or password")
+        self.counts["web_logins"] += 1
+        while len(self.sessions) >= SESSIONS_MAX:  # the one seen longest ago goes
+            del self.sessions[min(self.sessions, key=lambda k: self.sessions[k].last_seen)]
+        token = secrets.token_urlsafe(32)
+        s = Session(name, role, secrets.token_urlsafe(32), time.monotonic())
+        self.sessions[token] = s
+        self.on_event("web_login", "info", user=name, role=role, peer=request.remote or "-")
+        response = web.json_response({"session": self._session_json(s)})
+        response.set_cookie(COOKIE, token, httponly=True, samesite="Strict", secure=self.options.tls, path="/")
+        return response
+
+    async def _logout(self, request: web.Request) -> web.Response:
+        if not self._same_origin(request):
+            return self._refuse(403, "the request's Origin is not this console's")
+        token = request.cookies.get(COOKIE)
+        if token:
+            self.sessions.pop(token, None)
+        response = web.json_response({"session": self._session_json(None)})
+        response.del_cookie(COOKIE, path="/")
+        return response
+
+    def _refuse(self, status: int, why: str) -> web.Response:
+        return web.json_response({"error": why}, status=status)
+
+    def _node_index(self, request: web.Request) -> int:
+        try:
+            i = int(request.match_info["i"])
+        except ValueError:
+            raise web.HTTPNotFound() from None
+        if not 0 <= i < len(self.feeds):
+            raise web.HTTPNotFound()
+        return i
+
+    # -- commands ----------------------------------------------------------------------
+    async def _command(self, request: web.Request) -> web.Response:
+        i = self._node_index(request)
+        s = self._session(request)
+        try:
+            body = await request.json()
+            name = body["command"]
+        except (ValueError, KeyError, TypeError):
+            return self._refuse(400, "expected JSON {command}")
+        if name not in _COMMANDS:
+            return self._refuse(400, f"command: expected one of {', '.join(_COMMANDS)}, got {name!r}")
+        why, status = None, 0
+        if not self.users or self.options.read_only:
+            why, status = "read_only", 403
+        elif s is None:
+            why, status = "login", 401
+        elif not self._same_origin(request):
+            why, status = "origin", 403
+        elif not hmac.compare_digest(request.headers.get("X-CSRF-Token", ""), s.csrf):
+            why, status = "csrf", 403
+        elif s.role != "operator":
+            why, status = "role", 403
+        command = Command(name)
+        if why is None:
+            why = refusal(command, self.feeds[i].snapshot, read_only=self.options.read_only)
+            status = 409
+        if why is None and not self.feeds[i].queue_command(command):
+            why, status = "busy", 503
+        node = self.views[i].name
+        if why is not None:
+            self.counts["web_commands_refused"] += 1
+            self.on_event("web_command_refused", "warning", node_event=node, command=name, reason=why,
+                          user=s.user if s else "-")
+            return self._refuse(status, why)
+        self.counts["web_commands"] += 1
+        assert s is not None
+        self.on_event("web_command", "info", node_event=node, command=name, user=s.user)
+        return web.json_response({"queued": name}, status=202)
+
+    # -- captures ----------------------------------------------------------------------
+    async def _capture(self, request: web.Request) -> web.StreamResponse:
+        if not self._may_view(request):
+            return self._refuse(401, "log in first")
+        try:
+            node, ident = int(request.match_info["node"]), int(request.match_info["id"])
+            feed = self.feeds[node]
+        except (ValueError, IndexError):
+            raise web.HTTPNotFound() from None
+        ep = next((e for e in list(feed.episodes) if e.id == ident), None)
+        rows = ep.rows if ep is not None else None
+        if rows is None or rows.shape[0] == 0 or ep is None:
+            raise web.HTTPNotFound(text="no capture of that episode (not over yet, or let go)")
+        out = io.StringIO()
+        await asyncio.get_running_loop().run_in_executor(None, write_recording, out, rows[:, 0], rows[:, 1:])
+        name = f"{self.views[node].name}-{ep.state}-{ep.t:.3f}.csv"
+        return web.Response(text=out.getvalue(), content_type="text/csv",
+                            headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+    # -- the live state ----------------------------------------------------------------
+    async def _ws(self, request: web.Request) -> web.StreamResponse:
+        if not self._same_origin(request):
+            self.counts["web_origin_refused"] += 1
+            self.on_event("web_origin_refused", "warning", origin=request.headers.get("Origin", "-"),
+                          peer=request.remote or "-")
+            return self._refuse(403, "the WebSocket's Origin is not this console's")
+        if not self._may_view(request):
+            return self._refuse(401, "log in first")
+        if len(self.clients) >= self.options.max_clients:
+            return self._refuse(503, "too many browsers connected")
+        ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4096)
+        await ws.prepare(request)
+        client = Client(ws, peer=request.remote or "-")
+        self.clients.add(client)
+        self.counts["web_clients"] += 1
+        client.wake.set()
+        sender = asyncio.ensure_future(self._send_loop(client))
+        try:
+            async for msg in ws:
+                if msg.type != WSMsgType.TEXT:
+                    continue
+                try:
+                    body = json.loads(msg.data)
+                    watch = body.get("watch", client.watch)
+                    acks = body.get("ack", 0)
+                except (ValueError, AttributeError):
+                    continue
+                if isinstance(acks, int) and acks > 0:
+                    client.in_flight = max(0, client.in_flight - acks)
+                    client.acked.set()
+                if "watch" not in body:
+                    continue
+                client.watch = watch if isinstance(watch, int) and 0 <= watch < len(self.feeds) else None
+                client.frame_seq = client.trend_seq = 0
+                client.wake.set()
+        finally:
+            sender.cancel()
+            self.clients.discard(client)
+        return ws
+
+    async def _send_loop(self, client: Client) -> None:
+        try:
+            while not client.ws.closed:
+                await client.wake.wait()
+                try:
+                    while client.in_flight >= IN_FLIGHT:  # the page has not drawn what it has
+                        client.acked.clear()
+                        await asyncio.wait_for(client.acked.wait(), SEND_TIMEOUT_S)
+                    client.wake.clear()
+                    message = self._message(client)
+                    if message is None:
+                        continue
+                    await asyncio.wait_for(client.ws.send_str(message), SEND_TIMEOUT_S)
+                except TimeoutError:
+                    self.counts["web_clients_dropped"] += 1
+                    self.on_event("web_client_dropped", "warning", peer=client.peer,
+                                  reason=f"no message taken in {SEND_TIMEOUT_S:g} s")
+                    await client.ws.close()
+                    return
+                client.in_flight += 1
+                self.counts["web_messages"] += 1
+        except (ConnectionError, RuntimeError):
+            return  # the browser went away
+
+    def _message(self, client: Client) -> str | None:
+        """What is new for this browser, as one JSON text (None: nothing)."""
+        out: dict[str, Any] = {"server_time": time.time()}
+        nodes, lane, episodes = [], [], []
+        for i, feed in enumerate(self.feeds):
+            with feed.lock:
+                snap, snap_seq, rate = feed.snapshot, feed.snap_seq, feed.scans_per_s
+                new_lane = [e for e in feed.lane if e[0] > client.lane_seq.get(i, 0)]
+                eps = [e for e in feed.episodes
+                       if client.episodes.get((i, e.id)) != (e.rows is not None)]
+                summaries = [e.summary() for e in eps]
+            if snap_seq != client.snap_seq.get(i):
+                client.snap_seq[i] = snap_seq
+                nodes.append({"i": i, "snap": _snapshot_json(snap), "rate_hz": num(rate)})
+            if new_lane:
+                client.lane_seq[i] = new_lane[-1][0]
+                lane += [{"node": i, "seq": s, "t": t, "wall": w, "state": label, "valid": v}
+                         for s, t, w, label, v in new_lane]
+            for e, summary in zip(eps, summaries):
+                client.episodes[(i, e.id)] = summary["capture"]
+            episodes += summaries
+        if len(client.episodes) > 2 * EPISODES_MAX * len(self.feeds):  # bounded: what the feeds still list
+            present = {(i, e.id) for i, feed in enumerate(self.feeds) for e in list(feed.episodes)}
+            client.episodes = {k: v for k, v in client.episodes.items() if k in present}
+        if nodes:
+            out["nodes"] = nodes
+        if lane:
+            out["lane"] = lane
+        if episodes:
+            out["episodes"] = episodes
+        w = client.watch
+        if w is not None:
+            feed = self.feeds[w]
+            with feed.lock:
+                frame_seq, forces, frame_t = feed.frame_seq, feed.frame_forces, feed.frame_t
+                trend = [p for p in feed.trend if p[0] > client.trend_seq]
+            if frame_seq != client.frame_seq and forces is not None:
+                if client.frame_seq:
+                    self.counts["web_frames_skipped"] += max(0, frame_seq - client.frame_seq - 1)
+                client.frame_seq = frame_seq
+                out["frame"] = {"node": w, "t": frame_t, "forces": [num(x) for x in forces.tolist()]}
+            if trend:
+                client.trend_seq = trend[-1][0]
+                out["trend"] = {"node": w, "points": trend}
+            registers = self.registers.get(w)
+            if registers is not None and "nodes" in out:
+                try:
+                    table = registers()
+                except Exception:  # noqa: BLE001 - a register source that fails leaves the block out, not the page
+                    table = None
+                if table is not None:
+                    out["registers"] = {"node": w, "values": table[0], "bits": list(table[1])}
+        if len(out) == 1:
+            return None
+        return json.dumps(out, allow_nan=False)
+
+
+def _snapshot_json(snap: Any) -> dict[str, Any] | None:
+    if snap is None:
+        return None
+    d = snap._asdict()
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        if isinstance(v, float):
+            out[k] = v if math.isfinite(v) else None
+        elif isinstance(v, tuple):
+            out[k] = list(v)
+        else:
+            out[k] = v
+    out["state_label"] = snap.state_label
+    out["sensor_fault"] = snap.sensor_fault
+    out["turn_unseen"] = snap.turn_unseen
+    out["contact"] = snap.contact
+    return out
