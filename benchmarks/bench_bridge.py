@@ -179,7 +179,7 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
-    from eskin_industrial.outputs.plc.sink import PlcOptions
+    from eskin_industrial.outputs.plc.options import PlcOptions
 
     rate = 1000.0 if path.endswith("1k") else 100.0
     fd = rate > 500

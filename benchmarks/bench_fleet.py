@@ -195,7 +195,7 @@ def raw_scans(profile: Any, scene: Path, rate: float) -> np.ndarray:
 
 def bridge_for(n: int, rate: float, per_bus: int, port: int, edge: str, tag: str, frame_interval_s: float = 0.0):
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
-    from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugOptions
+    from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 
     fd = rate > 500
     base = 0x200

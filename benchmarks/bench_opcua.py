@@ -174,18 +174,21 @@ class NullOptions:
 def null_kind() -> str:
     """An output kind that takes every snapshot and does nothing (registered here, for
     the baseline: the same loops and handovers but for what OPC UA does)."""
-    from eskin_industrial.outputs.base import SINKS, Sink
+    from eskin_industrial.outputs.base import SINKS, OutputKind, Sink
 
     class NullSink(Sink):
-        kind = "bench-null"
+        pass
+
+    class NullKind(OutputKind[NullOptions]):
+        name = "bench-null"
         Options = NullOptions
 
         @classmethod
-        def open_nodes(cls, options: Any, nodes: Any, context: Any) -> list[Sink]:
-            return [cls() for _ in nodes]
+        def _open_nodes(cls, options: Any, nodes: Any, context: Any) -> list[Sink]:
+            return [NullSink() for _ in nodes]
 
-    globals()["NullSink"] = NullSink
-    SINKS["bench-null"] = f"{__name__}:NullSink"
+    globals()["NullKind"] = NullKind
+    SINKS["bench-null"] = f"{__name__}:NullKind"
     return "bench-null"
 
 

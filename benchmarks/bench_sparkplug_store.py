@@ -27,7 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from machine import describe
 
 from eskin_industrial.node import NodeSnapshot
-from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugOptions, open_edge
+from eskin_industrial.outputs.sparkplug.kind import open_edge
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from tests.helpers import sparkplug as spb
 from tests.helpers.modbus import free_port
 from tests.helpers.snapshots import made

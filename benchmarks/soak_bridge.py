@@ -66,7 +66,7 @@ def main() -> None:
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
     from eskin_industrial.modbus.pymodbus_io import quiet_pymodbus
-    from eskin_industrial.outputs.plc.sink import PlcOptions
+    from eskin_industrial.outputs.plc.options import PlcOptions
     from eskin_industrial.scenes import render
 
     quiet_pymodbus()

@@ -91,7 +91,7 @@ def main() -> None:
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
     from eskin_industrial.outputs.plc.client import JITTER
-    from eskin_industrial.outputs.plc.sink import PlcOptions
+    from eskin_industrial.outputs.plc.options import PlcOptions
 
     print(f"# .venv/bin/python benchmarks/soak_plc_flap.py --duration {args.duration:g} --flap {args.flap:g}")
     print(f"# {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC on {describe()}", flush=True)

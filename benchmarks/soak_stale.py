@@ -100,7 +100,7 @@ class Sender(Source[None]):
             return None
 
 
-class Keep(Sink[None]):
+class Keep(Sink):
     kind = "keep"
 
     def __init__(self) -> None:

@@ -23,8 +23,8 @@ them over every built-in method, source kind and output kind
 - :func:`check_source`: the kind declares ``kind``, ``spec`` and ``Options``; it opens,
   yields scans of the profile's taxels, reports health and counters of its own names,
   and closes twice safely.
-- :func:`check_sink`: the kind declares ``kind``, ``Options`` and ``cli_options``; it
-  opens, takes the snapshots and updates of a node's loop (a scene played through it)
+- :func:`check_sink`: the kind declares ``name``, ``Options`` and ``cli_options``; it
+  opens one sink per node, told the kind's name, takes the snapshots and updates of a node's loop (a scene played through it)
   and its last, offline snapshot, reports health and counters of its own names,
   flushes, and closes twice safely.
 """
@@ -51,7 +51,7 @@ from .detect.state import GraspState
 from .detect.updates import COLUMNS, UpdateTable
 from .errors import EskinError
 from .methods import bind, get_method
-from .outputs.base import CliOption, Sink, SinkHealth, sink_class
+from .outputs.base import CliOption, Sink, SinkHealth, output_kind
 from .profile import Profile, load_profile, parse_profile
 from .scenes import render
 from .schema import SchemaError, build, to_table
@@ -338,10 +338,10 @@ def check_sink(kind: str, options: Mapping[str, Any] | None = None, *, profile: 
     returns its counters' names."""
     what = f"output kind {kind!r}"
     try:
-        cls = sink_class(kind)
+        cls = output_kind(kind)
     except EskinError as exc:
         raise _Broken(what, str(exc)) from None
-    _that(cls.kind == kind, what, f"its class says kind {cls.kind!r}")
+    _that(cls.name == kind, what, f"its class says name {cls.name!r}")
     _that(isinstance(cls.cli_options, tuple) and all(isinstance(o, CliOption) for o in cls.cli_options), what,
           "cli_options must be a tuple of CliOption")
     node_cls = cls.NodeOptions
@@ -364,6 +364,7 @@ def check_sink(kind: str, options: Mapping[str, Any] | None = None, *, profile: 
         _that(len(opened) == 1 and isinstance(opened[0], Sink), what,
               f"open_nodes gave {len(opened)} objects for one node, not one Sink")
         sink = opened[0]
+        _that(sink.kind == kind, what, f"its sink says kind {sink.kind!r}: open_nodes tells each sink the kind's name")
         updates: list[Any] = []
         loop = NodeLoop(node.profile, src.start(), [sink], rate_hz=node.rate_hz, on_update=updates.append)
         loop.run(max_scans=scans, duration_s=max(10.0, 3 * scans / node.rate_hz))

@@ -15,7 +15,7 @@ import pytest
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, load_bridge_config, resolve
 from eskin_industrial.errors import ProfileError
 from eskin_industrial.outputs.plc.client import PlcWriter
-from eskin_industrial.outputs.plc.sink import PlcOptions
+from eskin_industrial.outputs.plc.options import PlcOptions
 from eskin_industrial.profile import parse_profile
 from tests.helpers.bridge import PAPER, running_bridge, wait_for
 from tests.helpers.plc_standin import PlcStandIn

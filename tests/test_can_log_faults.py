@@ -16,8 +16,8 @@ from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
 from eskin_industrial.bus.can.layout import CanLayout
 from eskin_industrial.outputs.plc.image import Status
-from eskin_industrial.outputs.plc.sink import PlcOptions
-from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS
+from eskin_industrial.outputs.plc.options import PlcOptions
+from eskin_industrial.outputs.sparkplug.metrics import DEVICE_METRICS
 from tests.helpers.bridge import PAPER, LogCapture, TimedPlc, hold_raw
 from tests.helpers.can_frames import scans_to_messages
 from tests.helpers.modbus import free_port
@@ -161,7 +161,7 @@ def test_the_bridge_command_exits_non_zero_when_its_only_source_fails(paper, tmp
 
 @pytest.mark.slow
 def test_sparkplug_hears_the_bus_fault_then_the_device_death(paper, tmp_path):
-    from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugOptions
+    from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
     from tests.helpers import sparkplug as spb
 
     layout = CanLayout.from_profile(paper)

@@ -41,7 +41,7 @@ def test_a_flood_of_enable_writes_is_a_few_log_lines_and_every_one_counted():
 
 def test_a_flood_of_dcmds_is_a_few_log_lines_and_every_one_counted(tmp_path):
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings
-    from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugOptions
+    from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
     from tests.helpers import sparkplug as spb
     from tests.helpers.modbus import need
     from tests.test_sparkplug_commands import _dcmd

@@ -115,6 +115,7 @@ SINK_SETUPS: dict[str, Callable[[Path], contextlib.AbstractContextManager[dict[s
     "recorder": lambda tmp: _given({"path": str(tmp / "updates.csv")}),
     "sparkplug": _sparkplug,
     "opcua": lambda tmp: _given({"endpoint": f"opc.tcp://127.0.0.1:{free_port()}", "pki_dir": str(tmp / "pki")}),
+    "web": lambda tmp: _given({"bind": f"127.0.0.1:{free_port()}"}),
 }
 
 
@@ -249,3 +250,11 @@ def test_check_sink_names_the_broken_promise(monkeypatch, tmp_path):
     with pytest.raises(AssertionError, match=r"output kind 'recorder': the second close raised RuntimeError: "
                                              r"closed already"):
         testing.check_sink("recorder", {"path": str(tmp_path / "r2.csv")})
+    monkeypatch.undo()
+    from eskin_industrial.outputs.recorder.kind import RecorderKind
+
+    # a kind that opens its sinks past open_nodes: none is told the kind's name
+    monkeypatch.setattr(RecorderKind, "open_nodes", classmethod(lambda cls, o, nodes, c: cls._open_nodes(o, nodes, c)))
+    with pytest.raises(AssertionError, match=r"output kind 'recorder': its sink says kind '': open_nodes tells "
+                                             r"each sink the kind's name"):
+        testing.check_sink("recorder", {"path": str(tmp_path / "r3.csv")})

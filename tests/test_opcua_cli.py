@@ -13,7 +13,7 @@ import pytest
 from click.testing import CliRunner
 
 from eskin_industrial.cli import main
-from eskin_industrial.outputs.base import SINKS, sink_class
+from eskin_industrial.outputs.base import SINKS, output_kind
 from eskin_industrial.outputs.opcua import model
 from tests.helpers.modbus import free_port
 from tests.helpers.paths import PROFILES, ROOT
@@ -49,8 +49,8 @@ def _toml(tmp_path: Path, opcua: str) -> Path:
 
 
 def test_the_kind_is_one_registry_entry() -> None:
-    assert SINKS["opcua"] == "eskin_industrial.outputs.opcua.sink:OpcuaSink"
-    assert sink_class("opcua").kind == "opcua"
+    assert SINKS["opcua"] == "eskin_industrial.outputs.opcua.sink:OpcuaKind"
+    assert output_kind("opcua").name == "opcua"
 
 
 @pytest.mark.slow

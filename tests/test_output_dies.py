@@ -17,7 +17,7 @@ import pytest
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, SupervisionSettings, resolve
 from eskin_industrial.bridge.logs import EventLog
 from eskin_industrial.bridge.runtime import Bridge
-from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugOptions
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, LogCapture, wait_for
 from tests.helpers.modbus import need

@@ -15,7 +15,8 @@ from pathlib import Path
 import pytest
 
 from eskin_industrial.node import NodeSnapshot
-from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugOptions, open_edge
+from eskin_industrial.outputs.sparkplug.kind import open_edge
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from eskin_industrial.outputs.sparkplug.watch import PlantModel
 from eskin_industrial.view.plant_table import plant_lines
 from tests.helpers import sparkplug as spb

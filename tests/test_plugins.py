@@ -42,7 +42,7 @@ description = "A source, an output and a method for eskin-industrial"
 const = "eskin_pagekinds:ConstSource"
 
 [project.entry-points."eskin_industrial.outputs"]
-state-log = "eskin_pagekinds:StateLog"
+state-log = "eskin_pagekinds:StateLogKind"
 
 [project.entry-points."eskin_industrial.methods"]
 peak-shift = "eskin_pagekinds:METHOD"

@@ -19,16 +19,17 @@ from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.detect.state import LABELS
 from eskin_industrial.detect.updates import COLUMNS
 from eskin_industrial.errors import ProfileError
-from eskin_industrial.outputs.base import SINKS, sink_class
+from eskin_industrial.outputs.base import SINKS, output_kind
 from eskin_industrial.outputs.plc.image import Status
-from eskin_industrial.outputs.recorder.sink import Recorder, RecorderOptions
+from eskin_industrial.outputs.recorder.kind import RecorderKind, RecorderOptions
+from eskin_industrial.outputs.recorder.sink import Recorder
 from tests.helpers.bridge import PAPER, channel, hold_raw, node_thread, running_bridge, server_config, wait_for
 
 
 def test_the_recorder_is_one_registry_entry():
-    assert SINKS["recorder"].endswith(":Recorder") and sink_class("recorder") is Recorder
+    assert SINKS["recorder"].endswith(":RecorderKind") and output_kind("recorder") is RecorderKind
     with pytest.raises(ProfileError, match="unknown output kind 'recorde'.*did you mean 'recorder'"):
-        sink_class("recorde")
+        output_kind("recorde")
 
 
 @pytest.mark.parametrize("fmt", ["csv", "jsonl"])

@@ -33,7 +33,7 @@ def kinds(tmp_path, monkeypatch):
     import pagekinds  # type: ignore[import-not-found]
 
     monkeypatch.setitem(SOURCES, "const", "pagekinds:ConstSource")  # the one registry entry each
-    monkeypatch.setitem(SINKS, "state-log", "pagekinds:StateLog")
+    monkeypatch.setitem(SINKS, "state-log", "pagekinds:StateLogKind")
     monkeypatch.setitem(METHODS, "peak-shift", pagekinds.METHOD)
     yield pagekinds
     sys.modules.pop("pagekinds", None)
@@ -57,10 +57,11 @@ def test_the_page_examples_run_in_the_bridge(kinds, tmp_path):
     cfg = parse_bridge_config(config(log_path, peak_shift_profile(tmp_path)), str(tmp_path / "b.toml"))
     (node,) = resolve(cfg)
     assert node.profile.detector.method == "peak-shift"
-    assert node.options.value == 600.0 and [c.kind for c, _ in output_classes(cfg)] == ["state-log"]
+    assert node.options.value == 600.0 and [c.name for c, _ in output_classes(cfg)] == ["state-log"]
     capture = LogCapture()
     log = EventLog(capture, "json", "debug")
     bridge = Bridge(cfg, [node], log).open()
+    assert [s.kind for s in bridge.runs[0].loop.sinks] == ["state-log"]  # told at open, by the kind
     try:
         bridge.start()
         wait_for(lambda: bridge.counters()["g"]["updates"] >= 20, what="updates from the example source")

@@ -24,7 +24,7 @@ from eskin_industrial.node import NodeSnapshot
 from eskin_industrial.outputs.base import Sink
 from eskin_industrial.outputs.opcua.status import BAD_SENSOR_FAILURE, quality
 from eskin_industrial.outputs.plc.image import Status
-from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS, metric_values
+from eskin_industrial.outputs.sparkplug.metrics import DEVICE_METRICS, metric_values
 from eskin_industrial.profile import load_profile
 from eskin_industrial.recording import write_recording
 from tests.helpers.bridge import CLAIMS, PAPER, hold_raw, running_bridge, server_config, wait_for
@@ -82,10 +82,8 @@ def test_identical_scans_freeze_and_a_rate_far_from_the_profile_is_refused():
 
 # -- through the bridge: every output --------------------------------------------
 
-class Snapshots(Sink[None]):
+class Snapshots(Sink):
     """Keeps every snapshot the loop publishes (what Sparkplug and OPC UA render)."""
-
-    kind = "snapshots"
 
     def __init__(self) -> None:
         super().__init__()

@@ -247,8 +247,6 @@ def test_modbus_bridge_leaves_the_plc_reading_offline(plc, hold_csv, how):
 class _BrokenOutput(Sink):
     """An output whose last image and flush raise (a disk gone, a library's bug)."""
 
-    kind = "broken"
-
     def _publish(self, snapshot: NodeSnapshot) -> None:
         if snapshot.offline:
             raise OSError("the output is gone")

@@ -16,10 +16,12 @@ from hypothesis import strategies as st
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.errors import ProfileError
-from eskin_industrial.outputs.base import SINKS, sink_class
+from eskin_industrial.outputs.base import SINKS, output_kind
 from eskin_industrial.outputs.sparkplug import payload as pb
 from eskin_industrial.outputs.sparkplug.commands import COMMANDS
-from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS, SparkplugDevice, SparkplugOptions, open_edge
+from eskin_industrial.outputs.sparkplug.kind import SparkplugKind, open_edge
+from eskin_industrial.outputs.sparkplug.metrics import DEVICE_METRICS
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, server_config, slip_raw, wait_for
 from tests.helpers.paths import PROFILES
@@ -73,7 +75,7 @@ def test_garbage_is_one_error_or_a_payload(data):
 
 # -- options ------------------------------------------------------------------------
 def test_the_kind_is_one_registry_entry_and_checks_its_options():
-    assert sink_class("sparkplug") is SparkplugDevice and "sparkplug" in SINKS
+    assert output_kind("sparkplug") is SparkplugKind and "sparkplug" in SINKS
     with pytest.raises(ValueError, match="expected mqtt://HOST:PORT"):
         SparkplugOptions("tcp://x:1", "g", "e")
     with pytest.raises(ValueError, match="expected mqtt://HOST:PORT"):
@@ -82,9 +84,9 @@ def test_the_kind_is_one_registry_entry_and_checks_its_options():
         SparkplugOptions("mqtt://x:1", "a/b", "e")
     with pytest.raises(ValueError, match="edge_node_id: '#' is not"):
         SparkplugOptions("mqtt://x:1", "g", "#")
-    assert SparkplugDevice.options_from_cli({}) is None
+    assert SparkplugKind.options_from_cli({}) is None
     with pytest.raises(ValueError, match="give --group-id and --edge-node-id"):
-        SparkplugDevice.options_from_cli({"sparkplug": "mqtt://h:1", "group_id": "g"})
+        SparkplugKind.options_from_cli({"sparkplug": "mqtt://h:1", "group_id": "g"})
 
 
 def test_sparkplug_section_in_a_file(tmp_path):
@@ -272,7 +274,7 @@ def test_check_describes_the_output(tmp_path):
 
 
 def test_the_metric_table_in_the_docs_is_the_code():
-    from eskin_industrial.outputs.sparkplug.sparkplug import metric_table
+    from eskin_industrial.outputs.sparkplug.metrics import metric_table
     from tests.helpers.paths import ROOT
 
     text = (ROOT / "docs" / "plant.md").read_text()
@@ -392,9 +394,9 @@ def test_every_key_but_qos_is_a_command_line_option() -> None:
     import dataclasses
 
     keys = {f.name for f in dataclasses.fields(SparkplugOptions)}
-    by_option = SparkplugDevice._CLI_KEYS
+    by_option = SparkplugKind._CLI_KEYS
     assert keys - set(by_option.values()) == {"broker", "group_id", "edge_node_id", "qos"}
-    dests = {o.dest: o for o in SparkplugDevice.cli_options}
+    dests = {o.dest: o for o in SparkplugKind.cli_options}
     assert {"sparkplug", "group_id", "edge_node_id"} <= set(dests) and set(by_option) <= set(dests)
     assert not any("password" == k for k in keys)
     sample = {bool: True, int: 7, float: 0.25, str: "x"}
@@ -402,6 +404,6 @@ def test_every_key_but_qos_is_a_command_line_option() -> None:
         if key in ("cert_file", "key_file", "ca_file", "password_file", "password_env", "username", "store_dir"):
             continue  # (their files and pairs are checked elsewhere; the mapping above covers them)
         value = sample[dests[dest].type]
-        opts = SparkplugDevice.options_from_cli({"sparkplug": "mqtt://127.0.0.1:1883", "group_id": "g",
+        opts = SparkplugKind.options_from_cli({"sparkplug": "mqtt://127.0.0.1:1883", "group_id": "g",
                                                  "edge_node_id": "e", dest: value})
         assert getattr(opts, key) == value, (dest, key)

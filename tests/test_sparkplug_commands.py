@@ -16,7 +16,8 @@ from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.node import Command
 from eskin_industrial.outputs.sparkplug import payload as pb
 from eskin_industrial.outputs.sparkplug.commands import COMMAND_ALIAS, COMMANDS, BadCommand, parse_device_command
-from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS, SparkplugOptions
+from eskin_industrial.outputs.sparkplug.metrics import DEVICE_METRICS
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from eskin_industrial.profile import Profile
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, channel, node_thread, running_bridge, to_raw, wait_for

@@ -37,7 +37,7 @@ from typing import Any
 
 import pytest
 
-from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugOptions
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from tests.helpers import sparkplug as spb
 from tests.helpers import sparkplug_lint as lint
 from tests.helpers.modbus import need

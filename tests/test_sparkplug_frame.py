@@ -27,7 +27,8 @@ from eskin_industrial.errors import ProfileError
 from eskin_industrial.frames import Frame
 from eskin_industrial.outputs.base import Sink
 from eskin_industrial.outputs.sparkplug import payload as pb
-from eskin_industrial.outputs.sparkplug.sparkplug import FRAME_ALIAS, SparkplugOptions
+from eskin_industrial.outputs.sparkplug.metrics import FRAME_ALIAS
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from eskin_industrial.profile import load_profile
 from eskin_industrial.scenes import render
 from tests.helpers import sparkplug as spb
@@ -77,8 +78,6 @@ def _matches(frames: list[np.ndarray], expected: np.ndarray) -> list[int]:
 
 # -- the loop: the frames due, nothing for a sink that wants none ------------------------
 class _FrameSink(Sink):
-    kind = "frames"
-
     def __init__(self, every_s: float | None) -> None:
         super().__init__()
         self.frame_every_s = every_s
@@ -337,7 +336,7 @@ def test_the_plant_view_shows_the_newest_frames_peak_and_total_and_survives_a_ba
 
 def test_the_frame_alias_is_its_own_in_the_device_block():
     from eskin_industrial.outputs.sparkplug.commands import COMMAND_ALIAS, COMMANDS
-    from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS
+    from eskin_industrial.outputs.sparkplug.metrics import DEVICE_METRICS
 
     aliases = [*range(len(DEVICE_METRICS)), FRAME_ALIAS, *range(COMMAND_ALIAS, COMMAND_ALIAS + len(COMMANDS))]
     assert len(set(aliases)) == len(aliases) and max(aliases) < 1000, "a device's block is 1000 aliases"

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
-from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugOptions
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, running_bridge, wait_for
 from tests.helpers.modbus import need

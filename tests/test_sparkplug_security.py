@@ -15,7 +15,8 @@ import pytest
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.cli.outputs import output_options
-from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugDevice, SparkplugOptions
+from eskin_industrial.outputs.sparkplug.kind import SparkplugKind
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from eskin_industrial.outputs.sparkplug.transport import check_files, parse_broker, password
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, running_bridge
@@ -63,7 +64,7 @@ def test_no_option_takes_the_password_itself():
     assert "--sparkplug-password-file" in flags and "--sparkplug-password-env" in flags
     assert not [f for f in flags if f.endswith("password") or f == "--password"]
     with pytest.raises(ValueError, match="--sparkplug-cert-file: give the client certificate"):
-        SparkplugDevice.options_from_cli({"sparkplug": "mqtts://h:1", "group_id": "g", "edge_node_id": "e",
+        SparkplugKind.options_from_cli({"sparkplug": "mqtts://h:1", "group_id": "g", "edge_node_id": "e",
                                           "sparkplug_cert_file": "c.pem"})
 
 

@@ -18,7 +18,10 @@ from typing import Any
 import pytest
 
 from eskin_industrial.node import NodeSnapshot
-from eskin_industrial.outputs.sparkplug.sparkplug import DEVICE_METRICS, EdgeNode, SparkplugOptions, open_edge
+from eskin_industrial.outputs.sparkplug.edge import EdgeNode
+from eskin_industrial.outputs.sparkplug.kind import open_edge
+from eskin_industrial.outputs.sparkplug.metrics import DEVICE_METRICS
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import wait_for
 from tests.helpers.modbus import free_port
@@ -266,13 +269,13 @@ def test_store_options_are_checked():
 
 
 def test_check_finds_a_store_dir_that_cannot_be_written(tmp_path):
-    from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugDevice
+    from eskin_industrial.outputs.sparkplug.kind import SparkplugKind
 
     f = tmp_path / "a-file"
     f.write_text("")
     with pytest.raises(ValueError, match="store_dir: .* is not a writable folder"):
-        SparkplugDevice.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(f / "sub")), [])
-    SparkplugDevice.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(tmp_path / "new" / "dir")), [])
+        SparkplugKind.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(f / "sub")), [])
+    SparkplugKind.check(SparkplugOptions("mqtt://h:1", "g", "e", store_dir=str(tmp_path / "new" / "dir")), [])
 
 
 def test_a_store_that_fails_to_write_is_counted_and_logged_and_goes_on():

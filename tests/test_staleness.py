@@ -68,9 +68,7 @@ class Hiccups(Source[None]):
         return RawScan(k, k * 0.01, self.raw[k % len(self.raw)], 0, now)
 
 
-class Keep(Sink[None]):
-    kind = "keep"
-
+class Keep(Sink):
     def __init__(self) -> None:
         super().__init__()
         self.seen: list[tuple[float, NodeSnapshot]] = []

@@ -22,7 +22,7 @@ from click.testing import CliRunner
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.cli import main
-from eskin_industrial.outputs.base import SINKS, sink_class
+from eskin_industrial.outputs.base import SINKS, output_kind
 from eskin_industrial.outputs.opcua.users import add_user
 from eskin_industrial.outputs.web import server as web_server
 from eskin_industrial.outputs.web.options import WebOptions
@@ -79,9 +79,9 @@ async def command(http: aiohttp.ClientSession, base: str, name: str, csrf: str |
 
 
 def test_the_kind_is_one_registry_entry() -> None:
-    assert SINKS["web"] == "eskin_industrial.outputs.web.sink:WebSink"
-    assert sink_class("web").kind == "web"
-    assert [o.flag for o in sink_class("web").cli_options][0] == "--web"
+    assert SINKS["web"] == "eskin_industrial.outputs.web.kind:WebKind"
+    assert output_kind("web").name == "web"
+    assert [o.flag for o in output_kind("web").cli_options][0] == "--web"
 
 
 def test_an_open_bind_needs_tls_and_users() -> None:

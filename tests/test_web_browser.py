@@ -26,7 +26,7 @@ from click.testing import CliRunner
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig
 from eskin_industrial.cli import main
 from eskin_industrial.outputs.plc.image import STATUS_COUNT, Status, decode_registers
-from eskin_industrial.outputs.plc.sink import PlcOptions
+from eskin_industrial.outputs.plc.options import PlcOptions
 from eskin_industrial.outputs.web.options import WebOptions
 from eskin_industrial.scenes import render
 from tests.helpers.bridge import PAPER, Running, running_bridge, wait_for

@@ -56,7 +56,7 @@ from typing import Any, Literal
 
 from ..bus.source import Source, source_class
 from ..errors import DeprecatedKey, ProfileError
-from ..outputs.base import DEFAULT_OUTPUT, Sink, sink_class, sink_kinds
+from ..outputs.base import DEFAULT_OUTPUT, OutputKind, output_kind, sink_kinds
 from ..profile import MAX_RATE_HZ, STALE_MAX_FACTOR, Profile, derived_stale_s, load_profile
 from ..schema import SchemaError, build, in_range, positive_at_most, read_toml_file
 from ..seam import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES
@@ -101,7 +101,7 @@ class NodeConfig:
 
 def _node_output(kind: str, value: Any) -> Any:
     """An output kind's node keys: built from a table, or as given."""
-    cls = sink_class(kind).NodeOptions
+    cls = output_kind(kind).NodeOptions
     if cls is None:
         raise SchemaError(kind, f"the output kind {kind!r} has no keys of a node")
     if isinstance(value, dict):
@@ -203,7 +203,7 @@ class BridgeConfig:
         """The outputs to open: the configured ones, or the default one."""
         if self.outputs or not default_output:
             return {k: self.outputs[k] for k in sink_kinds() if k in self.outputs}
-        return {DEFAULT_OUTPUT: sink_class(DEFAULT_OUTPUT).default_options()}
+        return {DEFAULT_OUTPUT: output_kind(DEFAULT_OUTPUT).default_options()}
 
 
 @dataclass(frozen=True)
@@ -252,7 +252,7 @@ def parse_bridge_config(text: str, source: str) -> BridgeConfig:
     outputs: dict[str, Any] = {}
     for kind in sink_kinds():
         if kind in table:
-            outputs[kind] = _section(sink_class(kind).Options, table.pop(kind), kind, source)
+            outputs[kind] = _section(output_kind(kind).Options, table.pop(kind), kind, source)
     try:
         top = build(_Top, table)
     except SchemaError as exc:
@@ -322,7 +322,7 @@ def _moved_node_keys(raw: dict[str, Any], label: str, source: str) -> dict[str, 
     """``[[node]]`` keys of earlier releases that an output kind now owns
     (``base_address`` -> ``[node.plc] base_address``): moved, with one warning each."""
     for kind in sink_kinds():
-        for old, new in sink_class(kind).moved_node_keys.items():
+        for old, new in output_kind(kind).moved_node_keys.items():
             if old not in raw:
                 continue
             table = raw.setdefault(kind, {})
@@ -377,7 +377,7 @@ def probe_outputs(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
     server's port is free); the run meets the same when it opens the output."""
     for kind, options in config.output_kinds().items():
         try:
-            sink_class(kind).probe(options, nodes)
+            output_kind(kind).probe(options, nodes)
         except ValueError as exc:
             raise ProfileError(f"{config.source}: [{kind}] {exc}") from None
 
@@ -385,7 +385,7 @@ def probe_outputs(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
 def _apply_overrides(prof: Profile, nc: NodeConfig) -> Profile:
     prof = source_class(nc.source).adapt_profile(prof, nc.options)
     for kind, node_options in nc.outputs.items():
-        prof = sink_class(kind).adapt_profile(prof, node_options)
+        prof = output_kind(kind).adapt_profile(prof, node_options)
     if nc.rate_hz is not None:
         # A stale limit the profile did not set was derived from the profile's rate;
         # a node running slower must get its own, or it reads stale between two scans.
@@ -414,14 +414,14 @@ def _check_together(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:
             raise ProfileError(f"{src}: {exc}") from None
     for kind, options in config.output_kinds().items():
         try:
-            sink_class(kind).check(options, nodes)
+            output_kind(kind).check(options, nodes)
         except ValueError as exc:  # about one node ("[node ...] key: ..."), or the section
             where = "" if str(exc).startswith("[node ") else f"[{kind}] "
             raise ProfileError(f"{src}: {where}{exc}") from None
 
 
-def output_classes(config: BridgeConfig, default_output: bool = True) -> list[tuple[type[Sink], Any]]:
-    return [(sink_class(kind), options) for kind, options in config.output_kinds(default_output).items()]
+def output_classes(config: BridgeConfig, default_output: bool = True) -> list[tuple[type[OutputKind[Any]], Any]]:
+    return [(output_kind(kind), options) for kind, options in config.output_kinds(default_output).items()]
 
 
 def explain(config: BridgeConfig, node: ResolvedNode) -> list[tuple[str, Any, str]]:
@@ -454,13 +454,13 @@ def explain(config: BridgeConfig, node: ResolvedNode) -> list[tuple[str, Any, st
     out.append(("source", c.source, given))
     add("", c.options, node.kind.profile_keys, given)
     for kind in sink_kinds():  # the output kinds' keys of this node, as the profile resolves them
-        cls = sink_class(kind)
+        cls = output_kind(kind)
         for key, profile_key in cls.node_profile_keys.items():
             mine = c.outputs.get(kind)
             value = from_profile(profile_key)
             set_here = mine is not None and getattr(mine, key, None) is not None
             out.append((f"node.{kind}.{key}", value, given if set_here else prof))
     for kind, options in config.output_kinds().items():
-        add(f"{kind}.", options, sink_class(kind).explain_keys(options, [node]),
+        add(f"{kind}.", options, output_kind(kind).explain_keys(options, [node]),
             given if kind in config.outputs else "default output")
     return out

@@ -92,12 +92,12 @@ def open_nodes(config: BridgeConfig, nodes: list[ResolvedNode], closers: list[Ca
             if supervision is None:
                 opened = cls.open_nodes(options, nodes, context)
             else:
-                output = Output(cls, options, nodes, context, policy_of(config, cls.kind), supervision.log,
+                output = Output(cls, options, nodes, context, policy_of(config, cls.name), supervision.log,
                                 supervision.stop)
                 opened = list(supervision.add(output))
                 closers.append(output.close)
         except ListenError as exc:  # a port in use: the line --check gives (probe_outputs)
-            raise ListenError(f"{config.source}: [{cls.kind}] port: {exc}") from None
+            raise ListenError(f"{config.source}: [{cls.name}] port: {exc}") from None
         for i, sink in enumerate(opened):
             per_node[i].append(sink)
     sources: list[Source | None] = [None] * len(nodes)

@@ -9,7 +9,7 @@ sink itself: it holds one :class:`SupervisedSink` per node, and an
   take_commands, commands_done, source_ended, health, counters), a call in progress
   longer than ``hang_s``, or the death of a thread the kind owns (by name: a thread
   named for the kind, ``opcua-server``, or one the kind declares in
-  :attr:`~eskin_industrial.outputs.base.Sink.thread_names`, paho's), is one failure:
+  :attr:`~eskin_industrial.outputs.base.OutputKind.thread_names`, paho's), is one failure:
   one line (``output_failed``, the output and node named), the output set down (its
   sinks answer nothing until it is back), its instance closed off the loop with a
   time limit, and a fresh one opened after a back-off (``backoff_s`` doubling to
@@ -43,7 +43,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
-from ..outputs.base import EventHandler, Sink, SinkHealth
+from ..outputs.base import EventHandler, OutputKind, Sink, SinkHealth
 
 if TYPE_CHECKING:
     from ..detect.updates import Update
@@ -77,28 +77,29 @@ class Policy:
     hang_s: float = 5.0
 
 
-def owns_thread(cls: type[Sink[Any]], name: str) -> bool:
+def owns_thread(cls: type[OutputKind[Any]], name: str) -> bool:
     """A thread of this output kind, by its name (``opcua-server``, paho's)."""
-    return name == cls.kind or any(name.startswith(prefix) for prefix in (f"{cls.kind}-", *cls.thread_names))
+    return name == cls.name or any(name.startswith(prefix) for prefix in (f"{cls.name}-", *cls.thread_names))
 
 
-class _Down(Sink[Any]):
+class _Down(Sink):
     """What a sink of an output that is down answers: nothing, at once."""
 
 
 _DOWN = _Down()
 
 
-class SupervisedSink(Sink[Any]):
+class SupervisedSink(Sink):
     """One node's sink of a supervised output, as the loop holds it; what the kind's
     instance has of its own (``server``, ``node``) is read through."""
 
-    def __init__(self, output: Output, index: int, inner: Sink[Any]) -> None:
+    def __init__(self, output: Output, index: int, inner: Sink) -> None:
         super().__init__()
+        self.kind = output.kind  # the kind's name, as the bridge reads it off every sink
         self.output = output
         self.index = index
         self.node_name = output.nodes[index].name
-        self.inner: Sink[Any] = inner
+        self.inner: Sink = inner
         self._kind_cls = type(inner)
         self.where = inner.where
         self.frame_every_s = inner.frame_every_s
@@ -113,7 +114,7 @@ class SupervisedSink(Sink[Any]):
     def overrides(self, name: str) -> bool:
         return getattr(self._kind_cls, name) is not getattr(Sink, name)
 
-    def attach(self, inner: Sink[Any]) -> None:
+    def attach(self, inner: Sink) -> None:
         """A fresh instance of the kind (a restart), its events to the same handler."""
         self.inner = inner
         self.where = inner.where
@@ -197,7 +198,7 @@ class HandedSink(SupervisedSink):
     """A non-essential output's sink: the loop leaves what it hands in a mailbox, the
     output's thread (:class:`_Handover`) calls the kind's instance."""
 
-    def __init__(self, output: Output, index: int, inner: Sink[Any]) -> None:
+    def __init__(self, output: Output, index: int, inner: Sink) -> None:
         super().__init__(output, index, inner)
         self.lock = threading.Lock()
         self.snapshot: NodeSnapshot | None = None
@@ -210,7 +211,7 @@ class HandedSink(SupervisedSink):
         self.cached_health = SinkHealth()
         self.cached_counters: dict[str, int] = {}
 
-    def attach(self, inner: Sink[Any]) -> None:
+    def attach(self, inner: Sink) -> None:
         self.cached_health, self.cached_counters = SinkHealth(), {}  # the old instance's no longer
         super().attach(inner)
 
@@ -287,7 +288,7 @@ class _Handover:
         self.generation = generation
         #: (the call, the node's index, until when it may take) of the call in progress
         self.busy: tuple[str, int, float] | None = None
-        self.thread = threading.Thread(target=self._run, name=f"{output.cls.kind}-output", daemon=True)
+        self.thread = threading.Thread(target=self._run, name=f"{output.kind}-output", daemon=True)
 
     def _live(self) -> bool:
         return self.output.generation == self.generation and self.output.up
@@ -374,7 +375,7 @@ class _Handover:
 class Output:
     """One output kind's sinks, watched: failures caught, the instance restarted."""
 
-    def __init__(self, cls: type[Sink[Any]], options: Any, nodes: Sequence[NodeLike[Any]], context: OpenContext,
+    def __init__(self, cls: type[OutputKind[Any]], options: Any, nodes: Sequence[NodeLike[Any]], context: OpenContext,
                  policy: Policy, log: Callable[..., None], stop: Callable[[str], None]) -> None:
         self.cls = cls
         self.options = options
@@ -383,7 +384,7 @@ class Output:
         self.policy = policy
         self._log = log
         self._stop_bridge = stop
-        self.kind = cls.kind
+        self.kind = cls.name
         self.lock = threading.Lock()
         self.wake = threading.Event()
         self.up = False
@@ -404,7 +405,7 @@ class Output:
         self._watch: threading.Thread | None = None
 
     # -- opening ----------------------------------------------------------------------
-    def _open_instance(self) -> list[Sink[Any]]:
+    def _open_instance(self) -> list[Sink]:
         from ..seam import OpenContext
 
         closers: list[Callable[[], None]] = []
@@ -422,10 +423,10 @@ class Output:
         """The first instance (an error here is the bridge's: nothing runs yet)."""
         opened = self._open_instance()
         base = GuardedSink if self.policy.essential else HandedSink
-        # the kind's name and what it says of itself, as the bridge reads them off the class
+        # what the kind's sinks say of themselves, as the bridge reads it off the class
+        # (the kind's name is each proxy's own, as every sink's)
         proxy = type(f"{base.__name__}_{self.kind}", (base,),
-                     {"kind": self.kind, "logs_connection": any(s.logs_connection for s in opened),
-                      "__module__": __name__})
+                     {"logs_connection": any(s.logs_connection for s in opened), "__module__": __name__})
         self.sinks = [proxy(self, i, sink) for i, sink in enumerate(opened)]
         self.up = True
         self._up_since = time.monotonic()

@@ -39,7 +39,7 @@ def profile_option(required: bool = True) -> Callable[[FC], FC]:
 def host_port(text: str, what: str, require_port: bool = False) -> tuple[str | None, int | None]:
     """``HOST:PORT`` (``HOST``, ``:PORT`` or nothing when the port is not required):
     None for what is left out, for the caller's default."""
-    from ..outputs.plc.sink import parse_host_port
+    from ..outputs.plc.options import parse_host_port
 
     try:
         return parse_host_port(text, require_port)

@@ -1,5 +1,5 @@
 """Command-line options of the output kinds, built from what each kind declares
-(:attr:`eskin_industrial.outputs.base.Sink.cli_options`), and read back into options."""
+(:attr:`eskin_industrial.outputs.base.OutputKind.cli_options`), and read back into options."""
 
 from __future__ import annotations
 
@@ -8,13 +8,13 @@ from typing import Any, TypeVar
 
 import click
 
-from ..outputs.base import CliOption, sink_class, sink_kinds
+from ..outputs.base import CliOption, output_kind, sink_kinds
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 
 def _all_cli_options(kind: str) -> tuple[CliOption, ...]:
-    cls = sink_class(kind)
+    cls = output_kind(kind)
     return cls.cli_options + cls.node_cli_options
 
 
@@ -52,7 +52,7 @@ def outputs_from_cli(values: dict[str, Any], kinds: tuple[str, ...] | None = Non
     only, when given: the ones :func:`kind_options` added)."""
     out = {}
     for kind in kinds or sink_kinds():
-        cls = sink_class(kind)
+        cls = output_kind(kind)
         try:
             options = cls.options_from_cli(values)
         except ValueError as exc:
@@ -67,7 +67,7 @@ def node_outputs_from_cli(values: dict[str, Any]) -> dict[str, Any]:
     """``kind -> node options`` of a one-node bridge (``--base-address``)."""
     out = {}
     for kind in sink_kinds():
-        cls = sink_class(kind)
+        cls = output_kind(kind)
         try:
             options = cls.node_options_from_cli(values)
         except ValueError as exc:

@@ -42,7 +42,7 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
     from ..bridge.config import BridgeConfig, NodeConfig, check_sources, resolve
     from ..bridge.runtime import SingleNode
     from ..errors import EskinError
-    from ..outputs.recorder.sink import RecorderOptions
+    from ..outputs.recorder.kind import RecorderOptions
 
     if can_log is None:
         node = NodeConfig.of("node", profile_path, "can", rate_hz=rate_hz, interface=interface, channel=channel,

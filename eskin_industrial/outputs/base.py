@@ -18,20 +18,20 @@ which the bridge routes to its log (:meth:`Sink.on_events`).  :meth:`Sink.flush`
 The public methods are written once here over private hooks (``_publish``,
 ``_close``), as python-can's ``BusABC.send`` over its backend's hook.
 
-An *output kind* is one module plus one entry in :data:`SINKS` (section name ->
-``module:Class``, imported on first use), or a plug-in: an entry point of the group
-``eskin_industrial.outputs`` in another distribution (:mod:`eskin_industrial.registry`).  The class declares what the bridge
+An *output kind* (:class:`OutputKind`) is the other half: a table of what the bridge
 configuration (its own ``[SECTION]`` of ``bridge.toml``), the command line
-(:attr:`Sink.cli_options`) and ``--check`` need, and opens one sink per node
-(:meth:`Sink.open_nodes`; a kind may share one connection between its nodes, as the
-PLC server serves every node's block).
+(:attr:`OutputKind.cli_options`) and ``--check`` need, and :meth:`OutputKind.open_nodes`,
+which opens one sink per node (a kind may share one connection between its nodes, as
+the PLC server serves every node's block) and tells each its kind's name.  A kind is
+one module plus one entry in :data:`SINKS` (section name -> ``module:Class``,
+imported on first use), or a plug-in: an entry point of the group
+``eskin_industrial.outputs`` in another distribution (:mod:`eskin_industrial.registry`).
 
 An example of a new kind, run by ``tests/test_seams.py``: ``docs/architecture.md``.
 """
 
 from __future__ import annotations
 
-import abc
 import collections
 import threading
 from collections.abc import Callable, Sequence
@@ -47,14 +47,14 @@ if TYPE_CHECKING:
     from ..profile import Profile
     from ..seam import NodeLike, OpenContext
 
-#: section name -> "module:Class", imported on first use.  The order is the order of
+#: section name -> "module:Class" of its :class:`OutputKind`, imported on first use.  The order is the order of
 #: the outputs in logs and ``--check``.
 SINKS: dict[str, str] = {
-    "plc": "eskin_industrial.outputs.plc.sink:PlcSink",
-    "recorder": "eskin_industrial.outputs.recorder.sink:Recorder",
-    "sparkplug": "eskin_industrial.outputs.sparkplug.sparkplug:SparkplugDevice",
-    "opcua": "eskin_industrial.outputs.opcua.sink:OpcuaSink",
-    "web": "eskin_industrial.outputs.web.sink:WebSink",
+    "plc": "eskin_industrial.outputs.plc.kind:PlcKind",
+    "recorder": "eskin_industrial.outputs.recorder.kind:RecorderKind",
+    "sparkplug": "eskin_industrial.outputs.sparkplug.kind:SparkplugKind",
+    "opcua": "eskin_industrial.outputs.opcua.sink:OpcuaKind",
+    "web": "eskin_industrial.outputs.web.kind:WebKind",
 }
 #: A sink's own events held until a handler is attached (the first ones of a writer
 #: that starts before the bridge's log is wired); beyond it the oldest are dropped.
@@ -80,7 +80,7 @@ class CliOption:
     a click option; the kind's module stays free of the CLI)."""
 
     flag: str  #: ``--plc``
-    dest: str  #: the name its value is handed to :meth:`Sink.options_from_cli` under
+    dest: str  #: the name its value is handed to :meth:`OutputKind.options_from_cli` under
     help: str
     metavar: str | None = None
     type: type = str  #: str, int or float; bool makes a flag
@@ -93,41 +93,23 @@ class CliOption:
 OptionsT = TypeVar("OptionsT")
 
 
-class Sink(abc.ABC, Generic[OptionsT]):
-    """Where one node's results go; a kind is generic over its ``Options``, which its
-    class methods are handed."""
+class Sink:
+    """Where one node's results go: the per-node half of an output, opened by its
+    :class:`OutputKind` (or built by hand, as ``monitor`` builds the register image
+    it shows)."""
 
-    #: The output kind: its ``[SECTION]`` in the bridge configuration, its log events.
-    kind: ClassVar[str] = ""
-    #: The kind's configuration section (a frozen dataclass).
-    Options: ClassVar[type] = type(None)
-    #: The kind's command-line options.
-    cli_options: ClassVar[tuple[CliOption, ...]] = ()
-    #: Option -> the (first node's) profile key it falls back to when unset.
-    profile_keys: ClassVar[dict[str, str]] = {}
     #: The sink logs its connection's ups and downs itself (:meth:`_event`): the
     #: bridge does not infer them from :meth:`health`.
     logs_connection: ClassVar[bool] = False
-    #: The kind's own keys of one node (a frozen dataclass): ``[node.KIND]`` under a
-    #: ``[[node]]`` table of ``bridge.toml`` (the PLC: the node's ``base_address``);
-    #: None: the kind has none.  Applied to the node's profile by :meth:`adapt_profile`.
-    NodeOptions: ClassVar[type | None] = None
-    #: The options of a one-node bridge's command line that fill :attr:`NodeOptions`.
-    node_cli_options: ClassVar[tuple[CliOption, ...]] = ()
-    #: ``[[node]]`` keys of earlier releases that are now this kind's (old -> its key):
-    #: still read, with a deprecation warning naming ``[node.KIND] key``.
-    moved_node_keys: ClassVar[dict[str, str]] = {}
-    #: A key of :attr:`NodeOptions` -> the profile key (dotted) it overrides, for ``--explain``.
-    node_profile_keys: ClassVar[dict[str, str]] = {}
-    #: Beginnings of the names of the threads the kind runs that are not named
-    #: ``KIND-...`` (a library's own, paho's): a death of one is this output's failure
-    #: (:mod:`eskin_industrial.bridge.supervise`), not the bridge's.
-    thread_names: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self) -> None:
         self._closed = False
-        #: Where the results go, for logs (``tcp 10.0.0.5:502 (client)``, a file path).
-        self.where = self.kind
+        #: The output kind that opened it (:attr:`OutputKind.name`), for logs; told
+        #: at open by :meth:`OutputKind.open_nodes` ("" for a sink built by hand).
+        self.kind = ""
+        #: Where the results go, for logs (``tcp 10.0.0.5:502 (client)``, a file
+        #: path); the kind's name when the sink says nothing.
+        self.where = ""
         #: The sink wants a calibrated frame (:meth:`on_frame`) at most this often, in
         #: seconds; None: no frames.  Read once when the sink joins a loop: the loop
         #: decides which frames are due, so a sink that wants none costs the scan nothing.
@@ -216,7 +198,38 @@ class Sink(abc.ABC, Generic[OptionsT]):
     def _close(self) -> None:
         pass
 
-    # -- what the configuration, the CLI and --check ask of a kind ---------------------
+
+class OutputKind(Generic[OptionsT]):
+    """An output kind: what the bridge configuration (its own ``[SECTION]`` of
+    ``bridge.toml``), the command line and ``--check`` need of it, and how it opens
+    one :class:`Sink` per node.  A table of class attributes and class methods, never
+    instantiated (as python-can's table of interfaces beside its ``Listener``);
+    generic over its ``Options``, which its class methods are handed."""
+
+    #: The kind's name: its ``[SECTION]`` in the bridge configuration, its log events.
+    name: ClassVar[str] = ""
+    #: The kind's configuration section (a frozen dataclass).
+    Options: ClassVar[type] = type(None)
+    #: The kind's command-line options.
+    cli_options: ClassVar[tuple[CliOption, ...]] = ()
+    #: Option -> the (first node's) profile key it falls back to when unset.
+    profile_keys: ClassVar[dict[str, str]] = {}
+    #: The kind's own keys of one node (a frozen dataclass): ``[node.KIND]`` under a
+    #: ``[[node]]`` table of ``bridge.toml`` (the PLC: the node's ``base_address``);
+    #: None: the kind has none.  Applied to the node's profile by :meth:`adapt_profile`.
+    NodeOptions: ClassVar[type | None] = None
+    #: The options of a one-node bridge's command line that fill :attr:`NodeOptions`.
+    node_cli_options: ClassVar[tuple[CliOption, ...]] = ()
+    #: ``[[node]]`` keys of earlier releases that are now this kind's (old -> its key):
+    #: still read, with a deprecation warning naming ``[node.KIND] key``.
+    moved_node_keys: ClassVar[dict[str, str]] = {}
+    #: A key of :attr:`NodeOptions` -> the profile key (dotted) it overrides, for ``--explain``.
+    node_profile_keys: ClassVar[dict[str, str]] = {}
+    #: Beginnings of the names of the threads the kind runs that are not named
+    #: ``KIND-...`` (a library's own, paho's): a death of one is this output's failure
+    #: (:mod:`eskin_industrial.bridge.supervise`), not the bridge's.
+    thread_names: ClassVar[tuple[str, ...]] = ()
+
     @classmethod
     def options_from_cli(cls, values: dict[str, Any]) -> OptionsT | None:
         """The kind's options from its command-line values (None: not asked for);
@@ -242,7 +255,7 @@ class Sink(abc.ABC, Generic[OptionsT]):
     @classmethod
     def describe(cls, options: OptionsT, node: NodeLike[Any]) -> str:
         """One line for ``--check``: where this node's results go."""
-        return cls.kind
+        return cls.name
 
     @classmethod
     def check(cls, options: OptionsT, nodes: Sequence[NodeLike[Any]]) -> None:
@@ -260,18 +273,26 @@ class Sink(abc.ABC, Generic[OptionsT]):
         ValueError ``key: what``."""
 
     @classmethod
-    def open_nodes(cls, options: OptionsT, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
-        """One sink per node (in order); what must be closed goes to ``context.closers``.
+    def open_nodes(cls, options: OptionsT, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink]:
+        """One sink per node (in order), each told the kind's name; what must be
+        closed goes to ``context.closers``."""
+        sinks = cls._open_nodes(options, nodes, context)
+        for sink in sinks:
+            sink.kind = cls.name
+            sink.where = sink.where or cls.name
+        return sinks
 
-        Every registered kind overrides it.  Not abstract: the sinks a kind opens may
-        be classes of their own that open nothing (the PLC's writer and server block),
-        as a source kind's :meth:`~eskin_industrial.bus.source.Source.open_node`."""
-        raise NotImplementedError(f"{cls.__name__} is opened by its output kind {cls.kind!r}")
+    @classmethod
+    def _open_nodes(cls, options: OptionsT, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink]:
+        """The kind's hook for :meth:`open_nodes`: every kind has one (a kind may
+        share one connection between its nodes, as the PLC server serves every
+        node's block)."""
+        raise NotImplementedError(f"the output kind {cls.name!r} opens no nodes")
 
 
-def sink_class(kind: str) -> type[Sink[Any]]:
-    """The class of an output kind by name; an unknown one is one line with the valid names."""
-    cls: type[Sink[Any]] = load_kind(SINKS, kind, "output kind", Sink, SINK_GROUP)
+def output_kind(name: str) -> type[OutputKind[Any]]:
+    """An output kind by name; an unknown one is one line with the valid names."""
+    cls: type[OutputKind[Any]] = load_kind(SINKS, name, "output kind", OutputKind, SINK_GROUP)
     return cls
 
 

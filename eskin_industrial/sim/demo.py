@@ -28,7 +28,7 @@ from ..calibration import Calibrator
 from ..detect.updates import Update, UpdateTable
 from ..evaluation.metrics import SceneScore, score_scene
 from ..outputs.plc.image import STATUS_COUNT, TAIL_AT, TAIL_COUNT, read_back, status_names
-from ..outputs.plc.sink import PlcOptions
+from ..outputs.plc.options import PlcOptions
 from ..outputs.web.sink import WebSink, web_sinks
 from ..profile import Profile
 from ..scenes import Rendered

@@ -26,7 +26,7 @@ from eskin_industrial.calibration import Calibrator
 from eskin_industrial.modbus.pymodbus_io import RegisterServer
 from eskin_industrial.outputs.plc.image import REG, STATUS_COUNT, Status
 from eskin_industrial.outputs.plc.image import decode_registers as decode
-from eskin_industrial.outputs.plc.sink import PlcOptions
+from eskin_industrial.outputs.plc.options import PlcOptions
 from eskin_industrial.profile import Profile
 from eskin_industrial.sim.can_node import CanNode, Faults
 from eskin_industrial.sim.plc import PlcMemory

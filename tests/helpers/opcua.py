@@ -191,8 +191,6 @@ class Capture(Sink):
     """A sink that keeps every snapshot and frame the loop hands it (beside the
     OPC UA output, on the same loop): what the server was given."""
 
-    kind = "capture"
-
     def __init__(self, frame_every_s: float | None = None) -> None:
         super().__init__()
         self.snapshots: list[NodeSnapshot] = []

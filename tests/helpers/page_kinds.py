@@ -26,7 +26,7 @@ from eskin_industrial.detect.settings import DetectorSettings
 from eskin_industrial.detect.state import GraspState
 from eskin_industrial.frames import RawScan
 from eskin_industrial.node import NodeSnapshot
-from eskin_industrial.outputs.base import CliOption, Sink
+from eskin_industrial.outputs.base import CliOption, OutputKind, Sink
 from eskin_industrial.schema import in_range
 '''
 

@@ -19,7 +19,7 @@ from ...errors import MissingExtra, ProfileError
 from ...netaddr import listen_problem
 from ...preflight import check_readable
 from ...schema import SchemaError, build
-from ..base import CliOption, Sink, SinkHealth
+from ..base import CliOption, OutputKind, Sink, SinkHealth
 from .options import OpcuaOptions
 
 if TYPE_CHECKING:
@@ -65,33 +65,8 @@ def node_info(node: NodeLike[Any], frame_interval_s: float) -> NodeInfo:
                     (p.layout.rows, p.layout.cols) if frame_interval_s else None, (0.0, per_taxel))
 
 
-class OpcuaSink(Sink[OpcuaOptions]):
-    """One node's object on the bridge's OPC UA server."""
-
-    kind = "opcua"
-    Options = OpcuaOptions
-    cli_options = (
-        CliOption("--opcua", "opcua", "Serve the grasp states over OPC UA at this endpoint (opc.tcp://HOST:PORT; "
-                  "security off only on loopback, docs/opcua.md).", metavar="URL"),
-        CliOption("--opcua-security", "opcua_security", "OPC UA: the endpoints offered, comma-separated (None, "
-                  "Basic256Sha256_Sign, Basic256Sha256_SignAndEncrypt, Aes128_Sha256_RsaOaep_Sign, "
-                  "Aes128_Sha256_RsaOaep_SignAndEncrypt); default: None on loopback, the secure ones with "
-                  "--opcua-pki-dir.", metavar="LIST"),
-        CliOption("--opcua-pki-dir", "opcua_pki_dir", "OPC UA: the folder of the server's certificate and of "
-                  "the trusted and rejected client certificates (made on first start).", metavar="DIR"),
-        CliOption("--opcua-users-file", "opcua_users_file", "OPC UA: the users and their roles (eskin-bus "
-                  "opcua user add).", metavar="FILE"),
-        CliOption("--opcua-users-env", "opcua_users_env", "OPC UA: the users, NAME:ROLE:PASSWORD lines of this "
-                  "environment variable.", metavar="NAME"),
-        CliOption("--opcua-allow-insecure", "opcua_allow_insecure", "OPC UA: allow SecurityPolicy None and "
-                  "anonymous sessions off loopback (a warning at start).", type=bool, default=False),
-        CliOption("--opcua-frame-interval", "opcua_frame_interval_s", "OPC UA: publish each node's taxel frame "
-                  "(Taxels, a Float matrix) at most this often, seconds (default 0: off).", type=float,
-                  metavar="S"),
-    )
-    #: ``--opcua-*`` option -> the ``[opcua]`` key it sets.
-    _CLI_KEYS = {"opcua_pki_dir": "pki_dir", "opcua_users_file": "users_file", "opcua_users_env": "users_env",
-                 "opcua_allow_insecure": "allow_insecure", "opcua_frame_interval_s": "frame_interval_s"}
+class OpcuaSink(Sink):
+    """One node's object on the bridge's OPC UA server (opened by :class:`OpcuaKind`)."""
 
     def __init__(self, server: OpcuaServer, index: int, name: str) -> None:
         super().__init__()
@@ -130,7 +105,35 @@ class OpcuaSink(Sink[OpcuaOptions]):
     def counters(self) -> dict[str, int]:
         return self.server.counters(self.index)
 
-    # -- the kind ----------------------------------------------------------------------
+
+class OpcuaKind(OutputKind[OpcuaOptions]):
+    """The output kind "opcua": one server for the bridge, one :class:`OpcuaSink` per node."""
+
+    name = "opcua"
+    Options = OpcuaOptions
+    cli_options = (
+        CliOption("--opcua", "opcua", "Serve the grasp states over OPC UA at this endpoint (opc.tcp://HOST:PORT; "
+                  "security off only on loopback, docs/opcua.md).", metavar="URL"),
+        CliOption("--opcua-security", "opcua_security", "OPC UA: the endpoints offered, comma-separated (None, "
+                  "Basic256Sha256_Sign, Basic256Sha256_SignAndEncrypt, Aes128_Sha256_RsaOaep_Sign, "
+                  "Aes128_Sha256_RsaOaep_SignAndEncrypt); default: None on loopback, the secure ones with "
+                  "--opcua-pki-dir.", metavar="LIST"),
+        CliOption("--opcua-pki-dir", "opcua_pki_dir", "OPC UA: the folder of the server's certificate and of "
+                  "the trusted and rejected client certificates (made on first start).", metavar="DIR"),
+        CliOption("--opcua-users-file", "opcua_users_file", "OPC UA: the users and their roles (eskin-bus "
+                  "opcua user add).", metavar="FILE"),
+        CliOption("--opcua-users-env", "opcua_users_env", "OPC UA: the users, NAME:ROLE:PASSWORD lines of this "
+                  "environment variable.", metavar="NAME"),
+        CliOption("--opcua-allow-insecure", "opcua_allow_insecure", "OPC UA: allow SecurityPolicy None and "
+                  "anonymous sessions off loopback (a warning at start).", type=bool, default=False),
+        CliOption("--opcua-frame-interval", "opcua_frame_interval_s", "OPC UA: publish each node's taxel frame "
+                  "(Taxels, a Float matrix) at most this often, seconds (default 0: off).", type=float,
+                  metavar="S"),
+    )
+    #: ``--opcua-*`` option -> the ``[opcua]`` key it sets.
+    _CLI_KEYS = {"opcua_pki_dir": "pki_dir", "opcua_users_file": "users_file", "opcua_users_env": "users_env",
+                 "opcua_allow_insecure": "allow_insecure", "opcua_frame_interval_s": "frame_interval_s"}
+
     @classmethod
     def options_from_cli(cls, values: dict[str, Any]) -> OpcuaOptions | None:
         url = values.get("opcua")
@@ -188,7 +191,7 @@ class OpcuaSink(Sink[OpcuaOptions]):
             raise ValueError(f"endpoint: {problem}")
 
     @classmethod
-    def open_nodes(cls, options: OpcuaOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink[Any]]:
+    def _open_nodes(cls, options: OpcuaOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink]:
         need_asyncua()
         from .server import OpcuaServer
         from .users import load_users

@@ -48,7 +48,6 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 from ...errors import ModbusFault, Refused
 from ...modbus.pymodbus_io import RtuMaster
@@ -59,9 +58,6 @@ from ...profile import ModbusPlcSection
 from ...ratelimit import Throttle
 from ..base import Sink, SinkHealth
 from .image import CMD_REFUSED, REG, TAIL_AT, PlcImage, parse_register_write
-
-if TYPE_CHECKING:
-    from .sink import PlcOptions  # noqa: F401 - named in the base class (a string: no import cycle at run time)
 
 #: Each back-off wait is the current delay less up to this share of it, at random.
 JITTER = 0.25
@@ -125,10 +121,7 @@ def _by_code(now: collections.Counter[int], before: dict[int, int]) -> str:
     return ",".join(f"{c:02d}:{n - before.get(c, 0)}" for c, n in sorted(now.items()) if n > before.get(c, 0)) or "-"
 
 
-class PlcWriter(Sink["PlcOptions"]):
-    # A sink of the "plc" output kind, opened by plc.sink.PlcSink: not a subclass of
-    # it, so that the two modules do not import each other.
-    kind = "plc"
+class PlcWriter(Sink):
     logs_connection = True  # outages are logged from the writer's own transitions
 
     def __init__(self, settings: ModbusPlcSection, host: str | None = None, port: int | None = None,

@@ -11,11 +11,10 @@ from ..base import Sink
 from .image import PlcImage, read_back, status_names
 
 
-class KeptRegisters(Sink[None]):
+class KeptRegisters(Sink):
     """Renders every snapshot into the node's register image, as the PLC output
     would, and keeps the newest (read by a view's redraw thread)."""
 
-    kind = "plc"
 
     def __init__(self, settings: ModbusPlcSection) -> None:
         super().__init__()
@@ -37,7 +36,7 @@ class KeptRegisters(Sink[None]):
         return values, status_names(values["STATUS"])
 
 
-def served_table(sink: Sink[object]) -> Callable[[], tuple[dict[str, int], tuple[str, ...]]] | None:
+def served_table(sink: Sink) -> Callable[[], tuple[dict[str, int], tuple[str, ...]]] | None:
     """A reader of the block a PLC reads from this sink (server mode: the served
     registers, by name, and the STATUS bits set), for a view beside the PLC (the web
     console's register block); None for a sink that serves no block (client mode

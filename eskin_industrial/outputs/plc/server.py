@@ -24,7 +24,6 @@ import queue
 import threading
 import time
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 from ...errors import Refused
 from ...modbus.exception_codes import DEVICE_FAILURE, ILLEGAL_ADDRESS
@@ -49,9 +48,6 @@ from .image import (
     parse_coil_write,
     parse_register_write,
 )
-
-if TYPE_CHECKING:
-    from .sink import PlcOptions  # noqa: F401 - named in the base class (a string: no import cycle at run time)
 
 
 class PlcRegisterHandler:
@@ -271,12 +267,9 @@ def identity_of(settings: ModbusPlcSection, model_name: str = "") -> Identity:
                     product_name=ident.product_name, model_name=ident.model_name or model_name)
 
 
-class PlcBlockSink(Sink["PlcOptions"]):
+class PlcBlockSink(Sink):
     """One node's block of a shared :class:`PlcServer`, as that node's sink."""
 
-    # A sink of the "plc" output kind, opened by plc.sink.PlcSink: not a subclass of
-    # it, so that the two modules do not import each other.
-    kind = "plc"
 
     def __init__(self, server: PlcServer, handler: PlcRegisterHandler) -> None:
         super().__init__()

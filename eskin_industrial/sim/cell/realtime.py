@@ -38,7 +38,7 @@ from ...errors import ModbusFault
 from ...modbus.pymodbus_io import RegisterServer
 from ...modbus.tcp_master import PipelinedTcpMaster
 from ...outputs.plc.image import CMD_ACK, REG, STATUS_COUNT, TAIL_AT, TAIL_COUNT, decode_registers, decode_tail
-from ...outputs.plc.sink import PlcOptions
+from ...outputs.plc.options import PlcOptions
 from ...profile import ModbusPlcSection, Profile
 from ..can_node import CanNode, Faults
 from ..demo import free_port
