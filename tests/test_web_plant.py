@@ -20,8 +20,9 @@ import pytest
 
 from eskin_industrial.cli.plant_cmd import plant_rows
 from eskin_industrial.node import NodeSnapshot
+from eskin_industrial.outputs.sparkplug.kind import open_edge
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from eskin_industrial.outputs.sparkplug.properties import score_properties
-from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugOptions, open_edge
 from eskin_industrial.profile import load_profile
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER

@@ -9,8 +9,9 @@ from pathlib import Path
 
 import pytest
 
+from eskin_industrial.outputs.sparkplug.kind import open_edge
+from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
 from eskin_industrial.outputs.sparkplug.properties import score_properties
-from eskin_industrial.outputs.sparkplug.sparkplug import SparkplugOptions, open_edge
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import wait_for
 from tests.helpers.browser import chromium, console_errors, need_chromium
@@ -25,6 +26,11 @@ def status(driver, row_id: str) -> str | None:
         f"const e = document.getElementById({row_id!r}); return e ? e.dataset.status : null;")
 
 
+def cells(driver, row_id: str) -> list[str]:
+    return driver.execute_script(f"const e = document.getElementById({row_id!r});"
+                                 " return e ? Array.from(e.children, (c) => c.textContent) : [];") or [""] * 9
+
+
 def test_the_device_row_appears_and_turns_offline(tmp_path: Path) -> None:
     need_chromium()
     with spb.broker(tmp_path) as port, plant_page(tmp_path, port) as base, chromium() as d:
@@ -36,9 +42,10 @@ def test_the_device_row_appears_and_turns_offline(tmp_path: Path) -> None:
             assert edge.wait_connected(5)
             edge.devices[0].publish(snapshot(1, 0))
             wait_for(lambda: status(d, "row/g/e/grip") == "online", timeout_s=10, what="the device's row online")
-            cells = d.execute_script("return Array.from(document.getElementById('row/g/e/grip').children,"
-                                     " (c) => c.textContent);")
-            assert cells[1] == "online" and cells[2] == "stable" and cells[4] == PROFILE.detector.method
+            # its DBIRTH may show before the DDATA with the state: the row is redrawn at it
+            wait_for(lambda: cells(d, "row/g/e/grip")[2] == "stable", timeout_s=10, what="the device's state")
+            row = cells(d, "row/g/e/grip")
+            assert row[1] == "online" and row[4] == PROFILE.detector.method
         finally:
             edge.close()  # its NDEATH
         wait_for(lambda: status(d, "row/g/e/grip") == "offline", timeout_s=10, what="the device's row offline")

@@ -166,9 +166,9 @@ def plant(broker: str, group_id: str, plain: bool, as_json: bool, rebirth: bool,
 
 def _serve(options: Any) -> tuple[Any, Any]:
     """The plant page's server, started (a port in use: ListenError, exit 2)."""
+    from ..outputs.web.kind import need_aiohttp
     from ..outputs.web.plant_feed import PlantFeed
     from ..outputs.web.plant_server import PlantServer
-    from ..outputs.web.sink import need_aiohttp
     from ..outputs.web.users import load_users
 
     need_aiohttp("eskin-bus plant --web")
