@@ -13,17 +13,13 @@ command route.
 
 from __future__ import annotations
 
-import asyncio
 import json
-import ssl
 import time
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
-from ...errors import ListenError
-from ...netaddr import listen_error
-from .server import STATIC, Client, WebServer
+from .server import Client, WebServer
 
 if TYPE_CHECKING:
     from .options import WebOptions
@@ -43,42 +39,11 @@ class PlantServer(WebServer):
         seq, rows, messages = self.plant.read()
         return {"seq": seq, "messages": messages, "rows": [r.as_json() for r in rows]}
 
-    async def _main(self) -> None:
-        # the console's _main with the plant's routes (its routes are fixed inside it)
-        self._stop = asyncio.Event()
-        app = web.Application(middlewares=[self._headers], client_max_size=64 * 1024)
-        app.router.add_get("/", self._page("plant.html"))
-        app.router.add_get("/plant", self._page("plant.html"))
-        app.router.add_get("/api/info", self._info)
-        app.router.add_get("/api/plant", self._rows)
-        app.router.add_post("/api/login", self._login)
-        app.router.add_post("/api/logout", self._logout)
-        app.router.add_get("/ws", self._ws)
-        app.router.add_static("/static/", STATIC, follow_symlinks=False)
-        runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
-        await runner.setup()
-        context = None
-        if self.options.tls:
-            context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
-            context.minimum_version = ssl.TLSVersion.TLSv1_2
-            assert self.options.tls_cert is not None and self.options.tls_key is not None
-            context.load_cert_chain(self.options.tls_cert, self.options.tls_key)
-        site = web.TCPSite(runner, self.options.host, self.options.port, ssl_context=context, reuse_address=True)
-        try:
-            await site.start()
-        except OSError as exc:
-            await runner.cleanup()
-            raise ListenError(listen_error(self.options.host, self.options.port, exc)) from None
-        self._loop = asyncio.get_running_loop()
-        self._ready.set()
-        self.on_event("web_listening", "info", url=self.options.url, users=len(self.users), tls=self.options.tls)
-        try:
-            await self._stop.wait()
-        finally:
-            for c in list(self.clients):
-                await c.ws.close()
-            await runner.cleanup()
-            self._loop = None
+    def _routes(self, router: web.UrlDispatcher) -> None:
+        """The plant's page and its rows (read-only: no command route)."""
+        router.add_get("/", self._page("plant.html"))
+        router.add_get("/plant", self._page("plant.html"))
+        router.add_get("/api/plant", self._rows)
 
     async def _rows(self, request: web.Request) -> web.Response:
         if not self._may_view(request):

@@ -190,17 +190,22 @@ class WebServer:
         finally:
             self._ready.set()
 
+    def _routes(self, router: web.UrlDispatcher) -> None:
+        """The pages and the routes of this server's own (beside the login, the info,
+        the WebSocket and the static files every console has)."""
+        router.add_get("/", self._page("cell.html"))
+        router.add_get("/node/{i}", self._page("node.html"))
+        router.add_get("/events", self._page("events.html"))
+        router.add_post("/api/nodes/{i}/command", self._command)
+        router.add_get("/api/episodes/{node}/{id}.csv", self._capture)
+
     async def _main(self) -> None:
         self._stop = asyncio.Event()
         app = web.Application(middlewares=[self._headers], client_max_size=64 * 1024)
-        app.router.add_get("/", self._page("cell.html"))
-        app.router.add_get("/node/{i}", self._page("node.html"))
-        app.router.add_get("/events", self._page("events.html"))
+        self._routes(app.router)
         app.router.add_get("/api/info", self._info)
         app.router.add_post("/api/login", self._login)
         app.router.add_post("/api/logout", self._logout)
-        app.router.add_post("/api/nodes/{i}/command", self._command)
-        app.router.add_get("/api/episodes/{node}/{id}.csv", self._capture)
         app.router.add_get("/ws", self._ws)
         app.router.add_static("/static/", STATIC, follow_symlinks=False)
         runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
