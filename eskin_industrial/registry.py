@@ -6,8 +6,8 @@ A kind is built in (a ``name -> "module:Class"`` table in the package) or a plug
 an entry point of an installed distribution in the kind's group, as python-can's
 ``can.interface`` group adds interfaces::
 
-    [project.entry-points."eskin_industrial.outputs"]
-    state-log = "mypackage.statelog:StateLog"
+    [project.entry-points."eskin_industrial.sinks"]
+    state-log = "mypackage.statelog:StateLogKind"
 
 A plug-in never replaces a built-in kind of the same name: the built-in one is used.
 Entry points are read once per process.
@@ -26,7 +26,7 @@ from .errors import ProfileError
 
 #: The entry-point groups, by what they add.
 SOURCE_GROUP = "eskin_industrial.sources"
-SINK_GROUP = "eskin_industrial.outputs"
+SINK_GROUP = "eskin_industrial.sinks"
 METHOD_GROUP = "eskin_industrial.methods"
 
 

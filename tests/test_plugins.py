@@ -41,7 +41,7 @@ description = "A source, an output and a method for eskin-industrial"
 [project.entry-points."eskin_industrial.sources"]
 const = "eskin_pagekinds:ConstSource"
 
-[project.entry-points."eskin_industrial.outputs"]
+[project.entry-points."eskin_industrial.sinks"]
 state-log = "eskin_pagekinds:StateLogKind"
 
 [project.entry-points."eskin_industrial.methods"]

@@ -25,7 +25,7 @@ which opens one sink per node (a kind may share one connection between its nodes
 the PLC server serves every node's block) and tells each its kind's name.  A kind is
 one module plus one entry in :data:`SINKS` (section name -> ``module:Class``,
 imported on first use), or a plug-in: an entry point of the group
-``eskin_industrial.outputs`` in another distribution (:mod:`eskin_industrial.registry`).
+``eskin_industrial.sinks`` in another distribution (:mod:`eskin_industrial.registry`).
 
 An example of a new kind, run by ``tests/test_seams.py``: ``docs/architecture.md``.
 """
@@ -298,5 +298,5 @@ def output_kind(name: str) -> type[OutputKind[Any]]:
 
 def sink_kinds() -> dict[str, str]:
     """Every output kind: :data:`SINKS`, then the plug-ins (entry-point group
-    ``eskin_industrial.outputs``), in the order of logs, ``--check`` and the options."""
+    ``eskin_industrial.sinks``), in the order of logs, ``--check`` and the options."""
     return kinds(SINKS, SINK_GROUP)
