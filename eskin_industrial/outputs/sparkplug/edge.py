@@ -543,6 +543,7 @@ class EdgeNode:
                 "sparkplug_store_held": f.held, "sparkplug_store_pending": f.pending,
                 "sparkplug_store_overflow": f.overflow, "sparkplug_store_forwarded": f.forwarded,
                 "sparkplug_store_discarded": f.discarded, "sparkplug_store_failures": f.failures,
+                "sparkplug_store_in_memory": int(bool(f.fallback)), "sparkplug_store_left_on_disk": f.left_on_disk,
                 "sparkplug_resent": self.resent, "sparkplug_unconfirmed": self.unconfirmed,
                 "sparkplug_commands": self.commands,
                 "sparkplug_commands_refused": self.commands_refused, "sparkplug_unknown_devices": self.unknown_devices,

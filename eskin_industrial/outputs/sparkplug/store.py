@@ -15,13 +15,27 @@ connected reads the table in order and hands each row to the node
 rows: a message that finds the table full is counted (``overflow``) and dropped (the
 newest goes: the births after the outage carry the newest values, so the history
 kept is the outage's start without a hole).
+
+A file that cannot be opened or written (a full disk, a read-only or failing file
+system, a folder that cannot be made) never stops the node: the store goes on in
+memory with the same bound (:meth:`Forwarder._to_memory`), said in one line
+(``sparkplug_store_in_memory``: the file, the OS error, the rows left in it) and
+counted (``sparkplug_store_in_memory`` 1).  The rows already in the file stay there,
+untouched: the next start that opens the file sends them (a chunk sent in the moment
+the file failed, its rows not yet deleted, is sent again then: historical, with the
+times it was made).  A message the failing write carried goes to memory instead; past
+the bound it is counted as ``sparkplug_store_overflow``, as ever; what memory holds
+when the bridge stops is lost, as without ``store_dir``.
 """
 
 from __future__ import annotations
 
 import collections
+import contextlib
+import os
 import sqlite3
 import threading
+import urllib.parse
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NamedTuple
@@ -65,6 +79,59 @@ def store_path(store_dir: str | None, group_id: str, edge_node_id: str) -> str:
     return ":memory:" if store_dir is None else str(Path(store_dir) / f"{group_id}-{edge_node_id}.sqlite3")
 
 
+#: Bytes a probe writes to learn the file system's own answer (SQLite names no errno).
+PROBE_BYTES = 1 << 20
+
+
+def os_error(path: str, exc: BaseException) -> str:
+    """The OS error behind a store that failed, one line: an ``OSError``'s own, else
+    (SQLite says only ``disk I/O error``) what the file system answers to a write of
+    our own beside the file: ``File too large``, ``No space left on device``, ..."""
+    if isinstance(exc, OSError):
+        return exc.strerror or str(exc)
+    probe = Path(path).with_name(Path(path).name + ".probe")
+    try:
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        try:
+            block, done = b"\0" * 65536, 0
+            while done < PROBE_BYTES:
+                done += os.write(fd, block)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+            with contextlib.suppress(OSError):
+                os.unlink(probe)
+    except OSError as probe_exc:
+        return f"{probe_exc.strerror or probe_exc} (sqlite: {exc})"
+    return f"sqlite: {exc}"
+
+
+def _rows_in(path: str) -> int:
+    """Rows a file holds, read only (0 when it cannot be read: none that we know of)."""
+    try:
+        uri = f"file:{urllib.parse.quote(path)}?mode=ro"
+        with contextlib.closing(sqlite3.connect(uri, uri=True)) as db:
+            return int(db.execute("SELECT COUNT(*) FROM held").fetchone()[0])
+    except sqlite3.Error:
+        return 0
+
+
+def _connect(path: str) -> sqlite3.Connection:
+    if path != ":memory:":
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+    db = sqlite3.connect(path, check_same_thread=False, isolation_level=None)
+    try:
+        db.execute("PRAGMA journal_mode=WAL" if path != ":memory:" else "PRAGMA journal_mode=MEMORY")
+        db.execute("PRAGMA synchronous=NORMAL")
+        if path == ":memory:":
+            db.execute("PRAGMA temp_store=MEMORY")  # no file at all, not even a temporary one
+        db.execute(_SCHEMA)
+    except BaseException:
+        db.close()
+        raise
+    return db
+
+
 class Forwarder:
     """The bounded queue and the thread that fills it and drains it."""
 
@@ -79,18 +146,22 @@ class Forwarder:
         self._connected = connected
         self._log = event or (lambda *a, **k: None)
         self._drained = drained
-        if path != ":memory:":
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
-        # Opened here, used by the forwarder's thread only after start (never at once).
-        self.db = sqlite3.connect(path, check_same_thread=False, isolation_level=None)
-        self.db.execute("PRAGMA journal_mode=WAL" if path != ":memory:" else "PRAGMA journal_mode=MEMORY")
-        self.db.execute("PRAGMA synchronous=NORMAL")
-        self.db.execute(_SCHEMA)
-        self.rows = int(self.db.execute("SELECT COUNT(*) FROM held").fetchone()[0])
-        #: The next serial: after anything a previous run left behind.
-        self.next_serial = int(self.db.execute("SELECT COALESCE(MAX(serial), -1) FROM held").fetchone()[0]) + 1
         self.incoming: collections.deque[Held] = collections.deque()
         self.held = self.overflow = self.forwarded = self.discarded = self.failures = 0
+        self.on_disk = path != ":memory:"  #: the table is the file (False: in memory, by choice or fallback)
+        #: Why the file was given up for memory ("" while it was not): the OS error, one line.
+        self.fallback = ""
+        self.left_on_disk = 0  #: rows the file held when it was given up (the next start sends them)
+        self._fallback_logged = False
+        # Opened here, used by the forwarder's thread only after start (never at once).
+        try:
+            self.db = _connect(path)
+            self.rows = int(self.db.execute("SELECT COUNT(*) FROM held").fetchone()[0])
+            #: The next serial: after anything a previous run left behind.
+            self.next_serial = int(self.db.execute("SELECT COALESCE(MAX(serial), -1) FROM held").fetchone()[0]) + 1
+        except (sqlite3.Error, OSError) as exc:  # a full disk at start: the node runs, the store in memory
+            self.rows = self.next_serial = 0
+            self._to_memory(exc, None, _rows_in(path))
         self._outage_overflow = self._outage_held = self._outage_sent = 0
         self._wake = threading.Event()
         self._stop = False
@@ -111,8 +182,31 @@ class Forwarder:
         return self.rows + len(self.incoming)
 
     def start(self) -> Forwarder:
+        self._log_fallback()  # a file given up at start: said once the node's log is there
         self._thread.start()
         return self
+
+    # -- the file given up ----------------------------------------------------------------
+    def _to_memory(self, exc: BaseException, old: sqlite3.Connection | None, left: int) -> None:
+        """Go on in memory, with the same bound, after the file failed (``old``: its
+        connection, closed; ``left``: the rows it holds, left there)."""
+        self.fallback = os_error(self.path, exc)
+        self.left_on_disk = left
+        self.on_disk = False
+        if old is not None:
+            with contextlib.suppress(sqlite3.Error):
+                if old.in_transaction:
+                    old.execute("ROLLBACK")
+            with contextlib.suppress(sqlite3.Error):
+                old.close()
+        self.db = _connect(":memory:")
+        self.rows = 0
+
+    def _log_fallback(self) -> None:
+        if self.fallback and not self._fallback_logged:
+            self._fallback_logged = True
+            self._log("sparkplug_store_in_memory", "error", store=self.path, error=self.fallback,
+                      left_on_disk=self.left_on_disk, bound=self.bound)
 
     def stop(self, timeout_s: float = 2.0) -> None:
         """Stop the thread (what it holds stays held)."""
@@ -143,6 +237,11 @@ class Forwarder:
                             break
                 except sqlite3.Error as exc:  # a full disk, a broken file: logged, the thread goes on
                     self.failures += 1
+                    if self.on_disk:  # the file: given up for memory, what it holds left in it
+                        self._to_memory(exc, self.db, self.rows)
+                        self._log_fallback()
+                        self._wake.set()
+                        continue
                     if self.failures == 1 or self.failures % 1000 == 0:
                         self._log("sparkplug_store_failed", "error", store=self.path, error=str(exc),
                                   failures=self.failures)
@@ -167,20 +266,27 @@ class Forwarder:
                 self._log("sparkplug_store_holding", "warning", store=self.path, bound=self.bound)
             self._outage_held += len(rows)
             try:
-                self.db.execute("BEGIN")
-                # OR REPLACE: a message sent but never acknowledged comes back with its serial
-                self.db.executemany("INSERT OR REPLACE INTO held VALUES (?, ?, ?, ?, ?)", rows)
-                self.db.execute("COMMIT")
-            except sqlite3.Error:
-                self.overflow += len(rows)
-                try:
-                    if self.db.in_transaction:
-                        self.db.execute("ROLLBACK")
-                except sqlite3.Error:
-                    pass  # (the file is beyond use: the next write says so again)
-                raise
+                self._insert(rows)
+            except sqlite3.Error as exc:
+                if not self.on_disk:
+                    self.overflow += len(rows)
+                    with contextlib.suppress(sqlite3.Error):  # (beyond use: the next write says so again)
+                        if self.db.in_transaction:
+                            self.db.execute("ROLLBACK")
+                    raise
+                # The file failed: the same rows in memory (within the bound: fewer than before)
+                self.failures += 1
+                self._to_memory(exc, self.db, self.rows)
+                self._log_fallback()
+                self._insert(rows)
             self.rows = int(self.db.execute("SELECT COUNT(*) FROM held").fetchone()[0])
             self.held += len(rows)
+
+    def _insert(self, rows: list[tuple[int, str, int, int, bytes]]) -> None:
+        self.db.execute("BEGIN")
+        # OR REPLACE: a message sent but never acknowledged comes back with its serial
+        self.db.executemany("INSERT OR REPLACE INTO held VALUES (?, ?, ?, ?, ?)", rows)
+        self.db.execute("COMMIT")
 
     def _drain_chunk(self) -> bool:
         """Send the oldest rows; False when the connection went (the rest stay)."""
