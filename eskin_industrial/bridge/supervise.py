@@ -15,6 +15,12 @@ sink itself: it holds one :class:`SupervisedSink` per node, and an
   time limit, and a fresh one opened after a back-off (``backoff_s`` doubling to
   ``backoff_max_s``, jittered, as the PLC writer's reconnects): ``output_restarted``.
   ``on_failure = "stop"`` stops the whole bridge with a failure instead.
+- An output that cannot *open* at start (a full disk, a folder it cannot make, a
+  library's error) is down from the start, the same one line (``call=open``), and
+  opened after the back-off as after any failure: the others (the PLC) run meanwhile.
+  A refusal stays the bridge's, one line before anything runs: a port in use, a
+  profile's or a setting's error, a missing extra (what ``--check`` finds), and any
+  error of an essential output or of one whose ``on_failure`` is ``stop``.
 - An *essential* output (the PLC by default: its latency is the product) is called
   on the loop's thread, inside ``try``; it costs nothing while nothing raises.  Any
   other is driven from a handover of its own: the loop leaves the newest snapshot and
@@ -89,6 +95,25 @@ class _Down(Sink):
 _DOWN = _Down()
 
 
+class _NotOpen(Sink):
+    """A node's sink of an output that did not open at start, until it does: what the
+    kind wants of the loop is not known yet, so the loop is asked for everything
+    (updates, commands, every frame); the handover passes on what the kind's sink,
+    once open, takes (its frames at its own ``frame_every_s``)."""
+
+    def __init__(self, kind: str) -> None:
+        super().__init__()
+        self.kind = kind
+        self.where = f"{kind} (not open)"
+        self.frame_every_s = 0.0
+
+    def on_update(self, update: Update) -> None:
+        """(Overridden: the loop hands updates to this sink.)"""
+
+    def take_commands(self) -> list[Command]:
+        return []
+
+
 class SupervisedSink(Sink):
     """One node's sink of a supervised output, as the loop holds it; what the kind's
     instance has of its own (``server``, ``node``) is read through."""
@@ -103,6 +128,9 @@ class SupervisedSink(Sink):
         self._kind_cls = type(inner)
         self.where = inner.where
         self.frame_every_s = inner.frame_every_s
+        #: Built on a :class:`_NotOpen`: the loop hands every frame, the handover gates them.
+        self.late = isinstance(inner, _NotOpen)
+        self.next_frame = 0.0  #: (late) when the kind's sink takes its next frame (monotonic)
         self._handler: EventHandler | None = None
 
     def __getattr__(self, name: str) -> Any:
@@ -117,6 +145,7 @@ class SupervisedSink(Sink):
     def attach(self, inner: Sink) -> None:
         """A fresh instance of the kind (a restart), its events to the same handler."""
         self.inner = inner
+        self._kind_cls = type(inner)  # (an instance opened late: the kind's own, from now on)
         self.where = inner.where
         if self._handler is not None:
             inner.on_events(self._handler)
@@ -229,7 +258,7 @@ class HandedSink(SupervisedSink):
         updates.append(update)
 
     def on_frame(self, frame: Frame) -> None:
-        if self.frame is not None:
+        if self.frame is not None and not self.late:  # (late: every frame comes, the newest is taken)
             self.output.superseded += 1
         self.frame = frame
         self.output.wake.set()
@@ -332,6 +361,12 @@ class _Handover:
         if snap is not None and (not self._call("publish", s, functools.partial(inner.publish, snap))[0] or not self._live()):
             return False
         frame, s.frame = s.frame, None
+        if frame is not None and s.late:  # the loop hands every frame: the kind's interval here
+            every = getattr(inner, "frame_every_s", None)
+            if every is None or time.monotonic() < s.next_frame:
+                frame = None
+            else:
+                s.next_frame = time.monotonic() + every
         if frame is not None and (not self._call("on_frame", s, functools.partial(inner.on_frame, frame))[0] or not self._live()):
             return False
         ended, s.ended = s.ended, None
@@ -420,8 +455,22 @@ class Output:
         return opened
 
     def open(self) -> list[SupervisedSink]:
-        """The first instance (an error here is the bridge's: nothing runs yet)."""
-        opened = self._open_instance()
+        """The first instance.  A refusal, or any error of an essential output (or of
+        one that stops the bridge), is the bridge's: nothing runs yet.  Any other
+        output that fails to open is down from the start: one line, opened again after
+        the back-off."""
+        from ..errors import ListenError, MissingExtra, ProfileError
+
+        error: Exception | None = None
+        try:
+            opened = self._open_instance()
+        except (ListenError, ProfileError, MissingExtra, ValueError):
+            raise
+        except Exception as exc:  # a full disk at start: the PLC is served all the same
+            if self.policy.essential or self.policy.on_failure == "stop":
+                raise
+            error = exc
+            opened = [_NotOpen(self.kind) for _ in self.nodes]
         base = GuardedSink if self.policy.essential else HandedSink
         # what the kind's sinks say of themselves, as the bridge reads it off the class
         # (the kind's name is each proxy's own, as every sink's)
@@ -430,7 +479,9 @@ class Output:
         self.sinks = [proxy(self, i, sink) for i, sink in enumerate(opened)]
         self.up = True
         self._up_since = time.monotonic()
-        if not self.policy.essential:
+        if error is not None:
+            self.failed("open", None, error)  # down: one line, the supervisor opens it after the back-off
+        elif not self.policy.essential:
             self._start_handover()
         self._watch = threading.Thread(target=self._supervise, name=f"supervise-{self.kind}", daemon=True)
         self._watch.start()

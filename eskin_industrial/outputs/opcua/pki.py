@@ -16,6 +16,7 @@ moved into ``trusted/`` counts from the next connection, without a restart.
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import hashlib
 import ipaddress
@@ -24,6 +25,8 @@ import socket
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+from ...errors import OutputFileError
 
 #: Certificates kept in ``rejected/`` at most (a client that presents a new one at
 #: every connection must not fill the disk); past it they are counted, not stored.
@@ -58,9 +61,13 @@ def make_certificate(pki_dir: str | Path, application_uri: str, name: str, hosts
     from cryptography.x509.oid import ExtendedKeyUsageOID
 
     cert_path, key_path = own_paths(pki_dir)
-    for d in (cert_path.parent, key_path.parent, Path(pki_dir) / "trusted", Path(pki_dir) / "rejected"):
-        d.mkdir(parents=True, exist_ok=True)
-    os.chmod(key_path.parent, 0o700)
+    try:
+        for d in (cert_path.parent, key_path.parent, Path(pki_dir) / "trusted", Path(pki_dir) / "rejected"):
+            d.mkdir(parents=True, exist_ok=True)
+        os.chmod(key_path.parent, 0o700)
+    except OSError as exc:
+        raise OutputFileError(f"pki_dir: {pki_dir}: cannot make its folders: "
+                              f"{(exc.strerror or str(exc)).lower()}") from None
     key = generate_private_key()
     alt: list[x509.GeneralName] = [x509.UniformResourceIdentifier(application_uri)]
     for host in dict.fromkeys([*hosts, socket.gethostname()]):
@@ -74,12 +81,28 @@ def make_certificate(pki_dir: str | Path, application_uri: str, name: str, hosts
     cert = generate_self_signed_app_certificate(key, name, {"organizationName": "eskin-industrial"}, alt,
                                                 [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
                                                 days=days)
-    tmp = key_path.with_name(key_path.name + ".tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "wb") as f:
-        f.write(pem_from_key(key))
-    os.replace(tmp, key_path)
-    cert_path.write_bytes(cert.public_bytes(serialization.Encoding.DER))
+    # Both written beside their place, then renamed (a rename needs no room): a full
+    # disk leaves the old pair or none, never a key without its certificate or a
+    # certificate cut short (which the next start would refuse).
+    written: list[Path] = []
+    try:
+        for data, path, mode in ((pem_from_key(key), key_path, 0o600),
+                                 (cert.public_bytes(serialization.Encoding.DER), cert_path, 0o644)):
+            tmp = path.with_name(path.name + ".tmp")
+            written.append(tmp)
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, mode)
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+        os.replace(written[0], key_path)
+        os.replace(written[1], cert_path)
+    except OSError as exc:
+        for tmp in written:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        raise OutputFileError(f"pki_dir: {pki_dir}: cannot write the certificate: "
+                              f"{(exc.strerror or str(exc)).lower()}") from None
     return cert_path
 
 
