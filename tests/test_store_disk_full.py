@@ -268,3 +268,22 @@ def test_an_opcua_pki_dir_on_a_full_disk_is_one_line_and_the_plc_is_served(tmp_p
     assert retries and all(e["error"] == failed["error"] for e in retries), retries
     the_plc_read_the_sensor(plc.reads)
     assert not [p for p in pki.rglob("*") if p.is_file()], "a half-written certificate or key"
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full here")
+def test_a_record_on_a_full_device_is_one_line_to_the_end_and_the_plc_is_served(tmp_path: Path) -> None:
+    """Every write of the record refused (``/dev/full``): one line, and no word that the
+    writes work again at the end (before: ``record_write_ok`` when the last flush had
+    nothing to write), the rows counted lost; the PLC reads the slip."""
+    with bridge(tmp_path, 1 << 20, "--record", "/dev/full") as run:
+        with run.poller() as plc:
+            run.saw_slip()
+        rc = run.finish()
+    assert rc == 0, "\n".join(run.lines[-60:])
+    every_line_is_one_event(run)
+    (failed,) = run.events("record_write_failed")
+    assert failed["path"] == "/dev/full" and failed["error"] == "No space left on device", failed
+    assert not run.events("record_write_ok"), run.events("record_write_ok")
+    (final,) = run.events("final")
+    assert final["record_lost_rows"] == final["recorded_updates"] + 1, final  # (the header line too)
+    the_plc_read_the_sensor(plc.reads)

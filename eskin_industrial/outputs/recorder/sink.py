@@ -71,12 +71,15 @@ class Recorder(Sink):
             return False
 
     def _flush_stream(self) -> None:
+        before = self._out.written if isinstance(self._out, RowFile) else None
         try:
             self._out.flush()
         except (OSError, ValueError) as exc:
             self._failed(exc)
         else:
-            if self._failing:
+            # ok again only once rows reached the file (a flush with nothing to write,
+            # the one at the end, says nothing of the disk)
+            if self._failing and (before is None or self._out.written > before):  # type: ignore[attr-defined]
                 self._failing = False
                 self._event("record_write_ok", path=self.where, lost_rows=self.lost_rows,
                             write_errors=self.write_errors)
@@ -129,6 +132,7 @@ class RowFile:
         self._buf = bytearray()
         self._end = self.size  #: the end of the last whole row on disk
         self.lost_rows = 0
+        self.written = 0  #: bytes this process wrote to the file (a flush that wrote nothing proves nothing)
 
     def write(self, text: str) -> int:
         self._buf += text.encode("utf-8")
@@ -154,6 +158,7 @@ class RowFile:
                 pass
             raise
         self._end += len(data)
+        self.written += len(data)
 
     def close(self) -> None:
         if self._fd < 0:
