@@ -298,3 +298,53 @@ def test_a_store_that_fails_to_write_is_counted_and_logged_and_goes_on():
         assert level == "error" and fields["failures"] == 1
     finally:
         f.stop()
+
+
+def test_a_store_that_cannot_be_made_goes_on_in_memory_with_its_bound(tmp_path):
+    """``store_dir`` under a file (the folder cannot be made): the store is in memory,
+    the same bound, past it counted as overflow; one line at start, naming the file and
+    the OS error (before: the exception, out of the edge node's constructor)."""
+    from eskin_industrial.outputs.sparkplug.store import Forwarder, Held
+
+    (tmp_path / "a-file").write_text("")
+    path = str(tmp_path / "a-file" / "g-e.sqlite3")
+    events: list = []
+    f = Forwarder(path, 3, lambda *a: False, lambda: False, lambda *a, **k: events.append((a, k)))
+    assert not f.on_disk and events == [], "said at start, once the node's log is there"
+    f.start()
+    try:
+        for i in range(5):
+            f.hold(Held(i, "grip", 1000, i, ()))
+        wait_for(lambda: f.rows == 3 and f.overflow == 2, what="held in memory, the bound kept")
+        lines = [(a, k) for a, k in events if a[0] == "sparkplug_store_in_memory"]
+        assert len(lines) == 1 and lines[0][0][1] == "error", events
+        fields = lines[0][1]
+        assert fields["store"] == path and fields["error"] == "File exists" and fields["bound"] == 3, fields
+    finally:
+        f.close()
+    assert not (tmp_path / "a-file").is_dir()
+
+
+def test_a_store_whose_file_fails_mid_run_keeps_the_batch_in_memory_and_the_file_whole(tmp_path):
+    """The file's connection fails between two writes: the batch goes to memory (none
+    lost), one line; the rows already in the file stay there for the next start."""
+    from eskin_industrial.outputs.sparkplug.store import Forwarder, Held
+
+    path = str(tmp_path / "g-e.sqlite3")
+    events: list = []
+    f = Forwarder(path, 100, lambda *a: False, lambda: False, lambda *a, **k: events.append((a, k))).start()
+    try:
+        for i in range(3):
+            f.hold(Held(i, "grip", 1000, i, ()))
+        wait_for(lambda: f.rows == 3, what="on disk")
+        f.db.close()  # any sqlite3.Error from here on
+        for i in range(3, 7):
+            f.hold(Held(i, "grip", 1000, i, ()))
+        wait_for(lambda: f.rows == 4, what="in memory")
+        assert not f.on_disk and f.overflow == 0 and f.left_on_disk == 3 and f.held == 7 and f.failures == 1
+        assert [a[0] for a, _ in events if a[0].startswith("sparkplug_store_")] == [
+            "sparkplug_store_holding", "sparkplug_store_in_memory"], events
+    finally:
+        f.close()
+    with sqlite3.connect(path) as db:
+        assert [r[0] for r in db.execute("SELECT serial FROM held ORDER BY serial")] == [0, 1, 2]
