@@ -33,7 +33,7 @@ from eskin_industrial.outputs.sparkplug.metrics import DEVICE_METRICS
 from eskin_industrial.recording import write_recording
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import BlockPoller, wait_for
-from tests.helpers.modbus import free_port, slip_recording
+from tests.helpers.modbus import free_port, need, slip_recording
 from tests.helpers.paths import PROFILES
 from tests.helpers.sparkplug import state_home  # noqa: F401  (autouse: a state folder of its own)
 
@@ -44,9 +44,9 @@ SLIP = 3
 
 
 def _limit(n_bytes: int) -> Any:
-    def apply() -> None:
+    def apply() -> None:  # (the soft limit only: :meth:`Run.free_the_disk` lifts it)
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        resource.setrlimit(resource.RLIMIT_FSIZE, (n_bytes, n_bytes))
+        resource.setrlimit(resource.RLIMIT_FSIZE, (n_bytes, resource.RLIM_INFINITY))
     return apply
 
 
@@ -90,6 +90,10 @@ class Run:
             assert time.monotonic() < deadline, "the PLC block is not served"
             time.sleep(0.05)
         return BlockPoller(self.plc_port, every_s=0.01)
+
+    def free_the_disk(self) -> None:
+        """The file-size limit lifted, as a disk that has room again."""
+        resource.prlimit(self.proc.pid, resource.RLIMIT_FSIZE, (resource.RLIM_INFINITY, resource.RLIM_INFINITY))
 
     def saw_slip(self) -> None:
         """The bridge logged the slip, and the PLC had a moment to read it."""
@@ -186,30 +190,29 @@ def test_a_full_disk_at_start_puts_the_store_in_memory_and_the_plc_is_served(tmp
 
 @pytest.mark.slow
 def test_a_disk_that_fills_mid_run_moves_the_store_to_memory_and_loses_nothing(tmp_path: Path) -> None:
-    """No broker: the store fills its file until the disk refuses (48 kB per file);
-    one line, then the rest of the outage is held in memory and, once a broker comes,
-    sent as historical after the births; what the file holds stays in it, whole, and
-    the next start on the same folder sends it.  The PLC reads the slip throughout."""
+    """The primary host not online yet: the node holds its data, its file fills until
+    the disk refuses (48 kB per file); one line, then the rest is held in memory and,
+    once the host's STATE says online, sent as historical after the births; what the
+    file holds stays in it, whole, and the next start on the same folder sends it.  The
+    PLC reads the slip throughout."""
     store = tmp_path / "store"
-    port = free_port()
-    broker = cap = None
-    with bridge(tmp_path, 48 * 1024, "--sparkplug", f"mqtt://127.0.0.1:{port}", "--group-id", "g",
-                "--edge-node-id", "e", "--sparkplug-store-dir", str(store), "--sparkplug-reconnect-min", "3",
-                "--sparkplug-reconnect-max", "3", still_s=1.5, after_s=9.0) as run:
+    with spb.broker(tmp_path) as port:
+        cap = spb.Capture(port, tmp_path / "sub.txt")
         try:
-            with run.poller() as plc:
-                wait_for(lambda: run.events("sparkplug_store_in_memory"), timeout_s=15, what="the file given up")
-                run.saw_slip()  # (held in memory, past the file's end)
-                broker = spb.Broker(tmp_path, port)
-                cap = spb.Capture(port, tmp_path / "sub.txt")
-                assert not any("g-e" in line for line in broker.log_lines()), "connected before the subscriber"
-                cap.wait(lambda m: any("/NDATA/" in t for t, _ in m[2:]), timeout_s=10)
-            rc = run.finish()
-            msgs = cap.messages()
+            with bridge(tmp_path, 48 * 1024, "--sparkplug", f"mqtt://127.0.0.1:{port}", "--group-id", "g",
+                        "--edge-node-id", "e", "--sparkplug-store-dir", str(store), "--sparkplug-primary-host",
+                        "scada", still_s=1.5, after_s=7.0) as run:
+                with run.poller() as plc:
+                    wait_for(lambda: run.events("sparkplug_store_in_memory"), timeout_s=15, what="the file given up")
+                    run.saw_slip()  # (held in memory, past the file's end)
+                    state = json.dumps({"online": True, "timestamp": int(time.time() * 1000)})
+                    subprocess.run([need("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(port), "-q", "1", "-r",
+                                    "-t", "spBv1.0/STATE/scada", "-m", state], check=True, timeout=10)
+                    cap.wait(lambda m: any("/NDATA/" in t for t, _ in m), timeout_s=10)
+                rc = run.finish()
+            msgs = [(t, p) for t, p in cap.messages() if "/STATE/" not in t]
         finally:
-            for c in (cap, broker):
-                if c is not None:
-                    c.close() if c is cap else c.kill()  # type: ignore[union-attr]
+            cap.close()
     assert rc == 0, "\n".join(run.lines[-60:])
     every_line_is_one_event(run)
     (line,) = store_lines(run)
@@ -252,12 +255,16 @@ def test_an_opcua_pki_dir_on_a_full_disk_is_one_line_and_the_plc_is_served(tmp_p
     """The server's certificate cannot be written (1 kB per file): one line names the
     folder and the OS error, the OPC UA output is down and tried again after its
     back-off (each try one line), the PLC reads the slip; nothing half-written is left
-    for the next start to refuse."""
+    for the next try to refuse, and once the disk has room the server comes up."""
     pki = tmp_path / "pki"
     with bridge(tmp_path, 1024, "--opcua", f"opc.tcp://127.0.0.1:{free_port()}", "--opcua-security",
-                "Basic256Sha256_SignAndEncrypt", "--opcua-pki-dir", str(pki)) as run:
+                "Basic256Sha256_SignAndEncrypt", "--opcua-pki-dir", str(pki), after_s=10.0) as run:
         with run.poller() as plc:
+            wait_for(lambda: run.events("output_restart_failed"), timeout_s=10, what="a second try")
+            assert not [p for p in pki.rglob("*") if p.is_file()], "a half-written certificate or key"
+            run.free_the_disk()  # (the next try comes after 2 s, doubling from the default 1 s)
             run.saw_slip()
+            wait_for(lambda: run.events("output_restarted"), timeout_s=15, what="the server up")
         rc = run.finish()
     assert rc == 0, "\n".join(run.lines[-60:])
     every_line_is_one_event(run)
@@ -267,7 +274,10 @@ def test_an_opcua_pki_dir_on_a_full_disk_is_one_line_and_the_plc_is_served(tmp_p
     retries = run.events("output_restart_failed")
     assert retries and all(e["error"] == failed["error"] for e in retries), retries
     the_plc_read_the_sensor(plc.reads)
-    assert not [p for p in pki.rglob("*") if p.is_file()], "a half-written certificate or key"
+    (final,) = run.events("final")
+    assert final["opcua_output_up"] == 1 and final["opcua_output_restarts"] == 1, final
+    assert sorted(p.relative_to(pki).as_posix() for p in pki.rglob("*") if p.is_file()) == [
+        "own/cert.der", "own/private/key.pem"]
 
 
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full here")
