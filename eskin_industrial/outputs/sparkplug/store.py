@@ -178,6 +178,11 @@ class Forwarder:
         self._wake.set()
 
     @property
+    def where(self) -> str:
+        """Where the table is, for the log: the file, or ``:memory:`` once it was given up."""
+        return self.path if self.on_disk else ":memory:"
+
+    @property
     def pending(self) -> int:
         return self.rows + len(self.incoming)
 
@@ -243,7 +248,7 @@ class Forwarder:
                         self._wake.set()
                         continue
                     if self.failures == 1 or self.failures % 1000 == 0:
-                        self._log("sparkplug_store_failed", "error", store=self.path, error=str(exc),
+                        self._log("sparkplug_store_failed", "error", store=self.where, error=str(exc),
                                   failures=self.failures)
                     self._wake.wait(1.0)
 
@@ -258,12 +263,12 @@ class Forwarder:
                 self.overflow += 1
                 self._outage_overflow += 1
                 if self._outage_overflow == 1:
-                    self._log("sparkplug_store_full", "warning", bound=self.bound, store=self.path)
+                    self._log("sparkplug_store_full", "warning", bound=self.bound, store=self.where)
                 continue
             rows.append((item.serial, item.device, item.base, item.ts, historical(item)))
         if rows:
             if self._outage_held == 0:
-                self._log("sparkplug_store_holding", "warning", store=self.path, bound=self.bound)
+                self._log("sparkplug_store_holding", "warning", store=self.where, bound=self.bound)
             self._outage_held += len(rows)
             try:
                 self._insert(rows)
