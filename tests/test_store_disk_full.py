@@ -297,3 +297,51 @@ def test_a_record_on_a_full_device_is_one_line_to_the_end_and_the_plc_is_served(
     (final,) = run.events("final")
     assert final["record_lost_rows"] == final["recorded_updates"] + 1, final  # (the header line too)
     the_plc_read_the_sensor(plc.reads)
+
+
+def test_an_output_that_cannot_open_at_start_is_opened_later_and_takes_the_updates(tmp_path: Path) -> None:
+    """The recorder's folder gone between the check and the open (in this process): the
+    bridge starts all the same, one line (``output_failed``, ``call=open``), the PLC's
+    block served; once the folder is back the recorder opens after its back-off and
+    records the updates from then on (the loop hands them to it: it asked for them
+    while not open).  Before: the bridge did not start."""
+    from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, SupervisionSettings, resolve
+    from eskin_industrial.bridge.logs import EventLog
+    from eskin_industrial.bridge.runtime import Bridge
+    from eskin_industrial.outputs.plc.options import PlcOptions
+    from eskin_industrial.outputs.recorder.kind import RecorderOptions
+    from tests.helpers.bridge import LogCapture
+
+    folder = tmp_path / "records"
+    folder.mkdir()
+    record = folder / "grip.csv"
+    plc_port = free_port()
+    config = BridgeConfig((NodeConfig.of("grip", PAPER, "scene", scene="case2"),),
+                          {"plc": PlcOptions(mode="server", host="127.0.0.1", port=plc_port, offline_linger_s=0.0),
+                           "recorder": RecorderOptions(str(record), flush_every_s=0.05)},
+                          LogSettings(format="json", status_every_s=0),
+                          supervision=SupervisionSettings(backoff_s=0.2, backoff_max_s=0.4))
+    nodes = resolve(config)  # (the check: the folder is there)
+    folder.rmdir()
+    capture = LogCapture()
+    log = EventLog(capture, "json", "debug")
+    bridge = Bridge(config, nodes, log)
+    try:
+        bridge.open()
+        bridge.start()
+        (failed,) = capture.events("output_failed")
+        assert failed["output"] == "recorder" and failed["call"] == "open", failed
+        assert str(record) in failed["error"] and "No such file or directory" in failed["error"], failed
+        with BlockPoller(plc_port, every_s=0.01) as plc:
+            wait_for(lambda: any(status & Status.DATA_VALID for _, status, _, _ in plc.reads), timeout_s=10,
+                     what="the block served, valid")
+            folder.mkdir()
+            wait_for(lambda: capture.events("output_restarted"), timeout_s=10, what="the recorder open")
+            wait_for(lambda: record.exists() and len(record.read_text().splitlines()) > 20, timeout_s=10,
+                     what="updates recorded")
+    finally:
+        bridge.stop()
+        log.close()
+    counters = next(s for s in bridge.runs[0].sinks if s.kind == "recorder").counters()
+    assert counters["recorder_output_up"] == 1 and counters["recorder_output_failures"] == 1, counters
+    assert counters["recorded_updates"] >= 20, counters
