@@ -95,7 +95,7 @@ class SparkplugOptions:
     #: in bursts as many; past it they are dropped before they are decoded, counted
     #: (``sparkplug_commands_shed``) and logged: a host that floods them must not
     #: take the interpreter from the scan path.
-    command_rate: float = field(default=100.0, metadata=in_range(1, 100_000))
+    command_rate: float = field(default=100.0, metadata=in_range(0.1, 100_000))
 
     def __post_init__(self) -> None:
         check_security(self)
