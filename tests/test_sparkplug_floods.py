@@ -72,6 +72,17 @@ def test_a_summary_names_a_few_and_counts_the_rest():
     assert len(long) == MAX_FIELD_CHARS and long.endswith("(59800 more characters)")
 
 
+def test_the_budget_charges_by_the_byte():
+    from eskin_industrial.outputs.sparkplug.commands import Budget
+
+    b = Budget(100)
+    assert sum(b.take(0.0, 80) for _ in range(150)) == 100, "a burst of 100 small ones"
+    assert not b.take(0.005) and b.take(0.01), "then one a 10 ms"
+    b = Budget(100)
+    assert b.take(0.0, 195_000), "a large one passes ..."
+    assert not b.take(5.0) and b.take(8.0), "... and the topic is quiet for its cost (762 tokens)"
+
+
 # -- on a broker -------------------------------------------------------------------------
 def _state(port: int, online: bool, ts: int) -> None:
     body = json.dumps({"online": online, "timestamp": ts}).encode()
@@ -234,7 +245,8 @@ def test_a_dcmd_of_5000_metrics_is_one_bounded_line(tmp_path: Path) -> None:
     bad.metrics.add(name="x" * 60_000, datatype=11, boolean_value=True)  # not a command, 60,000 characters
     with spb.broker(tmp_path) as port:
         node = NodeConfig.of("grip", PAPER, "scene", scene="hold")
-        with running_bridge(_config(port, node)) as run:
+        # (a rate that takes both: at the default the first, 195 kB, costs the topic 7 s)
+        with running_bridge(_config(port, node, command_rate=10_000)) as run:
             c = lambda: run.counters("grip")  # noqa: E731
             wait_for(lambda: c()["sparkplug_connects"] >= 1, timeout_s=10, what="connected")
             for i, payload in enumerate((big, bad)):
@@ -261,7 +273,8 @@ def test_a_dcmd_flood_stays_off_the_scan_path_while_a_plc_polls_the_block(paper_
                                                                              tmp_path: Path) -> None:
     """Tare and Acknowledge Slip, thousands a second, while the sensor is open (each
     tare one the PLC's rule allows), then grips and slips (the tares refused): every
-    read of the served block is fresh and valid, its force the sensor's, the slip read."""
+    read of the served block is fresh and valid, its force the sensor's, the slip read;
+    and the host's next command after the flood is taken."""
     ch = channel()
     rate = 100.0
     open_s = 2.5
@@ -275,10 +288,11 @@ def test_a_dcmd_flood_stays_off_the_scan_path_while_a_plc_polls_the_block(paper_
     dcmd = spb.Payload(timestamp=1)
     dcmd.metrics.add(name="Device Control/Tare", datatype=11, boolean_value=True)
     dcmd.metrics.add(name="Device Control/Acknowledge Slip", datatype=11, boolean_value=True)
-    # A stale limit of 150 ms: a host as loaded as a shared test machine holds a scan
-    # 50 ms now and then; a flood that reaches the scan path holds the loop far longer.
+    # A stale limit of 300 ms: a host as loaded as a shared test machine holds a
+    # process 100 ms now and then; a flood that reaches the scan path holds the loop
+    # far longer (seconds of tares, on the code before the mailbox).
     profile = tmp_path / "paper.toml"
-    profile.write_text(Path(PAPER).read_text().replace("[output]\n", "[output]\nstale_s = 0.15\n", 1))
+    profile.write_text(Path(PAPER).read_text().replace("[output]\n", "[output]\nstale_s = 0.3\n", 1))
     with spb.broker(tmp_path) as port:
         config = server_config(dataclasses.replace(can_node("grip", ch), profile=str(profile)))
         config = dataclasses.replace(config, outputs={**config.outputs, "sparkplug": SparkplugOptions(
@@ -296,6 +310,15 @@ def test_a_dcmd_flood_stays_off_the_scan_path_while_a_plc_polls_the_block(paper_
                     sent = _sent(proc, 30)
                 nt.join(15)
                 end = nt.tx.sent[-1]
+            # the topic is subscribed again after its pause: a host's next command is taken
+            time.sleep(1.2)
+            off = spb.Payload(timestamp=1)
+            off.metrics.add(name="Device Control/Enable", datatype=11, boolean_value=False)
+            f = tmp_path / "off.bin"
+            f.write_bytes(off.SerializeToString())
+            subprocess.run([need("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(port), "-q", "1",
+                            "-t", "spBv1.0/g/DCMD/e/grip", "-f", str(f)], check=True, timeout=10)
+            wait_for(lambda: not loop.status.enabled, what="a command after the flood")
             c_end = c()
             tares = loop.tares
     start, reads = nt.tx.sent[0], plc.reads
@@ -304,8 +327,15 @@ def test_a_dcmd_flood_stays_off_the_scan_path_while_a_plc_polls_the_block(paper_
     settled = next(at for at, s, _, _ in reads if s & Status.DATA_VALID)
     window = [(at - start, s, f) for at, s, f, _ in reads if settled < at < end - 0.05]
     assert len(window) > 300  # (a read every few ms, on a loaded host)
-    stale_reads = [(round(at, 3), Status(s)) for at, s, _ in window if s & Status.SENSOR_STALE]
+    # Stale while the sensor sent a scan in the last 200 ms (of a 300 ms limit): the
+    # bridge's lateness, not the sensor's silence.  (The node's simulator is a thread
+    # of this process: on a host loaded by others it may itself be held that long.)
+    sent_at = np.asarray(nt.tx.sent) - start
+    recent = lambda at: sent_at[np.searchsorted(sent_at, at) - 1] > at - 0.2  # noqa: E731
+    stale_reads = [(round(at, 3), Status(s)) for at, s, _ in window if s & Status.SENSOR_STALE and recent(at)]
     assert not stale_reads, f"{len(stale_reads)} stale reads under the flood: {stale_reads[:5]}"
+    excused = sum(1 for at, s, _ in window if s & Status.SENSOR_STALE and not recent(at))
+    assert excused < len(window) / 20, f"{excused} reads stale while the node itself was held: a host too loaded"
     # valid while open, while held still (past the contact's own warm-up), through the slip
     phases = [(0.0, open_s - 0.05), (open_s + 0.6, onset - 0.05), (onset, onset + 0.3)]
     invalid = [(round(at, 3), Status(s)) for at, s, _ in window if any(a < at < b for a, b in phases)
@@ -317,8 +347,10 @@ def test_a_dcmd_flood_stays_off_the_scan_path_while_a_plc_polls_the_block(paper_
     assert opened and max(opened) < 0.5
     assert held and all(abs(f - held_n) < 0.1 * held_n for f in held), (held_n, min(held), max(held))
     slips = [at for at, s, _ in window if s & Status.SLIP and s & Status.DATA_VALID]
-    assert slips and onset <= slips[0] < onset + 0.3, "the slip read while DATA_VALID"
-    # past command_rate a DCMD is dropped undecoded; of those decoded, at most one tare
-    # a scan reached the loop (the rest replaced in the mailbox)
-    assert c_end["sparkplug_commands"] > 100 and c_end["sparkplug_commands_shed"] > sent / 2
+    assert slips and onset <= slips[0] < onset + 0.5, "the slip read while DATA_VALID"
+    # past command_rate a DCMD is dropped undecoded, and past ten times that the topic is
+    # paused (the broker drops it); of those decoded, at most one tare a scan reached
+    # the loop (the rest replaced in the mailbox)
+    assert c_end["sparkplug_commands"] > 100 and c_end["sparkplug_commands_shed"] > 1000
+    assert c_end["sparkplug_command_pauses"] >= 1
     assert c_end["sparkplug_commands_dropped"] > 0 and 0 < tares <= c_end["scans"]

@@ -86,6 +86,14 @@ def now_ms() -> int:
 class EdgeNode:
     """One MQTT connection, the edge node's births and deaths, ``seq`` and ``bdSeq``."""
 
+    #: A device's DCMD topic that sheds more than this many times ``command_rate``
+    #: within a second is a flood: it is unsubscribed for :attr:`FLOOD_PAUSE_S` (the
+    #: broker drops it then, not paho's thread, whose every message costs the loop's
+    #: thread the interpreter), then subscribed again.  NCMDs are never paused: a
+    #: rebirth request must be answered.
+    FLOOD_FACTOR = 10
+    FLOOD_PAUSE_S = 1.0
+
     #: A data message written at QoS 0 and not seen back from the broker after this
     #: long stops being tracked and is counted (``sparkplug_unconfirmed``): the broker
     #: does not hand this edge node its own DDATA (an access rule, say).
@@ -123,6 +131,10 @@ class EdgeNode:
         #: Commands dropped undecoded, past ``command_rate`` on their topic; the budgets by topic.
         self.commands_shed = 0
         self._budgets: dict[str, Budget] = {}
+        #: Flooded DCMD topics: (start of the second, shed in it); the paused ones' timers.
+        self.command_pauses = 0
+        self._shed_window: dict[str, tuple[float, int]] = {}
+        self._paused: dict[str, threading.Timer] = {}
         #: STATEs not taken, per reason: "future" (stamped implausibly ahead of our
         #: clock, refused), "older" (than the newest taken), "malformed" (bad_states).
         self.states_ignored = {"future": 0, "older": 0, "malformed": 0}
@@ -447,9 +459,12 @@ class EdgeNode:
         budget = self._budgets.get(topic)
         if budget is None:
             budget = self._budgets[topic] = Budget(self.options.command_rate)
-        if budget.take(time.monotonic()):
+        now = time.monotonic()
+        if budget.take(now, len(data)):
             return True
         self.commands_shed += 1
+        if device is not None:
+            self._flooded(topic, now, device)
         held = self.commands_logged.passes((topic, "shed"))
         if held is not None:
             target = device if device is not None else (self.devices[0] if self.devices else None)
@@ -459,6 +474,38 @@ class EdgeNode:
         if device is None and _REBIRTH_BYTES in data:
             self._rebirth_requested()
         return False
+
+    def _flooded(self, topic: str, now: float, device: Device) -> None:
+        """A DCMD shed on ``topic``: past FLOOD_FACTOR times the rate within a second,
+        the topic is unsubscribed for FLOOD_PAUSE_S (paho's thread)."""
+        start, n = self._shed_window.get(topic, (now, 0))
+        if now - start > 1.0:
+            start, n = now, 0
+        n += 1
+        self._shed_window[topic] = (start, n)
+        if n <= self.FLOOD_FACTOR * self.options.command_rate or topic in self._paused:
+            return
+        del self._shed_window[topic]
+        with self.lock:
+            if self.stopping:
+                return
+            self.command_pauses += 1
+            self.client.unsubscribe(topic)
+            timer = self._paused[topic] = threading.Timer(self.FLOOD_PAUSE_S, self._resume, (topic,))
+            timer.name, timer.daemon = "sparkplug-resume", True
+            timer.start()
+        held = self.commands_logged.passes((topic, "paused"))
+        if held is not None:
+            device._event("sparkplug_commands_paused", "warning", topic=clip(topic), pause_s=self.FLOOD_PAUSE_S,
+                          held_back=held)
+
+    def _resume(self, topic: str) -> None:
+        """The pause of a flooded DCMD topic is over: subscribed again (a new session
+        subscribed it already)."""
+        with self.lock:
+            self._paused.pop(topic, None)
+            if self.session and not self.stopping:
+                self.client.subscribe(topic, 1)
 
     def _rebirth_requested(self) -> None:
         """A Node Control/Rebirth (paho's thread): answered by births now, or, within
@@ -600,8 +647,10 @@ class EdgeNode:
             if self.stopping:
                 return
             self.stopping = True  # the forwarder sends nothing more
-            timer, self._rebirth_timer = self._rebirth_timer, None
-        if timer is not None:
+            timers = [t for t in (self._rebirth_timer, *self._paused.values()) if t is not None]
+            self._rebirth_timer = None
+            self._paused.clear()
+        for timer in timers:
             timer.cancel()
             timer.join(timeout_s)
         self.forwarder.stop()
@@ -643,6 +692,7 @@ class EdgeNode:
                 "sparkplug_commands": self.commands,
                 "sparkplug_commands_refused": self.commands_refused, "sparkplug_unknown_devices": self.unknown_devices,
                 "sparkplug_commands_dropped": self.commands_dropped, "sparkplug_commands_shed": self.commands_shed,
+                "sparkplug_command_pauses": self.command_pauses,
                 "sparkplug_bad_states": self.bad_states, "sparkplug_host_online": int(self.host_online),
                 "sparkplug_state_ignored": sum(self.states_ignored.values()),
                 "sparkplug_state_future": self.states_ignored["future"],

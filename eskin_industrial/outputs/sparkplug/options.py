@@ -92,9 +92,10 @@ class SparkplugOptions:
     #: (or while one is pending) are answered by one rebirth at its end.
     rebirth_min_interval_s: float = field(default=1.0, metadata=in_range(0, 3600))
     #: Commands (NCMD, each device's DCMD) taken at most this many a second per topic,
-    #: in bursts as many; past it they are dropped before they are decoded, counted
-    #: (``sparkplug_commands_shed``) and logged: a host that floods them must not
-    #: take the interpreter from the scan path.
+    #: in bursts as many, a message of more than 256 bytes counting as one per 256;
+    #: past it they are dropped before they are decoded, counted
+    #: (``sparkplug_commands_shed``) and logged: a host that floods them must not take
+    #: the interpreter from the scan path.
     command_rate: float = field(default=100.0, metadata=in_range(0.1, 100_000))
 
     def __post_init__(self) -> None:
