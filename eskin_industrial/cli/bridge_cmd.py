@@ -22,6 +22,8 @@ if TYPE_CHECKING:
     from ..bridge.config import NodeConfig
     from ..bridge.runtime import Bridge
 from .can_common import bus_options
+from .common import complete_profile
+from .completion import complete_source
 from .console import verbosity
 from .outputs import given_output_options, node_outputs_from_cli, output_options, outputs_from_cli
 
@@ -50,9 +52,9 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], outpu
 @click.command()
 @click.option("--config", "config_path", type=click.Path(dir_okay=False), default=None,
               help="Bridge configuration (TOML): several nodes, each to its own register block.")
-@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None,
+@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None, shell_complete=complete_profile,
               help="One node: its sensor profile (instead of --config).")
-@click.option("--source", default="can", show_default=True, metavar="SPEC",
+@click.option("--source", default="can", show_default=True, metavar="SPEC", shell_complete=complete_source,
               help="One node's scans: can (python-can bus, -i/-c), log:FILE (replay a CAN log), "
                    "rtu:PORT[@BAUD] (poll a Modbus RTU node), scene:NAME (a built-in scene in real time), "
                    "recording:FILE.csv.")
