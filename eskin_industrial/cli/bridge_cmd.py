@@ -25,6 +25,7 @@ from .can_common import bus_options
 from .common import complete_profile
 from .completion import complete_source
 from .console import verbosity
+from .extras import check_extras
 from .outputs import given_output_options, node_outputs_from_cli, output_options, outputs_from_cli
 
 
@@ -128,6 +129,9 @@ def bridge(config_path: str | None, profile_path: str | None, source: str, inter
     if check:
         for line in deprecated:
             click.echo(f"eskin-bus: warning: {line}", err=True)
+        # an output or method whose extra is not installed (exit 4, as the run would)
+        check_extras([*(("output", kind) for kind in cfg.output_kinds()),
+                      *(("method", n.profile.detector.method) for n in nodes)])
         probe_outputs(cfg, nodes)  # a server's port is free (the run would fail to listen)
         outputs = output_classes(cfg)
         for n in nodes:
