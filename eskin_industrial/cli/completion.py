@@ -65,4 +65,4 @@ def completion(ctx: click.Context, shell: str) -> None:
     root = ctx.find_root().command
     cls = get_completion_class(shell)
     assert cls is not None  # the three click ships, as the choice says
-    click.echo(cls(root, {}, "eskin-bus", COMPLETE_VAR).source())
+    click.echo(cls(root, {}, "eskin-bus", COMPLETE_VAR).source(), nl=False)  # (as click prints it)
