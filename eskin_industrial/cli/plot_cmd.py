@@ -12,7 +12,7 @@ from ..methods import method_names
 from ..offline import Detected, detect_can_log, detect_recording
 from ..profile import Profile
 from .common import open_profile, profile_option
-from .plot_figure import PlotData, state_figure
+from .plot_figure import PlotData, centre_of_force, state_figure
 
 
 @click.command()
@@ -68,7 +68,8 @@ def plot_data(prof: Profile, found: Detected, labels_path: str | None) -> PlotDa
         threshold, threshold_name = prof.detector.slip_r_coe, "slip threshold"
     else:
         threshold, threshold_name = 1.0, "threshold"
-    return PlotData(t=t, total_n=np.nansum(values, axis=1), update_t=table.t,
+    return PlotData(t=t, total_n=np.nansum(values, axis=1),
+                    centre_mm=centre_of_force(values, *prof.layout.coordinates_mm()), update_t=table.t,
                     states=np.asarray(LABELS)[np.asarray(table.state, dtype=int)],
                     scores=((col_a, table.score_a), (col_b, table.score_b)), threshold=threshold,
                     threshold_name=threshold_name, title=f"{name}: {chosen.name} on {prof.name}, {rate:.0f} Hz",
