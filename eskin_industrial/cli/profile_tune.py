@@ -77,8 +77,8 @@ def tune(profile_path: str, recordings: tuple[str, ...], moves: tuple[str, ...],
     width = [max(len(r[i]) for r in rows) for i in range(3)]
     for r in rows:
         click.echo(f"  {r[0]:<{width[0]}}  {r[1]:>{width[1]}}  {r[2]:>{width[2]}}  {r[3]}".rstrip())
-    click.echo(f"false alarms an hour on the holds: {taught.before / hours:.3g} before ({taught.before}), "
-               f"{taught.after / hours:.3g} after ({taught.after})")
+    click.echo(f"false alarms an hour on the holds: {taught.before / hours:.1f} before ({taught.before}), "
+               f"{taught.after / hours:.1f} after ({taught.after})")
     for line in _slides(name, settings, taught.settings, profile, rate, seen, slides):
         click.echo(line)
     if not taught.met:

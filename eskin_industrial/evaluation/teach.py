@@ -243,24 +243,36 @@ class SensorNoise:
 
 
 def sensor_noise(holds: list[Hold], x_mm: np.ndarray, y_mm: np.ndarray) -> SensorNoise:
-    """Estimated from the holds: the taxels' noise from the spread of their changes from
-    frame to frame (a robust one, the median absolute change; a loaded taxel's), the
-    jitter from the largest excursion of the centre of force, on each axis, from its
-    mean over the frames of firm contact (half the median total or more)."""
+    """Estimated from the holds, over the frames of firm contact (half the median total
+    or more): the taxels' noise from the spread of their changes from frame to frame (a
+    robust one, the median absolute change, of the loaded taxels), and the jitter from
+    the spread of the centre of force less what that noise alone spreads it by (each
+    axis; the larger), turned into the largest excursion the scenes' jitter of that
+    spread makes over as long (``physics.cof_jitter`` scales by its peak)."""
+    from ..scenes.physics import cof_jitter
+
     noise, jitter = [], []
     for h in holds:
         f = np.nan_to_num(np.asarray(h.forces, float))
         total = f.sum(axis=1)
         firm = total >= 0.5 * float(np.median(total[total > 0])) if (total > 0).any() else np.zeros(len(f), bool)
-        if firm.sum() < 10:
+        if firm.sum() < 100:
             continue
         loaded = f[firm]
-        d = np.diff(loaded, axis=0)
-        mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0) * 1.4826 / math.sqrt(2.0)
-        noise.append(float(np.median(mad[loaded.mean(axis=0) > 0.05 * loaded.mean(axis=0).max()])))
-        xc = loaded @ x_mm / total[firm]
-        yc = loaded @ y_mm / total[firm]
-        jitter.append(float(max(np.abs(xc - xc.mean()).max(), np.abs(yc - yc.mean()).max())))
+        mean = loaded.mean(axis=0)
+        on = mean > 0.05 * mean.max()
+        d = np.diff(loaded[:, on], axis=0)
+        sigma = float(np.median(np.median(np.abs(d - np.median(d, axis=0)), axis=0))) * 1.4826 / math.sqrt(2.0)
+        noise.append(sigma)
+        s = total[firm]
+        spread = []
+        for coord in (x_mm, y_mm):
+            c = loaded @ coord / s
+            own = sigma ** 2 * float(np.sum((coord[on] - c.mean()) ** 2)) / float(s.mean()) ** 2
+            spread.append(math.sqrt(max(float(c.var()) - own, 0.0)))
+        t = h.t[firm]
+        unit = cof_jitter(t - t[0], 1.0, JITTERY_JITTER_HZ, np.random.default_rng(0))
+        jitter.append(max(spread) / float(unit.std(axis=0).mean()))
     return SensorNoise(float(np.median(noise)) if noise else 0.0, float(np.median(jitter)) if jitter else 0.0)
 
 
