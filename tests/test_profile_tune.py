@@ -166,9 +166,16 @@ def test_cli_tunes_a_profile_and_detect_reads_it(tmp_path):
         state = read_updates(out)["state"]
         counts[name] = int(np.sum((state[1:] == "slip") & (state[:-1] != "slip")))
     assert counts["default"] > 3 and counts["tuned"] == 0
-    # --write: in place
-    res = cli("profile", "tune", str(tuned), str(paths[0]), str(paths[1]), "--false-alarms-per-hour", "6", "--write")
+    # --write: in place; a recording of moves counts as holding; given slides are run instead of the scenes
+    r = render(tt.jittery(load_scene("case2")), RATE, 1000)
+    slide = tmp_path / "slide.csv"
+    write_recording(slide, r.t, r.forces)
+    res = cli("profile", "tune", str(tuned), str(paths[0]), "--moves", str(paths[1]), "--slides", str(slide),
+              "--false-alarms-per-hour", "6", "--write")
     assert res.returncode == 0, res.stderr
+    assert "2 recording(s), 2.4 min of holding" in res.stdout
+    found = next(line for line in res.stdout.splitlines() if line.startswith(f"slides: {slide}: "))
+    assert found.endswith(" after") and not found.endswith(" 0 after"), found
     text = tuned.read_text(encoding="utf-8")
     assert text.count("[detector.cof_track]") == 1  # the keys replaced where they were
     # taught again from the same holds, the rule lands where it did (its runs at the new

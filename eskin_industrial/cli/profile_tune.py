@@ -141,7 +141,7 @@ def _slides(name: str, before: Any, after: Any, profile: Profile, rate: float, s
     from ..evaluation import teach as tt
 
     if slides:
-        return _given_slides(name, after, profile, slides)
+        return _given_slides(name, before, after, profile, slides)
     scenes = tt.slide_scenes(profile.layout.rows, profile.layout.cols)
     if not scenes:
         return [f"slides: no built-in slide scene has a {profile.layout.rows}x{profile.layout.cols} array; "
@@ -156,19 +156,20 @@ def _slides(name: str, before: Any, after: Any, profile: Profile, rate: float, s
             f"jitter ({seen.jitter_mm:.3g} mm)", *out]
 
 
-def _given_slides(name: str, settings: Any, profile: Profile, slides: tuple[str, ...]) -> list[str]:
+def _given_slides(name: str, before: Any, after: Any, profile: Profile, slides: tuple[str, ...]) -> list[str]:
+    """Each slide recording's slips at the old settings and the new (no ground truth in
+    a recording: no delay)."""
     from ..evaluation import teach as tt
-
-    holds, rate = _read(profile, slides)
     from ..methods import ready_method
 
+    holds, rate = _read(profile, slides)
     x, y = profile.coordinates_mm
-    method = ready_method(name, settings)
-    out = []
-    for h in holds:
-        n = tt.slip_entries(tt.run(method, settings, x, y, rate, h))
-        out.append(f"slides: {h.name}: {n} slip(s) found after")
-    return out
+    counts = {}
+    for label, settings in (("before", before), ("after", after)):
+        method = ready_method(name, settings)
+        counts[label] = [tt.slip_entries(tt.run(method, settings, x, y, rate, h)) for h in holds]
+    return [f"slides: {h.name}: {b} slip(s) found before, {a} after"
+            for h, b, a in zip(holds, counts["before"], counts["after"])]
 
 
 def _minutes(hours: float) -> str:
