@@ -204,3 +204,24 @@ def test_cli_refuses_bad_input_in_one_line(tmp_path):
         assert res.returncode == 2, (args, res.stderr)
         assert message in res.stderr and res.stderr.count("\n") <= 2, (args, res.stderr)
     assert not (tmp_path / "t.toml").exists()
+
+
+def test_a_grab_and_a_release_are_no_hold():
+    from eskin_industrial.detect.updates import UpdateTable
+
+    t = np.arange(0.0, 10.0, 0.1)
+    state = np.where((t >= 1.0) & (t < 9.0), 1, 0)  # contact from 1 s to 9 s
+    state[(t >= 1.1) & (t < 1.3)] = 3  # a slip in the grab's half second: no false alarm
+    state[(t >= 5.0) & (t < 5.2)] = 3  # one in the hold: a false alarm
+    state[(t >= 8.7) & (t < 8.9)] = 3  # one in the release's half second: none
+    score = np.where(state == 3, 9.0, 0.5)
+    n = len(t)
+    table = UpdateTable(t=t, r_coe=score, r_dw=score, state=state, valid=np.ones(n, bool), f_sum=np.ones(n),
+                        xc=np.zeros(n), yc=np.zeros(n), flags=np.zeros(n, np.int64), score_a=score, score_b=score)
+    assert tt.slip_entries(table) == 1
+    held = tt.holding(table)
+    # (the last update in contact is at 8.9 s)
+    assert held[(t > 1.55) & (t < 8.35)].all() and not held[(t < 1.45) | (t > 8.45)].any()
+    # the grab's scores set nothing: the peaks are the hold's (its slip's second, then calm ones)
+    peaks = tt.block_peaks([table], ("score_a",))
+    assert peaks[0] == 9.0 and peaks[1] == 0.5

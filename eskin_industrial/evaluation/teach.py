@@ -38,6 +38,7 @@ from .families import SLIDES
 from .metrics import SceneScore, score_scene, spans
 
 _SLIP = int(GraspState.SLIP)
+_NO_CONTACT = int(GraspState.NO_CONTACT)
 
 #: The jittery sensor: taxel noise (N rms; the scenes' default is 0.01 N) ...
 JITTERY_NOISE_N = 0.04
@@ -110,9 +111,29 @@ class Taught:
         return self.after <= self.allowed
 
 
+#: After contact begins and before it ends, this long is a grab or a release, not the
+#: hold: its updates neither count nor set a threshold (the scenes' ``settle_s``, the
+#: "transition" the evaluation does not score).
+TRANSITION_S = 0.5
+
+
+def holding(table: UpdateTable) -> np.ndarray:
+    """Which updates of a recording are holding: in contact, and not within
+    ``TRANSITION_S`` of the contact's start or of an end inside the recording."""
+    t = np.asarray(table.t, float)
+    touching = np.asarray(table.state) != _NO_CONTACT
+    out = np.zeros(len(t), bool)
+    for a, b in spans(touching):
+        end = t[b - 1] - TRANSITION_S if b < len(t) else np.inf
+        out[a:b] = (t[a:b] >= t[a] + TRANSITION_S) & (t[a:b] <= end)
+    return out
+
+
 def slip_entries(table: UpdateTable) -> int:
-    """False alarms in a recording of holding: each entry into the slip state."""
-    return len(spans(np.asarray(table.state) == _SLIP))
+    """False alarms in a recording of holding: each entry into the slip state, but for
+    those wholly within a grab or a release (``holding``)."""
+    held = holding(table)
+    return sum(1 for a, b in spans(np.asarray(table.state) == _SLIP) if held[a:b].any())
 
 
 def run(method: Method, settings: DetectorSettings, x_mm: np.ndarray, y_mm: np.ndarray, rate_hz: float,
@@ -131,10 +152,11 @@ def _column(method: Method, score: str) -> str:
 
 def block_peaks(tables: list[UpdateTable], columns: tuple[str, ...], below: bool = False) -> np.ndarray:
     """Each one-second block's most alarming score over ``columns`` (the largest, or with
-    ``below`` the smallest, negated), every recording's blocks, in falling order."""
+    ``below`` the smallest, negated) while holding, every recording's blocks, in falling
+    order."""
     peaks: list[np.ndarray] = []
     for tab in tables:
-        ok = np.asarray(tab.valid, bool)
+        ok = np.asarray(tab.valid, bool) & holding(tab)
         if not ok.any():
             continue
         scores = np.column_stack([np.asarray(getattr(tab, c), float) for c in columns])[ok]
@@ -153,14 +175,12 @@ def _bounds(cls: type, key: str) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
-def _current(method: Method, settings: DetectorSettings) -> Any:
-    return method.settings_of(settings)
-
-
 def _with(method: Method, settings: DetectorSettings, values: dict[str, Any]) -> DetectorSettings:
     """``settings`` with the method's keys set to ``values``."""
-    if method.key == "":
-        return replace(settings, **values)
+    if method.key == "":  # the paper's rule: its varying-force thresholds stay at most the slip ones
+        floors = {f"variable_{k.removeprefix('slip_')}": min(getattr(settings, f"variable_{k.removeprefix('slip_')}"), v)
+                  for k, v in values.items() if k in ("slip_r_coe", "slip_r_dw")}
+        return replace(settings, **values, **floors)
     own = replace(method.settings_of(settings), **values)
     if method.key in {f.name for f in dataclasses.fields(DetectorSettings)}:
         return replace(settings, **{method.key: own})
@@ -196,12 +216,12 @@ def teach(method_name: str, settings: DetectorSettings, x_mm: np.ndarray, y_mm: 
     allowed = int(math.floor(per_hour * hours / 2.0))
     first = [run(method, settings, x_mm, y_mm, rate_hz, h) for h in holds]
     before = sum(slip_entries(t) for t in first)
-    old = _current(method, settings)
+    old = method.settings_of(settings)
     start = {k: float(getattr(old, k)) for th in method.tunable for k in th.keys}
     wanted: dict[str, float | None] = {}
     tables, current, rounds, after = first, settings, 0, before
     while rounds == 0 or (after > allowed and rounds <= ROUNDS):
-        own = _current(method, current)
+        own = method.settings_of(current)
         values: dict[str, Any] = {}
         for th in method.tunable:
             peaks = block_peaks(tables, tuple(_column(method, s) for s in th.scores), th.direction == "below")
@@ -211,26 +231,16 @@ def teach(method_name: str, settings: DetectorSettings, x_mm: np.ndarray, y_mm: 
             for key, (value, want) in _set(method, th, own, level).items():
                 values[key] = value
                 wanted[key] = want
-        current = _paper_consistent(_with(method, current, values))
+        current = _with(method, current, values)
         tables = [run(method, current, x_mm, y_mm, rate_hz, h) for h in holds]
         after = sum(slip_entries(t) for t in tables)
         rounds += 1
         if all(w is not None for w in wanted.values()):
             break  # every key at its bound: another round cannot move them
-    new = _current(method, current)
+    new = method.settings_of(current)
     changes = tuple(Change(k, v, float(getattr(new, k)), wanted.get(k)) for k, v in start.items())
     section = "detector" if method.key == "" else f"detector.{method.key}"
     return Taught(method.name, section, changes, current, hours, before, after, allowed, rounds)
-
-
-def _paper_consistent(settings: DetectorSettings) -> DetectorSettings:
-    """The paper's varying-force thresholds must stay at most its slip thresholds: a slip
-    threshold taught below one takes it down with it."""
-    coe = min(settings.variable_r_coe, settings.slip_r_coe)
-    dw = min(settings.variable_r_dw, settings.slip_r_dw)
-    if (coe, dw) == (settings.variable_r_coe, settings.variable_r_dw):
-        return settings
-    return replace(settings, variable_r_coe=coe, variable_r_dw=dw)
 
 
 @dataclass(frozen=True)
@@ -307,5 +317,5 @@ def slide_score(method_name: str, settings: DetectorSettings, scenes: tuple[str,
 
 
 __all__ = ["JITTERY_HELD_OUT_SEEDS", "JITTERY_JITTER_HZ", "JITTERY_JITTER_MM", "JITTERY_NOISE_N",
-           "JITTERY_TUNING_SEEDS", "SAFETY", "Change", "Hold", "SensorNoise", "Taught", "block_peaks", "jittery",
-           "min_hold_hours", "run", "sensor_noise", "slide_scenes", "slide_score", "slip_entries", "teach"]
+           "JITTERY_TUNING_SEEDS", "SAFETY", "TRANSITION_S", "Change", "Hold", "SensorNoise", "Taught", "block_peaks",
+           "holding", "jittery", "min_hold_hours", "run", "sensor_noise", "slide_scenes", "slide_score", "slip_entries", "teach"]
