@@ -22,6 +22,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "profile dbc": ("eskin-bus profile dbc hand-4x5 > hand.dbc", "eskin-bus profile dbc --config bridge.toml > plant.dbc"),
     "profile list": ("eskin-bus profile list",),
     "profile init": ("eskin-bus profile init paper-5x5 -o cell.toml",),
+    "profile tune": ("eskin-bus profile tune cell.toml holds.csv --moves moves.csv --write",
+                     "eskin-bus profile tune paper-5x5 holds.csv -o cell.toml   # eskin-bus simulate jittery-hold -o holds.csv"),
     "simulate": ("eskin-bus simulate --list", "eskin-bus simulate case2 -o case2.csv --labels case2-labels.csv"),
     "plot": ("eskin-bus plot -p paper-5x5 case2.csv --labels case2-labels.csv -o case2.png",),
     "evaluate": ("eskin-bus evaluate", "eskin-bus evaluate -m cof-track -s case2 --json"),
