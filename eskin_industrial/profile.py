@@ -9,6 +9,8 @@ See ``docs/profiles.md`` for every key.
 
 from __future__ import annotations
 
+import tomllib
+import warnings
 from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from pathlib import Path
@@ -17,7 +19,8 @@ from typing import Literal
 import numpy as np
 
 from .detect.settings import DetectorSettings
-from .errors import ProfileError
+from .errors import DeprecatedKey, ProfileError
+from .identity import DeviceIdentity
 from .netaddr import check_host
 from .schema import (
     SchemaError,
@@ -252,19 +255,9 @@ class ModbusNodeSection:
         return 2 if self.value_type.endswith("32") else 1
 
 
-@dataclass(frozen=True)
-class DeviceIdentitySection:
-    """``[modbus.plc.identity]``: what server mode answers to a read of the device
-    identification (FC43/14) and, in part, to report server id (FC17)."""
-
-    vendor_name: str = "eskin-industrial"
-    product_code: str = "eskin-bus"
-    #: Empty: the package's version.
-    revision: str = ""
-    vendor_url: str = ""
-    product_name: str = "eskin-industrial bridge"
-    #: Empty: the profile's ``[sensor] name``.
-    model_name: str = ""
+#: ``[modbus.plc.identity]`` of earlier releases: the bridge configuration's
+#: ``[identity]`` now (:mod:`eskin_industrial.identity`); still read, with a warning.
+DeviceIdentitySection = DeviceIdentity
 
 
 @dataclass(frozen=True)
@@ -489,9 +482,31 @@ def load_profile(path: str | Path, base: Path | None = None) -> Profile:
     return parse_profile(text, str(found))
 
 
+#: Profile sections of earlier releases that are the bridge configuration's now
+#: (old table -> its new place there): still read into the profile, and used when the
+#: bridge configuration does not give them, with one warning per key.
+MOVED_OUT: dict[str, str] = {"modbus.plc.identity": "identity"}
+
+
+def _warn_moved_out(text: str, source: str) -> None:
+    """One :class:`DeprecatedKey` line for each key of a :data:`MOVED_OUT` table the
+    text gives (a text that is no TOML is parse_toml's to report)."""
+    try:
+        table: object = tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        return
+    for old, new in MOVED_OUT.items():
+        for part in old.split("."):
+            table = table.get(part) if isinstance(table, dict) else None
+        for key in table if isinstance(table, dict) else ():
+            warnings.warn(DeprecatedKey(f"{source}: [{old}] {key} is deprecated: write [{new}] {key} in the "
+                                        f"bridge configuration (bridge.toml)"), stacklevel=3)
+
+
 def parse_profile(text: str, source: str = "<profile>") -> Profile:
     from .methods import section_class  # (a plug-in method's [detector.<key>])
 
+    _warn_moved_out(text, source)
     profile = parse_toml(Profile, text, source, MOVED_KEYS, section_class)
     object.__setattr__(profile, "source", source)
     return profile

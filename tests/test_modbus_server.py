@@ -138,14 +138,13 @@ def parse_device_id(resp: bytes) -> tuple[int, int, dict[int, str]]:
     return code, conformity, objects
 
 
-def test_device_identification_gives_the_mandatory_objects_from_the_profile(paper_profile):
-    from dataclasses import replace
+def test_device_identification_gives_the_mandatory_objects_of_the_identity(paper_profile):
+    from eskin_industrial.identity import DeviceIdentity
 
-    from eskin_industrial.profile import DeviceIdentitySection
-
-    plc = replace(paper_profile.modbus.plc, identity=DeviceIdentitySection(
-        vendor_name="Acme Tactile", product_code="AT-5X5", revision="2.3", vendor_url="https://acme.example"))
-    server = PlcServer(plc, tcp=("127.0.0.1", free_port()), identity=identity_of(plc, paper_profile.name)).start()
+    ident = DeviceIdentity(vendor_name="Acme Tactile", product_code="AT-5X5", revision="2.3",
+                           vendor_url="https://acme.example")
+    server = PlcServer(paper_profile.modbus.plc, tcp=("127.0.0.1", free_port()),
+                       identity=identity_of(ident, paper_profile.name)).start()
     try:
         with connect(port_of(server)) as s:
             code, conformity, basic = parse_device_id(ask(s, bytes((43, 14, 1, 0))))

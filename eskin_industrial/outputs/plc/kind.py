@@ -132,7 +132,7 @@ class PlcKind(OutputKind[PlcOptions]):
             blocks = [n.profile.modbus.plc for n in nodes]
             merged = server_settings(options, nodes)
             server = PlcServer(first, tcp=tcp, serial=serial, blocks=blocks, linger_s=options.offline_linger_s,
-                               policy=policy_of(merged, blocks), identity=identity_of(first, nodes[0].profile.name)
+                               policy=policy_of(merged, blocks), identity=identity_of(context.identity, nodes[0].profile.name)
                                ).start()
             context.closers.append(server.stop)
             return [server.block(i) for i in range(len(nodes))]
