@@ -482,25 +482,44 @@ def load_profile(path: str | Path, base: Path | None = None) -> Profile:
     return parse_profile(text, str(found))
 
 
-#: Profile sections of earlier releases that are the bridge configuration's now
-#: (old table -> its new place there): still read into the profile, and used when the
-#: bridge configuration does not give them, with one warning per key.
-MOVED_OUT: dict[str, str] = {"modbus.plc.identity": "identity"}
+#: ``[modbus.plc]`` keys of earlier releases that are the PLC output's, set in the
+#: bridge configuration's ``[plc]`` now (profile key -> ``[plc]`` key; ``bind`` is
+#: where server mode listens, ``[plc] host``).  Still read into the profile, and used
+#: where ``[plc]`` leaves them unset, with one warning per key.  The keys of the
+#: register image stay the profile's (``base_address``, ``word_order``, ``r_scale``:
+#: ``eskin-bus plc map`` and ``plc export`` make the PLC's side from a profile alone).
+PLC_MOVED_OUT: dict[str, str] = {
+    "mode": "mode", "unit_id": "unit_id", "host": "host", "port": "port", "bind": "host",
+    "timeout_s": "timeout_s", "backoff_s": "backoff_s", "backoff_max_s": "backoff_max_s",
+    "max_connections": "max_connections", "idle_timeout_s": "idle_timeout_s", "allow_read": "allow_read",
+    "allow_write": "allow_write", "read_only": "read_only", "unit_ids": "unit_ids",
+}
+#: ``[modbus.plc.identity]`` of earlier releases: the bridge configuration's ``[identity]``.
+IDENTITY_MOVED_OUT = "identity"
+_ELSEWHERE = "in the bridge configuration (bridge.toml)"
+
+
+def moved_out(text: str) -> list[tuple[str, str]]:
+    """(old place, new place) of each key the profile's text gives that is the bridge
+    configuration's now, both spelled as in a file (``[modbus.plc] port``, ``[plc] port``);
+    a text that is no TOML gives none (parse_toml reports it)."""
+    try:
+        plc = tomllib.loads(text).get("modbus", {}).get("plc", {})
+    except (tomllib.TOMLDecodeError, AttributeError):
+        return []
+    if not isinstance(plc, dict):
+        return []
+    out = [(f"[modbus.plc] {k}", f"[plc] {PLC_MOVED_OUT[k]}") for k in plc if k in PLC_MOVED_OUT]
+    ident = plc.get("identity")
+    if isinstance(ident, dict):
+        out += [(f"[modbus.plc.identity] {k}", f"[{IDENTITY_MOVED_OUT}] {k}") for k in ident]
+    return out
 
 
 def _warn_moved_out(text: str, source: str) -> None:
-    """One :class:`DeprecatedKey` line for each key of a :data:`MOVED_OUT` table the
-    text gives (a text that is no TOML is parse_toml's to report)."""
-    try:
-        table: object = tomllib.loads(text)
-    except tomllib.TOMLDecodeError:
-        return
-    for old, new in MOVED_OUT.items():
-        for part in old.split("."):
-            table = table.get(part) if isinstance(table, dict) else None
-        for key in table if isinstance(table, dict) else ():
-            warnings.warn(DeprecatedKey(f"{source}: [{old}] {key} is deprecated: write [{new}] {key} in the "
-                                        f"bridge configuration (bridge.toml)"), stacklevel=3)
+    """One :class:`DeprecatedKey` line for each key :func:`moved_out` finds."""
+    for old, new in moved_out(text):
+        warnings.warn(DeprecatedKey(f"{source}: {old} is deprecated: write {new} {_ELSEWHERE}"), stacklevel=3)
 
 
 def parse_profile(text: str, source: str = "<profile>") -> Profile:
