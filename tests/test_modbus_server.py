@@ -410,11 +410,12 @@ def test_mbpoll_reads_the_input_register_mirror(paper_profile):
 # -- configuration ---------------------------------------------------------------------
 
 def profile_with(tmp_path, plc_lines: str) -> str:
-    """paper-5x5 with lines added to its [modbus.plc] (keys it does not set)."""
+    """paper-5x5 with lines added to its [modbus.plc] (keys it does not set; the PLC's
+    connection keys there are deprecated, [plc]'s now, and still read)."""
     from tests.helpers.paths import PROFILES
 
     text = (PROFILES / "paper-5x5.toml").read_text()
-    text = text.replace('bind = "127.0.0.1"\n', "").replace("[modbus.plc]\n", f"[modbus.plc]\n{plc_lines}\n")
+    text = text.replace("[modbus.plc]\n", f"[modbus.plc]\n{plc_lines}\n")
     path = tmp_path / "profile.toml"
     path.write_text(text)
     return str(path)
@@ -460,10 +461,10 @@ def test_modbus_bridge_serve_port_only_listens_on_the_profiles_bind(tmp_path):
 ])
 def test_a_bad_server_setting_is_one_line_at_load(tmp_path, key, line, bad):
     from eskin_industrial import load_profile
-    from eskin_industrial.errors import ProfileError
+    from eskin_industrial.errors import DeprecatedKey, ProfileError
 
-    with pytest.raises(ProfileError) as err:
-        load_profile(profile_with(tmp_path, line))
+    with pytest.warns(DeprecatedKey, match=rf"\[plc\] {key} in the bridge"), pytest.raises(ProfileError) as err:
+        load_profile(profile_with(tmp_path, line))  # a profile's key of earlier releases: checked as before
     msg = str(err.value)
     assert "\n" not in msg and f"[modbus] plc.{key}:" in msg and bad in msg
 

@@ -44,7 +44,7 @@ class PlcKind(OutputKind[PlcOptions]):
     profile_keys = explain_keys("client")
     cli_options = (
         CliOption("--plc", "plc", "tcp:HOST:PORT (write into the PLC), rtu:PORT (PLC as RTU slave), serve:HOST:PORT "
-                  "or serve:PORT (serve, the PLC reads; the host: the profile's bind), serve-rtu:PORT; IPv6 in "
+                  "or serve:PORT (serve, the PLC reads; the host: 127.0.0.1), serve-rtu:PORT; IPv6 in "
                   "brackets ([::1]:1502); default: serve on 127.0.0.1:502.", metavar="SPEC"),
         CliOption("--plc-baud", "plc_baud", "Baud rate for rtu: and serve-rtu:.", type=int, default=115200),
         CliOption("--plc-timeout", "plc_timeout", "Client mode: seconds the PLC has to answer a write "
