@@ -447,7 +447,21 @@ class Profile:
         return self.layout.coordinates_mm()
 
     def to_table(self) -> dict:
-        return to_table(self)
+        """Every key as loaded, defaults filled in, but for the PLC's connection and the
+        device identity (the bridge configuration's now): only those a profile of
+        earlier releases set otherwise, so that the table read back warns as its file did."""
+        table = to_table(self)
+        plc, default = table["modbus"]["plc"], ModbusPlcSection()
+        for key in PLC_MOVED_OUT:
+            if getattr(self.modbus.plc, key) == getattr(default, key):
+                del plc[key]
+        ident = plc["identity"]
+        for key in list(ident):
+            if getattr(self.modbus.plc.identity, key) == getattr(default.identity, key):
+                del ident[key]
+        if not ident:
+            del plc["identity"]
+        return table
 
 
 #: The profiles shipped inside the package (package data): ``-p paper-5x5`` names one.

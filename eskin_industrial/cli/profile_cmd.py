@@ -71,7 +71,6 @@ def show(file: str, fmt: str) -> None:
     values derived from it (taxel coordinates, detector sizes in samples)."""
     p = load_profile(file)
     table = p.to_table()
-    moved = _without_moved_out(table, Path(p.source).read_text(encoding="utf-8"))
     geo = p.detector.geometry(p.sensor.rate_hz)
     x, y = p.coordinates_mm
     table["derived"] = {
@@ -93,27 +92,14 @@ def show(file: str, fmt: str) -> None:
         given["derived"] = table["derived"]  # computed, not defaults
         click.echo(f"# {file}: {_brief(p)}")
         click.echo("# every key, as resolved: '# default' marks what the file leaves to the default")
-        click.echo(f"# the PLC's connection and the device identity are the bridge configuration's: {moved}")
+        click.echo(f"# the PLC's connection and the device identity are the bridge configuration's: {_moved_places()}")
         click.echo(dumps(table, given=given), nl=False)
 
 
-def _without_moved_out(table: dict[str, Any], text: str) -> str:
-    """Take out of ``table`` the keys that are the bridge configuration's now
-    (:data:`~eskin_industrial.profile.PLC_MOVED_OUT`, the identity) unless the file
-    still gives them (deprecated; ``profile check`` warns); their new places, in a line."""
-    from ..profile import IDENTITY_MOVED_OUT, PLC_MOVED_OUT, moved_out
+def _moved_places() -> str:
+    """Where the keys a profile no longer holds are set (``profile show``'s line)."""
+    from ..profile import IDENTITY_MOVED_OUT, PLC_MOVED_OUT
 
-    given = {old for old, _ in moved_out(text)}
-    plc = table["modbus"]["plc"]
-    for key in PLC_MOVED_OUT:
-        if f"[modbus.plc] {key}" not in given:
-            plc.pop(key, None)
-    ident = plc.get("identity", {})
-    for key in list(ident):
-        if f"[modbus.plc.identity] {key}" not in given:
-            del ident[key]
-    if not ident:
-        plc.pop("identity", None)
     return f"[plc] {', '.join(dict.fromkeys(PLC_MOVED_OUT.values()))}; [{IDENTITY_MOVED_OUT}] (docs/plc.md)"
 
 
