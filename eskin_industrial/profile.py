@@ -262,7 +262,11 @@ DeviceIdentitySection = DeviceIdentity
 
 @dataclass(frozen=True)
 class ModbusPlcSection:
-    """The PLC register image, written to the PLC (client) or served (server)."""
+    """The node's register block as the PLC sees it (``base_address``, ``word_order``,
+    ``r_scale``), and the PLC output's settings as a profile of earlier releases gave
+    them (:data:`PLC_MOVED_OUT`, ``identity``: deprecated here, the bridge
+    configuration's ``[plc]`` and ``[identity]`` now); the PLC output lays its
+    ``[plc]`` over them (``eskin_industrial/outputs/plc/legacy.py``)."""
 
     #: ``client``: the bridge writes into the PLC's holding registers;
     #: ``server``: the bridge serves the registers and the PLC reads them.
