@@ -9,6 +9,8 @@ See ``docs/profiles.md`` for every key.
 
 from __future__ import annotations
 
+import tomllib
+import warnings
 from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from pathlib import Path
@@ -17,7 +19,8 @@ from typing import Literal
 import numpy as np
 
 from .detect.settings import DetectorSettings
-from .errors import ProfileError
+from .errors import DeprecatedKey, ProfileError
+from .identity import DeviceIdentity
 from .netaddr import check_host
 from .schema import (
     SchemaError,
@@ -252,24 +255,18 @@ class ModbusNodeSection:
         return 2 if self.value_type.endswith("32") else 1
 
 
-@dataclass(frozen=True)
-class DeviceIdentitySection:
-    """``[modbus.plc.identity]``: what server mode answers to a read of the device
-    identification (FC43/14) and, in part, to report server id (FC17)."""
-
-    vendor_name: str = "eskin-industrial"
-    product_code: str = "eskin-bus"
-    #: Empty: the package's version.
-    revision: str = ""
-    vendor_url: str = ""
-    product_name: str = "eskin-industrial bridge"
-    #: Empty: the profile's ``[sensor] name``.
-    model_name: str = ""
+#: ``[modbus.plc.identity]`` of earlier releases: the bridge configuration's
+#: ``[identity]`` now (:mod:`eskin_industrial.identity`); still read, with a warning.
+DeviceIdentitySection = DeviceIdentity
 
 
 @dataclass(frozen=True)
 class ModbusPlcSection:
-    """The PLC register image, written to the PLC (client) or served (server)."""
+    """The node's register block as the PLC sees it (``base_address``, ``word_order``,
+    ``r_scale``), and the PLC output's settings as a profile of earlier releases gave
+    them (:data:`PLC_MOVED_OUT`, ``identity``: deprecated here, the bridge
+    configuration's ``[plc]`` and ``[identity]`` now); the PLC output lays its
+    ``[plc]`` over them (``eskin_industrial/outputs/plc/legacy.py``)."""
 
     #: ``client``: the bridge writes into the PLC's holding registers;
     #: ``server``: the bridge serves the registers and the PLC reads them.
@@ -454,7 +451,21 @@ class Profile:
         return self.layout.coordinates_mm()
 
     def to_table(self) -> dict:
-        return to_table(self)
+        """Every key as loaded, defaults filled in, but for the PLC's connection and the
+        device identity (the bridge configuration's now): only those a profile of
+        earlier releases set otherwise, so that the table read back warns as its file did."""
+        table = to_table(self)
+        plc, default = table["modbus"]["plc"], ModbusPlcSection()
+        for key in PLC_MOVED_OUT:
+            if getattr(self.modbus.plc, key) == getattr(default, key):
+                del plc[key]
+        ident = plc["identity"]
+        for key in list(ident):
+            if getattr(self.modbus.plc.identity, key) == getattr(default.identity, key):
+                del ident[key]
+        if not ident:
+            del plc["identity"]
+        return table
 
 
 #: The profiles shipped inside the package (package data): ``-p paper-5x5`` names one.
@@ -489,9 +500,50 @@ def load_profile(path: str | Path, base: Path | None = None) -> Profile:
     return parse_profile(text, str(found))
 
 
+#: ``[modbus.plc]`` keys of earlier releases that are the PLC output's, set in the
+#: bridge configuration's ``[plc]`` now (profile key -> ``[plc]`` key; ``bind`` is
+#: where server mode listens, ``[plc] host``).  Still read into the profile, and used
+#: where ``[plc]`` leaves them unset, with one warning per key.  The keys of the
+#: register image stay the profile's (``base_address``, ``word_order``, ``r_scale``:
+#: ``eskin-bus plc map`` and ``plc export`` make the PLC's side from a profile alone).
+PLC_MOVED_OUT: dict[str, str] = {
+    "mode": "mode", "unit_id": "unit_id", "host": "host", "port": "port", "bind": "host",
+    "timeout_s": "timeout_s", "backoff_s": "backoff_s", "backoff_max_s": "backoff_max_s",
+    "max_connections": "max_connections", "idle_timeout_s": "idle_timeout_s", "allow_read": "allow_read",
+    "allow_write": "allow_write", "read_only": "read_only", "unit_ids": "unit_ids",
+}
+#: ``[modbus.plc.identity]`` of earlier releases: the bridge configuration's ``[identity]``.
+IDENTITY_MOVED_OUT = "identity"
+_ELSEWHERE = "in the bridge configuration (bridge.toml)"
+
+
+def moved_out(text: str) -> list[tuple[str, str]]:
+    """(old place, new place) of each key the profile's text gives that is the bridge
+    configuration's now, both spelled as in a file (``[modbus.plc] port``, ``[plc] port``);
+    a text that is no TOML gives none (parse_toml reports it)."""
+    try:
+        plc = tomllib.loads(text).get("modbus", {}).get("plc", {})
+    except (tomllib.TOMLDecodeError, AttributeError):
+        return []
+    if not isinstance(plc, dict):
+        return []
+    out = [(f"[modbus.plc] {k}", f"[plc] {PLC_MOVED_OUT[k]}") for k in plc if k in PLC_MOVED_OUT]
+    ident = plc.get("identity")
+    if isinstance(ident, dict):
+        out += [(f"[modbus.plc.identity] {k}", f"[{IDENTITY_MOVED_OUT}] {k}") for k in ident]
+    return out
+
+
+def _warn_moved_out(text: str, source: str) -> None:
+    """One :class:`DeprecatedKey` line for each key :func:`moved_out` finds."""
+    for old, new in moved_out(text):
+        warnings.warn(DeprecatedKey(f"{source}: {old} is deprecated: write {new} {_ELSEWHERE}"), stacklevel=3)
+
+
 def parse_profile(text: str, source: str = "<profile>") -> Profile:
     from .methods import section_class  # (a plug-in method's [detector.<key>])
 
+    _warn_moved_out(text, source)
     profile = parse_toml(Profile, text, source, MOVED_KEYS, section_class)
     object.__setattr__(profile, "source", source)
     return profile

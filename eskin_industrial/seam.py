@@ -12,6 +12,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol, TypeVar
 
+from .identity import DeviceIdentity
+
 if TYPE_CHECKING:
     from .profile import Profile
 
@@ -54,3 +56,5 @@ class OpenContext:
     #: An output opened again after a failure (its supervisor's restart): a file is
     #: appended to, not started anew.
     reopen: bool = False
+    #: The device identity the outputs name (``[identity]`` of the bridge configuration).
+    identity: DeviceIdentity = field(default_factory=DeviceIdentity)

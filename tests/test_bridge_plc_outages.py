@@ -8,13 +8,15 @@ import os
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, load_bridge_config, resolve
-from eskin_industrial.errors import ProfileError
+from eskin_industrial.errors import DeprecatedKey, ProfileError
 from eskin_industrial.outputs.plc.client import PlcWriter
+from eskin_industrial.outputs.plc.legacy import block_settings
 from eskin_industrial.outputs.plc.options import PlcOptions
 from eskin_industrial.profile import parse_profile
 from tests.helpers.bridge import PAPER, running_bridge, wait_for
@@ -48,13 +50,13 @@ def test_a_plc_that_refuses_every_write_is_an_outage_in_the_log_with_its_end(pap
 def test_timeout_and_back_off_from_plc_section_over_the_profile(paper_profile):
     config = scene_client(1502, timeout_s=1.5, backoff_s=0.2, backoff_max_s=5.0)
     nodes = resolve(config)
-    settings = config.outputs["plc"].client_settings(nodes[0].profile.modbus.plc)
+    settings = block_settings(config.outputs["plc"], nodes[0].profile.modbus.plc, "client")
     assert (settings.timeout_s, settings.backoff_s, settings.backoff_max_s) == (1.5, 0.2, 5.0)
     writer = PlcWriter(settings, "127.0.0.1", 1502)
     assert writer.timeout_s == 1.5 and writer.master.timeout_s == 1.5 and writer.master.late_s == 1.5
-    # unset: the profile's
-    plain = PlcOptions(mode="client").client_settings(nodes[0].profile.modbus.plc)
-    assert plain == nodes[0].profile.modbus.plc and plain.timeout_s == 0.5
+    # unset: the defaults
+    plain = block_settings(PlcOptions(mode="client"), nodes[0].profile.modbus.plc, "client")
+    assert plain == replace(nodes[0].profile.modbus.plc, mode="client") and plain.timeout_s == 0.5
 
 
 @pytest.mark.parametrize("key, value, expected", [
@@ -72,8 +74,9 @@ def test_bad_plc_timing_in_the_file_is_one_line(tmp_path, key, value, expected):
 
 
 def test_bad_timeout_in_the_profile_is_refused():
-    text = Path(PAPER).read_text().replace("timeout_s = 0.5 ", "timeout_s = 31 ")
-    with pytest.raises(ProfileError, match=r"timeout_s: expected a value in \[0.01, 30\]"):
+    text = Path(PAPER).read_text().replace("[modbus.plc]\n", "[modbus.plc]\ntimeout_s = 31\n")
+    with pytest.warns(DeprecatedKey, match=r"\[plc\] timeout_s"), \
+            pytest.raises(ProfileError, match=r"timeout_s: expected a value in \[0.01, 30\]"):
         parse_profile(text, "p.toml")
 
 

@@ -127,15 +127,19 @@ def test_bad_plc_specs_are_usage_errors(spec, expected):
     assert res.exit_code == 2 and "--plc" in res.output and expected in res.output, res.output
 
 
-@pytest.mark.parametrize("old, new, expected", [
-    ('bind = "127.0.0.1"', 'bind = "999.1.1.1"', "[modbus] plc.bind: expected an IPv4 address"),
-    ('host = "127.0.0.1"', 'host = "127.0.0.1:502"',
+@pytest.mark.parametrize("line, expected", [
+    ('bind = "999.1.1.1"', "[modbus] plc.bind: expected an IPv4 address"),
+    ('host = "127.0.0.1:502"',
      "[modbus] plc.host: expected a host without a port, got '127.0.0.1:502' (the port is a key of its own)"),
 ])
-def test_host_fields_of_a_profile_are_parsed_at_load(tmp_path, old, new, expected):
-    prof = paper_with(tmp_path, old, new)
-    refused(run("profile", "check", prof), f"{prof}: {expected}")
-    refused(run("bridge", "-p", prof, "--source", "scene:case2", "--check"), expected)
+def test_host_fields_of_a_profile_are_parsed_at_load(tmp_path, line, expected):
+    """The PLC's hosts are [plc]'s now; a profile of earlier releases that still gives
+    them is checked at load as before (besides its deprecation line)."""
+    prof = paper_with(tmp_path, "[modbus.plc]\n", f"[modbus.plc]\n{line}\n")
+    for res, want in ((run("profile", "check", prof), f"{prof}: {expected}"),
+                      (run("bridge", "-p", prof, "--source", "scene:case2", "--check"), expected)):
+        lines = [x for x in res.output.splitlines() if x and "is deprecated: write [plc]" not in x]
+        assert res.exit_code == 2 and len(lines) == 1 and want in lines[0], res.output
 
 
 def test_host_of_plc_and_sparkplug_sections_are_parsed(tmp_path):
@@ -233,10 +237,8 @@ def test_host_options_of_other_commands_use_the_same_parser(command):
 
 def test_explain_in_server_mode_shows_the_address_listened_on(tmp_path):
     """A server listens on the profile's ``bind``, not on its PLC ``host``; before,
-    --explain showed the PLC's host."""
-    prof = paper_with(tmp_path, 'host = "127.0.0.1"', 'host = "192.168.0.10"')
-    text = Path(prof).read_text().replace('bind = "127.0.0.1"', 'bind = "127.0.0.2"', 1)
-    Path(prof).write_text(text)
+    --explain showed the PLC's host.  (Both deprecated there, [plc] host now, still read.)"""
+    prof = paper_with(tmp_path, "[modbus.plc]\n", '[modbus.plc]\nhost = "192.168.0.10"\nbind = "127.0.0.2"\n')
 
     def host(*plc: str) -> str:
         res = run("bridge", "-p", prof, "--source", "scene:case2", *plc, "--check", "--explain")

@@ -17,7 +17,7 @@ from tests.helpers.fuzz import fuzz
 from tests.helpers.paths import PROFILES
 
 PAPER = load_profile(PROFILES / "paper-5x5.toml")
-IDENTITY = identity_of(PAPER.modbus.plc, PAPER.name)
+IDENTITY = identity_of(PAPER.modbus.plc.identity, PAPER.name)
 
 
 def handler() -> PlcRegisterHandler:

@@ -138,14 +138,13 @@ def parse_device_id(resp: bytes) -> tuple[int, int, dict[int, str]]:
     return code, conformity, objects
 
 
-def test_device_identification_gives_the_mandatory_objects_from_the_profile(paper_profile):
-    from dataclasses import replace
+def test_device_identification_gives_the_mandatory_objects_of_the_identity(paper_profile):
+    from eskin_industrial.identity import DeviceIdentity
 
-    from eskin_industrial.profile import DeviceIdentitySection
-
-    plc = replace(paper_profile.modbus.plc, identity=DeviceIdentitySection(
-        vendor_name="Acme Tactile", product_code="AT-5X5", revision="2.3", vendor_url="https://acme.example"))
-    server = PlcServer(plc, tcp=("127.0.0.1", free_port()), identity=identity_of(plc, paper_profile.name)).start()
+    ident = DeviceIdentity(vendor_name="Acme Tactile", product_code="AT-5X5", revision="2.3",
+                           vendor_url="https://acme.example")
+    server = PlcServer(paper_profile.modbus.plc, tcp=("127.0.0.1", free_port()),
+                       identity=identity_of(ident, paper_profile.name)).start()
     try:
         with connect(port_of(server)) as s:
             code, conformity, basic = parse_device_id(ask(s, bytes((43, 14, 1, 0))))
@@ -411,11 +410,12 @@ def test_mbpoll_reads_the_input_register_mirror(paper_profile):
 # -- configuration ---------------------------------------------------------------------
 
 def profile_with(tmp_path, plc_lines: str) -> str:
-    """paper-5x5 with lines added to its [modbus.plc] (keys it does not set)."""
+    """paper-5x5 with lines added to its [modbus.plc] (keys it does not set; the PLC's
+    connection keys there are deprecated, [plc]'s now, and still read)."""
     from tests.helpers.paths import PROFILES
 
     text = (PROFILES / "paper-5x5.toml").read_text()
-    text = text.replace('bind = "127.0.0.1"\n', "").replace("[modbus.plc]\n", f"[modbus.plc]\n{plc_lines}\n")
+    text = text.replace("[modbus.plc]\n", f"[modbus.plc]\n{plc_lines}\n")
     path = tmp_path / "profile.toml"
     path.write_text(text)
     return str(path)
@@ -461,10 +461,10 @@ def test_modbus_bridge_serve_port_only_listens_on_the_profiles_bind(tmp_path):
 ])
 def test_a_bad_server_setting_is_one_line_at_load(tmp_path, key, line, bad):
     from eskin_industrial import load_profile
-    from eskin_industrial.errors import ProfileError
+    from eskin_industrial.errors import DeprecatedKey, ProfileError
 
-    with pytest.raises(ProfileError) as err:
-        load_profile(profile_with(tmp_path, line))
+    with pytest.warns(DeprecatedKey, match=rf"\[plc\] {key} in the bridge"), pytest.raises(ProfileError) as err:
+        load_profile(profile_with(tmp_path, line))  # a profile's key of earlier releases: checked as before
     msg = str(err.value)
     assert "\n" not in msg and f"[modbus] plc.{key}:" in msg and bad in msg
 

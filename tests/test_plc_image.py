@@ -153,14 +153,16 @@ def test_map_rows_follow_the_base_address(paper_profile):
 
 
 def test_plc_section_is_checked():
-    from eskin_industrial.errors import ProfileError
+    from eskin_industrial.errors import DeprecatedKey, ProfileError
     from eskin_industrial.profile import parse_profile
 
     base = (PROFILES / "paper-5x5.toml").read_text(encoding="utf-8")
-    with pytest.raises(ProfileError, match=r"\[modbus\] plc.mode"):
-        parse_profile(base.replace('mode = "server"', 'mode = "master"'), "p.toml")
-    with pytest.raises(ProfileError, match="backoff_max_s"):
-        parse_profile(base.replace("backoff_max_s = 2.0", "backoff_max_s = 0.01"), "p.toml")
+    with pytest.raises(ProfileError, match=r"\[modbus\] plc.word_order"):
+        parse_profile(base.replace('word_order = "big"', 'word_order = "middle"'), "p.toml")
+    with pytest.warns(DeprecatedKey), pytest.raises(ProfileError, match=r"\[modbus\] plc.mode"):  # an old key, checked as ever
+        parse_profile(base.replace("[modbus.plc]\n", '[modbus.plc]\nmode = "master"\n'), "p.toml")
+    with pytest.warns(DeprecatedKey), pytest.raises(ProfileError, match="backoff_max_s"):
+        parse_profile(base.replace("[modbus.plc]\n", "[modbus.plc]\nbackoff_max_s = 0.01\n"), "p.toml")
     with pytest.raises(ProfileError, match="value_type"):
         parse_profile(base.replace('value_type = "uint16"', 'value_type = "float"'), "p.toml")
 

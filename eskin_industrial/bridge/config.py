@@ -50,12 +50,14 @@ import dataclasses
 import difflib
 import tomllib
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
 from ..bus.source import Source, source_class
 from ..errors import DeprecatedKey, ProfileError
+from ..identity import DeviceIdentity
 from ..outputs.base import DEFAULT_OUTPUT, OutputKind, output_kind, sink_kinds
 from ..profile import MAX_RATE_HZ, STALE_MAX_FACTOR, Profile, derived_stale_s, load_profile
 from ..schema import SchemaError, build, in_range, positive_at_most, read_toml_file
@@ -194,6 +196,9 @@ class BridgeConfig:
     #: The file it came from, for messages.
     source: str = COMMAND_LINE
     supervision: SupervisionSettings = field(default_factory=SupervisionSettings)
+    #: ``[identity]``: the device identity every output names (None: not given; the
+    #: first node's profile's ``[modbus.plc.identity]`` of earlier releases, else the defaults).
+    identity: DeviceIdentity | None = None
 
     def __post_init__(self) -> None:
         if not self.node:
@@ -253,11 +258,12 @@ def parse_bridge_config(text: str, source: str) -> BridgeConfig:
     for kind in sink_kinds():
         if kind in table:
             outputs[kind] = _section(output_kind(kind).Options, table.pop(kind), kind, source)
+    identity = _section(DeviceIdentity, table.pop("identity"), "identity", source) if "identity" in table else None
     try:
         top = build(_Top, table)
     except SchemaError as exc:
         if exc.message.startswith("unknown key") and "." not in exc.key:
-            valid = ["node", *sink_kinds(), *(f.name for f in dataclasses.fields(_Top))]
+            valid = ["node", *sink_kinds(), "identity", *(f.name for f in dataclasses.fields(_Top))]
             near = difflib.get_close_matches(exc.key, valid, n=1, cutoff=0.6)
             hint = f"did you mean {near[0]!r}?" if near else f"valid sections: {', '.join(valid)}"
             raise ProfileError(f"{source}: [{exc.key}]: unknown section; {hint}") from None
@@ -266,7 +272,7 @@ def parse_bridge_config(text: str, source: str) -> BridgeConfig:
     if not isinstance(nodes_raw, list) or not nodes_raw:
         raise ProfileError(f"{source}: [node]: expected at least one [[node]] table")
     nodes = tuple(_node(raw, i, source) for i, raw in enumerate(nodes_raw))
-    return BridgeConfig(nodes, outputs, top.log, top.queue_frames, source, top.supervision)
+    return BridgeConfig(nodes, outputs, top.log, top.queue_frames, source, top.supervision, identity)
 
 
 def _section(cls: type, raw: Any, name: str, source: str) -> Any:
@@ -359,6 +365,12 @@ def resolve(config: BridgeConfig) -> list[ResolvedNode]:
         nodes.append(ResolvedNode(nc, prof))
     _check_together(config, nodes)
     return nodes
+
+
+def device_identity(config: BridgeConfig, nodes: Sequence[ResolvedNode]) -> DeviceIdentity:
+    """The identity the outputs name: ``[identity]``, else the first node's profile's
+    ``[modbus.plc.identity]`` (deprecated; its defaults when it has none)."""
+    return config.identity or nodes[0].profile.modbus.plc.identity
 
 
 def check_sources(config: BridgeConfig, nodes: list[ResolvedNode]) -> None:

@@ -38,7 +38,7 @@ from ..frames import FrameFlag
 from ..outputs.base import Sink
 from ..ratelimit import Throttle
 from ..seam import OpenContext
-from .config import BridgeConfig, ResolvedNode, output_classes
+from .config import BridgeConfig, ResolvedNode, device_identity, output_classes
 from .logs import EventLog
 from .loop import NodeLoop
 from .notify import Notifier
@@ -84,7 +84,8 @@ def open_nodes(config: BridgeConfig, nodes: list[ResolvedNode], closers: list[Ca
     closed is appended to ``closers`` (also when a later one fails to open).  The one
     wiring path of every command.  With ``supervision``, each output is opened
     supervised (:mod:`.supervise`): the loops hold its supervised sinks."""
-    context = OpenContext(queue_frames=config.queue_frames, all_frames=all_frames, closers=closers)
+    context = OpenContext(queue_frames=config.queue_frames, all_frames=all_frames, closers=closers,
+                          identity=device_identity(config, nodes))
     per_node: list[list[Sink]] = [[] for _ in nodes]
     for cls, options in output_classes(config, default_output):
         try:

@@ -68,16 +68,16 @@ def run_rtu_node(prof: Profile, port: str, scene: str | None, recording: str | N
 @click.option("--baud", "baudrate", type=int, default=None,
               help="Node baud rate (default: the profile's): bridge --source rtu:PORT@BAUD.")
 @click.option("--plc-host", default=None, callback=host_value,
-              help="Client mode: the PLC's host (default: the profile's): bridge --plc tcp:HOST:PORT.")
+              help="Client mode: the PLC's host (default: 127.0.0.1): bridge --plc tcp:HOST:PORT.")
 @click.option("--plc-port", type=int, default=None,
-              help="Client mode: the PLC's port (default: the profile's): bridge --plc tcp:HOST:PORT.")
+              help="Client mode: the PLC's port (default: 502): bridge --plc tcp:HOST:PORT.")
 @click.option("--plc-rtu", default=None, metavar="PORT",
               help="Client mode over Modbus RTU, the PLC's serial port: bridge --plc rtu:PORT.")
 @click.option("--plc-baud", type=int, default=115200, show_default=True, help="Baud rate for --plc-rtu.")
 @click.option("--plc-timeout", type=click.FloatRange(0.01, 30.0), default=None,
-              help="Client mode: seconds the PLC has to answer (default: the profile's timeout_s).")
+              help="Client mode: seconds the PLC has to answer (default: 0.5).")
 @click.option("--serve", "serve", default=None, metavar="HOST:PORT",
-              help="Server mode over TCP (default host: the profile's [modbus.plc] bind): bridge --plc serve:HOST:PORT.")
+              help="Server mode over TCP (default host: 127.0.0.1): bridge --plc serve:HOST:PORT.")
 @click.option("--serve-rtu", default=None, metavar="PORT",
               help="Server mode over Modbus RTU on this serial port: bridge --plc serve-rtu:PORT.")
 @click.option("--serve-baud", type=int, default=115200, show_default=True, help="Baud rate for --serve-rtu.")
@@ -141,7 +141,7 @@ def bridge_args(profile_path: str, rtu_port: str | None, recording: str | None, 
     elif tcp_client or plc_timeout is not None:  # as before: any client option asks for client mode
         plc = f"tcp:{_endpoint(plc_host, plc_port)}"
     else:
-        plc = None  # the profile's [modbus.plc], as the bridge has it
+        plc = None  # the PLC output's defaults, as the bridge has them
     if plc is not None:
         args.append(("--plc", "plc", plc))
     if baud is not None and baud != 115200:  # the bridge's default too

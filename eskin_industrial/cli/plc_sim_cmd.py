@@ -12,7 +12,7 @@ from .common import host_value, open_profile, profile_option
 @click.command("plc-sim")
 @profile_option()
 @click.option("--host", default="127.0.0.1", show_default=True, callback=host_value, help="Address to listen on.")
-@click.option("--port", type=int, default=None, help="TCP port (default: the profile's [modbus.plc] port).")
+@click.option("--port", type=int, default=None, help="TCP port (default: 502, or a profile's deprecated [modbus.plc] port).")
 @click.option("--rtu", "rtu_port", default=None, metavar="PORT", help="Be an RTU slave on this serial port instead.")
 @click.option("--baud", "baudrate", type=int, default=115200, show_default=True, help="Baud rate for --rtu.")
 @click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), default=None,

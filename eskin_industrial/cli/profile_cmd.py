@@ -96,7 +96,15 @@ def show(file: str, fmt: str) -> None:
         given["derived"] = table["derived"]  # computed, not defaults
         click.echo(f"# {file}: {_brief(p)}")
         click.echo("# every key, as resolved: '# default' marks what the file leaves to the default")
+        click.echo(f"# the PLC's connection and the device identity are the bridge configuration's: {_moved_places()}")
         click.echo(dumps(table, given=given), nl=False)
+
+
+def _moved_places() -> str:
+    """Where the keys a profile no longer holds are set (``profile show``'s line)."""
+    from ..profile import IDENTITY_MOVED_OUT, PLC_MOVED_OUT
+
+    return f"[plc] {', '.join(dict.fromkeys(PLC_MOVED_OUT.values()))}; [{IDENTITY_MOVED_OUT}] (docs/plc.md)"
 
 
 @profile.command()

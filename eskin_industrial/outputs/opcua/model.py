@@ -90,9 +90,9 @@ FRAME = Var("Taxels", "Float", "measurement",
 FOLDERS: tuple[str, ...] = ("Health", "Indicators", "Scores", "Counters")
 #: Identification (OPC 40001-1's names) and MachineryItemState/CurrentState.
 IDENTIFICATION: tuple[tuple[str, str, str], ...] = (
-    ("Manufacturer", "LocalizedText", "the profile's [modbus.plc.identity] vendor_name"),
+    ("Manufacturer", "LocalizedText", "[identity] vendor_name of the bridge configuration"),
     ("Model", "LocalizedText", "the profile's [sensor] name (model_name when given)"),
-    ("ProductCode", "String", "the profile's [modbus.plc.identity] product_code"),
+    ("ProductCode", "String", "[identity] product_code of the bridge configuration"),
     ("SerialNumber", "String", "the node's name (its [[node]] name)"),
     ("ProductInstanceUri", "String", "urn:VENDOR:PRODUCT_CODE:SERIAL_NUMBER"),
     ("SoftwareRevision", "String", "the package's version"),

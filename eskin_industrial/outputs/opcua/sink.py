@@ -24,6 +24,7 @@ from .options import OpcuaOptions
 
 if TYPE_CHECKING:
     from ...frames import Frame
+    from ...identity import DeviceIdentity
     from ...node import Command, NodeSnapshot
     from ...seam import NodeLike, OpenContext
     from .build import NodeInfo
@@ -41,13 +42,12 @@ def need_asyncua(what: str = "the opcua output") -> None:
         raise MissingExtra.of(what, "asyncua", "opcua") from None
 
 
-def node_info(node: NodeLike[Any], frame_interval_s: float) -> NodeInfo:
-    """What the model says about a node, from its profile and the package."""
+def node_info(node: NodeLike[Any], frame_interval_s: float, ident: DeviceIdentity) -> NodeInfo:
+    """What the model says about a node, from its profile, ``[identity]`` and the package."""
     from ...methods import get_method
     from .build import NodeInfo
 
     p = node.profile
-    ident = p.modbus.plc.identity
     model = ident.model_name or p.sensor.name
     x, y = p.layout.coordinates_mm()
     full = p.calibration.full_scale_n
@@ -213,7 +213,8 @@ class OpcuaKind(OutputKind[OpcuaOptions]):
                 held.append((name, level, fields))
 
         held: list[tuple[str, str, dict[str, Any]]] = []
-        server = OpcuaServer(options, [node_info(n, options.frame_interval_s) for n in nodes], users, on_event,
+        infos = [node_info(n, options.frame_interval_s, context.identity) for n in nodes]
+        server = OpcuaServer(options, infos, users, on_event,
                              refresh_s=min(n.profile.output.refresh_s for n in nodes))
         server.start()
         context.closers.append(server.stop)

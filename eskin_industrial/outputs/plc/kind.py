@@ -4,8 +4,10 @@ command line): each node's register image, written into the PLC (client mode, on
 mode, one :class:`~eskin_industrial.outputs.plc.server.PlcServer` with one block per node).
 
 Where a setting can come from, the first that gives it wins: the command line
-(``--plc``), the bridge configuration's ``[plc]``, the node profile's ``[modbus.plc]``
-(the first node's, for the connection), the defaults.
+(``--plc``), the bridge configuration's ``[plc]``, the defaults (a node profile's
+``[modbus.plc]`` of earlier releases, deprecated, before them: :mod:`.legacy`).  The
+register image of a node's block is its profile's (``[modbus.plc] base_address``,
+``word_order``, ``r_scale``), the block's place ``[node.plc] base_address`` when given.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ from ...preflight import check_serial
 from ...profile import Profile
 from ..base import CliOption, OutputKind, Sink
 from .image import IMAGE_COUNT
-from .options import SERVER_KEYS, PlcNodeOptions, PlcOptions, parse_plc_spec, plc_mode, serve_address, server_settings
+from .legacy import block_settings, explain_keys, plc_mode, serve_address
+from .options import PlcNodeOptions, PlcOptions, parse_plc_spec
 
 if TYPE_CHECKING:
     from ...seam import NodeLike, OpenContext
@@ -38,16 +41,14 @@ class PlcKind(OutputKind[PlcOptions]):
     node_profile_keys = {"base_address": "modbus.plc.base_address"}
     node_cli_options = (CliOption("--base-address", "base_address", "One node: its register block (default: the "
                                   "profile's [modbus.plc] base_address).", type=int, metavar="N"),)
-    profile_keys = {"mode": "modbus.plc.mode", "host": "modbus.plc.host", "port": "modbus.plc.port",
-                    "timeout_s": "modbus.plc.timeout_s", "backoff_s": "modbus.plc.backoff_s",
-                    "backoff_max_s": "modbus.plc.backoff_max_s", **{k: f"modbus.plc.{k}" for k in SERVER_KEYS}}
+    profile_keys = explain_keys("client")
     cli_options = (
         CliOption("--plc", "plc", "tcp:HOST:PORT (write into the PLC), rtu:PORT (PLC as RTU slave), serve:HOST:PORT "
-                  "or serve:PORT (serve, the PLC reads; the host: the profile's bind), serve-rtu:PORT; IPv6 in "
-                  "brackets ([::1]:1502); default: the profile's [modbus.plc].", metavar="SPEC"),
+                  "or serve:PORT (serve, the PLC reads; the host: 127.0.0.1), serve-rtu:PORT; IPv6 in "
+                  "brackets ([::1]:1502); default: serve on 127.0.0.1:502.", metavar="SPEC"),
         CliOption("--plc-baud", "plc_baud", "Baud rate for rtu: and serve-rtu:.", type=int, default=115200),
         CliOption("--plc-timeout", "plc_timeout", "Client mode: seconds the PLC has to answer a write "
-                  "(0.01 to 30); default: the profile's [modbus.plc] timeout_s.", metavar="S", type=float),
+                  "(0.01 to 30); default: [plc] timeout_s, else 0.5.", metavar="S", type=float),
     )
 
     @classmethod
@@ -92,14 +93,13 @@ class PlcKind(OutputKind[PlcOptions]):
         if options.transport == "rtu" and plc_mode(options, nodes) == "client" and len(nodes) > 1:
             raise ValueError("transport: a PLC on a serial line takes one node in client mode "
                              "(use server mode, or TCP)")
+        mode = plc_mode(options, nodes)
         for n in nodes:
-            options.client_settings(n.profile.modbus.plc)  # the back-off bounds, with the profile's
+            block_settings(options, n.profile.modbus.plc, mode)  # the back-off bounds, with a profile's
 
     @classmethod
     def explain_keys(cls, options: PlcOptions, nodes: Sequence[NodeLike[Any]]) -> dict[str, str]:
-        if plc_mode(options, nodes) == "server":  # a server listens on the profile's bind, not its PLC host
-            return {**cls.profile_keys, "host": "modbus.plc.bind"}
-        return cls.profile_keys
+        return explain_keys(plc_mode(options, nodes))
 
     @classmethod
     def probe(cls, options: PlcOptions, nodes: Sequence[NodeLike[Any]]) -> None:
@@ -122,24 +122,24 @@ class PlcKind(OutputKind[PlcOptions]):
         from .client import PlcWriter
         from .server import PlcServer, identity_of, policy_of
 
-        first = nodes[0].profile.modbus.plc
+        mode = plc_mode(options, nodes)
+        blocks = [block_settings(options, n.profile.modbus.plc, mode) for n in nodes]
         serial = None
         if options.transport == "rtu":
             assert options.serial_port is not None  # PlcOptions requires it over RTU
             serial = SerialSettings(options.serial_port, options.baudrate)
-        if plc_mode(options, nodes) == "server":
+        if mode == "server":
             tcp = None if serial else serve_address(options, nodes)
-            blocks = [n.profile.modbus.plc for n in nodes]
-            merged = server_settings(options, nodes)
+            first = blocks[0]  # the connection's settings: the first node's, with [plc]'s
             server = PlcServer(first, tcp=tcp, serial=serial, blocks=blocks, linger_s=options.offline_linger_s,
-                               policy=policy_of(merged, blocks), identity=identity_of(first, nodes[0].profile.name)
-                               ).start()
+                               policy=policy_of(first, blocks),
+                               identity=identity_of(context.identity, nodes[0].profile.name)).start()
             context.closers.append(server.stop)
             return [server.block(i) for i in range(len(nodes))]
         sinks: list[Sink] = []
-        for n in nodes:
-            w = PlcWriter(options.client_settings(n.profile.modbus.plc), options.host, options.port,
-                          serial=serial, refresh_s=n.profile.output.refresh_s).start()
+        for n, settings in zip(nodes, blocks):
+            w = PlcWriter(settings, options.host, options.port, serial=serial,
+                          refresh_s=n.profile.output.refresh_s).start()
             context.closers.append(w.close)
             sinks.append(w)
         return sinks

@@ -1,28 +1,28 @@
-"""The PLC output's settings: ``[plc]`` of the bridge configuration (or ``--plc``),
-``[node.plc]`` of a node, and how they combine with a node profile's ``[modbus.plc]``.
+"""The PLC output's settings: ``[plc]`` of the bridge configuration (or ``--plc``)
+and ``[node.plc]`` of a node (how a node profile's deprecated ``[modbus.plc]`` keys
+still fill what ``[plc]`` leaves unset: :mod:`.legacy`).
 
 A module of its own so that the writer (:mod:`.client`), the server (:mod:`.server`)
-and the kind (:mod:`.sink`) all read them without importing one another.
+and the kind (:mod:`.kind`) all read them without importing one another.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any, Literal
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal
 
 from ...netaddr import check_host, parse_endpoint
-from ...profile import ModbusPlcSection
 from ...schema import in_range, ip_network, positive
 
 if TYPE_CHECKING:
-    from ...seam import NodeLike
+    pass
 
 
 @dataclass(frozen=True)
 class PlcOptions:
-    """``[plc]``: where the register blocks go; unset keys come from the first node's
-    profile ``[modbus.plc]``."""
+    """``[plc]``: where the register blocks go and how the PLC is served or written;
+    an unset key is its default (or, deprecated, the first node's profile's
+    ``[modbus.plc]`` key: :mod:`.legacy`)."""
 
     #: ``client``: write into the PLC; ``server``: serve the blocks, the PLC reads.
     mode: Literal["client", "server"] | None = None
@@ -36,16 +36,21 @@ class PlcOptions:
     #: Server mode, on shutdown: keep serving the "bridge offline" image this long,
     #: so that a polling PLC reads it before the connection goes.
     offline_linger_s: float = field(default=0.5, metadata=in_range(0, 60))
-    #: Server mode: access and connections, as ``[modbus.plc]`` says them (unset: the
-    #: first node's profile); see docs/operations.md, "Who may talk to the server".
+    #: Server mode: the unit id answered (and the server id of FC17); client mode:
+    #: the unit id written to (default 1).
+    unit_id: int | None = field(default=None, metadata=in_range(0, 255))
+    #: Server mode: access and connections (defaults: 8 connections, 60 s idle, any
+    #: client may read and write, unit ids ``unit_id``, 0 and 255); see
+    #: docs/operations.md, "Who may talk to the server".
     max_connections: int | None = field(default=None, metadata=in_range(1, 1024))
     idle_timeout_s: float | None = field(default=None, metadata=in_range(0.1, 86400))
     allow_read: tuple[str, ...] | None = field(default=None, metadata=ip_network())
     allow_write: tuple[str, ...] | None = field(default=None, metadata=ip_network())
     read_only: bool | None = None
     unit_ids: tuple[int, ...] | None = field(default=None, metadata=in_range(0, 255))
-    #: Client mode: how long the PLC has to answer, and the back-off after a failure
-    #: (doubling from ``backoff_s`` to ``backoff_max_s``); unset: the profile's.
+    #: Client mode: how long the PLC has to answer (default 0.5 s; an answer up to as
+    #: long again is still taken, and counted as late), and the back-off after a
+    #: failure (doubling from ``backoff_s`` to ``backoff_max_s``, defaults 0.1 and 2 s).
     timeout_s: float | None = field(default=None, metadata=in_range(0.01, 30))
     backoff_s: float | None = field(default=None, metadata=in_range(0.01, 60))
     backoff_max_s: float | None = field(default=None, metadata=in_range(0.01, 600))
@@ -58,13 +63,6 @@ class PlcOptions:
         if self.backoff_s is not None and self.backoff_max_s is not None and self.backoff_max_s < self.backoff_s:
             raise ValueError("backoff_max_s: expected at least backoff_s")
 
-    def client_settings(self, plc: ModbusPlcSection) -> ModbusPlcSection:
-        """A node's ``[modbus.plc]`` with this section's timeout and back-off laid over it;
-        ValueError when the two together leave ``backoff_max_s`` below ``backoff_s``."""
-        keys = ("timeout_s", "backoff_s", "backoff_max_s")
-        given = {k: getattr(self, k) for k in keys if getattr(self, k) is not None}
-        return replace(plc, **given) if given else plc
-
 
 @dataclass(frozen=True)
 class PlcNodeOptions:
@@ -72,28 +70,6 @@ class PlcNodeOptions:
 
     #: The node's register block in the PLC; default: the profile's ``[modbus.plc] base_address``.
     base_address: int | None = field(default=None, metadata=in_range(0, 65000))
-
-
-#: The ``[plc]`` keys that override the first node's ``[modbus.plc]`` for the server.
-SERVER_KEYS = ("max_connections", "idle_timeout_s", "allow_read", "allow_write", "read_only", "unit_ids")
-
-
-def server_settings(options: PlcOptions, nodes: Sequence[NodeLike[Any]]) -> ModbusPlcSection:
-    """The first node's ``[modbus.plc]`` with what ``[plc]`` sets of :data:`SERVER_KEYS`."""
-    given = {k: getattr(options, k) for k in SERVER_KEYS if getattr(options, k) is not None}
-    return replace(nodes[0].profile.modbus.plc, **given)
-
-
-def plc_mode(options: PlcOptions, nodes: Sequence[NodeLike[Any]]) -> Literal["client", "server"]:
-    mode = options.mode or nodes[0].profile.modbus.plc.mode
-    return "client" if mode == "client" else "server"
-
-
-def serve_address(options: PlcOptions, nodes: Sequence[NodeLike[Any]]) -> tuple[str, int]:
-    """Server mode over TCP: where to listen (``[plc]`` / ``--plc``, else the first
-    node's ``[modbus.plc] bind`` and ``port``)."""
-    first = nodes[0].profile.modbus.plc
-    return options.host or first.bind, options.port or first.port
 
 
 def parse_plc_spec(spec: str, baud: int) -> PlcOptions:

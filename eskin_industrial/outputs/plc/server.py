@@ -26,6 +26,7 @@ import time
 from collections.abc import Sequence
 
 from ...errors import Refused
+from ...identity import DeviceIdentity
 from ...modbus.exception_codes import DEVICE_FAILURE, ILLEGAL_ADDRESS
 from ...modbus.pdu import Identity, Table
 from ...modbus.rtu_server import RtuServer
@@ -182,11 +183,11 @@ class PlcServer:
         served = self.handler if len(self.handlers) == 1 else PlcBlocks(self.handlers)
         self.server: TcpServer | RtuServer
         if tcp is not None:
-            self.server = TcpServer(served, tcp[0], tcp[1], identity or identity_of(settings),
+            self.server = TcpServer(served, tcp[0], tcp[1], identity or identity_of(settings.identity),
                                     policy or policy_of(settings, blocks or [settings]), server_id=settings.unit_id)
         else:
             assert serial is not None
-            self.server = RtuServer(served, serial, settings.unit_id, identity or identity_of(settings),
+            self.server = RtuServer(served, serial, settings.unit_id, identity or identity_of(settings.identity),
                                     read_only=policy.read_only if policy is not None else settings.read_only)
         self.linger_s = linger_s
         self._lingered = False
@@ -254,10 +255,9 @@ def policy_of(settings: ModbusPlcSection, blocks: Sequence[ModbusPlcSection] = (
                   read_only=settings.read_only, unit_ids=frozenset(units))
 
 
-def identity_of(settings: ModbusPlcSection, model_name: str = "") -> Identity:
-    """The device identification of ``[modbus.plc.identity]``, its blanks filled:
-    the revision with the package's version, the model with ``model_name``."""
-    ident = settings.identity
+def identity_of(ident: DeviceIdentity, model_name: str = "") -> Identity:
+    """The device identification of ``[identity]`` (:mod:`eskin_industrial.identity`),
+    its blanks filled: the revision with the package's version, the model with ``model_name``."""
     try:
         version = importlib.metadata.version("eskin-industrial")
     except importlib.metadata.PackageNotFoundError:
