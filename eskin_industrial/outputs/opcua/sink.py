@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from ...node import Command, NodeSnapshot
     from ...seam import NodeLike, OpenContext
     from .build import NodeInfo
-    from .server import OpcuaServer
+    from .process import OpcuaProcess
 
 #: What a node's name must not hold: its object's string node ids join names with '.'.
 _NAME_FORBIDDEN = set("./")
@@ -68,7 +68,7 @@ def node_info(node: NodeLike[Any], frame_interval_s: float) -> NodeInfo:
 class OpcuaSink(Sink):
     """One node's object on the bridge's OPC UA server (opened by :class:`OpcuaKind`)."""
 
-    def __init__(self, server: OpcuaServer, index: int, name: str) -> None:
+    def __init__(self, server: OpcuaProcess, index: int, name: str) -> None:
         super().__init__()
         self.server = server
         self.index = index
@@ -193,7 +193,7 @@ class OpcuaKind(OutputKind[OpcuaOptions]):
     @classmethod
     def _open_nodes(cls, options: OpcuaOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink]:
         need_asyncua()
-        from .server import OpcuaServer
+        from .process import OpcuaProcess
         from .users import load_users
 
         try:
@@ -213,7 +213,7 @@ class OpcuaKind(OutputKind[OpcuaOptions]):
                 held.append((name, level, fields))
 
         held: list[tuple[str, str, dict[str, Any]]] = []
-        server = OpcuaServer(options, [node_info(n, options.frame_interval_s) for n in nodes], users, on_event,
+        server = OpcuaProcess(options, [node_info(n, options.frame_interval_s) for n in nodes], users, on_event,
                              refresh_s=min(n.profile.output.refresh_s for n in nodes))
         server.start()
         context.closers.append(server.stop)
