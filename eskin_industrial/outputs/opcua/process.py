@@ -45,6 +45,13 @@ START_TIMEOUT_S = 60.0
 REPORT_S = 0.02
 #: The sending thread looks at the handovers at least this often (a refresh wakes no one).
 SEND_S = 0.02
+#: A stop waits this long (after ``offline_linger_s``) for the server to close its
+#: sessions and its port, then kills its process (the port is free at once): a
+#: restart's close must end within the supervisor's limit on a loaded host too.
+STOP_S = 2.0
+#: The server's process runs this much nicer than the bridge's: on a busy host its
+#: work (a restart's address space built anew, a client's browse) waits for the PLC's.
+NICE = 5
 
 
 class _Node:
@@ -116,9 +123,10 @@ class OpcuaProcess:
             return
         self._stopping = True
         self.wake.set()
+        t0 = time.monotonic()
         if sender is not None:
-            sender.join(timeout=5.0)
-        self._stop_process(15.0 + self.options.offline_linger_s)
+            sender.join(timeout=STOP_S)
+        self._stop_process(max(0.0, STOP_S + self.options.offline_linger_s - (time.monotonic() - t0)))
 
     def _stop_process(self, timeout_s: float) -> None:
         self._stopping = True
@@ -240,8 +248,14 @@ class OpcuaProcess:
 def _serve(conn: multiprocessing.connection.Connection, options: OpcuaOptions, infos: list[NodeInfo],
            users: tuple[UserEntry, ...], refresh_s: float) -> None:
     """The server, fed from the pipe until the bridge says stop or its end closes."""
+    import os
+
     from .server import OpcuaServer
 
+    try:
+        os.nice(NICE)
+    except OSError:
+        pass  # (not on every system)
     lock = threading.Lock()
 
     def send(message: tuple[Any, ...]) -> None:
