@@ -26,14 +26,16 @@ import multiprocessing.connection
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ...errors import TransportError
 from ...node import Command, NodeSnapshot
-from .build import NodeInfo
 from .handover import Handover, Waker
 from .options import OpcuaOptions
 from .users import UserEntry
+
+if TYPE_CHECKING:
+    from .nodeinfo import NodeInfo
 
 __all__ = ["OpcuaProcess"]
 
@@ -250,12 +252,15 @@ def _serve(conn: multiprocessing.connection.Connection, options: OpcuaOptions, i
     """The server, fed from the pipe until the bridge says stop or its end closes."""
     import os
 
-    from .server import OpcuaServer
-
     try:
         os.nice(NICE)
     except OSError:
         pass  # (not on every system)
+    try:
+        from .server import OpcuaServer
+    except BaseException as exc:  # noqa: BLE001 - an install asyncua does not import in: the start's error
+        conn.send(("ready", _portable(exc), ""))
+        return
     lock = threading.Lock()
 
     def send(message: tuple[Any, ...]) -> None:

@@ -9,6 +9,7 @@ bridge configuration's ``[opcua]``, the defaults (:class:`.options.OpcuaOptions`
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import time
 from collections.abc import Sequence
@@ -26,7 +27,7 @@ if TYPE_CHECKING:
     from ...frames import Frame
     from ...node import Command, NodeSnapshot
     from ...seam import NodeLike, OpenContext
-    from .build import NodeInfo
+    from .nodeinfo import NodeInfo
     from .process import OpcuaProcess
 
 #: What a node's name must not hold: its object's string node ids join names with '.'.
@@ -35,16 +36,15 @@ _NAME_FORBIDDEN = set("./")
 
 def need_asyncua(what: str = "the opcua output") -> None:
     """The one missing-extra error of this output (exit 4)."""
-    try:
-        import asyncua  # noqa: F401
-    except ImportError:
-        raise MissingExtra.of(what, "asyncua", "opcua") from None
+    # found, not imported: the bridge's process leaves asyncua to the server's (.process)
+    if importlib.util.find_spec("asyncua") is None:
+        raise MissingExtra.of(what, "asyncua", "opcua")
 
 
 def node_info(node: NodeLike[Any], frame_interval_s: float) -> NodeInfo:
     """What the model says about a node, from its profile and the package."""
     from ...methods import get_method
-    from .build import NodeInfo
+    from .nodeinfo import NodeInfo
 
     p = node.profile
     ident = p.modbus.plc.identity
