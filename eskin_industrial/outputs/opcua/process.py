@@ -42,9 +42,12 @@ __all__ = ["OpcuaProcess"]
 #: The longest a start may take: the process's imports, a new certificate, the
 #: standard address space (the server's own START_TIMEOUT_S).
 START_TIMEOUT_S = 60.0
-#: The server's process sends its counters at most this often (when they changed),
-#: its queued commands and the offline snapshots applied at once when it looks.
+#: The server's process looks at its queued commands and the offline snapshots
+#: applied this often (and sends them at once).
 REPORT_S = 0.02
+#: The counters are asked of the server's process (what a client did is counted once
+#: its answer is out); past this the last ones it sent answer.
+COUNTERS_WAIT_S = 1.0
 #: The sending thread looks at the handovers at least this often (a refresh wakes no one).
 SEND_S = 0.02
 #: A stop waits this long (after ``offline_linger_s``) for the server to close its
@@ -85,7 +88,10 @@ class OpcuaProcess:
         self._commands: list[list[Command]] = [[] for _ in infos]
         self._ended: list[tuple[int, str]] = []
         self._counters: list[dict[str, int]] = [{} for _ in infos]
+        self._asked = self._answered = 0  #: the counters asked for, the newest answer's
+        self._answer = threading.Condition()
         self._lock = threading.Lock()
+        self._send_lock = threading.Lock()
         self._stopping = False
         self._ready = threading.Event()
         self._start_error: BaseException | None = None
@@ -166,6 +172,20 @@ class OpcuaProcess:
         self.wake.set()
 
     def counters(self, index: int) -> dict[str, int]:
+        """The server's counters now (asked of its process, at most COUNTERS_WAIT_S)."""
+        conn = self._conn
+        if conn is not None and self._ready.is_set() and not self._stopping:
+            with self._answer:
+                self._asked += 1
+                asked = self._asked
+            try:
+                with self._send_lock:
+                    conn.send([("counters", asked)])
+            except (OSError, ValueError):
+                pass  # the process is gone: its last counters
+            else:
+                with self._answer:
+                    self._answer.wait_for(lambda: self._answered >= asked or self._stopping, COUNTERS_WAIT_S)
         out = dict(self._counters[index])
         h = self.handovers[index]
         out["opcua_handover_dropped"] = out.get("opcua_handover_dropped", 0) + h.dropped
@@ -197,7 +217,8 @@ class OpcuaProcess:
                 batch.append(("stop",))
             if batch:
                 try:
-                    conn.send(batch)
+                    with self._send_lock:
+                        conn.send(batch)
                 except OSError:
                     if self._stopping:
                         return
@@ -209,6 +230,7 @@ class OpcuaProcess:
     def _receive(self) -> None:
         conn = self._conn
         assert conn is not None
+        what = ""
         while True:
             try:
                 message = conn.recv()
@@ -222,14 +244,22 @@ class OpcuaProcess:
                 with self._lock:
                     self._commands[message[1]].extend(message[2])
             elif what == "counters":
-                self._counters = message[1]
+                with self._answer:
+                    self._counters = message[1]
+                    self._answered = max(self._answered, message[2])
+                    self._answer.notify_all()
             elif what == "applied":
                 self.nodes[message[1]].offline_applied.set()
             elif what == "ready":
                 self._start_error, self.certificate_made = message[1], message[2]
                 self._ready.set()
             elif what == "stopped":
-                return
+                break
+        with self._answer:
+            self._answered = self._asked  # (no answer is to come)
+            self._answer.notify_all()
+        if what == "stopped":
+            return
         if not self._ready.is_set():
             self._start_error = TransportError(f"[opcua] the server's process ended while starting "
                                                f"(exit code {self._exit_code()})")
@@ -280,10 +310,8 @@ def _serve(conn: multiprocessing.connection.Connection, options: OpcuaOptions, i
         send(("ready", _portable(exc), ""))
         return
     applied = [False] * len(infos)
-    sent: list[dict[str, int]] = []
-    _report(server, send, applied, sent, force=True)  # (the sinks' counters there from the start)
+    send(("counters", [server.counters(i) for i in range(len(infos))], 0))  # (there from the start)
     send(("ready", None, server.certificate_made))
-    next_counters = 0.0
     try:
         while True:
             if conn.poll(REPORT_S):
@@ -294,14 +322,15 @@ def _serve(conn: multiprocessing.connection.Connection, options: OpcuaOptions, i
                 if any(m[0] == "stop" for m in batch):
                     _apply(server, batch)
                     server.stop()
-                    _report(server, send, applied, sent, force=True)
+                    _report(server, send, applied)
+                    send(("counters", [server.counters(i) for i in range(len(infos))], 0))
                     send(("stopped",))
                     return
                 _apply(server, batch)
-            now = time.monotonic()
-            _report(server, send, applied, sent, force=now >= next_counters)
-            if now >= next_counters:
-                next_counters = now + REPORT_S
+                asked = max((m[1] for m in batch if m[0] == "counters"), default=0)
+                if asked:
+                    send(("counters", [server.counters(i) for i in range(len(infos))], asked))
+            _report(server, send, applied)
     finally:
         server.stop()
 
@@ -319,9 +348,8 @@ def _apply(server: Any, batch: list[tuple[Any, ...]]) -> None:
             server.source_ended(i, message[2])
 
 
-def _report(server: Any, send: Callable[[tuple[Any, ...]], None], applied: list[bool], sent: list[dict[str, int]],
-            force: bool) -> None:
-    """The commands queued, the offline snapshots applied, the counters (when changed)."""
+def _report(server: Any, send: Callable[[tuple[Any, ...]], None], applied: list[bool]) -> None:
+    """The commands queued, the offline snapshots applied."""
     for i in range(len(applied)):
         commands = server.take_commands(i)
         if commands:
@@ -329,11 +357,6 @@ def _report(server: Any, send: Callable[[tuple[Any, ...]], None], applied: list[
         if not applied[i] and server.nodes[i].offline_applied.is_set():
             applied[i] = True
             send(("applied", i))
-    if force:
-        counters = [server.counters(i) for i in range(len(applied))]
-        if counters != sent:
-            sent[:] = counters
-            send(("counters", counters))
 
 
 def _portable(exc: BaseException) -> BaseException:
