@@ -178,12 +178,17 @@ class OpcuaProcess:
             with self._answer:
                 self._asked += 1
                 asked = self._asked
-            try:
-                with self._send_lock:
+            sent = False
+            # (a sender held up by a process that reads nothing: the last counters)
+            if self._send_lock.acquire(timeout=COUNTERS_WAIT_S):
+                try:
                     conn.send([("counters", asked)])
-            except (OSError, ValueError):
-                pass  # the process is gone: its last counters
-            else:
+                    sent = True
+                except (OSError, ValueError):
+                    pass  # the process is gone: its last counters
+                finally:
+                    self._send_lock.release()
+            if sent:
                 with self._answer:
                     self._answer.wait_for(lambda: self._answered >= asked or self._stopping, COUNTERS_WAIT_S)
         out = dict(self._counters[index])
