@@ -13,10 +13,12 @@ served block is answered within 20 ms, DATA_VALID stays set and the slip is serv
 Within 20 ms on a quiet host.  The suite shares two cores with other work, and a
 process the scheduler holds back answers late whatever it runs: a control bridge
 serving the PLC block alone (no output attached, a process of its own) is polled the
-same way at the same time, and no read of the faulted bridge may take longer than
+same way at the same time.  No read of the faulted bridge may take longer than
 :data:`HOST_FACTOR` times the control's slowest plus :data:`MARGIN_S` (nor than 20 ms
-when that comes to less).  (Two processes the host holds back at random see slowest
-reads of their own: 93 ms was seen beside the control's 79 ms.)  Before the OPC UA server had a process of its own,
+when that comes to less), and no more of its reads may take over 20 ms than
+HOST_FACTOR times the control's share of them, and :data:`LATE_MORE` reads.  (Two
+processes the host holds back at random see slowest reads of their own: 93 ms was
+seen beside the control's 79 ms, at a load average of 13 on the two cores.)  Before the OPC UA server had a process of its own,
 its restarts stalled reads for 0.3 to 2.4 s (the garbage collector's full passes over
 its address space, in the bridge's process).
 The PLC itself in client mode is faulted the same way, writing into a Modbus server
@@ -75,8 +77,9 @@ def _scene(tmp_path: Path) -> str:
 READ_WITHIN_S = 0.020
 #: How much slower than the control bridge's slowest read (the host's own delay, see
 #: the module's docstring) a read of the faulted bridge may be.
-HOST_FACTOR = 1.5
+HOST_FACTOR = 2.0
 MARGIN_S = 0.010
+LATE_MORE = 5
 
 
 class Died(BaseException):
@@ -279,10 +282,15 @@ def _served_block_held(poller: Poller, control: Poller, since: float) -> None:
     late = sorted((took for _, took, _ in reads if took > within), reverse=True)
     assert not late, (f"{len(late)} of {len(reads)} reads took over {within * 1000:.1f} ms (the control's slowest: "
                       f"{max(control_took) * 1000:.1f} ms): {[round(x * 1000, 1) for x in late[:10]]}")
+    over = sum(1 for _, took, _ in reads if took > READ_WITHIN_S)
+    control_over = sum(1 for took in control_took if took > READ_WITHIN_S)
+    allowed = HOST_FACTOR * control_over * len(reads) / len(control_took) + LATE_MORE
+    assert over <= allowed, f"{over} of {len(reads)} reads over 20 ms, the control's {control_over} of {len(control_took)}"
     invalid = [(round(t - since, 3), img["STATUS"]) for t, _, img in reads if not img["STATUS"] & Status.DATA_VALID]
     assert not invalid, f"{len(invalid)} reads without DATA_VALID (s after the grasp held, STATUS): {invalid[:3]}..{invalid[-3:]}"
     assert any(img["STATUS"] & Status.SLIP and img["STATE"] == 3 for _, _, img in poller.reads), "the slip was not served"
-    print(f"slowest read {slowest * 1000:.1f} ms, the control's {max(control_took) * 1000:.1f} ms")
+    print(f"slowest read {slowest * 1000:.1f} ms, the control's {max(control_took) * 1000:.1f} ms; over 20 ms: "
+          f"{over} of {len(reads)}, the control's {control_over} of {len(control_took)}")
 
 
 #: The control bridge: the PLC block alone served on the port given, the scene given,
