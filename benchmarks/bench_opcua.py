@@ -48,7 +48,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_bridge import PROFILE, slip_train_toml, thread_cpu_s  # noqa: E402
+from bench_bridge import PROFILE, slip_train_toml  # noqa: E402
+from bench_bridge import thread_cpu_s as bridge_thread_cpu_s  # noqa: E402
 from bench_fleet import make_nodes, raw_scans, start  # noqa: E402
 from machine import describe  # noqa: E402
 
@@ -285,6 +286,24 @@ def match(decisions: list[tuple[float, int]], seen: list[tuple[float, int]]) -> 
         if j < len(seen) and seen[j][1] == state and seen[j][0] >= t - 0.001:
             out.append(seen[j][0] - t)
             j += 1
+    return out
+
+
+def thread_cpu_s() -> dict[str, float]:
+    """CPU seconds of each thread of this process, by name, the OPC UA server's process
+    (``opcua-server``, a process of its own) counted with the thread of that name."""
+    import multiprocessing
+
+    out = bridge_thread_cpu_s()
+    tick = os.sysconf("SC_CLK_TCK")
+    for child in multiprocessing.active_children():
+        if child.name != "opcua-server":
+            continue
+        try:
+            fields = Path(f"/proc/{child.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        out["opcua-server"] = out.get("opcua-server", 0.0) + (int(fields[11]) + int(fields[12])) / tick
     return out
 
 

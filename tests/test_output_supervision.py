@@ -4,23 +4,37 @@ client polls it every 10 ms on loopback.
 
 The faults, one after the other on one bridge (the case-2 scene, its slide brought
 forward from 9.4 s to 5 s to keep the run short: pressed at 1 s, a slip at 5 s): (a) an exception from the output's ``publish``, (b) the death of a
-thread of its own (paho's network thread, the OPC UA server's, the PLC writer's, the
-recorder's handover: made to die by a callback that raises), (c) a call that hangs.
-Each is one ``output_failed`` line naming the output; the output is back
-(``output_restarted``, a fresh instance) within its back-off; every read of the
+thread of its own (paho's network thread, the PLC writer's, the recorder's handover:
+made to die by a callback that raises; the OPC UA server's process, killed), (c) a
+call that hangs.  Each is one ``output_failed`` line naming the output; the output is
+back (``output_restarted``, a fresh instance) within its back-off; every read of the
 served block is answered within 20 ms, DATA_VALID stays set and the slip is served.
+
+Within 20 ms on a quiet host.  The suite shares two cores with other work, and a
+process the scheduler holds back answers late whatever it runs: a control bridge
+serving the PLC block alone (no output attached, a process of its own) is polled the
+same way at the same time.  No read of the faulted bridge may take longer than
+:data:`HOST_FACTOR` times the control's slowest plus :data:`MARGIN_S` (nor than 20 ms
+when that comes to less), and no more of its reads may take over 20 ms than
+HOST_FACTOR times the control's share of them, and :data:`LATE_MORE` reads.  (Two
+processes the host holds back at random see slowest reads of their own: 93 ms was
+seen beside the control's 79 ms, at a load average of 13 on the two cores.)  Before the OPC UA server had a process of its own,
+its restarts stalled reads for 0.3 to 2.4 s (the garbage collector's full passes over
+its address space, in the bridge's process).
 The PLC itself in client mode is faulted the same way, writing into a Modbus server
 the test starts: once as an essential output (on the loop's thread: (a) and (b)),
 once handed over (the three)."""
 
 from __future__ import annotations
 
+import os
+import signal
 import socket
 import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -42,27 +56,30 @@ BACKOFF_S = 0.2
 BACKOFF_MAX_S = 0.4
 HANG_S = 0.5
 #: A restart takes its back-off, the old instance's close and the new one's open (an
-#: OPC UA server's takes seconds on a loaded machine).
-BACK_WITHIN_S = 20.0
+#: OPC UA server's process takes seconds to start, up to 26 s seen on two cores
+#: shared with a dozen others): a bound on the wait, not the check (``down_s`` is).
+BACK_WITHIN_S = 60.0
 SLIP_AT_S = 5.0  #: the scene's slide (case 2's at 9.4 s)
+SCENE_S = 300.0
 CASE2 = Path(__file__).resolve().parents[1] / "eskin_industrial" / "scenes" / "builtin" / "case2.toml"
 
 
 def _scene(tmp_path: Path) -> str:
-    """Case 2 with its slide at :data:`SLIP_AT_S`, looped every 8 s."""
-    text = CASE2.read_text().replace("t_s = 9.4", f"t_s = {SLIP_AT_S}").replace("duration_s = 14.0", "duration_s = 8.0")
-    assert f"t_s = {SLIP_AT_S}" in text and "duration_s = 8.0" in text
+    """Case 2 with its slide at :data:`SLIP_AT_S`, lasting :data:`SCENE_S` (a scene
+    starts again at its end, and the detector's warm-up after its press again is no
+    valid data: no fault's run, however slow its restarts on a loaded host, reaches it)."""
+    text = CASE2.read_text().replace("t_s = 9.4", f"t_s = {SLIP_AT_S}").replace("duration_s = 14.0",
+                                                                                   f"duration_s = {SCENE_S}")
+    assert f"t_s = {SLIP_AT_S}" in text and f"duration_s = {SCENE_S}" in text
     path = tmp_path / "case2-early.toml"
     path.write_text(text)
     return str(path)
 READ_WITHIN_S = 0.020
-#: The suite shares two cores with the other worker's tests: a read the host's
-#: scheduler held up (one of about a thousand seen at 23.7 ms) is no output's doing.
-#: At most this share of the reads may take longer than READ_WITHIN_S, and none
-#: longer than LOADED_WITHIN_S; benchmarks/bench_fairness.py measures the worst read
-#: on a quiet machine.
-LATE_SHARE = 0.005
-LOADED_WITHIN_S = 0.100
+#: How much slower than the control bridge's slowest read (the host's own delay, see
+#: the module's docstring) a read of the faulted bridge may be.
+HOST_FACTOR = 2.0
+MARGIN_S = 0.010
+LATE_MORE = 5
 
 
 class Died(BaseException):
@@ -149,10 +166,6 @@ def _die(*_: Any) -> None:
     raise Died("a thread of its own dies")
 
 
-async def _die_async(*_: Any) -> None:
-    raise RuntimeError("the server's thread dies")
-
-
 def _kill_paho(port: int) -> Callable[[SupervisedSink], None]:
     """paho's thread killed by its message callback raising, at an NCMD sent by a
     ``mosquitto_pub -l`` started now (no process is started while the block is timed)."""
@@ -190,8 +203,8 @@ def _faults(kind: str, release: threading.Event, broker: int | None) -> dict[str
         assert broker is not None
         thread_dies = _kill_paho(broker)
     elif kind == "opcua":
-        def thread_dies(sink: SupervisedSink) -> None:
-            sink.inner.server._turn = _die_async  # type: ignore[attr-defined]
+        def thread_dies(sink: SupervisedSink) -> None:  # the server's process
+            os.kill(sink.inner.server.pid, signal.SIGKILL)  # type: ignore[attr-defined]
     elif kind == "recorder":
         def thread_dies(sink: SupervisedSink) -> None:  # its handover's thread: it has none other
             sink.inner.on_update = _die  # type: ignore[method-assign]
@@ -227,7 +240,7 @@ def _fault_in_turn(r: Running, kind: str, faults: dict[str, Callable[[Supervised
         (back,) = _lines(r, "output_restarted", kind)[i:]
         restarting.append((injected, seen))
         # back after its back-off (jittered, doubling from backoff_s), the close and the open: no other wait
-        assert BACKOFF_S * 0.75 <= back["backoff_s"] <= BACKOFF_MAX_S, back
+        assert BACKOFF_S * 0.75 - 0.0005 <= back["backoff_s"] <= BACKOFF_MAX_S, back  # (logged to the ms)
         assert back["down_s"] <= max(back["backoff_s"], back["close_s"]) + back["open_s"] + 0.3, back
         failed = _lines(r, "output_failed", kind)
         assert len(failed) == i + 1, f"{name}: {failed}"
@@ -253,24 +266,66 @@ def _no_other_failure(r: Running) -> None:
     assert not r.bridge.failure
 
 
-def _served_block_held(poller: Poller, since: float, excused: Sequence[tuple[float, float]] = ()) -> None:
-    """Every read answered; from ``since`` (the grasp held, the faults to come) on,
-    outside the ``excused`` windows, each within 20 ms (but for a loaded host's few:
-    :data:`LATE_SHARE`) and with DATA_VALID set; the slip served."""
+def _served_block_held(poller: Poller, control: Poller, since: float) -> None:
+    """Every read answered; from ``since`` (the grasp held, the faults to come) on, each
+    within 20 ms (or what the host did to the control at the same time: see the
+    module's docstring) and with DATA_VALID set; the slip served."""
     assert not poller.errors, poller.errors
-    reads = poller.reads
-    assert len(reads) > 500, len(reads)
+    assert not control.errors, control.errors
+    assert len(poller.reads) > 500, len(poller.reads)
+    reads = [(t, took, img) for t, took, img in poller.reads if t >= since]
+    until = reads[-1][0]
+    control_took = [took for t, took, _ in control.reads if since <= t <= until]
+    assert len(control_took) > 0.8 * len(reads), (len(control_took), len(reads))
+    within = max(READ_WITHIN_S, HOST_FACTOR * max(control_took) + MARGIN_S)
+    slowest = max(took for _, took, _ in reads)
+    late = sorted((took for _, took, _ in reads if took > within), reverse=True)
+    assert not late, (f"{len(late)} of {len(reads)} reads took over {within * 1000:.1f} ms (the control's slowest: "
+                      f"{max(control_took) * 1000:.1f} ms): {[round(x * 1000, 1) for x in late[:10]]}")
+    over = sum(1 for _, took, _ in reads if took > READ_WITHIN_S)
+    control_over = sum(1 for took in control_took if took > READ_WITHIN_S)
+    allowed = HOST_FACTOR * control_over * len(reads) / len(control_took) + LATE_MORE
+    assert over <= allowed, f"{over} of {len(reads)} reads over 20 ms, the control's {control_over} of {len(control_took)}"
+    invalid = [(round(t - since, 3), img["STATUS"]) for t, _, img in reads if not img["STATUS"] & Status.DATA_VALID]
+    assert not invalid, f"{len(invalid)} reads without DATA_VALID (s after the grasp held, STATUS): {invalid[:3]}..{invalid[-3:]}"
+    assert any(img["STATUS"] & Status.SLIP and img["STATE"] == 3 for _, _, img in poller.reads), "the slip was not served"
+    print(f"slowest read {slowest * 1000:.1f} ms, the control's {max(control_took) * 1000:.1f} ms; over 20 ms: "
+          f"{over} of {len(reads)}, the control's {control_over} of {len(control_took)}")
 
-    def timed(t: float, took: float) -> bool:
-        return t >= since and not any(a <= t + took and t <= b for a, b in excused)
 
-    took_all = [took for t, took, _ in reads if timed(t, took)]
-    late = [took for took in took_all if took > READ_WITHIN_S]
-    assert len(late) <= LATE_SHARE * len(took_all), f"{len(late)} of {len(took_all)} reads took over 20 ms"
-    assert max(took_all) <= LOADED_WITHIN_S, f"a read took {max(took_all) * 1000:.1f} ms"
-    invalid = [img for t, took, img in reads if timed(t, took) and not img["STATUS"] & Status.DATA_VALID]
-    assert not invalid, f"{len(invalid)} reads without DATA_VALID"
-    assert any(img["STATUS"] & Status.SLIP and img["STATE"] == 3 for _, _, img in reads), "the slip was not served"
+#: The control bridge: the PLC block alone served on the port given, the scene given,
+#: until its stdin closes (it says "up" once serving).
+_CONTROL = r"""
+import sys
+from eskin_industrial.outputs.plc.options import PlcOptions
+from tests.helpers.bridge import running_bridge
+from tests.test_output_supervision import _config
+port, scene = int(sys.argv[1]), sys.argv[2]
+outputs = {"plc": PlcOptions(mode="server", host="127.0.0.1", port=port, offline_linger_s=0.0)}
+with running_bridge(_config(scene, outputs)):
+    print("up", flush=True)
+    sys.stdin.read()
+"""
+
+
+class Control:
+    """The control bridge's process and its poller."""
+
+    def __init__(self, scene: str) -> None:
+        port = free_port()
+        root = str(Path(__file__).resolve().parents[1])
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([root, os.environ.get("PYTHONPATH", "")])}
+        self._proc = subprocess.Popen([sys.executable, "-c", _CONTROL, str(port), scene], stdin=subprocess.PIPE,
+                                      stdout=subprocess.PIPE, text=True, cwd=root, env=env)
+        assert self._proc.stdout is not None and self._proc.stdout.readline().strip() == "up"
+        self.poller = Poller(port)
+
+    def stop(self) -> Poller:
+        try:
+            self.poller.stop()
+        finally:
+            self._proc.communicate("", timeout=20)
+        return self.poller
 
 
 @pytest.mark.parametrize("kind", ["recorder", "sparkplug", "opcua"])
@@ -300,26 +355,25 @@ def test_a_failing_output_restarts_while_the_plc_block_is_served(tmp_path: Path,
                 return sink.output.up and _listens(opcua_port)
         faults = _faults(kind, release, broker)  # (any process it needs started before the block is timed)
         try:
-            with running_bridge(_config(_scene(tmp_path), outputs)) as r:
-                started = time.monotonic()
-                assert isinstance(r.bridge.runs[0].sinks[0], GuardedSink)  # the PLC: on the loop's thread
-                poller = Poller(plc_port)
-                try:
-                    wait_for(lambda: _held(r), timeout_s=10, what="the grasp served as stable and valid")
-                    since = time.perf_counter()
-                    restarting = _fault_in_turn(r, kind, faults, healthy)
-                    # the slide, served through it all
-                    time.sleep(max(0.0, SLIP_AT_S + 1.5 - (time.monotonic() - started)))
-                finally:
-                    poller.stop()
-                _no_other_failure(r)
-                # An OPC UA server's restart is seconds of CPU in the bridge's process
-                # (asyncua closes, then builds its address space anew): on a loaded machine
-                # the GIL's holder is descheduled while the PLC's threads wait, for up to
-                # seconds (measured 2.4 s on 2 shared cores, the image stale meanwhile).
-                # While it restarts, the block is only required to answer; a process of
-                # its own for that server is what would lift this.
-                _served_block_held(poller, since, restarting if kind == "opcua" else [])
+            control = Control(_scene(tmp_path))
+            try:
+                with running_bridge(_config(_scene(tmp_path), outputs)) as r:
+                    started = time.monotonic()
+                    assert isinstance(r.bridge.runs[0].sinks[0], GuardedSink)  # the PLC: on the loop's thread
+                    poller = Poller(plc_port)
+                    try:
+                        wait_for(lambda: _held(r), timeout_s=10, what="the grasp served as stable and valid")
+                        since = time.perf_counter()
+                        restarting = _fault_in_turn(r, kind, faults, healthy)
+                        print("faults (from, back):", [(round(a - since, 3), round(b - since, 3)) for a, b in restarting])
+                        # the slide, served through it all
+                        time.sleep(max(0.0, SLIP_AT_S + 1.5 - (time.monotonic() - started)))
+                    finally:
+                        poller.stop()
+                    _no_other_failure(r)
+            finally:
+                control.stop()
+            _served_block_held(poller, control.poller, since)
         finally:
             release.set()
             for pub in _PUBLISHERS:

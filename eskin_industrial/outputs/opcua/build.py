@@ -23,6 +23,7 @@ from asyncua.common.structures104 import new_enum
 
 from . import model
 from .model import FOLDERS, FRAME, IDENTIFICATION, METHODS, VARIABLES, Var
+from .nodeinfo import NodeInfo
 from .uaconv import node_id
 
 _BUILTIN: dict[str, tuple[int, ua.VariantType]] = {
@@ -43,22 +44,6 @@ _FIELD_DEFAULTS: dict[str, Any] = {"Double": 0.0, "String": "", "UInt32": 0}
 def variant_type(datatype: str) -> ua.VariantType:
     """The variant a variable's values travel in (the enumeration: Int32)."""
     return ua.VariantType.Int32 if datatype == "GraspStateEnumeration" else _BUILTIN[datatype][1]
-
-
-@dataclass(frozen=True)
-class NodeInfo:
-    """What the model says about one node, from its configuration and profile."""
-
-    name: str
-    score_names: tuple[str, str]
-    score_docs: tuple[str, str]
-    identification: dict[str, str]
-    force_range: tuple[float, float]
-    x_range: tuple[float, float]
-    y_range: tuple[float, float]
-    #: rows x cols of the taxel frame, when it is published
-    frame_shape: tuple[int, int] | None = None
-    frame_range: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass

@@ -1,5 +1,6 @@
 """The OPC UA server: one per bridge, on a thread and an asyncio event loop of its
-own, so that the node loops never wait for it.  This module is its life: start,
+own, so that the node loops never wait for it, in the process :mod:`.process` starts
+for it (so that its heap is not the bridge's).  This module is its life: start,
 the turns of its loop, stop, and its counters.
 
 The loops' side is :class:`.handover.Handover` (a snapshot or a frame put, a command

@@ -9,6 +9,7 @@ bridge configuration's ``[opcua]``, the defaults (:class:`.options.OpcuaOptions`
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import time
 from collections.abc import Sequence
@@ -27,8 +28,8 @@ if TYPE_CHECKING:
     from ...identity import DeviceIdentity
     from ...node import Command, NodeSnapshot
     from ...seam import NodeLike, OpenContext
-    from .build import NodeInfo
-    from .server import OpcuaServer
+    from .nodeinfo import NodeInfo
+    from .process import OpcuaProcess
 
 #: What a node's name must not hold: its object's string node ids join names with '.'.
 _NAME_FORBIDDEN = set("./")
@@ -36,16 +37,15 @@ _NAME_FORBIDDEN = set("./")
 
 def need_asyncua(what: str = "the opcua output") -> None:
     """The one missing-extra error of this output (exit 4)."""
-    try:
-        import asyncua  # noqa: F401
-    except ImportError:
-        raise MissingExtra.of(what, "asyncua", "opcua") from None
+    # found, not imported: the bridge's process leaves asyncua to the server's (.process)
+    if importlib.util.find_spec("asyncua") is None:
+        raise MissingExtra.of(what, "asyncua", "opcua")
 
 
 def node_info(node: NodeLike[Any], frame_interval_s: float, ident: DeviceIdentity) -> NodeInfo:
     """What the model says about a node, from its profile, ``[identity]`` and the package."""
     from ...methods import get_method
-    from .build import NodeInfo
+    from .nodeinfo import NodeInfo
 
     p = node.profile
     model = ident.model_name or p.sensor.name
@@ -68,7 +68,7 @@ def node_info(node: NodeLike[Any], frame_interval_s: float, ident: DeviceIdentit
 class OpcuaSink(Sink):
     """One node's object on the bridge's OPC UA server (opened by :class:`OpcuaKind`)."""
 
-    def __init__(self, server: OpcuaServer, index: int, name: str) -> None:
+    def __init__(self, server: OpcuaProcess, index: int, name: str) -> None:
         super().__init__()
         self.server = server
         self.index = index
@@ -193,7 +193,7 @@ class OpcuaKind(OutputKind[OpcuaOptions]):
     @classmethod
     def _open_nodes(cls, options: OpcuaOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink]:
         need_asyncua()
-        from .server import OpcuaServer
+        from .process import OpcuaProcess
         from .users import load_users
 
         try:
@@ -214,7 +214,7 @@ class OpcuaKind(OutputKind[OpcuaOptions]):
 
         held: list[tuple[str, str, dict[str, Any]]] = []
         infos = [node_info(n, options.frame_interval_s, context.identity) for n in nodes]
-        server = OpcuaServer(options, infos, users, on_event,
+        server = OpcuaProcess(options, infos, users, on_event,
                              refresh_s=min(n.profile.output.refresh_s for n in nodes))
         server.start()
         context.closers.append(server.stop)
