@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 if TYPE_CHECKING:
     from .profile import Profile
@@ -54,3 +54,6 @@ class OpenContext:
     #: An output opened again after a failure (its supervisor's restart): a file is
     #: appended to, not started anew.
     reopen: bool = False
+    #: What an output keeps across its restarts, under its kind's name: the same dict at
+    #: every open of one output (what it was handed after the first, its sessions).
+    kept: dict[str, Any] = field(default_factory=dict)
