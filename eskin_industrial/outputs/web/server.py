@@ -29,6 +29,7 @@ Nothing is queued per browser.
 from __future__ import annotations
 
 import asyncio
+import collections
 import concurrent.futures
 import hmac
 import io
@@ -40,7 +41,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from aiohttp import WSMsgType, web
 
@@ -55,6 +56,7 @@ from .wire import encode
 if TYPE_CHECKING:
     from .options import WebOptions
 
+_T = TypeVar("_T")
 STATIC = Path(__file__).parent / "static"
 #: A browser that has not taken (acknowledged) a message within this time is dropped.
 SEND_TIMEOUT_S = 5.0
@@ -528,7 +530,7 @@ class WebServer:
         nodes, lane, episodes = [], [], []
         for i, feed in enumerate(self.feeds):
             with feed.lock:
-                new_lane = [e for e in feed.lane if e[0] > client.lane_seq.get(i, 0)]
+                new_lane = newest(feed.lane, feed.lane_seq - client.lane_seq.get(i, 0))
                 eps = [e for e in feed.episodes
                        if client.episodes.get((i, e.id)) != (e.rows is not None)]
                 summaries = [e.summary() for e in eps]
@@ -563,7 +565,7 @@ class WebServer:
                 client.frame_seq = frame_seq
                 parts.append(f'"frame":{frame_head}')
                 tail = frame_tail
-            trend = [p for p in feed.trend if p[0] > client.trend_seq] if feed.trend_seq > client.trend_seq else []
+            trend = newest(feed.trend, feed.trend_seq - client.trend_seq)
             if trend:
                 client.trend_seq = trend[-1][0]
                 parts.append(f'"trend":{_dumps({"node": w, "points": trend})}')
@@ -593,6 +595,16 @@ class WebServer:
             text = _dumps({"node": w, "values": table[0], "bits": list(table[1]), **meta})
         self._blocks[w] = (seq, text)
         return text
+
+
+def newest(ring: collections.deque[_T], count: int) -> list[_T]:
+    """The ``count`` newest items of a ring numbered in order (its seq minus the one a
+    client has), read from its end: a message costs what is new, not the ring's length."""
+    if count <= 0:
+        return []
+    if count >= len(ring):
+        return list(ring)
+    return [ring[-j] for j in range(count, 0, -1)]
 
 
 def _dumps(value: Any) -> str:
