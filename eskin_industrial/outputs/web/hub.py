@@ -119,6 +119,7 @@ class NodeFeed:
         self.lane: collections.deque[tuple[int, float, float, str, bool]] = collections.deque(maxlen=LANE_MAX)
         self.lane_seq = 0
         self.episodes: collections.deque[Episode] = collections.deque(maxlen=EPISODES_MAX)
+        self.episodes_seq = 0  #: bumped (under the lock) at an episode listed, a capture frozen or let go
         self.pending: list[Episode] = []
         window_s = self.capture_pre_s + self.capture_post_s
         # the ring holds the window and some margin (the server freezes a capture one turn late)
@@ -162,6 +163,7 @@ class NodeFeed:
                 delay = self.truth.delay(u.t, label) if self.truth is not None else None
                 ep = Episode(self._episode_ids, self.index, label, u.t, wall, delay)
                 self.episodes.append(ep)
+                self.episodes_seq += 1
                 if self.ring is not None:
                     ep.waiting = True
                     self.pending.append(ep)
@@ -261,6 +263,7 @@ class NodeFeed:
             kept = [ep for ep in self.episodes if ep.rows is not None]
             for old in kept[:-CAPTURES_MAX]:
                 old.rows = None  # the oldest captures let go: memory stays bounded
+            self.episodes_seq += 1
         return True
 
 

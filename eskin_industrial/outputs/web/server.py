@@ -117,6 +117,7 @@ class Client:
     acked: asyncio.Event = field(default_factory=asyncio.Event)
     snap_seq: dict[int, int] = field(default_factory=dict)
     lane_seq: dict[int, int] = field(default_factory=dict)
+    episodes_seq: dict[int, int] = field(default_factory=dict)
     frame_seq: int = 0
     trend_seq: int = 0
     episodes: dict[tuple[int, int], bool] = field(default_factory=dict)
@@ -156,6 +157,7 @@ class WebServer:
         self.clients: set[Client] = set()
         self.registers = self.wiring.registers
         self._blocks: dict[int, tuple[int, str | None]] = {}  #: node -> (snap_seq, its block's JSON)
+        self._trends: dict[int, tuple[int, int, str]] = {}  #: node -> (from seq, to seq, the points' JSON)
         self.counts = {"web_clients": 0, "web_clients_dropped": 0, "web_messages": 0, "web_frames_skipped": 0,
                        "web_logins": 0, "web_logins_refused": 0, "web_commands": 0, "web_commands_refused": 0,
                        "web_origin_refused": 0}
@@ -531,11 +533,14 @@ class WebServer:
         parts = [f'"server_time":{time.time()!r}']
         nodes, lane, episodes = [], [], []
         for i, feed in enumerate(self.feeds):
-            with feed.lock:
-                new_lane = newest(feed.lane, feed.lane_seq - client.lane_seq.get(i, 0))
-                eps = [e for e in feed.episodes
-                       if client.episodes.get((i, e.id)) != (e.rows is not None)]
-                summaries = [e.summary() for e in eps]
+            new_lane, eps, summaries = [], [], []
+            if feed.lane_seq != client.lane_seq.get(i, 0) or feed.episodes_seq != client.episodes_seq.get(i, 0):
+                with feed.lock:  # only when the lane or the episodes changed since this browser's last
+                    new_lane = newest(feed.lane, feed.lane_seq - client.lane_seq.get(i, 0))
+                    eps = [e for e in feed.episodes
+                           if client.episodes.get((i, e.id)) != (e.rows is not None)]
+                    summaries = [e.summary() for e in eps]
+                    client.episodes_seq[i] = feed.episodes_seq
             snap_seq, snap_text = feed.snapshot_text()
             if snap_seq != client.snap_seq.get(i):
                 client.snap_seq[i] = snap_seq
@@ -567,16 +572,27 @@ class WebServer:
                 client.frame_seq = frame_seq
                 parts.append(f'"frame":{frame_head}')
                 tail = frame_tail
-            trend = newest(feed.trend, feed.trend_seq - client.trend_seq)
-            if trend:
-                client.trend_seq = trend[-1][0]
-                parts.append(f'"trend":{_dumps({"node": w, "points": trend})}')
+            if feed.trend_seq != client.trend_seq:
+                parts.append(f'"trend":{self._trend(w, client.trend_seq)}')
+                client.trend_seq = feed.trend_seq
             block = self._block(w) if nodes else None
             if block is not None:
                 parts.append(f'"registers":{block}')
         if len(parts) == 1:
             return None
         return encode("{" + ",".join(parts) + "}", tail)
+
+    def _trend(self, w: int, since: int) -> str:
+        """Node ``w``'s trend points after ``since`` as JSON, made once for the browsers
+        in step (each has had the same points)."""
+        feed = self.feeds[w]
+        cached = self._trends.get(w)
+        if cached is not None and cached[:2] == (since, feed.trend_seq):
+            return cached[2]
+        upto = feed.trend_seq
+        text = _dumps({"node": w, "points": newest(feed.trend, upto - since)})
+        self._trends[w] = (since, upto, text)
+        return text
 
     def _block(self, w: int) -> str | None:
         """Node ``w``'s register block as JSON, read once a snapshot for every viewer."""
