@@ -108,3 +108,15 @@ def test_in_client_mode_the_node_page_shows_the_image_last_written_and_whether_t
             wait_for(lambda: r.counters("grip")["plc_write_failures"] > 0, what="the writer's failure counted")
     finally:
         plc.stop()
+
+
+def test_a_reopen_keeps_the_sessions_of_the_users_the_file_still_gives_with_their_role(tmp_path) -> None:
+    from eskin_industrial.outputs.web.server import Session, WebServer, Wiring
+    from eskin_industrial.outputs.web.users import load_users
+
+    wiring = Wiring()
+    now = time.monotonic()
+    wiring.sessions.update({"kept": Session("olga", "operator", "c1", now), "demoted": Session("rita", "operator", "c2", now),
+                            "gone": Session("nobody", "reader", "c3", now)})
+    server = WebServer(WebOptions(), [], [], load_users(users_file(tmp_path)), wiring)
+    assert set(server.sessions) == {"kept"} and server.sessions is wiring.sessions

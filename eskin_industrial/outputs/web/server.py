@@ -49,7 +49,7 @@ from ...errors import ListenError
 from ...netaddr import listen_error
 from ...node import Command, refusal
 from ...recording import write_recording
-from .hub import EPISODES_MAX, NodeFeed
+from .hub import EPISODES_MAX, NodeFeed, Truth
 from .users import Role, WebUser, login
 from .wire import encode
 
@@ -102,7 +102,7 @@ class Wiring:
     sessions: dict[str, Session] = field(default_factory=dict)
     #: node -> a function giving the register block, or None; set by whoever wires the PLC beside
     registers: dict[int, RegisterReader] = field(default_factory=dict)
-    truths: dict[int, Any] = field(default_factory=dict)  #: node -> its :class:`.hub.Truth`
+    truths: dict[int, Truth] = field(default_factory=dict)  #: node -> the onsets of its scene
 
 
 @dataclass(eq=False)  # one per connection, kept in a set
