@@ -5,7 +5,7 @@ or SocketCAN vcan) and Modbus RTU; and the CPU the bridge takes.
     .venv/bin/python benchmarks/bench_bridge.py                 # every path, 60 s each (~5 min)
     .venv/bin/python benchmarks/bench_bridge.py --paths can-1k --duration 30
     .venv/bin/python benchmarks/bench_bridge.py --paths can-100 --duration 30 --breakdown   # where the time goes
-    .venv/bin/python benchmarks/bench_bridge.py --paths can-100,can-1k --duration 20 --viewers 5   # the web console's cost
+    .venv/bin/python benchmarks/bench_bridge.py --paths can-100,can-1k --duration 20 --viewers 5 --repeats 3   # the web console's cost
     python tests/vcan/vm.py -- .venv/bin/python benchmarks/bench_bridge.py --paths vcan-100,vcan-1k
 
 What runs: the product's own :class:`~eskin_industrial.bridge.runtime.Bridge` (reader
@@ -256,12 +256,13 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
             node_thread = start_can_node(nodes[0].profile, scene_file, rate, fd, interface, channel)
         from web_viewers import Viewers
 
-        cpu0, t0 = thread_cpu_s(), time.monotonic()
-        br.start()
+        # the viewers connected before the run: their process's start-up is not in it
         with Viewers(web_base or "", viewers or 0) as seen:
+            cpu0, t0 = thread_cpu_s(), time.monotonic()
+            br.start()
             br.wait(duration_s)
-        wall = time.monotonic() - t0
-        cpu1 = thread_cpu_s()
+            wall = time.monotonic() - t0
+            cpu1 = thread_cpu_s()
         br.stop()
         log.close()
         counters = br.counters()["n1"]
@@ -375,20 +376,30 @@ def run_reference(path: str, decisions: list[tuple[int, int]], scene_file: Path,
     return dict(lat_all=lat_all, lat_slip=lat_slip, skipped=skipped)
 
 
-def web_row(path: str, duration_s: float, scene: Path, interface: str, channel: str, n: int) -> str:
+def web_row(path: str, duration_s: float, scene: Path, interface: str, channel: str, n: int, repeats: int = 1) -> str:
     """The console attached with 0 and with ``n`` viewers, one after the other in the same
-    run (a fresh bus channel each): the latency the viewers add, as a ratio."""
+    run (a fresh bus channel each), ``repeats`` times in turn: the latency the viewers
+    add, as the ratio of the medians over the repeats of each run's p50 and p99."""
     suffix = "" if interface != "virtual" else "-web"
-    r0 = run_ours(path, duration_s, scene, interface, channel + suffix + "0", viewers=0)
-    rn = run_ours(path, duration_s, scene, interface, channel + suffix + "n", viewers=n)
+    r0s, rns = [], []
+    for k in range(repeats):
+        r0s.append(run_ours(path, duration_s, scene, interface, f"{channel}{suffix}0-{k}", viewers=0))
+        rns.append(run_ours(path, duration_s, scene, interface, f"{channel}{suffix}n-{k}", viewers=n))
+
+    def med(runs: list[dict], q: float) -> float:
+        return float(np.median([np.percentile(r["lat_all"], q) for r in runs if r["lat_all"]]))
+
     ratio = "-"
-    if r0["lat_all"] and rn["lat_all"]:
-        ratio = (f"{np.percentile(rn['lat_all'], 50) / np.percentile(r0['lat_all'], 50):.2f}x / "
-                 f"{np.percentile(rn['lat_all'], 99) / np.percentile(r0['lat_all'], 99):.2f}x")
-    rates = rn["viewer_messages_s"]
-    return (f"| {path} | {ms(r0['lat_all'], 50)} / {ms(r0['lat_all'], 99)} | {ms(rn['lat_all'], 50)} / "
-            f"{ms(rn['lat_all'], 99)} | {ratio} | {r0['cpu'] * 100:.1f} / {rn['cpu'] * 100:.1f} % | "
-            f"{min(rates):.0f} to {max(rates):.0f} |" if rates else "-")
+    if all(r["lat_all"] for r in r0s + rns):
+        ratio = f"{med(rns, 50) / med(r0s, 50):.2f}x / {med(rns, 99) / med(r0s, 99):.2f}x"
+    cpu0, cpun = (float(np.median([r["cpu"] for r in runs])) for runs in (r0s, rns))
+    rates = [m for r in rns for m in r["viewer_messages_s"]]
+    each = " / ".join(f"{np.percentile(a['lat_all'], 99) * 1000:.2f}:{np.percentile(b['lat_all'], 99) * 1000:.2f}"
+                      for a, b in zip(r0s, rns))
+    return (f"| {path} | {repeats} | {med(r0s, 50) * 1000:.2f} / {med(r0s, 99) * 1000:.2f} | {med(rns, 50) * 1000:.2f} / "
+            f"{med(rns, 99) * 1000:.2f} | {ratio} | {cpu0 * 100:.1f} / {cpun * 100:.1f} % | "
+            f"{(cpun - cpu0) * 100 / max(n, 1):.2f} % | {min(rates):.0f} to {max(rates):.0f} | {each} |"
+            if rates else "-")
 
 
 def ms(values, q) -> str:
@@ -405,7 +416,10 @@ def main() -> None:
                          "detection, detection -> the write's send")
     ap.add_argument("--viewers", type=int, default=None, metavar="N",
                     help="also, per path, the bridge with the web console attached, with 0 and with N viewers "
-                         "(WebSocket clients acknowledging as the page does), and the ratio of their latencies")
+                         "(WebSocket clients acknowledging as the page does, in a process of their own), and the "
+                         "ratio of their latencies")
+    ap.add_argument("--repeats", type=int, default=1, metavar="R",
+                    help="with --viewers: the 0 and N viewer runs R times in turn, the ratio of the medians")
     ap.add_argument("--capture", nargs=2, metavar=("PORT", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.capture:
@@ -417,7 +431,8 @@ def main() -> None:
 
     quiet_pymodbus()
     cmd = (f".venv/bin/python benchmarks/bench_bridge.py --paths {args.paths} --duration {args.duration:g}"
-           + (" --breakdown" if args.breakdown else "") + (f" --viewers {args.viewers}" if args.viewers else ""))
+           + (" --breakdown" if args.breakdown else "") + (f" --viewers {args.viewers}" if args.viewers else "")
+           + (f" --repeats {args.repeats}" if args.repeats != 1 else ""))
     print(f"# {cmd}")
     print(f"# {time.strftime('%Y-%m-%d', time.gmtime())} on {describe()}")
     print("| path | rate | decisions timed (slips) | ours p50 / p99 ms | slips p50 / p99 ms | reference p50 / p99 ms "
@@ -458,14 +473,14 @@ def main() -> None:
                                   f"(p90 {d9:.2f}), detection -> send {s:.2f} ms (p90 {s9:.2f}) "
                                   f"(medians and p90s of {len(b)} decision scans)")
             if args.viewers:
-                web_rows.append(web_row(path, args.duration, scene, interface, channel, args.viewers))
+                web_rows.append(web_row(path, args.duration, scene, interface, channel, args.viewers, args.repeats))
     for line in breakdowns:
         print(line)
     if web_rows:
         print()
-        print(f"| path | console, 0 viewers: p50 / p99 ms | {args.viewers} viewers: p50 / p99 ms | ratio p50 / p99 "
-              "| bridge CPU 0 / N | messages/s per viewer |")
-        print("|---|---|---|---|---|---|")
+        print(f"| path | repeats | console, 0 viewers: p50 / p99 ms | {args.viewers} viewers: p50 / p99 ms "
+              "| ratio p50 / p99 | bridge CPU 0 / N | CPU per viewer | messages/s per viewer | p99 0:N each repeat |")
+        print("|---|---|---|---|---|---|---|---|---|")
         for row in web_rows:
             print(row)
 

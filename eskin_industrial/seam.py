@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from .identity import DeviceIdentity
 
@@ -58,3 +58,6 @@ class OpenContext:
     reopen: bool = False
     #: The device identity the outputs name (``[identity]`` of the bridge configuration).
     identity: DeviceIdentity = field(default_factory=DeviceIdentity)
+    #: What an output keeps across its restarts, under its kind's name: the same dict at
+    #: every open of one output (what it was handed after the first, its sessions).
+    kept: dict[str, Any] = field(default_factory=dict)

@@ -26,6 +26,7 @@ from eskin_industrial.outputs.base import SINKS, output_kind
 from eskin_industrial.outputs.opcua.users import add_user
 from eskin_industrial.outputs.web import server as web_server
 from eskin_industrial.outputs.web.options import WebOptions
+from eskin_industrial.outputs.web.wire import decode
 from tests.helpers.bridge import PAPER, Running, running_bridge, wait_for
 from tests.helpers.modbus import free_port
 
@@ -162,7 +163,7 @@ def test_the_websocket_upgrade_checks_the_origin(tmp_path: Path) -> None:
                     assert refused.value.status == 403
                 async with http.ws_connect(f"{base}/ws", headers={"Origin": base}) as ws:
                     await ws.send_str(json.dumps({"watch": 0}))
-                    msg = json.loads((await ws.receive(timeout=5)).data)
+                    msg = decode((await ws.receive(timeout=5)).data)
                     assert msg["nodes"][0]["i"] == 0
                 # no users: the console is read-only, for everyone
                 assert await command(http, base, "ack", None) == (403, "read_only")
@@ -183,7 +184,7 @@ def test_a_browser_that_takes_nothing_gets_two_messages_then_is_dropped(tmp_path
                     await ws.send_str(json.dumps({"watch": 0}))
                     end = time.monotonic() + 2.0
                     while time.monotonic() < end:
-                        msg = json.loads((await ws.receive(timeout=5)).data)
+                        msg = decode((await ws.receive(timeout=5)).data)
                         if "frame" in msg:
                             slow_t.append(msg["frame"]["t"])
                         await asyncio.sleep(0.3)
@@ -195,7 +196,7 @@ def test_a_browser_that_takes_nothing_gets_two_messages_then_is_dropped(tmp_path
                     t0 = time.monotonic()
                     while True:
                         msg = await ws.receive(timeout=5)
-                        if msg.type != aiohttp.WSMsgType.TEXT:
+                        if msg.type != aiohttp.WSMsgType.BINARY:
                             break
                         got += 1
                     return got, slow_t, time.monotonic() - t0
@@ -251,7 +252,7 @@ def test_the_bridge_shows_the_served_plc_block_on_the_node_page() -> None:
             async with ws:
                 await ws.send_str(json.dumps({"watch": 0}))
                 while not blocks:
-                    msg = json.loads((await ws.receive(timeout=5)).data)
+                    msg = decode((await ws.receive(timeout=5)).data)
                     await ws.send_str('{"ack":1}')
                     if "registers" in msg and "DATA_VALID" in msg["registers"]["bits"]:
                         blocks.append(msg["registers"])
@@ -275,14 +276,13 @@ def test_the_feed_keeps_each_capture_window_and_at_most_the_newest_captures() ->
     feed = NodeFeed(0, 100.0, capture_pre_s=0.5, capture_post_s=0.2, frame_interval_s=0.03)
     kicks = []
     feed.kick = lambda: kicks.append(1)
-    forces = np.zeros(25)
     k = 0
     for _episode in range(CAPTURES_MAX + 3):
         for state in (GraspState.STABLE, GraspState.SLIP):
             for _ in range(100):  # 1 s of each, a scan every 10 ms
                 t = k / 100.0
-                forces[:] = t
-                feed.frame(Frame(k, t, forces))
+                # a new array a scan, as the calibration makes: the feed keeps references
+                feed.frame(Frame(k, t, np.full(25, t)))
                 feed.update(Update(t, 0.0, 0.0, int(state), True, 1.0, 0.0, 0.0, 0))
                 feed.freeze_captures()
                 k += 1
@@ -325,7 +325,7 @@ def test_tls_serves_https_and_wss_with_secure_cookies(tmp_path: Path) -> None:
             assert r.status == 200
             assert "Secure" in r.headers["Set-Cookie"] and "max-age" in r.headers["Strict-Transport-Security"]
             async with http.ws_connect(f"wss://127.0.0.1:{port}/ws", headers={"Origin": base}, ssl=trust) as ws:
-                msg = json.loads((await ws.receive(timeout=5)).data)
+                msg = decode((await ws.receive(timeout=5)).data)
                 assert msg["nodes"][0]["i"] == 0
             with pytest.raises(aiohttp.ClientError):  # plain HTTP is not served
                 await http.get(f"http://127.0.0.1:{port}/api/info")

@@ -445,7 +445,8 @@ class Output:
 
         closers: list[Callable[[], None]] = []
         context = OpenContext(queue_frames=self.context.queue_frames, all_frames=self.context.all_frames,
-                              closers=closers, reopen=self.generation > 0, identity=self.context.identity)
+                              closers=closers, reopen=self.generation > 0, identity=self.context.identity,
+                              kept=self.context.kept)
         try:
             opened = self.cls.open_nodes(self.options, self.nodes, context)
         except BaseException:

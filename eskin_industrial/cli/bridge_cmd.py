@@ -174,13 +174,15 @@ def bridge(config_path: str | None, profile_path: str | None, source: str, inter
 
 def _registers_to_the_console(bridge: Bridge) -> None:
     """The web console's register block: each node's served PLC block, read as the PLC
-    reads it (server mode; a client-mode PLC's writes are the writer's own)."""
-    from ..outputs.plc.kept import served_table
+    reads it (server mode), or the image the writer last wrote to the PLC and whether
+    the PLC acknowledged it (client mode)."""
+    from ..outputs.plc.kept import served_table, written_table
     from ..outputs.web.sink import web_sinks
 
     for run in bridge.runs:
         webs = web_sinks(run.sinks)
-        tables = [t for t in (served_table(getattr(s, "inner", s)) for s in run.sinks) if t is not None]
+        tables = [t for t in (served_table(getattr(s, "inner", s)) or written_table(s) for s in run.sinks)
+                  if t is not None]
         for web in webs:
             if tables:
                 web.set_registers(tables[0])

@@ -22,7 +22,7 @@ from asyncua import ua
 from asyncua.crypto.permission_rules import USER_TYPES, PermissionRuleset, User, UserRole
 from asyncua.server.user_managers import UserManager
 
-from .options import Role
+from ..users import Role
 from .uaconv import node_id
 from .users import Directory
 

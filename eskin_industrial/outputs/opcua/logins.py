@@ -10,8 +10,9 @@ from pathlib import Path
 from asyncua import Server, ua
 
 from ...errors import ProfileError
+from ..users import Role
 from .access import Logins, Permissions
-from .options import OpcuaOptions, Role
+from .options import OpcuaOptions
 from .pki import TrustList, certificate_problem, make_certificate, own_paths
 from .report import Report
 from .users import Directory

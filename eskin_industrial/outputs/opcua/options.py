@@ -35,8 +35,6 @@ POLICIES: tuple[str, ...] = (
 )
 SECURE_POLICIES = POLICIES[1:]
 
-Role = Literal["reader", "operator"]
-
 
 def parse_endpoint_url(url: str) -> tuple[str, int]:
     """``opc.tcp://HOST[:PORT]`` -> (host, port); ValueError, one line, when malformed."""

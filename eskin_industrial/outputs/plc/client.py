@@ -492,6 +492,18 @@ class PlcWriter(Sink):
         with self._cond:
             return self._pending is None and self._outstanding is None
 
+    def last_written(self) -> tuple[list[int], tuple[int, ...], bool] | None:
+        """The image the writer last wrote, its SCORE_A..SCORE_B, and whether the PLC
+        acknowledged it: the newest acknowledged image while the PLC answers, else
+        (never written, or in an outage) the newest image waiting to be written, not
+        acknowledged.  Plain reads (any thread; the writer's lock is not taken)."""
+        last, tail = self._last, self._tail
+        if last is not None and self._outage is None:
+            return last, tail, True
+        sent, pending = self._outstanding, self._pending
+        image = sent[1] if sent is not None else (pending[0] if pending is not None else last)
+        return None if image is None else (image, tail, False)
+
     @property
     def in_outage(self) -> bool:
         """A failure since the last acknowledged write."""

@@ -4,6 +4,7 @@ shows beside the node's snapshot when no PLC is connected."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 from ...node import NodeSnapshot
 from ...profile import ModbusPlcSection
@@ -51,5 +52,32 @@ def served_table(sink: Sink) -> Callable[[], tuple[dict[str, int], tuple[str, ..
     def table() -> tuple[dict[str, int], tuple[str, ...]]:
         values = read_back(list(handler.registers), list(handler.tail), word_order)
         return values, status_names(values["STATUS"])
+
+    return table
+
+
+def written_table(sink: Sink) -> Callable[[], tuple[dict[str, int], tuple[str, ...], dict[str, Any]] | None] | None:
+    """A reader of the image a client-mode PLC output last wrote to the PLC (by name,
+    the STATUS bits set, and ``{"source": "written", "acknowledged": bool}``), for a view
+    beside the PLC (the web console's register block); None for a sink that writes
+    none (server mode serves its block: :func:`served_table`).  A supervised sink is
+    read through to its instance at each call: a restarted writer's image is shown,
+    none while the output is down."""
+    from .client import PlcWriter
+
+    if not isinstance(getattr(sink, "inner", sink), PlcWriter):
+        return None
+
+    def table() -> tuple[dict[str, int], tuple[str, ...], dict[str, Any]] | None:
+        writer = getattr(sink, "inner", sink)
+        if not isinstance(writer, PlcWriter):
+            return None  # the output is down
+        word_order = writer.settings.word_order
+        written = writer.last_written()
+        if written is None:
+            return None
+        registers, tail, acknowledged = written
+        values = read_back(list(registers), list(tail), word_order)
+        return values, status_names(values["STATUS"]), {"source": "written", "acknowledged": acknowledged}
 
     return table

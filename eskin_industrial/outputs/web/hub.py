@@ -1,17 +1,21 @@
-"""What the node's loop leaves for the console: the newest values of each node, kept
-under a lock in bounded structures, and a wake-up for the server's loop.
+"""What the node's loop leaves for the console: the newest values of each node, and a
+wake-up for the server's loop.
 
 The loop's side (:meth:`NodeFeed.publish`, :meth:`NodeFeed.update`,
-:meth:`NodeFeed.frame`) stores and returns: a snapshot, a frame or a trend point
-replaces the one before, the state lane and the episodes are bounded rings, the raw
-scans a ring of the capture window.  It wakes the server's loop (thread-safely, at
-most once per frame interval unless the snapshot is urgent) and never waits for it.
-The server's side reads under the same lock and copies what it sends.
+:meth:`NodeFeed.frame`) is O(1) and tiny a scan: it stores a reference to the newest
+snapshot, frame and update (no copy, no encoding, no lock: one reference replaced is
+atomic), appends the frame to the capture ring (a bounded deque, thread-safe), and
+only at a state change takes the lock for the lane and the episodes and wakes the
+server (an urgent snapshot wakes it too).  Everything else is the server's, once a
+display frame for every viewer together (:meth:`NodeFeed.tick`, the server's ticker):
+the trend point, the scan rate, the captures frozen, the snapshot's JSON and the
+frame's float32 bytes (:mod:`.wire`), each made once and shared by every message.
 """
 
 from __future__ import annotations
 
 import collections
+import json
 import math
 import threading
 import time
@@ -22,14 +26,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...detect.state import LABELS, GraspState
+from .wire import frame_bytes
 
 if TYPE_CHECKING:
     from ...detect.updates import Update
     from ...frames import Frame
     from ...node import Command, NodeSnapshot
 
-#: Trend points a second at most (the newest update of each 20 ms is kept), over 30 s.
-TREND_HZ = 50.0
+#: The trends' span: a point a display frame (the newest update then), and every state change.
 TREND_S = 30.0
 LANE_MAX = 256  #: state changes kept for the lane
 EPISODES_MAX = 64  #: episodes listed
@@ -97,21 +101,25 @@ class NodeFeed:
     kick: Callable[[], None] = lambda: None
     truth: Truth | None = None
     lock: threading.Lock = field(default_factory=threading.Lock)
-    seq: int = 0  #: bumped at every change a client may not have yet
 
     def __post_init__(self) -> None:
+        # the loop's side: references replaced, counters bumped (by that thread only)
         self.snapshot: NodeSnapshot | None = None
         self.snap_seq = 0
-        self.frame_t: float | None = None
-        self.frame_forces: np.ndarray | None = None
+        self.newest_frame: Frame | None = None
         self.frame_seq = 0
-        points = int(TREND_HZ * TREND_S) + 16
+        self.newest_update: Update | None = None
+        self.changed_update: Update | None = None  #: the newest update that changed the state
+        # the server's side: one point a display frame (and one a state change) over 30 s
+        points = int(math.ceil(TREND_S / max(self.frame_interval_s, 0.005))) + LANE_MAX
         self.trend: collections.deque[tuple[int, float, float | None, float | None, float | None, float | None]] = \
             collections.deque(maxlen=points)
         self.trend_seq = 0
+        self._trended: tuple[Update | None, Update | None] = (None, None)
         self.lane: collections.deque[tuple[int, float, float, str, bool]] = collections.deque(maxlen=LANE_MAX)
         self.lane_seq = 0
         self.episodes: collections.deque[Episode] = collections.deque(maxlen=EPISODES_MAX)
+        self.episodes_seq = 0  #: bumped (under the lock) at an episode listed, a capture frozen or let go
         self.pending: list[Episode] = []
         window_s = self.capture_pre_s + self.capture_post_s
         # the ring holds the window and some margin (the server freezes a capture one turn late)
@@ -119,39 +127,34 @@ class NodeFeed:
             collections.deque(maxlen=int(math.ceil((window_s + 1.0) * self.rate_hz)) + 8) if window_s > 0 else None)
         self.commands: collections.deque[Command] = collections.deque()
         self._last_state: int | None = None
-        self._last_trend_t = -math.inf
-        self._last_kick = -math.inf
         self._episode_ids = 0
         self.scans_per_s: float | None = None
         self._rate_mark: tuple[float, int] | None = None
+        self._snap_text: tuple[int, str] = (-1, "")
+        self._frame_blob: tuple[int, str, bytes] = (-1, "", b"")
         self.counts = {"web_frames_dropped": 0}
+
+    @property
+    def frame_t(self) -> float | None:
+        frame = self.newest_frame
+        return None if frame is None else frame.t
 
     # -- the loop's thread -----------------------------------------------------------
     def publish(self, snapshot: NodeSnapshot) -> None:
-        now = time.monotonic()
-        with self.lock:
-            self.snapshot = snapshot
-            self.snap_seq += 1
-            mark = self._rate_mark
-            if mark is None:
-                self._rate_mark = (now, snapshot.scans)
-            elif now - mark[0] >= 1.0:
-                self.scans_per_s = (snapshot.scans - mark[1]) / (now - mark[0])
-                self._rate_mark = (now, snapshot.scans)
-        self._wake(now, snapshot.urgent)
+        self.snapshot = snapshot
+        self.snap_seq += 1
+        if snapshot.urgent:
+            self.kick()
 
     def update(self, u: Update) -> None:
+        self.newest_update = u
         state = u.state
-        changed = state != self._last_state
+        if state == self._last_state:
+            return
         self._last_state = state
+        self.changed_update = u
+        wall = time.time()
         with self.lock:
-            if changed or u.t - self._last_trend_t >= 1.0 / TREND_HZ:
-                self._last_trend_t = u.t
-                self.trend_seq += 1
-                self.trend.append((self.trend_seq, u.t, num(u.r_coe), num(u.r_dw), num(u.score_a), num(u.score_b)))
-            if not changed:
-                return
-            wall = time.time()
             self.lane_seq += 1
             self.lane.append((self.lane_seq, u.t, wall, LABELS[state], bool(u.valid)))
             if state in _EPISODE_STATES:
@@ -160,26 +163,19 @@ class NodeFeed:
                 delay = self.truth.delay(u.t, label) if self.truth is not None else None
                 ep = Episode(self._episode_ids, self.index, label, u.t, wall, delay)
                 self.episodes.append(ep)
+                self.episodes_seq += 1
                 if self.ring is not None:
                     ep.waiting = True
                     self.pending.append(ep)
-        self._wake(time.monotonic(), True)
+        self.kick()
 
     def frame(self, frame: Frame) -> None:
-        forces = frame.forces.astype(np.float32)  # a copy: the frame's arrays are the detector's
-        t = frame.t
-        with self.lock:
-            if self.ring is not None:
-                self.ring.append((t, forces))
-            self.frame_t = t
-            self.frame_forces = forces
-            self.frame_seq += 1
-        self._wake(time.monotonic(), False)
-
-    def _wake(self, now: float, urgent: bool) -> None:
-        if urgent or now - self._last_kick >= self.frame_interval_s:
-            self._last_kick = now
-            self.kick()
+        # no copy: the calibration makes a new forces array for every scan, none is
+        # changed once handed on (bridge/supervise.py)
+        if self.ring is not None:
+            self.ring.append((frame.t, frame.forces))
+        self.newest_frame = frame
+        self.frame_seq += 1
 
     def take_commands(self) -> list[Command]:
         out = []
@@ -196,12 +192,57 @@ class NodeFeed:
             self.commands.append(command)
             return True
 
+    def tick(self, now: float) -> None:
+        """Once a display frame: the trend's point (the state change's too, when one came
+        since), the scan rate, the captures whose window has passed."""
+        u, changed = self.newest_update, self.changed_update
+        last_u, last_changed = self._trended
+        if changed is not None and changed is not last_changed and changed is not u:
+            self._trend(changed)
+        if u is not None and u is not last_u:
+            self._trend(u)
+        self._trended = (u, changed)
+        snap = self.snapshot
+        if snap is not None:
+            mark = self._rate_mark
+            if mark is None:
+                self._rate_mark = (now, snap.scans)
+            elif now - mark[0] >= 1.0:
+                self.scans_per_s = (snap.scans - mark[1]) / (now - mark[0])
+                self._rate_mark = (now, snap.scans)
+        self.freeze_captures()
+
+    def _trend(self, u: Update) -> None:
+        self.trend_seq += 1
+        self.trend.append((self.trend_seq, u.t, num(u.r_coe), num(u.r_dw), num(u.score_a), num(u.score_b)))
+
+    def snapshot_text(self) -> tuple[int, str]:
+        """The newest snapshot as the message's JSON (``{"i", "snap", "rate_hz"}``), made
+        once for every viewer; with its seq."""
+        seq = self.snap_seq
+        cached = self._snap_text
+        if cached[0] != seq:
+            body = {"i": self.index, "snap": snapshot_json(self.snapshot), "rate_hz": num(self.scans_per_s)}
+            cached = self._snap_text = (seq, json.dumps(body, allow_nan=False, separators=(",", ":")))
+        return cached
+
+    def frame_blob(self) -> tuple[int, str, bytes]:
+        """The newest frame as the message's ``"frame"`` JSON and its float32 tail, made
+        once for every viewer; with its seq (0: no frame yet)."""
+        seq, frame = self.frame_seq, self.newest_frame
+        cached = self._frame_blob
+        if cached[0] != seq and frame is not None:
+            forces = frame.forces
+            head = json.dumps({"node": self.index, "t": num(frame.t), "n": int(forces.size)}, separators=(",", ":"))
+            cached = self._frame_blob = (seq, head, frame_bytes(forces))
+        return cached if frame is not None else (0, "", b"")
+
     def freeze_captures(self) -> bool:
         """Freeze the captures whose post-trigger window has passed; True when one did."""
+        newest = self.frame_t
         with self.lock:
-            if not self.pending or self.ring is None or self.frame_t is None:
+            if not self.pending or self.ring is None or newest is None:
                 return False
-            newest = self.frame_t
             due = [ep for ep in self.pending if newest >= ep.t + self.capture_post_s]
             if not due:
                 return False
@@ -222,4 +263,24 @@ class NodeFeed:
             kept = [ep for ep in self.episodes if ep.rows is not None]
             for old in kept[:-CAPTURES_MAX]:
                 old.rows = None  # the oldest captures let go: memory stays bounded
+            self.episodes_seq += 1
         return True
+
+
+def snapshot_json(snap: Any) -> dict[str, Any] | None:
+    if snap is None:
+        return None
+    d = snap._asdict()
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        if isinstance(v, float):
+            out[k] = v if math.isfinite(v) else None
+        elif isinstance(v, tuple):
+            out[k] = list(v)
+        else:
+            out[k] = v
+    out["state_label"] = snap.state_label
+    out["sensor_fault"] = snap.sensor_fault
+    out["turn_unseen"] = snap.turn_unseen
+    out["contact"] = snap.contact
+    return out

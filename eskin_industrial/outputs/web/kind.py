@@ -152,7 +152,7 @@ class WebKind(OutputKind[WebOptions]):
     @classmethod
     def _open_nodes(cls, options: WebOptions, nodes: Sequence[NodeLike[Any]], context: OpenContext) -> list[Sink]:
         need_aiohttp()
-        from .server import WebServer
+        from .server import WebServer, Wiring
         from .users import load_users
 
         try:
@@ -160,9 +160,13 @@ class WebKind(OutputKind[WebOptions]):
             users = load_users(options.users_file) if options.users_file else ()
         except ValueError as exc:
             raise ProfileError(f"[web] {exc}") from None
+        # what the console was handed after the first open (register blocks, truths,
+        # sessions): a restart's fresh instance is given it again
+        wiring = context.kept.setdefault(cls.name, Wiring())
         feeds = [NodeFeed(i, float(n.rate_hz), options.capture_pre_s, options.capture_post_s,
-                          options.frame_interval_s, truth=scene_truth(n)) for i, n in enumerate(nodes)]
-        server = WebServer(options, [node_view(n) for n in nodes], feeds, users)
+                          options.frame_interval_s, truth=wiring.truths.get(i) or scene_truth(n))
+                 for i, n in enumerate(nodes)]
+        server = WebServer(options, [node_view(n) for n in nodes], feeds, users, wiring)
         sinks: list[WebSink] = []
         held: list[tuple[str, str, dict[str, Any]]] = []
 

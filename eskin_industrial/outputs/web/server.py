@@ -11,10 +11,15 @@ files on asyncio, with no ASGI server beside it (docs/web.md).
   its CSRF token (``X-CSRF-Token``), judged under :func:`~eskin_industrial.node.refusal`,
   then queued for the node's loop (its sink's ``take_commands``).
 - ``GET /api/episodes/ID.csv``: an episode's raw scans as a recording CSV.
-- ``GET /ws``: the live state, JSON; the Origin header must be the console's own.
+- ``GET /ws``: the live state, one binary message a display frame (:mod:`.wire`: JSON
+  and the frame's float32 forces); the Origin header must be the console's own.
 
-Each WebSocket has a sender that waits for a wake-up, builds one message of what is
-new for it and sends it.  The page acknowledges each message once it has drawn it;
+A ticker on the server's loop, once a display frame (``frame_interval_s``), does the
+feeds' work for every viewer together (:meth:`.hub.NodeFeed.tick`: the trends, the
+captures) and wakes the senders when something is new; a node's loop wakes it itself
+only at a state change.  Each WebSocket has a sender that waits for a wake-up, builds
+one message of what is new for it (of parts encoded once for all: the snapshot's JSON,
+the frame's bytes) and sends it.  The page acknowledges each message once it has drawn it;
 at most :data:`IN_FLIGHT` messages go unacknowledged, so a browser that draws slowly
 is sent fewer messages, each with the newest frame (the one it missed is never sent:
 it is decimated), and one that takes none for :data:`SEND_TIMEOUT_S` is dropped.
@@ -24,11 +29,11 @@ Nothing is queued per browser.
 from __future__ import annotations
 
 import asyncio
+import collections
 import concurrent.futures
 import hmac
 import io
 import json
-import math
 import secrets
 import ssl
 import threading
@@ -36,7 +41,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from aiohttp import WSMsgType, web
 
@@ -44,12 +49,14 @@ from ...errors import ListenError
 from ...netaddr import listen_error
 from ...node import Command, refusal
 from ...recording import write_recording
-from .hub import EPISODES_MAX, NodeFeed, num
+from .hub import EPISODES_MAX, NodeFeed, Truth
 from .users import Role, WebUser, login
+from .wire import encode
 
 if TYPE_CHECKING:
     from .options import WebOptions
 
+_T = TypeVar("_T")
 STATIC = Path(__file__).parent / "static"
 #: A browser that has not taken (acknowledged) a message within this time is dropped.
 SEND_TIMEOUT_S = 5.0
@@ -78,6 +85,26 @@ class Session:
     last_seen: float
 
 
+#: A register block as the page shows it: the registers by name, the STATUS bits set,
+#: and what it is (``{"source": "served" | "written", "acknowledged": bool}``; a reader
+#: of two elements is a served block's).
+RegisterBlock = tuple[dict[str, int], tuple[str, ...]] | tuple[dict[str, int], tuple[str, ...], dict[str, Any]]
+RegisterReader = Callable[[], RegisterBlock | None]
+
+
+@dataclass
+class Wiring:
+    """What the console is handed beside its options, kept by the output across a
+    restart of its instance (``OpenContext.kept``): the register blocks' readers and
+    the scenes' truths, given once after the bridge opened, and the login sessions (a
+    logged-in operator stays logged in)."""
+
+    sessions: dict[str, Session] = field(default_factory=dict)
+    #: node -> a function giving the register block, or None; set by whoever wires the PLC beside
+    registers: dict[int, RegisterReader] = field(default_factory=dict)
+    truths: dict[int, Truth] = field(default_factory=dict)  #: node -> the onsets of its scene
+
+
 @dataclass(eq=False)  # one per connection, kept in a set
 class Client:
     """One browser's WebSocket: what it watches, and what it has been sent."""
@@ -90,6 +117,7 @@ class Client:
     acked: asyncio.Event = field(default_factory=asyncio.Event)
     snap_seq: dict[int, int] = field(default_factory=dict)
     lane_seq: dict[int, int] = field(default_factory=dict)
+    episodes_seq: dict[int, int] = field(default_factory=dict)
     frame_seq: int = 0
     trend_seq: int = 0
     episodes: dict[tuple[int, int], bool] = field(default_factory=dict)
@@ -116,16 +144,20 @@ class WebServer:
     """One server for the bridge's nodes (``feeds``, in order)."""
 
     def __init__(self, options: WebOptions, views: list[NodeView], feeds: list[NodeFeed],
-                 users: tuple[WebUser, ...]) -> None:
+                 users: tuple[WebUser, ...], wiring: Wiring | None = None) -> None:
         self.options = options
         self.views = views
         self.feeds = feeds
         self.users = {u.name: u for u in users}
-        self.sessions: dict[str, Session] = {}
+        self.wiring = wiring or Wiring()
+        self.sessions = self.wiring.sessions
+        for token, s in list(self.sessions.items()):  # a user the users file no longer gives goes
+            if self.users.get(s.user) is None or self.users[s.user].role != s.role:
+                del self.sessions[token]
         self.clients: set[Client] = set()
-        #: node -> a function giving the register block as the PLC reads it (names ->
-        #: values, the STATUS bits set), or None; set by whoever wires the PLC beside.
-        self.registers: dict[int, Callable[[], tuple[dict[str, int], tuple[str, ...]] | None]] = {}
+        self.registers = self.wiring.registers
+        self._blocks: dict[int, tuple[int, str | None]] = {}  #: node -> (snap_seq, its block's JSON)
+        self._trends: dict[int, tuple[int, int, str]] = {}  #: node -> (from seq, to seq, the points' JSON)
         self.counts = {"web_clients": 0, "web_clients_dropped": 0, "web_messages": 0, "web_frames_skipped": 0,
                        "web_logins": 0, "web_logins_refused": 0, "web_commands": 0, "web_commands_refused": 0,
                        "web_origin_refused": 0}
@@ -223,12 +255,14 @@ class WebServer:
             await runner.cleanup()
             raise ListenError(listen_error(self.options.host, self.options.port, exc)) from None
         self._loop = asyncio.get_running_loop()
+        ticker = asyncio.ensure_future(self._ticker())
         self._ready.set()
         self.on_event("web_listening", "info", url=self.options.url, users=len(self.users),
                       tls=self.options.tls)
         try:
             await self._stop.wait()
         finally:
+            ticker.cancel()
             for c in list(self.clients):
                 await c.ws.close()
             await runner.cleanup()
@@ -236,10 +270,26 @@ class WebServer:
 
     def _woken(self) -> None:
         self._kicked = False
-        for feed in self.feeds:
-            feed.freeze_captures()
         for c in self.clients:
             c.wake.set()
+
+    async def _ticker(self) -> None:
+        """Once a display frame: the feeds' work for every viewer together, then the
+        senders woken when a feed has something new."""
+        interval = self.options.frame_interval_s
+        seen: list[tuple[int, int]] = [(-1, -1)] * len(self.feeds)
+        while True:
+            await asyncio.sleep(interval)
+            now = time.monotonic()
+            new = False
+            for i, feed in enumerate(self.feeds):
+                feed.tick(now)
+                mark = (feed.snap_seq, feed.frame_seq)
+                if mark != seen[i]:
+                    seen[i], new = mark, True
+            if new:
+                for c in self.clients:
+                    c.wake.set()
 
     @web.middleware
     async def _headers(self, request: web.Request, handler: Callable[..., Any]) -> web.StreamResponse:
@@ -418,7 +468,9 @@ class WebServer:
             return self._refuse(401, "log in first")
         if len(self.clients) >= self.options.max_clients:
             return self._refuse(503, "too many browsers connected")
-        ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4096)
+        # no permessage-deflate: float32 forces hardly compress, and each viewer's copy
+        # would be deflated on its own (a quarter of the server's CPU per viewer, measured)
+        ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4096, compress=False)
         await ws.prepare(request)
         client = Client(ws, peer=request.remote or "-")
         self.clients.add(client)
@@ -460,7 +512,8 @@ class WebServer:
                     message = self._message(client)
                     if message is None:
                         continue
-                    await asyncio.wait_for(client.ws.send_str(message), SEND_TIMEOUT_S)
+                    send = client.ws.send_bytes(message) if isinstance(message, bytes) else client.ws.send_str(message)
+                    await asyncio.wait_for(send, SEND_TIMEOUT_S)
                 except TimeoutError:
                     self.counts["web_clients_dropped"] += 1
                     self.on_event("web_client_dropped", "warning", peer=client.peer,
@@ -472,20 +525,26 @@ class WebServer:
         except (ConnectionError, RuntimeError):
             return  # the browser went away
 
-    def _message(self, client: Client) -> str | None:
-        """What is new for this browser, as one JSON text (None: nothing)."""
-        out: dict[str, Any] = {"server_time": time.time()}
+    def _message(self, client: Client) -> bytes | str | None:
+        """What is new for this browser, as one message (:mod:`.wire`; None: nothing).
+        The snapshots' JSON and the frame's bytes are the feeds' own, made once for
+        every viewer; what is this browser's (the lane, the episodes, the trend points
+        it has not had) is small."""
+        parts = [f'"server_time":{time.time()!r}']
         nodes, lane, episodes = [], [], []
         for i, feed in enumerate(self.feeds):
-            with feed.lock:
-                snap, snap_seq, rate = feed.snapshot, feed.snap_seq, feed.scans_per_s
-                new_lane = [e for e in feed.lane if e[0] > client.lane_seq.get(i, 0)]
-                eps = [e for e in feed.episodes
-                       if client.episodes.get((i, e.id)) != (e.rows is not None)]
-                summaries = [e.summary() for e in eps]
+            new_lane, eps, summaries = [], [], []
+            if feed.lane_seq != client.lane_seq.get(i, 0) or feed.episodes_seq != client.episodes_seq.get(i, 0):
+                with feed.lock:  # only when the lane or the episodes changed since this browser's last
+                    new_lane = newest(feed.lane, feed.lane_seq - client.lane_seq.get(i, 0))
+                    eps = [e for e in feed.episodes
+                           if client.episodes.get((i, e.id)) != (e.rows is not None)]
+                    summaries = [e.summary() for e in eps]
+                    client.episodes_seq[i] = feed.episodes_seq
+            snap_seq, snap_text = feed.snapshot_text()
             if snap_seq != client.snap_seq.get(i):
                 client.snap_seq[i] = snap_seq
-                nodes.append({"i": i, "snap": _snapshot_json(snap), "rate_hz": num(rate)})
+                nodes.append(snap_text)
             if new_lane:
                 client.lane_seq[i] = new_lane[-1][0]
                 lane += [{"node": i, "seq": s, "t": t, "wall": w, "state": label, "valid": v}
@@ -497,52 +556,74 @@ class WebServer:
             present = {(i, e.id) for i, feed in enumerate(self.feeds) for e in list(feed.episodes)}
             client.episodes = {k: v for k, v in client.episodes.items() if k in present}
         if nodes:
-            out["nodes"] = nodes
+            parts.append(f'"nodes":[{",".join(nodes)}]')
         if lane:
-            out["lane"] = lane
+            parts.append(f'"lane":{_dumps(lane)}')
         if episodes:
-            out["episodes"] = episodes
+            parts.append(f'"episodes":{_dumps(episodes)}')
+        tail = b""
         w = client.watch
         if w is not None:
             feed = self.feeds[w]
-            with feed.lock:
-                frame_seq, forces, frame_t = feed.frame_seq, feed.frame_forces, feed.frame_t
-                trend = [p for p in feed.trend if p[0] > client.trend_seq]
-            if frame_seq != client.frame_seq and forces is not None:
+            frame_seq, frame_head, frame_tail = feed.frame_blob()
+            if frame_seq and frame_seq != client.frame_seq:
                 if client.frame_seq:
                     self.counts["web_frames_skipped"] += max(0, frame_seq - client.frame_seq - 1)
                 client.frame_seq = frame_seq
-                out["frame"] = {"node": w, "t": frame_t, "forces": [num(x) for x in forces.tolist()]}
-            if trend:
-                client.trend_seq = trend[-1][0]
-                out["trend"] = {"node": w, "points": trend}
-            registers = self.registers.get(w)
-            if registers is not None and "nodes" in out:
-                try:
-                    table = registers()
-                except Exception:  # noqa: BLE001 - a register source that fails leaves the block out, not the page
-                    table = None
-                if table is not None:
-                    out["registers"] = {"node": w, "values": table[0], "bits": list(table[1])}
-        if len(out) == 1:
+                parts.append(f'"frame":{frame_head}')
+                tail = frame_tail
+            if feed.trend_seq != client.trend_seq:
+                parts.append(f'"trend":{self._trend(w, client.trend_seq)}')
+                client.trend_seq = feed.trend_seq
+            block = self._block(w) if nodes else None
+            if block is not None:
+                parts.append(f'"registers":{block}')
+        if len(parts) == 1:
             return None
-        return json.dumps(out, allow_nan=False)
+        return encode("{" + ",".join(parts) + "}", tail)
+
+    def _trend(self, w: int, since: int) -> str:
+        """Node ``w``'s trend points after ``since`` as JSON, made once for the browsers
+        in step (each has had the same points)."""
+        feed = self.feeds[w]
+        cached = self._trends.get(w)
+        if cached is not None and cached[:2] == (since, feed.trend_seq):
+            return cached[2]
+        upto = feed.trend_seq
+        text = _dumps({"node": w, "points": newest(feed.trend, upto - since)})
+        self._trends[w] = (since, upto, text)
+        return text
+
+    def _block(self, w: int) -> str | None:
+        """Node ``w``'s register block as JSON, read once a snapshot for every viewer."""
+        read = self.registers.get(w)
+        if read is None:
+            return None
+        seq = self.feeds[w].snap_seq
+        cached = self._blocks.get(w)
+        if cached is not None and cached[0] == seq:
+            return cached[1]
+        try:
+            table = read()
+        except Exception:  # noqa: BLE001 - a register source that fails leaves the block out, not the page
+            table = None
+        text = None
+        if table is not None:
+            meta = table[2] if len(table) > 2 else {"source": "served", "acknowledged": True}
+            text = _dumps({"node": w, "values": table[0], "bits": list(table[1]), **meta})
+        self._blocks[w] = (seq, text)
+        return text
 
 
-def _snapshot_json(snap: Any) -> dict[str, Any] | None:
-    if snap is None:
-        return None
-    d = snap._asdict()
-    out: dict[str, Any] = {}
-    for k, v in d.items():
-        if isinstance(v, float):
-            out[k] = v if math.isfinite(v) else None
-        elif isinstance(v, tuple):
-            out[k] = list(v)
-        else:
-            out[k] = v
-    out["state_label"] = snap.state_label
-    out["sensor_fault"] = snap.sensor_fault
-    out["turn_unseen"] = snap.turn_unseen
-    out["contact"] = snap.contact
-    return out
+def newest(ring: collections.deque[_T], count: int) -> list[_T]:
+    """The ``count`` newest items of a ring numbered in order (its seq minus the one a
+    client has), read from its end: a message costs what is new, not the ring's length."""
+    if count <= 0:
+        return []
+    if count >= len(ring):
+        return list(ring)
+    return [ring[-j] for j in range(count, 0, -1)]
+
+
+def _dumps(value: Any) -> str:
+    return json.dumps(value, allow_nan=False, separators=(",", ":"))

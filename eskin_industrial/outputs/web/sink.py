@@ -6,7 +6,7 @@ the commands the operator's page queued.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from ..base import Sink, SinkHealth
@@ -16,14 +16,14 @@ if TYPE_CHECKING:
     from ...detect.updates import Update
     from ...frames import Frame
     from ...node import Command, NodeSnapshot
-    from .server import WebServer
+    from .server import RegisterReader, WebServer
 
 
 def web_sinks(sinks: Sequence[Sink]) -> list[WebSink]:
     """The web console's sinks among a loop's (each as the kind opened it: a supervised
     output's sink holds its instance as ``inner``), for whoever wires the console's
-    truth and register block.  (A restart of the output opens a fresh instance
-    without them.)"""
+    truth and register block.  (What they are given is kept by the output: a restart's
+    fresh instance has it too, :class:`.server.Wiring`.)"""
     out = []
     for sink in sinks:
         inner = getattr(sink, "inner", sink)
@@ -65,10 +65,14 @@ class WebSink(Sink):
 
     def set_truth(self, onsets: list[tuple[float, str]], period_s: float | None = None) -> None:
         """The onsets of what the node plays (a demo's scene), for the detection delays."""
-        self.feed.truth = Truth(onsets, period_s)
+        truth = Truth(onsets, period_s)
+        self.server.wiring.truths[self.index] = truth
+        self.feed.truth = truth
 
-    def set_registers(self, read: Callable[[], tuple[dict[str, int], tuple[str, ...]] | None]) -> None:
+    def set_registers(self, read: RegisterReader) -> None:
         """Where the page's register block comes from: the PLC's registers as the PLC
-        reads them (names -> values, the STATUS bits set), handed by whoever wires the
-        PLC beside; without it the page has no register block."""
+        reads them (names -> values, the STATUS bits set) or as the bridge last wrote
+        them to the PLC (a third element says so: ``{"source": "written",
+        "acknowledged": bool}``), handed by whoever wires the PLC beside; without it the
+        page has no register block."""
         self.server.registers[self.index] = read

@@ -102,6 +102,19 @@ function flagsElement(snap) {
   return span;
 }
 
+// A node page's message (outputs/web/wire.py): u32 LE n, n bytes of JSON (padded to a
+// multiple of 4), then the frame's forces as float32 LE when the JSON names a frame.
+const utf8Decoder = new TextDecoder();
+function decodeMessage(buffer) {
+  const n = new DataView(buffer).getUint32(0, true);
+  const msg = JSON.parse(utf8Decoder.decode(new Uint8Array(buffer, 4, n)));
+  if (msg.frame) {
+    const forces = new Float32Array(buffer, 4 + n, msg.frame.n);
+    msg.frame.forces = Array.from(forces, (x) => (Number.isFinite(x) ? x : null));
+  }
+  return msg;
+}
+
 function connect() {
   const scheme = location.protocol === "https:" ? "wss:" : "ws:";
   const ws = new WebSocket(`${scheme}//${location.host}/ws`);
@@ -111,8 +124,9 @@ function connect() {
     if (status) status.textContent = "live";
     if (Console.watch !== null) ws.send(JSON.stringify({ watch: Console.watch }));
   };
+  ws.binaryType = "arraybuffer";
   ws.onmessage = (ev) => {
-    const msg = JSON.parse(ev.data);
+    const msg = typeof ev.data === "string" ? JSON.parse(ev.data) : decodeMessage(ev.data);
     msg.received = nowMs();
     for (const h of Console.handlers) h(msg);
     ws.send('{"ack":1}');  // drawn: the server may send the next (a slow page is sent fewer, newer ones)

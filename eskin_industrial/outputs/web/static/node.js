@@ -73,6 +73,12 @@ start((info) => {
     }
     if (lastT !== null || (msg.lane && msg.lane.length)) lane.draw(lastT);
     if (msg.registers && msg.registers.node === index) {
+      const r = msg.registers;
+      document.getElementById("registers-title").textContent = r.source === "written"
+        ? `PLC registers, as the bridge last wrote them to the PLC (${r.acknowledged ? "acknowledged" : "not acknowledged"})`
+        : "PLC registers, as the PLC reads them";
+      document.getElementById("registers-panel").dataset.source = r.source;
+      document.getElementById("registers-panel").dataset.acknowledged = String(r.acknowledged);
       const t = el("table", { id: "register-table" });
       t.append(el("tr", {}, el("th", { text: "STATUS bits" }), el("td", { id: "status-bits", text: msg.registers.bits.join(" ") || "-" })));
       for (const [k, v] of Object.entries(msg.registers.values)) {
