@@ -7,9 +7,9 @@ to a ``mosquitto_sub`` subscriber receiving its DDATA, against a bare paho-mqtt 
     .venv/bin/python benchmarks/bench_fleet.py --nodes-100 8,16,32 --nodes-1k 1,2,4 --duration 10
     .venv/bin/python benchmarks/bench_fleet.py --only latency --latency-duration 60
     .venv/bin/python benchmarks/bench_fleet.py --only fleet --nodes-100 8 --nodes-1k 2 --frame-interval 1
+    .venv/bin/python benchmarks/bench_fleet.py --only fleet --pin --nodes-100 16,32,48,64 --nodes-1k 4,8,16 --duration 20
 
-The nodes: the project's CAN node simulator (``sim/can_node.py``) on python-can's
-virtual buses, playing the slip train of ``bench_bridge.py`` (a still grasp with a
+The nodes: the project's CAN node simulator (``sim/can_node.py``), playing the slip train of ``bench_bridge.py`` (a still grasp with a
 slide every 1.2 s: about 110 state changes a minute per node, each a DDATA at once,
 besides the analog metrics at their minimum interval).  CAN nodes, not ``scene:``
 sources: the frame decode, the routing by ID and the scan assembly are part of what
@@ -18,10 +18,16 @@ a real line: ``--per-bus`` nodes (distinct node ids and base IDs) on each bus, 4
 default (100 Hz classic: 9 frames a scan, 3,600 frames/s a bus; 1 kHz CAN FD: one
 frame a scan, 4,000 frames/s a bus, near what FD at 1/5 Mbit/s carries).
 
-The virtual bus exists in one process only, so the simulators run in the bridge's
-process, one thread a node.  Their CPU is left out of the bridge's (per thread, from
-``/proc/self/task``), but they share the interpreter lock with it: the count of nodes
-one core carries is a lower bound of what a bridge fed by real buses carries.
+The simulators run in processes of their own (``--sender-procs``, 4 by default; a
+bus's nodes in one of them), sending over a loopback datagram bus
+(``benchmarks/udp_bus.py``: one UDP datagram a frame, the sender's time as the frame's
+timestamp) that the bridge opens as a python-can interface like any other: its
+reader threads, routing, assembly, detection and outputs are the product's own, and
+the simulators share neither its interpreter lock nor, with ``--pin``, its CPU (the
+bridge's process on CPU 0; the simulators, the broker and the subscriber on CPU 1).
+``--sender-procs 0`` runs them as before, one thread a node in the bridge's process on
+python-can's virtual buses (whose count of nodes is then a lower bound).  ``--web``
+attaches the web console (no viewer) to the fleet's bridge.
 
 - bridge CPU: the bridge's own threads (readers, loops, paho's network thread, the
   store's), % of one core; per node = that / N.
@@ -45,7 +51,8 @@ one core carries is a lower bound of what a bridge fed by real buses carries.
   more than 0.5 s (the process's interpreter is saturated by bridge and simulators
   together) the step is not carried either, and says so.
 
-Latency (one node, at 100 Hz and 1 kHz): from the arrival of the frame completing
+Latency (one node, at 100 Hz and 1 kHz; its simulator in the bridge's process on a
+virtual bus, as its floor's): from the arrival of the frame completing
 the deciding scan (python-can's message timestamp: the virtual bus stamps at send)
 to the receipt of the DDATA carrying the new state by ``mosquitto_sub`` (its ``%U``
 timestamp, payloads decoded with the ``protobuf`` package from the tests' schema,

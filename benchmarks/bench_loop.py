@@ -4,6 +4,7 @@ machine changes; and what a sink that takes taxel frames adds.
 
     .venv/bin/python benchmarks/bench_loop.py               # every case (~2 min)
     .venv/bin/python benchmarks/bench_loop.py --cases none  # one case
+    .venv/bin/python benchmarks/bench_loop.py --profile none  # where a scan's time goes (cProfile, no valgrind)
 
 Cases (the paper-5x5 profile, its detector, scans from memory with no wait):
 - ``none``: no sink at all: the loop as every command runs it.
@@ -101,11 +102,51 @@ def instructions_per_scan(case: str) -> float:
     return (totals[1] - totals[0]) / 4_000
 
 
+def profile(case: str, scans: int = 4_000, top: int = 20) -> None:
+    """The loop's scans under cProfile: each module's own time and the functions that
+    take most of it, as shares of the whole step (cProfile's overhead weighs every call
+    alike: read the shares, not the microseconds)."""
+    import cProfile
+    import pstats
+
+    run_scans(case, 200)  # imports and first calls out of the way
+    prof = cProfile.Profile()
+    prof.enable()
+    run_scans(case, scans)
+    prof.disable()
+    stats = pstats.Stats(prof).stats  # type: ignore[attr-defined]
+    rows = [(tt, nc, f"{Path(fn).name}:{ln}({name})", fn) for (fn, ln, name), (_, nc, tt, _, _) in stats.items()]
+    total = sum(r[0] for r in rows)
+    by_module: dict[str, float] = {}
+    for tt, _, _, fn in rows:
+        if "eskin_industrial/" in fn:
+            key = fn.split("eskin_industrial/")[-1]
+        else:
+            key = "numpy" if "numpy" in fn else "C calls (numpy's ufuncs, min, max, ...)" if fn == "~" else Path(fn).name
+        by_module[key] = by_module.get(key, 0.0) + tt
+    print(f"# cProfile of {scans} scans, case {case}: {total / scans * 1e6:.0f} us a scan under the profiler")
+    print("| module (own time) | share |")
+    print("|---|---|")
+    for key, tt in sorted(by_module.items(), key=lambda kv: -kv[1])[:top]:
+        print(f"| {key} | {tt / total * 100:.1f} % |")
+    print()
+    print("| function (own time) | calls a scan | share |")
+    print("|---|---|---|")
+    for tt, nc, where, _ in sorted(rows, key=lambda r: -r[0])[:top]:
+        print(f"| {where} | {nc / scans:.2f} | {tt / total * 100:.1f} % |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default=",".join(CASES), help=f"comma-separated, of {', '.join(CASES)}")
     ap.add_argument("--count", nargs=2, metavar=("CASE", "SCANS"), help=argparse.SUPPRESS)
+    ap.add_argument("--profile", metavar="CASE", help="instead: where a scan's time goes in CASE, by cProfile")
     args = ap.parse_args()
+    if args.profile:
+        print(f"# .venv/bin/python benchmarks/bench_loop.py --profile {args.profile}")
+        print(f"# on {describe()}")
+        profile(args.profile)
+        return
     if args.count:
         run_scans(args.count[0], int(args.count[1]))
         return
