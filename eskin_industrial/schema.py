@@ -57,8 +57,10 @@ def non_negative(what: str = "a number >= 0") -> dict[str, Check]:
     return {"check": (lambda v: v >= 0, what)}
 
 
-def in_range(lo: float, hi: float) -> dict[str, Check]:
-    return {"check": (lambda v: lo <= v <= hi, f"a value in [{lo:g}, {hi:g}]")}
+def in_range(lo: float, hi: float) -> dict[str, Any]:
+    """The check, and the bounds as numbers (``"range"``: a teach-in keeps a threshold it
+    sets within them)."""
+    return {"check": (lambda v: lo <= v <= hi, f"a value in [{lo:g}, {hi:g}]"), "range": (lo, hi)}
 
 
 def positive_at_most(hi: float, what: str = "a number") -> dict[str, Check]:

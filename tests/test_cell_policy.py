@@ -138,3 +138,32 @@ def test_each_objects_recipe_grips_lightly_below_its_fixed_grip_and_never_past_i
         cap = crush_cap_n(kind)
         if cap is not None:
             assert fixed <= cap
+
+
+def test_a_creep_too_slow_for_the_repeat_test_is_still_answered_by_the_distance_slid():
+    # 4 mm/s: 0.8 mm per 0.2 s, under repeat_mm (a cup crept so at 4.6 mm/s for 1.9 s with SLIP set
+    # and dropped)
+    plc = gripping()
+    assert plc.run(0.05, SLIP, moving_mm_s=4.0) == 3.0
+    assert plc.run(0.4, SLIP, moving_mm_s=4.0) == 3.0  # 1.4 mm since the raise settled: not yet
+    assert plc.run(0.3, SLIP, moving_mm_s=4.0) == 4.0  # 2 mm from where it stood: another step
+    assert plc.run(1.2, SLIP, moving_mm_s=4.0) == SETTINGS.max_n
+    assert [r.why for r in plc.policy.raises] == ["slip"] + ["still slipping"] * 3
+
+
+def test_a_centre_that_wanders_back_and_forth_under_a_lingering_slip_state_is_no_creep():
+    # the slip state outlasts the slide; a centre of force jittering by a millimetre is not a slide
+    plc = gripping()
+    assert plc.run(0.05, SLIP) == 3.0
+    for _ in range(10):
+        plc.run(0.1, SLIP, moving_mm_s=10.0)  # 1 mm out
+        plc.run(0.1, SLIP, moving_mm_s=-10.0)  # and back
+    assert plc.policy.request_n == 3.0 and [r.why for r in plc.policy.raises] == ["slip"]
+
+
+def test_the_creep_test_can_be_switched_off():
+    from dataclasses import replace
+
+    plc = gripping(replace(SETTINGS, creep_mm=0.0))
+    plc.run(0.05, SLIP, moving_mm_s=4.0)
+    assert plc.run(2.0, SLIP, moving_mm_s=4.0) == 3.0

@@ -1,7 +1,9 @@
 """A client that writes commands as fast as the link goes floods neither the bridge's
 log nor its journal: one ``plc_command`` line per node and command per 10 s, every
 command counted (``commands``).  (The DCMD lines of Sparkplug are limited the same
-way, with the same Throttle: tests/test_sparkplug_commands.py.)"""
+way, with the same Throttle: tests/test_sparkplug_commands.py; past ``command_rate`` a
+DCMD is dropped before it is decoded, counted and logged the same way:
+tests/test_sparkplug_floods.py.)"""
 
 from __future__ import annotations
 
@@ -57,6 +59,10 @@ def test_a_flood_of_dcmds_is_a_few_log_lines_and_every_one_counted(tmp_path):
             subprocess.run([need("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(port), "-q", "1", "-t",
                             "spBv1.0/g/DCMD/e/grip", "-f", str(payload), "--repeat", "300", "--repeat-delay", "0"],
                            check=True, timeout=30)
-            wait_for(lambda: run.counters("grip")["sparkplug_commands"] == 300, timeout_s=10, what="all counted")
+            # taken, or past command_rate dropped undecoded: each one counted
+            wait_for(lambda: run.counters("grip")["sparkplug_commands"] + run.counters("grip")[
+                "sparkplug_commands_shed"] == 300, timeout_s=10, what="all counted")
             lines = run.log.events("sparkplug_command")
+            shed = run.log.events("sparkplug_commands_shed")
     assert len(lines) == 1 and lines[0]["held_back"] == 0
+    assert len(shed) <= 1 and all(e["held_back"] == 0 for e in shed)

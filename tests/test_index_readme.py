@@ -63,7 +63,8 @@ def test_the_index_description_is_current() -> None:
 def test_pyproject_gives_it_as_markdown() -> None:
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert project["readme"] == {"file": "README.index.md", "content-type": "text/markdown"}
-    assert "urls" not in project  # no public home yet: docs/operations.md says when to add it
+    # where the docs are, beside the description (Project-URL; the pages are also in the wheel: eskin-bus docs)
+    assert {"Homepage", "Documentation", "Source", "Issues"} <= set(project["urls"])
 
 
 def test_it_renders_with_no_link_that_goes_nowhere() -> None:

@@ -64,6 +64,12 @@ def test_wheel_carries_profiles_examples_license_and_metadata(installed: tuple[P
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
     assert any(n.startswith("eskin_industrial/scenes/builtin/") for n in names)
     assert "eskin_industrial/data/models/learned.npz" in names  # the learned method's model
+    # the docs (eskin-bus docs): every page of docs/, the file itself, not a link to one
+    pages = sorted((ROOT / "docs").glob("*.md"))
+    with zipfile.ZipFile(wheel) as zf:
+        for page in pages:
+            assert zf.read(f"eskin_industrial/docs/{page.name}") == page.read_bytes(), page.name
+    assert meta.get_all("Project-URL") and any(u.startswith("Documentation, https://") for u in meta.get_all("Project-URL"))
     assert meta["License-Expression"] == "MIT"
     # the index's description: README.md with its links into the checkout made plain (tests/test_index_readme.py)
     assert meta["Description-Content-Type"] == "text/markdown"
@@ -110,6 +116,17 @@ def test_installed_demo_runs_from_an_empty_folder(installed: tuple[Path, Path], 
     assert {"paper-5x5", "hand-4x5", "strip-1x5"} <= {line.split()[0] for line in listed.splitlines()}
     demo = _run([eskin, "demo", "--plain", "--scene", "case2"], tmp_path, timeout=120).stdout
     assert "slip events 1, found 1, false alarms 0" in demo
+
+
+def test_installed_docs_list_and_print_with_no_checkout(installed: tuple[Path, Path], tmp_path: Path) -> None:
+    _, bin_dir = installed
+    eskin = str(bin_dir / "eskin-bus")
+    listed = _run([eskin, "docs"], tmp_path).stdout
+    assert {p.stem for p in (ROOT / "docs").glob("*.md")} <= {line.split()[0] for line in listed.splitlines() if line}
+    shown = _run([eskin, "docs", "plc"], tmp_path).stdout
+    assert shown == (ROOT / "docs" / "plc.md").read_text()
+    where = Path(_run([eskin, "docs", "plc", "--path"], tmp_path).stdout.strip())
+    assert bin_dir.parent in where.parents and not where.is_symlink()  # the install's own copy
 
 
 def test_the_base_install_runs_the_learned_method(installed: tuple[Path, Path], tmp_path: Path) -> None:

@@ -11,9 +11,11 @@ import click
 
 from ..errors import DeprecatedKey, EskinError
 from .bridge_cmd import bridge
+from .completion import completion
 from .console import add_envvars, add_global_verbosity, add_verbosity, sigterm_as_interrupt
 from .demo_cmd import demo
 from .detect_cmd import detect
+from .docs_cmd import DOCS_LINE, docs
 from .evaluate_cmd import evaluate_cmd
 from .examples_cmd import examples
 from .help_tail import add_help_tail
@@ -78,9 +80,9 @@ def _one_line_warning(message: Warning | str, category: type[Warning], filename:
     _show_warning(message, category, filename, lineno, file, line)
 
 
-@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]}, epilog=f"\b\n{DOCS_LINE}")
 @click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
-@click.version_option(package_name="eskin-industrial")
+@click.version_option(package_name="eskin-industrial", message=f"%(prog)s, version %(version)s\n{DOCS_LINE}")
 @click.pass_context
 def main(ctx: click.Context, debug: bool) -> None:
     """Electronic-skin tactile arrays on industrial grippers: decode, detect slip, tell the PLC."""
@@ -108,6 +110,8 @@ main.add_command(monitor)
 main.add_command(examples)
 main.add_command(plant)
 main.add_command(opcua)
+main.add_command(docs)
+main.add_command(completion)
 # After every command is added: -v/-q on each, and each option also from the
 # environment, ESKIN_<COMMAND>_<OPTION> (docs/cli.md).
 add_verbosity(main)

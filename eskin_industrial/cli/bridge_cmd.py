@@ -22,7 +22,10 @@ if TYPE_CHECKING:
     from ..bridge.config import NodeConfig
     from ..bridge.runtime import Bridge
 from .can_common import bus_options
+from .common import complete_profile
+from .completion import complete_source
 from .console import verbosity
+from .extras import check_extras
 from .outputs import given_output_options, node_outputs_from_cli, output_options, outputs_from_cli
 
 
@@ -50,9 +53,9 @@ def node_from_options(profile_path: str, source: str, bus: dict[str, Any], outpu
 @click.command()
 @click.option("--config", "config_path", type=click.Path(dir_okay=False), default=None,
               help="Bridge configuration (TOML): several nodes, each to its own register block.")
-@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None,
+@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None, shell_complete=complete_profile,
               help="One node: its sensor profile (instead of --config).")
-@click.option("--source", default="can", show_default=True, metavar="SPEC",
+@click.option("--source", default="can", show_default=True, metavar="SPEC", shell_complete=complete_source,
               help="One node's scans: can (python-can bus, -i/-c), log:FILE (replay a CAN log), "
                    "rtu:PORT[@BAUD] (poll a Modbus RTU node), scene:NAME (a built-in scene in real time), "
                    "recording:FILE.csv.")
@@ -126,6 +129,9 @@ def bridge(config_path: str | None, profile_path: str | None, source: str, inter
     if check:
         for line in deprecated:
             click.echo(f"eskin-bus: warning: {line}", err=True)
+        # an output or method whose extra is not installed (exit 4, as the run would)
+        check_extras([*(("output", kind) for kind in cfg.output_kinds()),
+                      *(("method", n.profile.detector.method) for n in nodes)])
         probe_outputs(cfg, nodes)  # a server's port is free (the run would fail to listen)
         outputs = output_classes(cfg)
         for n in nodes:

@@ -10,6 +10,7 @@ import click
 
 from ..bus.can.busargs import parse_bus_kwargs, parse_filters, parse_timing
 from ..errors import NothingReceived
+from .completion import complete_interface
 
 if TYPE_CHECKING:
     from ..bus.can.logbus import LogBus
@@ -46,7 +47,7 @@ def bus_options(func: Callable[..., Any]) -> Callable[..., Any]:
         return func(*args, bus_extra=bus_extra(timing, can_filter, bus_kwargs), **kwargs)
 
     opts = [
-        click.option("-i", "--interface", default=None,
+        click.option("-i", "--interface", default=None, shell_complete=complete_interface,
                      help="python-can interface: socketcan, virtual, slcan, pcan, ... "
                           "(default: python-can's configuration, CAN_INTERFACE)."),
         click.option("-c", "--channel", default=None,

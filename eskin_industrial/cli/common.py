@@ -9,23 +9,23 @@ from typing import TypeVar
 
 import click
 import numpy as np
+from click.shell_completion import CompletionItem
 
 from ..calibration import Calibrator, full_scale
 from ..errors import InputFormatError, OutputFileError
 from ..profile import Profile, load_profile
 from ..recording import read_recording
+from .completion import files_for
 
 FC = TypeVar("FC", bound=Callable[..., object])
 
 
-def complete_profile(ctx: click.Context, param: click.Parameter, incomplete: str) -> list:
-    """Shell completion of a profile: the built-in names, then files."""
-    from click.shell_completion import CompletionItem
-
+def complete_profile(ctx: click.Context, param: click.Parameter, incomplete: str) -> list[CompletionItem]:
+    """Shell completion of a profile: the built-in names, then profile files."""
     from ..profile import builtin_profiles
 
     names = [CompletionItem(n) for n in builtin_profiles() if n.startswith(incomplete)]
-    return names + [CompletionItem(incomplete, type="file")]
+    return names + files_for(incomplete, ".toml")
 
 
 def profile_option(required: bool = True) -> Callable[[FC], FC]:

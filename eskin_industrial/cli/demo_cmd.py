@@ -11,7 +11,8 @@ import click
 import numpy as np
 
 from ..methods import method_names
-from .common import open_profile
+from .common import complete_profile, open_profile
+from .completion import complete_scene
 from .outputs import kind_options, outputs_from_cli
 
 if TYPE_CHECKING:
@@ -27,8 +28,8 @@ T = TypeVar("T")
 
 
 @click.command()
-@click.option("--scene", default="hand", show_default=True, help="Scene the node plays (see `simulate --list`).")
-@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--scene", default="hand", show_default=True, shell_complete=complete_scene, help="Scene the node plays (see `simulate --list`).")
+@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None, shell_complete=complete_profile,
               help="Profile: a file or a built-in name (default: the scene's built-in profile).")
 @click.option("--rate", "rate_hz", type=click.FloatRange(min=10.0, max=2000.0), default=100.0, show_default=True)
 @click.option("--seed", type=int, default=7, show_default=True)

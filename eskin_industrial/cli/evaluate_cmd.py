@@ -24,7 +24,8 @@ from ..evaluation.suite import (
     evaluate,
 )
 from ..methods import detector_names, method_names
-from .common import open_profile
+from .common import complete_profile, open_profile
+from .completion import complete_scene
 from .console import Ticker, echo_json, json_alias
 from .evaluate_families import family_names, leave_one_out, list_families, per_family, slip_episodes
 
@@ -52,7 +53,7 @@ def _seeds(value: str) -> tuple[int, ...]:
               type=click.Choice(sorted(method_names()) + ["fixed", "oracle"]),
               help="Method to score (repeatable; default: every detector, not the 'none' baseline; with "
                    "--closed-loop also the baselines fixed and oracle, and all of them by default).")
-@click.option("-s", "--scene", "scenes", multiple=True, help="Scene (repeatable; default: the built-in suite).")
+@click.option("-s", "--scene", "scenes", multiple=True, shell_complete=complete_scene, help="Scene (repeatable; default: the built-in suite).")
 @click.option("--seeds", default="evaluation", show_default=True,
               help="'evaluation' (held out), 'tuning', or seeds and ranges: 0..4,7,10..59")
 @click.option("--rate", "rate_hz", type=click.FloatRange(min=1.0), default=100.0, show_default=True)
@@ -70,7 +71,7 @@ def _seeds(value: str) -> tuple[int, ...]:
                    "(2000-2099, 3.8 h; with --seeds tuning, the 300 tuning seeds 100-399, 11.3 h; with --seeds fresh, "
                    "100 more held out, 2100-2199), "
                    "about 25 s per 100 seeds and method.")
-@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None,
+@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None, shell_complete=complete_profile,
               help="Take the detector settings from this profile's [detector] (default: the built-in defaults).")
 @click.option("--condition", "conditions", multiple=True, metavar="NAME=VALUE",
               help="Push one property of every scene as the failure map does (repeatable), e.g. noise=0.1, "

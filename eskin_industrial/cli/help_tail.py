@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import click
 
+from .docs_cmd import DOCS_LINE
+
 #: Example lines by command path (without "eskin-bus").
 EXAMPLES: dict[str, tuple[str, ...]] = {
     "bridge": ("eskin-bus bridge -p paper-5x5 --source scene:case2 --plc serve:127.0.0.1:1502",
@@ -20,6 +22,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "profile dbc": ("eskin-bus profile dbc hand-4x5 > hand.dbc", "eskin-bus profile dbc --config bridge.toml > plant.dbc"),
     "profile list": ("eskin-bus profile list",),
     "profile init": ("eskin-bus profile init paper-5x5 -o cell.toml",),
+    "profile tune": ("eskin-bus profile tune cell.toml holds.csv --moves moves.csv --write",
+                     "eskin-bus profile tune paper-5x5 holds.csv -o cell.toml   # eskin-bus simulate jittery-hold -o holds.csv"),
     "simulate": ("eskin-bus simulate --list", "eskin-bus simulate case2 -o case2.csv --labels case2-labels.csv"),
     "plot": ("eskin-bus plot -p paper-5x5 case2.csv --labels case2-labels.csv -o case2.png",),
     "evaluate": ("eskin-bus evaluate", "eskin-bus evaluate -m cof-track -s case2 --json"),
@@ -44,6 +48,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "opcua trust": ("eskin-bus opcua trust --pki-dir pki",),
     "opcua user": ("eskin-bus opcua user add users.toml scada --role reader",),
     "opcua user add": ("eskin-bus opcua user add users.toml scada --role reader",),
+    "docs": ("eskin-bus docs", "eskin-bus docs plc   # docs/plc.md"),
+    "completion": ("eskin-bus completion bash > ~/.local/share/bash-completion/completions/eskin-bus",),
 }
 
 
@@ -63,7 +69,8 @@ def add_help_tail(root: click.Group) -> None:
         names = envvars(cmd)
         if names:
             parts.append("Environment: " + ", ".join(names) + " (docs/cli.md).")
-        cmd.epilog = "\n\n".join(parts) or None
+        parts.append(f"\b\n{DOCS_LINE}")  # the pages the text names (docs/X.md): eskin-bus docs X
+        cmd.epilog = "\n\n".join(parts)
         if isinstance(cmd, click.Group):
             for name, sub in cmd.commands.items():
                 visit(sub, f"{path} {name}".strip())

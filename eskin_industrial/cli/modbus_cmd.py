@@ -12,6 +12,7 @@ import click
 
 from .bridge_cmd import bridge
 from .common import host_port, host_value, open_profile, profile_option, scene_or_recording
+from .completion import complete_scene
 from .console import quiet
 
 if TYPE_CHECKING:
@@ -21,7 +22,7 @@ if TYPE_CHECKING:
 @click.command("modbus-node")
 @profile_option()
 @click.option("--port", "port", required=True, help="Serial port to serve on (e.g. one end of a socat pty pair).")
-@click.option("--scene", default=None, help="Built-in scene name or scene .toml.")
+@click.option("--scene", default=None, shell_complete=complete_scene, help="Built-in scene name or scene .toml.")
 @click.option("--recording", type=click.Path(dir_okay=False), default=None, help="Recording CSV (t,f0,... or t,raw0,...).")
 @click.option("--rate", "rate_hz", type=click.FloatRange(min=0.1), default=None,
               help="Scan rate in Hz (default: the recording's, or the profile's for a scene).")

@@ -13,12 +13,13 @@ if TYPE_CHECKING:
 
 from .can_common import bus_options, log_bus
 from .common import open_profile, profile_option, scene_or_recording
+from .completion import complete_scene
 
 
 @click.command()
 @profile_option()
 @bus_options
-@click.option("--scene", default=None, help="Scene to send (from the scene simulator).")
+@click.option("--scene", default=None, shell_complete=complete_scene, help="Scene to send (from the scene simulator).")
 @click.option("--recording", "recording", type=click.Path(dir_okay=False), default=None,
               help="Recording CSV to send instead (t,f0,... newtons or t,raw0,... raw).")
 @click.option("--rate", "rate_hz", type=float, default=None,

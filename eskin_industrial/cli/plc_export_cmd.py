@@ -13,7 +13,7 @@ from .. import __version__
 from ..outputs.plc.export import codesys_st, flat_csv, ident, tia_xlsx
 from ..outputs.plc.plcopen import plcopen_xml
 from ..profile import ModbusPlcSection
-from .common import open_profile
+from .common import complete_profile, open_profile
 
 #: File name (the node's or profile's name in it) of each format.
 _FILES = {"codesys": "eskin_{}.st", "plcopen": "eskin_{}.xml", "tia": "eskin_{}_tags.xlsx",
@@ -31,7 +31,7 @@ class _Block:
 
 
 @click.command("export")
-@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False),
+@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), shell_complete=complete_profile,
               help="Sensor profile: a TOML file, or a built-in name (eskin-bus profile list), e.g. paper-5x5.")
 @click.option("--config", "config_path", type=click.Path(dir_okay=False),
               help="A bridge configuration: one file per node, tags prefixed with the node's name, each at its "

@@ -1,19 +1,18 @@
-"""``eskin-bus plot``: a recording's indicators over time, states shaded, as a PNG."""
+"""``eskin-bus plot``: a recording's force, scores, detected states and truth over time, as a PNG
+(the figure: plot_figure.py)."""
 
 from __future__ import annotations
-
-from typing import Any
 
 import click
 import numpy as np
 
-from ..detect.state import GraspState
+from ..detect.state import LABELS, GraspState
 from ..errors import InputFormatError
 from ..methods import method_names
-from ..offline import detect_can_log, detect_recording
+from ..offline import Detected, detect_can_log, detect_recording
+from ..profile import Profile
 from .common import open_profile, profile_option
-
-STATE_COLOURS = {GraspState.SLIP: "tab:red", GraspState.VARIABLE_FORCE: "tab:orange"}
+from .plot_figure import PlotData, centre_of_force, state_figure
 
 
 @click.command()
@@ -27,8 +26,9 @@ STATE_COLOURS = {GraspState.SLIP: "tab:red", GraspState.VARIABLE_FORCE: "tab:ora
               help="Ground truth (t,label, from `eskin-bus simulate --labels`) drawn under the states.")
 def plot(profile_path: str, input_path: str | None, can_log: str | None, output: str, method: str | None,
          labels_path: str | None) -> None:
-    """Draw total force, the two indicators and the detected states of a recording
-    (or of a CAN log, through the live receiver's decoding)."""
+    """Draw a recording's total force, the method's two scores, the detected states
+    as coloured bands and, with --labels, the truth in a lane below (or a CAN log's,
+    through the live receiver's decoding)."""
     if (input_path is None) == (can_log is None):
         raise click.UsageError("give exactly one of REC.csv or --can-log LOG")
     try:
@@ -46,31 +46,9 @@ def plot(profile_path: str, input_path: str | None, can_log: str | None, output:
     else:
         assert input_path is not None  # exactly one of the two, checked above
         found = detect_recording(prof, input_path, method=method)
-    assert found.t is not None and found.forces is not None  # (kept: asked for, or a recording's)
-    t, values, name, rate, chosen, table = found.t, found.forces, found.name, found.rate_hz, found.method, found.table
-    col_a, col_b = (s.name for s in chosen.scores)  # the deciding method's own scores
-
-    fig, (ax_f, ax_r) = plt.subplots(2, 1, figsize=(11, 6), sharex=True, gridspec_kw={"height_ratios": [1, 2]})
-    ax_f.plot(t, np.nansum(values, axis=1), color="k", lw=0.8)
-    ax_f.set_ylabel("total force (N)")
-    if labels_path is not None:
-        _shade_labels(ax_r, labels_path)
-    for state, colour in STATE_COLOURS.items():
-        on = table.state == state
-        ax_r.fill_between(table.t, 0, 1, where=on, transform=ax_r.get_xaxis_transform(), color=colour,
-                          alpha=0.35, step="post", lw=0, label=f"detected {state.label}")
-    ax_r.plot(table.t, table.score_a, lw=1.0, label=col_a)
-    ax_r.plot(table.t, table.score_b, lw=1.0, label=col_b)
-    if chosen.name.startswith("paper"):
-        ax_r.axhline(prof.detector.slip_r_coe, color="k", ls="--", lw=0.8, label="slip threshold")
-    else:
-        ax_r.axhline(1.0, color="k", ls="--", lw=0.8, label="threshold")
-    ax_r.set_yscale("symlog", linthresh=1.0)
-    ax_r.set_ylim(bottom=0.0)
-    ax_r.set_xlabel("time (s)")
-    ax_r.legend(fontsize=8, ncol=3, loc="upper left")
-    fig.suptitle(f"{name}: {chosen.name} on {prof.name}, {rate:.0f} Hz")
-    fig.tight_layout()
+    data = plot_data(prof, found, labels_path)
+    table = found.table
+    fig = state_figure(plt, data)
     try:
         fig.savefig(output, dpi=100)
     except OSError as exc:
@@ -81,11 +59,27 @@ def plot(profile_path: str, input_path: str | None, can_log: str | None, output:
                + ", ".join(f"{s.label} {int(np.sum(table.state == s))}" for s in GraspState), err=True)
 
 
-def _shade_labels(ax: Any, path: str) -> None:
-    data = np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="utf-8")
-    t, labels = np.atleast_1d(data["t"]), np.atleast_1d(data["label"])
-    from ..evaluation.metrics import spans
+def plot_data(prof: Profile, found: Detected, labels_path: str | None) -> PlotData:
+    """What the figure shows of a detection run (and of its truth, ``--labels``)."""
+    assert found.t is not None and found.forces is not None  # (kept: asked for, or a recording's)
+    t, values, name, rate, chosen, table = found.t, found.forces, found.name, found.rate_hz, found.method, found.table
+    col_a, col_b = (s.name for s in chosen.scores)  # the deciding method's own scores
+    if chosen.name.startswith("paper"):
+        threshold, threshold_name = prof.detector.slip_r_coe, "slip threshold"
+    else:
+        threshold, threshold_name = 1.0, "threshold"
+    return PlotData(t=t, total_n=np.nansum(values, axis=1),
+                    centre_mm=centre_of_force(values, *prof.layout.coordinates_mm()), update_t=table.t,
+                    states=np.asarray(LABELS)[np.asarray(table.state, dtype=int)],
+                    scores=((col_a, table.score_a), (col_b, table.score_b)), threshold=threshold,
+                    threshold_name=threshold_name, title=f"{name}: {chosen.name} on {prof.name}, {rate:.0f} Hz",
+                    truth=_read_labels(labels_path) if labels_path is not None else None)
 
-    for label, colour in (("slip", "tab:red"), ("variable_force", "tab:orange")):
-        for a, b in spans(labels == label):
-            ax.axvspan(t[a], t[b - 1], ymax=0.06, color=colour, alpha=0.9, lw=0)
+
+def _read_labels(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """The ground truth's (t, label) columns, as ``simulate --labels`` writes them."""
+    data = np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    try:
+        return np.atleast_1d(data["t"]).astype(float), np.atleast_1d(data["label"]).astype(str)
+    except (ValueError, TypeError):
+        raise InputFormatError(f"--labels: {path}: expected the columns t,label") from None

@@ -14,12 +14,16 @@ from ..errors import DeprecatedKey, ProfileError
 from ..profile import Profile, builtin_profiles, load_profile
 from .common import complete_profile
 from .console import echo_json, json_alias
+from .profile_tune import tune
 from .toml_out import dumps
 
 
 @click.group()
 def profile() -> None:
     """Validate and inspect sensor profiles."""
+
+
+profile.add_command(tune)
 
 
 @profile.command()

@@ -6,12 +6,13 @@ import click
 
 from ..recording import write_recording
 from ..scenes import Rendered, list_scenes, render
-from .common import check_output, open_profile, writing
+from .common import check_output, complete_profile, open_profile, writing
+from .completion import complete_scene
 from .console import PROGRESS_DELAY_S, Ticker
 
 
 @click.command()
-@click.argument("scene", required=False)
+@click.argument("scene", required=False, shell_complete=complete_scene)
 @click.option("-o", "--output", default=None, type=click.Path(dir_okay=False, allow_dash=True),
               help="Recording CSV (t,f0,...) in newtons ('-' for stdout, the default without --can-log).")
 @click.option("--labels", "labels_path", type=click.Path(dir_okay=False), default=None,
@@ -23,7 +24,7 @@ from .console import PROGRESS_DELAY_S, Ticker
 @click.option("--can-log", "can_log", default=None, type=click.Path(dir_okay=False, allow_dash=True), metavar="FILE",
               help="Write the scene as the profile's CAN node sends it (-p) to a CAN log, stamped from 0 at the scene's "
                    "rate (python-can's writer by suffix: .asc, .blf, .csv, .log candump, .trc; '-': candump -L on stdout).")
-@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None,
+@click.option("-p", "--profile", "profile_path", type=click.Path(dir_okay=False), default=None, shell_complete=complete_profile,
               help="With --can-log: the node's profile (default: the scene's own, e.g. paper-5x5).")
 @click.option("--list", "list_only", is_flag=True, help="List the built-in scenes and exit.")
 def simulate(scene: str | None, output: str | None, labels_path: str | None, rate_hz: float, seed: int,

@@ -18,7 +18,7 @@ from ..progress import NO_PROGRESS, Prefixed, Progress
 from ..scenes import render
 from .conditions import CONDITIONS
 from .plotting import pyplot
-from .shading import shade_labels
+from .shading import LABEL_COLOURS, shade_labels
 from .suite import DEFAULT_SETTINGS, EVALUATION_SEEDS, SUITE, evaluate, run_one
 from .sweeps import defaults, sweep
 
@@ -48,7 +48,7 @@ def accuracy_charts(out: Path, seeds: tuple[int, ...], log: Any, progress: Progr
         rows.append({"family": family, "label": label, "f1": s.f1, "delay_ms": d50 * 1000 if np.isfinite(d50) else np.nan,
                      "us": res.us_per_frame, "fa_h": s.false_alarms_per_hour, "vf": s.vf_as_slip,
                      "still_min": s.still_changes_per_min, "vf_min": s.vf_changes_per_min})
-        log(f"  {family:12s} {label:24s} F1 {s.f1:.2f} delay {rows[-1]['delay_ms']:.0f} ms cost {res.us_per_frame:.1f} us "
+        log(f"  {family:12s} {label:24s} F1 {s.f1:.2f} delay {rows[-1]['delay_ms']:.0f} ms cost {res.us_per_frame:.1f} µs "
             f"changes {s.still_changes_per_min:.2f}/min still, {s.vf_changes_per_min:.0f}/min varying")
     # each method's default with its own varying-force evidence, as before the state had its own
     own = []
@@ -62,8 +62,8 @@ def accuracy_charts(out: Path, seeds: tuple[int, ...], log: Any, progress: Progr
     _delay_vs_changes(out, rows, own, seeds)
     plt = pyplot()
     for key, xlabel, name in (("delay_ms", "median detection delay (ms)", "accuracy-vs-delay.png"),
-                              ("us", "cost per frame (us, streaming, one core)", "accuracy-vs-cost.png")):
-        fig, ax = plt.subplots(figsize=(8, 5.5))
+                              ("us", "cost per frame (µs, streaming, one core)", "accuracy-vs-cost.png")):
+        fig, ax = plt.subplots(figsize=(9.5, 5.5), layout="constrained")
         pts = [(r[key] if np.isfinite(r[key]) else 3000.0, r["f1"]) for r in rows]
         front = set(pareto(pts))
         for fam in COLOURS:
@@ -76,9 +76,8 @@ def accuracy_charts(out: Path, seeds: tuple[int, ...], log: Any, progress: Progr
         ax.set_ylabel("event-level slip F1")
         ax.set_ylim(-0.02, 1.02)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="lower right")
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="method")  # clear of the points
         ax.set_title(f"Each point a method at one setting; built-in suite, seeds {seeds[0]}..{seeds[-1]}")
-        fig.tight_layout()
         fig.savefig(out / name, dpi=110)
         plt.close(fig)
     return rows
@@ -94,7 +93,7 @@ def _delay_vs_changes(out: Path, rows: list[dict[str, Any]], own: list[dict[str,
     lower delay and fewer changes marked; hollow: each method's default with its own
     varying-force evidence (the state before it had evidence of its own)."""
     plt = pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5))
+    fig, axes = plt.subplots(1, 2, figsize=(14.5, 5.5), layout="constrained")
     for ax, key, ylabel in ((axes[0], "still_min", "state changes per minute in still holds"),
                             (axes[1], "vf_min", "state changes per minute inside varying forces")):
         pts = [(r["delay_ms"] if np.isfinite(r["delay_ms"]) else 3000.0, r[key]) for r in rows]
@@ -115,9 +114,9 @@ def _delay_vs_changes(out: Path, rows: list[dict[str, Any]], own: list[dict[str,
         ax.set_xlabel("median slip detection delay (ms); no detection at all plotted at 3000")
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7, loc="upper left")
+    # one legend for both, right of them: clear of the points
+    axes[1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="method")
     fig.suptitle(f"Slip delay against how often the state changes; built-in suite, seeds {seeds[0]}..{seeds[-1]}")
-    fig.tight_layout()
     fig.savefig(out / "delay-vs-changes.png", dpi=110)
     plt.close(fig)
 
@@ -125,9 +124,11 @@ def _delay_vs_changes(out: Path, rows: list[dict[str, Any]], own: list[dict[str,
 def figure3(out: Path, seed: int, progress: Progress = NO_PROGRESS) -> None:
     """The paper's Figure 3 redone: R_coe, R_dw over time, truth shaded, threshold drawn."""
     plt = pyplot()
+    from matplotlib.patches import Patch
+
     scenes = ("case1", "case2", "case3", "case4", "case5", "case6", "hand")
     progress.stage("figure 3", len(scenes))
-    fig, axes = plt.subplots(len(scenes), 1, figsize=(10, 2.0 * len(scenes)), sharex=False)
+    fig, axes = plt.subplots(len(scenes), 1, figsize=(10, 2.0 * len(scenes)), sharex=False, layout="constrained")
     settings = DetectorSettings(method="paper")
     for ax, scene in zip(axes, scenes):
         rec = render(scene, 100.0, seed)
@@ -141,10 +142,13 @@ def figure3(out: Path, seed: int, progress: Progress = NO_PROGRESS) -> None:
         ax.set_ylabel(scene)
         ax.set_xlim(rec.t[0], rec.t[-1])
         progress.advance(1, f"figure 3: {scene}")
-    axes[0].legend(fontsize=8, ncol=3, loc="upper right")
-    axes[-1].set_xlabel("time (s); shaded: slip (red), varying force (orange), transition (grey)")
+    axes[-1].set_xlabel("time (s)")
     fig.suptitle(f"Paper indicators on the paper's scenes (100 Hz, seed {seed})")
-    fig.tight_layout()
+    # under the lanes, clear of every one's data: the lines and what the shading means
+    handles, labels = axes[0].get_legend_handles_labels()
+    handles += [Patch(facecolor=LABEL_COLOURS[label], alpha=0.3, label=f"truth: {label.replace('_', ' ')}")
+                for label in ("slip", "variable_force", "transition")]
+    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
     fig.savefig(out / "figure3-indicators.png", dpi=100)
     plt.close(fig)
 
@@ -173,7 +177,7 @@ def failure_map(out: Path, seeds: tuple[int, ...], log: Any,
             table[cond][_VF].append(res["cof-track"].score.vf_recall)
             log(f"  {cond:9s} {v:>8g}: " + " ".join(f"{m} {r.score.f1:.2f}" for m, r in res.items()))
     plt = pyplot()
-    fig, axes = plt.subplots(3, 3, figsize=(13, 10.5))
+    fig, axes = plt.subplots(3, 3, figsize=(13, 11), layout="constrained")
     for ax, (cond, (axis, values, _f)) in zip(axes.flat, CONDITIONS.items()):
         for m, f1 in table[cond].items():
             if m == _VF:
@@ -186,9 +190,9 @@ def failure_map(out: Path, seeds: tuple[int, ...], log: Any,
         ax.grid(alpha=0.3)
     for row in axes:
         row[0].set_ylabel("slip F1; varying-force recall")
-    axes[0, 0].legend(fontsize=7)
     fig.suptitle(f"Failure map: one condition pushed at a time (scenes {', '.join(scenes)}; seeds {seeds[0]}..{seeds[-1]})")
-    fig.tight_layout()
+    # one legend for the nine, under them: clear of every panel's lines
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=4, fontsize=8, frameon=False)
     fig.savefig(out / "failure-map.png", dpi=100)
     plt.close(fig)
     return table

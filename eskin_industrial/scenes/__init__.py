@@ -75,6 +75,8 @@ def render(name_or_path: str | SceneSpec, rate_hz: float, seed: int, stream: int
         force = force * physics.force_drop_factor(t, events, rng)
     jitter, ripple = physics.stick_slip(t, events, rng)
     centre = np.asarray(spec.footprint.centre_mm)[None, :] + physics.slide_offset(t, events) + jitter
+    if spec.sensor.cof_jitter_mm:  # (drawn only when asked for: the other scenes' draws stay as they were)
+        centre = centre + physics.cof_jitter(t, spec.sensor.cof_jitter_mm, spec.sensor.cof_jitter_hz, rng)
     if physics.needs_sampling(spec.footprint, events):
         angle = physics.rotation_deg(t, events, spec.footprint.angle_deg)
         gradient = np.asarray(spec.footprint.gradient_per_mm)[None, :] + physics.lift_off_gradient(t, events)

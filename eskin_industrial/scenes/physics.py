@@ -94,6 +94,25 @@ def stick_slip(t: np.ndarray, events: tuple[Event, ...], rng: np.random.Generato
     return jitter, factor
 
 
+def cof_jitter(t: np.ndarray, amplitude_mm: float, band_hz: float, rng: np.random.Generator) -> np.ndarray:
+    """A held contact's wander (K, 2) mm: white noise per axis kept below ``band_hz``
+    (a Gaussian roll-off, so it has no ringing edge), scaled so that its largest
+    excursion on each axis is ``amplitude_mm`` (the scene's jitter reaches its bound
+    once, whatever its length).  No amplitude: zeros, and nothing drawn."""
+    out = np.zeros((t.size, 2))
+    if amplitude_mm <= 0 or t.size < 2:
+        return out
+    dt = float(np.median(np.diff(t)))
+    freq = np.fft.rfftfreq(t.size, dt)
+    gain = np.exp(-0.5 * (freq / band_hz) ** 2)
+    for axis in range(2):
+        wander = np.fft.irfft(np.fft.rfft(rng.standard_normal(t.size)) * gain, n=t.size)
+        wander -= wander.mean()
+        peak = float(np.abs(wander).max())
+        out[:, axis] = amplitude_mm * wander / peak if peak > 0 else 0.0
+    return out
+
+
 def drawn(values: tuple[float, ...], rng: np.random.Generator) -> float:
     """One value, or a draw from the range ``[low, high]``."""
     return float(values[0]) if len(values) == 1 else float(rng.uniform(values[0], values[1]))

@@ -166,6 +166,11 @@ class SensorEffects:
     #: Crosstalk: each taxel also reads this fraction of each of its (up to four)
     #: row and column neighbours' forces.
     crosstalk: float = field(default=0.0, metadata=in_range(0.0, 0.25))
+    #: A jittery mount: the contact's centre wanders by up to this far (mm, each axis)
+    #: while it is held, a smooth random motion with nothing sliding (a gripper's
+    #: servo hunting, a compliant finger); 0: none.  Its band reaches ``cof_jitter_hz``.
+    cof_jitter_mm: float = field(default=0.0, metadata=in_range(0.0, 10.0))
+    cof_jitter_hz: float = field(default=3.0, metadata=in_range(0.01, 50.0))
 
 
 @dataclass(frozen=True)

@@ -4,10 +4,17 @@ A host application writes a device's command metrics, declared in its DBIRTH; ea
 becomes the same :class:`~eskin_industrial.node.Command` a PLC's COMMAND or ENABLE
 write gives, and is refused under the same rule (:func:`~eskin_industrial.node.refusal`:
 no tare while something is held, or while the detector cannot say).
+
+A host may send commands as fast as the broker goes: they are parsed where they arrive
+(paho's thread) and wait for the node's loop in a :class:`Mailbox` of at most one
+command of each kind, so that the loop applies a few per scan whatever the flood; and
+their log lines name a few and count the rest (:func:`summary`, :func:`clip`).
 """
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Sequence
 from typing import NamedTuple
 
 from ...node import Command, CommandName
@@ -34,6 +41,100 @@ _BY_NAME = {c.name: i for i, c in enumerate(COMMANDS)}
 
 class BadCommand(ValueError):
     """A DCMD that is not one of this device's commands (one line: what is wrong)."""
+
+
+#: A text a command's log line quotes (an error, a topic, the commands) is cut to this
+#: many characters: a DCMD of thousands of metrics, or a metric name of 60,000
+#: characters, is still one line of a readable length.
+MAX_FIELD_CHARS = 200
+#: The commands a line names before "... and N more".
+NAMED = 4
+
+
+def clip(text: str, limit: int = MAX_FIELD_CHARS) -> str:
+    """``text`` cut to ``limit`` characters, saying how many were left off."""
+    if len(text) <= limit:
+        return text
+    tail = f"... ({len(text) - limit} more characters)"
+    return text[: max(limit - len(tail), 0)] + tail
+
+
+def summary(names: Sequence[str], named: int = NAMED) -> str:
+    """The first ``named`` names, then how many more, within :data:`MAX_FIELD_CHARS`."""
+    head = ",".join(names[:named])
+    rest = len(names) - named
+    return clip(head if rest <= 0 else f"{head} ... and {rest} more")
+
+
+def kind_of(command: Command) -> str:
+    """The slot a command takes in the mailbox: enable and disable share one."""
+    return "enable" if command.name in ("enable", "disable") else command.name
+
+
+class Mailbox:
+    """The commands of one device waiting for the node's loop: at most one of each
+    kind (tare, ack, enable/disable), the newest winning and going last; what it
+    replaces is counted as dropped.  Safe from any thread."""
+
+    def __init__(self) -> None:
+        self._slots: dict[str, Command] = {}
+        self._lock = threading.Lock()
+
+    def put(self, commands: Sequence[Command]) -> int:
+        """Post ``commands`` in order; the number of commands dropped (replaced)."""
+        dropped = 0
+        with self._lock:
+            slots = self._slots
+            for cmd in commands:
+                kind = kind_of(cmd)
+                if slots.pop(kind, None) is not None:
+                    dropped += 1
+                slots[kind] = cmd
+        return dropped
+
+    def take(self) -> list[Command]:
+        """Everything posted since the last take, in the order of the newest of each kind."""
+        with self._lock:
+            out = list(self._slots.values())
+            self._slots.clear()
+        return out
+
+    def __len__(self) -> int:
+        return len(self._slots)
+
+
+#: A command message costs one token per this many bytes (one at least): decoding
+#: costs by the byte (some 1.5 us each in pure Python), a DCMD of 5,000 metrics
+#: (195 kB) as much as 2,400 of two.
+BUDGET_BYTES = 256
+
+
+class Budget:
+    """A token bucket: ``rate`` tokens a second, bursts of ``rate`` (one at least):
+    what the commands of one topic may cost paho's thread.  A message takes one token
+    per :data:`BUDGET_BYTES`; it passes while a token is left, and a large one leaves
+    the bucket in debt for as long as its cost takes to refill.  Past it a message is
+    dropped before it is decoded (decoding is the cost: a flood decoded whole kept the
+    loop's thread from the interpreter, and a healthy sensor read stale).  Used from
+    paho's thread alone; the clock is handed in."""
+
+    __slots__ = ("rate", "burst", "_tokens", "_at")
+
+    def __init__(self, rate: float) -> None:
+        self.rate = rate
+        self.burst = max(rate, 1.0)
+        self._tokens = self.burst
+        self._at: float | None = None
+
+    def take(self, now: float, size: int = 0) -> bool:
+        """Whether a message of ``size`` bytes passes at ``now`` (it is charged if so)."""
+        if self._at is not None:
+            self._tokens = min(self.burst, self._tokens + (now - self._at) * self.rate)
+        self._at = now
+        if self._tokens < 1.0:
+            return False
+        self._tokens -= max(1.0, size / BUDGET_BYTES)
+        return True
 
 
 def parse_device_command(payload: pb.Payload, base: int) -> list[Command]:

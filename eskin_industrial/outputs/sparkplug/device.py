@@ -9,14 +9,13 @@ publish (a frame is a sample of now: the store keeps the states, not stale frame
 
 from __future__ import annotations
 
-import collections
 import time
 from typing import TYPE_CHECKING, Any
 
 from ...node import Command, NodeSnapshot, refusal
 from ..base import Sink, SinkHealth
 from . import payload as pb
-from .commands import BadCommand, birth_metrics, parse_device_command
+from .commands import BadCommand, Mailbox, birth_metrics, parse_device_command, summary
 from .edge import NAMESPACE, EdgeNode, now_ms
 from .metrics import ANALOG, DEVICE_METRICS, ENABLE_COMMAND, ENABLED, FLOATS, FRAME_ALIAS, FRAME_METRIC, metric_values
 from .properties import Property
@@ -44,15 +43,18 @@ class SparkplugDevice(Sink):
         self.sent_at = [float("-inf")] * len(DEVICE_METRICS)
         self.dead = False
         self.snapshot: NodeSnapshot | None = None  #: the newest published (for a command's refusal)
-        self._commands: collections.deque[Command] = collections.deque()
+        #: What the loop has yet to apply: one command of each kind at most (a flood
+        #: of DCMDs never reaches the scan path as a flood).
+        self._commands = Mailbox()
         self.frame_every_s = node.options.frame_interval_s or None
         self.frame: bytes | None = None  #: the newest frame handed, packed (births declare it)
         self.frame_sent: bytes | None = None  #: the frame last sent (a DBIRTH or a DDATA)
         self.frames = self.frames_not_sent = self.frames_lost = 0
 
     def command(self, payload: pb.Payload, topic: str) -> None:
-        """A DCMD for this device (paho's thread): queued for the loop, or refused as a
-        whole under the PLC's rule, or counted as malformed."""
+        """A DCMD for this device (paho's thread): posted for the loop (the newest of
+        each kind wins, the ones it replaces counted as dropped), or refused as a whole
+        under the PLC's rule, or counted as malformed; its line names a few commands."""
         node = self.node
         try:
             cmds = parse_device_command(payload, self.base)
@@ -68,8 +70,8 @@ class SparkplugDevice(Sink):
                 self._logged("sparkplug_command_refused", "warning", command=cmd.name, reason=why)
                 return
         node.commands += len(cmds)
-        self._commands.extend(cmds)
-        self._logged("sparkplug_command", "info", commands=",".join(c.name for c in cmds))
+        node.commands_dropped += self._commands.put(cmds)
+        self._logged("sparkplug_command", "info", commands=summary([c.name for c in cmds]), count=len(cmds))
 
     def _logged(self, name: str, level: str, **fields: Any) -> None:
         """A DCMD's line: at most one per name per LOG_EVERY_S (a host may send them as
@@ -85,11 +87,7 @@ class SparkplugDevice(Sink):
         self.death()
 
     def take_commands(self) -> list[Command]:
-        out = []
-        commands = self._commands
-        while commands:
-            out.append(commands.popleft())
-        return out
+        return self._commands.take()
 
     def birth(self) -> None:
         """DBIRTH: every metric with name, alias, datatype, unit and its newest value."""

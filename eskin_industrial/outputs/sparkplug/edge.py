@@ -32,12 +32,14 @@ from ...errors import EskinError
 from ...ratelimit import Throttle
 from . import payload as pb
 from .bdseq import BdSeqFile, bdseq_path
+from .commands import Budget, clip
 from .metrics import FRAME_ALIAS, REBIRTH
 from .options import SparkplugOptions, nonconforming
 from .store import Forwarder, Held, store_path
 from .transport import parse_broker
 
 NAMESPACE = "spBv1.0"
+_REBIRTH_BYTES = REBIRTH.encode()
 
 
 class Device(Protocol):
@@ -84,6 +86,14 @@ def now_ms() -> int:
 class EdgeNode:
     """One MQTT connection, the edge node's births and deaths, ``seq`` and ``bdSeq``."""
 
+    #: A device's DCMD topic that sheds more than this many times ``command_rate``
+    #: within a second is a flood: it is unsubscribed for :attr:`FLOOD_PAUSE_S` (the
+    #: broker drops it then, not paho's thread, whose every message costs the loop's
+    #: thread the interpreter), then subscribed again.  NCMDs are never paused: a
+    #: rebirth request must be answered.
+    FLOOD_FACTOR = 10
+    FLOOD_PAUSE_S = 1.0
+
     #: A data message written at QoS 0 and not seen back from the broker after this
     #: long stops being tracked and is counted (``sparkplug_unconfirmed``): the broker
     #: does not hand this edge node its own DDATA (an access rule, say).
@@ -116,6 +126,23 @@ class EdgeNode:
         self._life = threading.Lock()  #: start, a new session after the host left, close
         self.published = self.dropped = self.connects = self.failures = self.bad_commands = self.rebirths = 0
         self.unknown_devices = self.commands = self.commands_refused = self.bad_states = 0
+        #: Commands folded into one of the same kind still waiting for the loop (newest wins).
+        self.commands_dropped = 0
+        #: Commands dropped undecoded, past ``command_rate`` on their topic; the budgets by topic.
+        self.commands_shed = 0
+        self._budgets: dict[str, Budget] = {}
+        #: Flooded DCMD topics: (start of the second, shed in it); the paused ones' timers.
+        self.command_pauses = 0
+        self._shed_window: dict[str, tuple[float, int]] = {}
+        self._paused: dict[str, threading.Timer] = {}
+        #: STATEs not taken, per reason: "future" (stamped implausibly ahead of our
+        #: clock, refused), "older" (than the newest taken), "malformed" (bad_states).
+        self.states_ignored = {"future": 0, "older": 0, "malformed": 0}
+        self.states_logged = Throttle()  #: the first STATE ignored of each reason, then one a LOG_EVERY_S
+        #: Node Control/Rebirth: the requests, those answered by a rebirth already due.
+        self.rebirth_requests = self.rebirths_coalesced = 0
+        self._births_at = float("-inf")  #: when the last births went (monotonic)
+        self._rebirth_timer: threading.Timer | None = None  #: a rebirth due at the end of the interval
         self.resent = self.unconfirmed = self.host_sessions_ended = 0
         self._bad_logged: dict[str, tuple[float, int]] = {}
         self.commands_logged = Throttle()  #: the DCMD lines, per device and event
@@ -310,6 +337,7 @@ class EdgeNode:
         name alone (tck-id-operational-behavior-data-commands-rebirth-name-aliases)."""
         with self.lock:
             self.seq = 0
+            self._births_at = time.monotonic()
             now = now_ms()
             metrics = (pb.Metric("bdSeq", 1, now, pb.INT64, self.bd_seq),
                        pb.Metric(REBIRTH, None, now, pb.BOOLEAN, False),
@@ -403,6 +431,8 @@ class EdgeNode:
                 self.unknown_devices += 1
                 self._bad("sparkplug_unknown_device", topic, "no such device on this edge node")
                 return
+        if not self._within_budget(topic, message.payload, device):
+            return
         try:
             cmd = pb.decode(message.payload)
         except EskinError as exc:  # malformed: counted and dropped, never a crash
@@ -418,9 +448,95 @@ class EdgeNode:
             self.bad_commands += 1
             self._bad("sparkplug_bad_command", topic, f"expected {REBIRTH} = true")
             return
-        self.rebirths += 1
+        self._rebirth_requested()
+
+    def _within_budget(self, topic: str, data: bytes, device: Device | None) -> bool:
+        """Whether a command on ``topic`` is within ``command_rate``; past it, counted,
+        logged (one line per topic per LOG_EVERY_S) and dropped undecoded.  An NCMD
+        that names Node Control/Rebirth is still a request (coalesced with the rebirth
+        the ones before it asked for: a request is answered even in a flood, and at
+        most one rebirth an interval goes whatever the requests hold)."""
+        budget = self._budgets.get(topic)
+        if budget is None:
+            budget = self._budgets[topic] = Budget(self.options.command_rate)
+        now = time.monotonic()
+        if budget.take(now, len(data)):
+            return True
+        self.commands_shed += 1
+        if device is not None:
+            self._flooded(topic, now, device)
+        held = self.commands_logged.passes((topic, "shed"))
+        if held is not None:
+            target = device if device is not None else (self.devices[0] if self.devices else None)
+            if target is not None:
+                target._event("sparkplug_commands_shed", "warning", topic=clip(topic),
+                              rate=self.options.command_rate, held_back=held)
+        if device is None and _REBIRTH_BYTES in data:
+            self._rebirth_requested()
+        return False
+
+    def _flooded(self, topic: str, now: float, device: Device) -> None:
+        """A DCMD shed on ``topic``: past FLOOD_FACTOR times the rate within a second,
+        the topic is unsubscribed for FLOOD_PAUSE_S (paho's thread)."""
+        start, n = self._shed_window.get(topic, (now, 0))
+        if now - start > 1.0:
+            start, n = now, 0
+        n += 1
+        self._shed_window[topic] = (start, n)
+        if n <= self.FLOOD_FACTOR * self.options.command_rate or topic in self._paused:
+            return
+        del self._shed_window[topic]
         with self.lock:
+            if self.stopping:
+                return
+            self.command_pauses += 1
+            self.client.unsubscribe(topic)
+            timer = self._paused[topic] = threading.Timer(self.FLOOD_PAUSE_S, self._resume, (topic,))
+            timer.name, timer.daemon = "sparkplug-resume", True
+            timer.start()
+        held = self.commands_logged.passes((topic, "paused"))
+        if held is not None:
+            device._event("sparkplug_commands_paused", "warning", topic=clip(topic), pause_s=self.FLOOD_PAUSE_S,
+                          held_back=held)
+
+    def _resume(self, topic: str) -> None:
+        """The pause of a flooded DCMD topic is over: subscribed again (a new session
+        subscribed it already)."""
+        with self.lock:
+            self._paused.pop(topic, None)
+            if self.session and not self.stopping:
+                self.client.subscribe(topic, 1)
+
+    def _rebirth_requested(self) -> None:
+        """A Node Control/Rebirth (paho's thread): answered by births now, or, within
+        ``rebirth_min_interval_s`` of the last ones, by one rebirth at its end that
+        answers every request until then, counted as coalesced but the first (a host
+        that floods them gets one rebirth an interval, not one each: each is every
+        metric of the node and its devices)."""
+        with self.lock:
+            self.rebirth_requests += 1
+            if not self.connected or self.stopping:
+                return  # the births when the node goes live answer it
+            if self._rebirth_timer is not None:
+                self.rebirths_coalesced += 1
+                return
+            wait = self._births_at + self.options.rebirth_min_interval_s - time.monotonic()
+            if wait <= 0:
+                self.rebirths += 1
+                self.births()
+                return
+            self._rebirth_timer = threading.Timer(wait, self._rebirth_due)
+            self._rebirth_timer.name = "sparkplug-rebirth"
+            self._rebirth_timer.daemon = True
+            self._rebirth_timer.start()
+
+    def _rebirth_due(self) -> None:
+        """The interval after the last births has passed: the rebirth the requests
+        since then asked for (its own thread)."""
+        with self.lock:
+            self._rebirth_timer = None
             if self.connected and not self.stopping:
+                self.rebirths += 1
                 self.births()
 
     def _on_state(self, data: bytes) -> None:
@@ -433,13 +549,22 @@ class EdgeNode:
             online, ts = state["online"], state["timestamp"]
             if not isinstance(online, bool) or not isinstance(ts, int) or isinstance(ts, bool):
                 raise ValueError("expected a Boolean online and an integer timestamp")
-        except (ValueError, KeyError, TypeError) as exc:
+        except (ValueError, KeyError, TypeError, RecursionError) as exc:
             self.bad_states += 1
+            self._state_ignored("malformed", None, None)
             self._bad("sparkplug_bad_state", str(self.state_topic), f"{type(exc).__name__}: {exc}")
             return
+        ahead_ms = ts - now_ms()
+        if ahead_ms > self.options.state_future_s * 1000:
+            # Taken, it would make every genuine STATE after it look older.
+            self._state_ignored("future", online, ts, ahead_s=round(ahead_ms / 1000, 3))
+            return
         with self.lock:
-            if ts < self._host_ts or self.stopping:
-                return  # an older STATE than one already taken
+            if self.stopping:
+                return
+            if ts < self._host_ts:
+                self._state_ignored("older", online, ts, newest=self._host_ts)
+                return
             self._host_ts = ts
             was, self.host_online = self.host_online, online
             if online and not was:
@@ -452,6 +577,18 @@ class EdgeNode:
                 self.last_error = f"primary host {self.options.primary_host_id} offline"
                 if self.session:
                     self._leave_for_host()
+
+    def _state_ignored(self, reason: str, online: bool | None, ts: int | None, **fields: Any) -> None:
+        """A STATE not taken: counted by reason; the first of each reason logged, then
+        one line a LOG_EVERY_S with the count held back (malformed ones have their own
+        line, ``sparkplug_bad_state``)."""
+        self.states_ignored[reason] += 1
+        if reason == "malformed":
+            return
+        held = self.states_logged.passes(reason)
+        if held is not None:
+            self._event("sparkplug_state_ignored", "warning", host=self.options.primary_host_id, reason=reason,
+                        online=online, timestamp=ts, held_back=held, **fields)
 
     def _leave_for_host(self) -> None:
         """The primary host went offline during our Sparkplug session: NDEATH, then a
@@ -486,7 +623,7 @@ class EdgeNode:
         self._bad_logged[event] = (now, 0)
         target = device if device is not None else (self.devices[0] if self.devices else None)
         if target is not None:
-            target._event(event, "warning", topic=topic, error=error, not_logged=quiet)
+            target._event(event, "warning", topic=clip(topic), error=clip(error), not_logged=quiet)
 
     # -- life ----------------------------------------------------------------------------
     def start(self) -> EdgeNode:
@@ -510,6 +647,12 @@ class EdgeNode:
             if self.stopping:
                 return
             self.stopping = True  # the forwarder sends nothing more
+            timers = [t for t in (self._rebirth_timer, *self._paused.values()) if t is not None]
+            self._rebirth_timer = None
+            self._paused.clear()
+        for timer in timers:
+            timer.cancel()
+            timer.join(timeout_s)
         self.forwarder.stop()
         with self.lock:
             for d in self.devices:
@@ -540,11 +683,18 @@ class EdgeNode:
         return {"sparkplug_published": self.published, "sparkplug_dropped": self.dropped,
                 "sparkplug_connects": self.connects, "sparkplug_failures": self.failures,
                 "sparkplug_bad_commands": self.bad_commands, "sparkplug_rebirths": self.rebirths,
+                "sparkplug_rebirth_requests": self.rebirth_requests,
+                "sparkplug_rebirths_coalesced": self.rebirths_coalesced,
                 "sparkplug_store_held": f.held, "sparkplug_store_pending": f.pending,
                 "sparkplug_store_overflow": f.overflow, "sparkplug_store_forwarded": f.forwarded,
                 "sparkplug_store_discarded": f.discarded, "sparkplug_store_failures": f.failures,
                 "sparkplug_resent": self.resent, "sparkplug_unconfirmed": self.unconfirmed,
                 "sparkplug_commands": self.commands,
                 "sparkplug_commands_refused": self.commands_refused, "sparkplug_unknown_devices": self.unknown_devices,
+                "sparkplug_commands_dropped": self.commands_dropped, "sparkplug_commands_shed": self.commands_shed,
+                "sparkplug_command_pauses": self.command_pauses,
                 "sparkplug_bad_states": self.bad_states, "sparkplug_host_online": int(self.host_online),
+                "sparkplug_state_ignored": sum(self.states_ignored.values()),
+                "sparkplug_state_future": self.states_ignored["future"],
+                "sparkplug_state_older": self.states_ignored["older"],
                 "sparkplug_host_sessions_ended": self.host_sessions_ended}

@@ -74,6 +74,14 @@ class SparkplugKind(OutputKind[SparkplugOptions]):
                   metavar="FILE"),
         CliOption("--sparkplug-primary-host", "sparkplug_primary_host_id", "Publish only while this Sparkplug "
                   "primary host application is online (its STATE topic).", metavar="ID"),
+        CliOption("--sparkplug-state-future", "sparkplug_state_future_s", "A primary host's STATE stamped more "
+                  "than this ahead of this host's clock is refused, seconds (default 60).", type=float, metavar="S"),
+        CliOption("--sparkplug-rebirth-interval", "sparkplug_rebirth_min_interval_s", "At most one rebirth in "
+                  "this time; the requests within it get one at its end, seconds (default 1).", type=float,
+                  metavar="S"),
+        CliOption("--sparkplug-command-rate", "sparkplug_command_rate", "NCMDs and each device's DCMDs taken at "
+                  "most this many a second; past it dropped undecoded and counted (default 100).", type=float,
+                  metavar="N"),
         CliOption("--sparkplug-username", "sparkplug_username", "MQTT username.", metavar="NAME"),
         CliOption("--sparkplug-password-file", "sparkplug_password_file", "MQTT password: the first line of "
                   "this file (no password option takes the secret itself).", metavar="FILE"),
@@ -88,6 +96,9 @@ class SparkplugKind(OutputKind[SparkplugOptions]):
                  "sparkplug_store_dir": "store_dir", "sparkplug_store_max": "store_max",
                  "sparkplug_ca_file": "ca_file", "sparkplug_cert_file": "cert_file", "sparkplug_key_file": "key_file",
                  "sparkplug_username": "username", "sparkplug_primary_host_id": "primary_host_id", "sparkplug_password_file": "password_file",
+                 "sparkplug_state_future_s": "state_future_s",
+                 "sparkplug_rebirth_min_interval_s": "rebirth_min_interval_s",
+                 "sparkplug_command_rate": "command_rate",
                  "sparkplug_password_env": "password_env"}
 
     @classmethod

@@ -83,6 +83,20 @@ class SparkplugOptions:
     #: application of this id says online on ``spBv1.0/STATE/<id>``; held while it is
     #: away, births again when it comes back.
     primary_host_id: str | None = None
+    #: A primary host's STATE stamped more than this ahead of this node's clock is
+    #: refused (counted, logged): taken, it would make every genuine STATE after it
+    #: look older, and the node would wait for its host until restarted.  A minute
+    #: covers the clocks of a plant kept by NTP; a host further off is the fault.
+    state_future_s: float = field(default=60.0, metadata=in_range(0, 86400))
+    #: Node Control/Rebirth: at most one rebirth in this time; the requests within it
+    #: (or while one is pending) are answered by one rebirth at its end.
+    rebirth_min_interval_s: float = field(default=1.0, metadata=in_range(0, 3600))
+    #: Commands (NCMD, each device's DCMD) taken at most this many a second per topic,
+    #: in bursts as many, a message of more than 256 bytes counting as one per 256;
+    #: past it they are dropped before they are decoded, counted
+    #: (``sparkplug_commands_shed``) and logged: a host that floods them must not take
+    #: the interpreter from the scan path.
+    command_rate: float = field(default=100.0, metadata=in_range(0.1, 100_000))
 
     def __post_init__(self) -> None:
         check_security(self)

@@ -6,7 +6,9 @@ maximum); while SLIP stays set, raise by another step each ``repeat_s`` if the c
 of force (XC, YC) has moved by ``repeat_mm`` over the last ``repeat_s`` and since
 ``settle_s`` after the last raise (a detector's slip state outlasts the slide by some
 tenths of a second: SLIP alone does not say the object still moves; and a soft pad's
-contact grows with the force, so the raise itself moves the centre of force);
+contact grows with the force, so the raise itself moves the centre of force), or by
+``creep_mm`` in all from where it stood ``settle_s`` after the last raise (a creep too
+slow for ``repeat_mm`` per ``repeat_s`` still loses the part, a millimetre at a time);
 acknowledge the latch once the slip is over; after ``quiet_s`` of trusted data with no
 slip, relax by ``relax_share`` of the request, no lower than the light grip (nor, with
 ``relax_floor``, than that multiple of the force it last slipped at).
@@ -49,6 +51,9 @@ class PolicySettings:
     mode: Literal["step", "max"] = "step"
     repeat_s: float = field(default=0.2, metadata=positive())
     repeat_mm: float = field(default=1.0, metadata=non_negative())
+    #: while SLIP stays set, the distance from where the centre stood ``settle_s`` after the
+    #: last raise that raises again however slowly it was covered (0: off)
+    creep_mm: float = field(default=2.0, metadata=non_negative())
     settle_s: float = field(default=0.1, metadata=non_negative())
     quiet_s: float = field(default=3.0, metadata=positive())
     relax_share: float = field(default=0.1, metadata=positive())
@@ -93,6 +98,8 @@ class GripPolicy:
         self._slip_force = 0.0
         #: (time, XC, YC) of the cycles of the last ``repeat_s``: the centre of force's recent path
         self._path: collections.deque[tuple[float, int, int]] = collections.deque()
+        #: where the centre of force stood once the last raise had settled (None: not slipping)
+        self._anchor: tuple[float, int, int] | None = None
 
     def grip(self, now: float) -> float:
         """Close on the object with the light grip; returns the request."""
@@ -107,6 +114,7 @@ class GripPolicy:
             return False
         self.request_n = to
         self._last_raise = now
+        self._anchor = None  # the creep is counted again from once this raise has settled
         self.raises.append(Raise(now, to, why))
         return True
 
@@ -126,6 +134,10 @@ class GripPolicy:
         since = max(now - cfg.repeat_s, self._last_raise + cfg.settle_s)
         while path[0][0] < since and len(path) > 1:
             path.popleft()
+        if not slip:
+            self._anchor = None
+        elif self._anchor is None and now >= self._last_raise + cfg.settle_s:
+            self._anchor = path[-1]
         if not self.gripping:
             self._latched_before = latched
             return PlcOutput(self.request_n, False, not trusted)
@@ -136,7 +148,9 @@ class GripPolicy:
             to = cfg.max_n if cfg.mode == "max" else self.request_n + cfg.step_n
             if self._raise(now, to, "slip"):
                 events.append(f"SLIP: grip force request raised to {self.request_n:.2f} N")
-        elif slip and now - self._last_raise >= cfg.repeat_s and _moved_mm(path[0], path[-1]) >= cfg.repeat_mm:
+        elif slip and now - self._last_raise >= cfg.repeat_s and (
+                _moved_mm(path[0], path[-1]) >= cfg.repeat_mm
+                or (cfg.creep_mm > 0 and self._anchor is not None and _moved_mm(self._anchor, path[-1]) >= cfg.creep_mm)):
             self._slip_force = self.request_n
             if self._raise(now, self.request_n + cfg.step_n, "still slipping"):
                 events.append(f"still slipping: grip force request raised to {self.request_n:.2f} N")
