@@ -232,25 +232,12 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
                 arrival[int(round(scan.t * rate))] = rx
             return scan
 
-        source.poll = timed_poll  # type: ignore[method-assign]
-        pushed: dict[int, tuple[float, float]] = {}  # scan -> wall time at the start and end of detection
-        sends: list[tuple[float, int]] = []  # (wall time, STATE) of each write the bridge sends
+        hops: dict[int, dict[str, float]] = {}  # decision scan -> hop name -> wall time
+        acks: list[tuple[float, int]] = []  # (wall time, STATE) of each write the bridge saw acknowledged
         if breakdown:
-            loop, writer = br.runs[0].loop, next(s for s in br.runs[0].sinks if hasattr(s, "master"))
-            push, send_write = loop.pipeline.push, writer.master.send_write
-
-            def timed_push(scan):
-                t1 = time.time()
-                out = push(scan)
-                pushed[int(round(scan.t * rate))] = (t1, time.time())
-                return out
-
-            def timed_send(address, values):
-                sends.append((time.time(), int(values[1])))
-                return send_write(address, values)
-
-            loop.pipeline.push = timed_push  # type: ignore[method-assign]
-            writer.master.send_write = timed_send  # type: ignore[method-assign]
+            hops, acks = time_hops(br, rate, timed_poll, lambda scan: arrival[int(round(scan.t * rate))])
+        else:
+            source.poll = timed_poll  # type: ignore[method-assign]
         node_thread = None
         if not path.startswith("rtu"):
             node_thread = start_can_node(nodes[0].profile, scene_file, rate, fd, interface, channel)
@@ -280,25 +267,154 @@ def run_ours(path: str, duration_s: float, scene_file: Path, interface: str, cha
     lat_all, lat_slip, skipped = latencies(decisions, arrival, writes)
     return dict(rate=rate, decisions=decisions, lat_all=lat_all, lat_slip=lat_slip, skipped=skipped, arrival=arrival, writes=writes,
                 cpu=bridge_cpu / wall, counters=counters, viewer_messages_s=[m / wall for m in seen.messages],
-                breakdown=stages(decisions, arrival, pushed, sends) if breakdown else None)
+                breakdown=hop_table(decisions, arrival, hops, acks, writes) if breakdown else None)
 
 
-def stages(decisions: list[tuple[int, int]], arrival: dict[int, float], pushed: dict[int, tuple[float, float]],
-           sends: list[tuple[float, int]]) -> list[tuple[float, float, float]]:
-    """For each decision scan: arrival -> start of detection, detection (calibration
-    and detector), end of detection -> the bridge's send of the new STATE (seconds)."""
-    out = []
-    times = np.array([t for t, _ in sends])
-    for k, state in decisions:
-        if k not in arrival or k not in pushed:
-            continue
-        t1, t2 = pushed[k]
-        j = int(np.searchsorted(times, t2))
-        while j < len(sends) and sends[j][1] != state:
+#: The hops of a decision scan, in order, as ``--breakdown`` times them (wall clock).
+HOPS = (("frame", "the deciding scan's last frame sent (its CAN timestamp)"),
+        ("woken", "the thread that steps the node holds the frame (the reader serving it, or the loop thread)"),
+        ("assembled", "the scan assembled (the source's poll returns it)"),
+        ("detected", "calibration, sensor-fault watch and detector done (the pipeline's push returns)"),
+        ("snapshot", "the node's snapshot made, handed to the PLC's sink"),
+        ("rendered", "the register image rendered, offered to the writer"),
+        ("sent", "the write request on the socket (the offering thread, or the writer thread)"),
+        ("received", "the PLC stand-in's receipt (its own process)"),
+        ("acked", "the bridge's writer has the answer"))
+
+
+def time_hops(br, rate: float, poll, arrival_of):
+    """Wrap the bridge's calls on the urgent path to stamp each hop of every scan
+    (``HOPS``): the source's poll, the pipeline's push, the PLC sink's publish, its
+    offer and send, and the writer's acknowledged write.  Every hop up to the send
+    runs on the thread that steps the node, one scan at a time, so each stamp is the
+    scan's that thread polled last."""
+    import threading as _threading
+
+    run = br.runs[0]
+    loop = run.loop
+    plc = next(s for s in run.sinks if s.kind == "plc")
+    writer = plc.inner
+    hops: dict[int, dict[str, float]] = {}
+    acks: list[tuple[float, int]] = []
+    now: dict[str, float] = {}  # the hops of the scan being stepped
+    woken = [0.0]
+    group = getattr(loop.source, "feeder", None)
+    if group is not None:  # CAN (an RTU poll is its own thread's: "woken" is its answer)
+        on_queued, wait = group._on_queued, group.wait
+
+        def timed_on_queued():  # the reader has frames: it serves them itself when the loop is idle
+            woken[0] = time.time()
+            return on_queued()
+
+        def timed_wait(timeout_s):  # the loop thread woken by the reader's event: a thread hop
+            wait(timeout_s)
+            woken[0] = time.time()
+
+        group._on_queued = timed_on_queued  # (taken by serve_arrivals when the bridge starts)
+        group.wait = timed_wait
+
+    def timed_poll(timeout_s=None):
+        scan = poll(timeout_s)
+        if scan is not None:
+            k = int(round(scan.t * rate))
+            now.clear()
+            t = time.time()
+            now.update(frame=arrival_of(scan), woken=woken[0] if group is not None else t, assembled=t,
+                       inline=float(_threading.current_thread().name == "can-reader"))
+            hops[k] = now.copy()
+            now["k"] = k
+        return scan
+
+    loop.source.poll = timed_poll
+    push = loop.pipeline.push
+
+    def timed_push(scan):
+        out = push(scan)
+        hops[int(round(scan.t * rate))]["detected"] = time.time()
+        return out
+
+    loop.pipeline.push = timed_push
+    publish, offer = plc.publish, writer.offer
+    send_write, write_registers, written = writer.master.send_write, writer.master.write_registers, writer._written
+
+    def stamp(name):
+        k = now.get("k")
+        if k is not None and name not in hops[k]:
+            hops[k][name] = time.time()
+
+    def timed_publish(snap):
+        if snap.urgent:
+            stamp("snapshot")
+        return publish(snap)
+
+    def timed_offer(registers, urgent=False, t_event=None, tail=()):
+        if urgent:
+            stamp("rendered")
+        return offer(registers, urgent, t_event, tail)
+
+    def timed_send(address, values):
+        if _threading.current_thread().name != "plc-writer":
+            stamp("sent")
+        else:  # the writer thread sends what was pending: stamped by STATE below
+            acks.append((-time.time(), int(values[1])))
+        return send_write(address, values)
+
+    def timed_write(address, values):
+        acks.append((-time.time(), int(values[1])))
+        return write_registers(address, values)
+
+    def timed_written(registers, t_event, took_s):
+        acks.append((time.time(), int(registers[1])))
+        return written(registers, t_event, took_s)
+
+    plc.publish = timed_publish
+    writer.offer = timed_offer
+    writer.master.send_write = timed_send
+    writer.master.write_registers = timed_write
+    writer._written = timed_written
+    return hops, acks
+
+
+def hop_table(decisions, arrival, hops, acks, writes) -> list[tuple[str, list[float]]]:
+    """Per hop, the seconds from the one before it, over the decision scans whose
+    every hop was stamped; the writer thread's sends (negative stamps in ``acks``) and
+    the acknowledgements are matched by STATE, the first after the scan's detection;
+    the PLC's receipt by STATE, as :func:`latencies`."""
+    sends = sorted((-t, st) for t, st in acks if t < 0)
+    acked = sorted((t, st) for t, st in acks if t >= 0)
+    w_times = [t for t, _ in writes]
+    s_times, a_times = [t for t, _ in sends], [t for t, _ in acked]
+
+    def first(times, items, t0, state):
+        j = int(np.searchsorted(times, t0))
+        while j < len(items) and items[j][1] != state:
             j += 1
-        if j < len(sends):
-            out.append((t1 - arrival[k], t2 - t1, sends[j][0] - t2))
-    return out
+        return items[j][0] if j < len(items) else None
+
+    rows: dict[str, list[float]] = {name: [] for name, _ in HOPS[1:]}
+    rows["total"] = []
+    hopped = 0
+    for k, state in decisions:
+        h = hops.get(k)
+        if h is None or "rendered" not in h:
+            continue
+        h = dict(h)
+        if "sent" not in h:  # the writer thread sent it (the offering thread found it busy)
+            t = first(s_times, sends, h["rendered"], state)
+            if t is None:
+                continue
+            h["sent"] = t
+        rec, ack = first(w_times, writes, h["detected"], state), first(a_times, acked, h["detected"], state)
+        if rec is None or ack is None:
+            continue
+        h["received"], h["acked"] = rec, ack
+        hopped += int(not h["inline"])
+        names = [name for name, _ in HOPS]
+        for a, b in zip(names, names[1:]):
+            rows[b].append(h[b] - h[a])
+        rows["total"].append(h["received"] - h["frame"])
+    rows["loop thread woken"] = [float(hopped)]
+    return list(rows.items())
 
 
 def start_can_node(profile, scene_file: Path, rate: float, fd: bool, interface: str, channel: str,
@@ -412,8 +528,9 @@ def main() -> None:
                     help=f"comma-separated: {', '.join(PATHS)}, vcan-100, vcan-1k (SocketCAN vcan0)")
     ap.add_argument("--duration", type=float, default=60.0, help="seconds per path (default 60)")
     ap.add_argument("--breakdown", action="store_true",
-                    help="also where our time goes, per decision scan (medians): arrival -> detection, "
-                         "detection, detection -> the write's send")
+                    help="also where our time goes, hop by hop, per decision scan (p50 / p90 / p99): the frame "
+                         "in, the stepping thread woken, assembled, detected, snapshot, image rendered, sent, "
+                         "the PLC's receipt, the bridge's acknowledgement")
     ap.add_argument("--viewers", type=int, default=None, metavar="N",
                     help="also, per path, the bridge with the web console attached, with 0 and with N viewers "
                          "(WebSocket clients acknowledging as the page does, in a process of their own), and the "
@@ -467,11 +584,18 @@ def main() -> None:
                   f"{ms(r['lat_all'], 99)} | {ms(r['lat_slip'], 50)} / {ms(r['lat_slip'], 99)} | {refcol} | {ratio} | "
                   f"{r['cpu'] * 100:.1f} % | {drops} (of {c.get('scans', 0)} scans) |", flush=True)
             if r["breakdown"]:
-                b = np.asarray(r["breakdown"]) * 1000
-                (a, d, s), (a9, d9, s9) = np.median(b, axis=0), np.percentile(b, 90, axis=0)
-                breakdowns.append(f"# {path}: arrival -> detection {a:.2f} ms (p90 {a9:.2f}), detection {d:.2f} ms "
-                                  f"(p90 {d9:.2f}), detection -> send {s:.2f} ms (p90 {s9:.2f}) "
-                                  f"(medians and p90s of {len(b)} decision scans)")
+                rows = dict(r["breakdown"])
+                n = len(rows["total"])
+                breakdowns.append(f"# {path}: the hops of {n} decision scans, each from the one before "
+                                  f"(the loop thread woken for {int(rows['loop thread woken'][0])} of them; "
+                                  "the others served by the reader)")
+                breakdowns.append("| hop | what | p50 us | p90 us | p99 us |")
+                breakdowns.append("|---|---|---|---|---|")
+                for name, what in HOPS[1:] + (("total", "frame -> received: the bench's latency"),):
+                    v = np.asarray(rows[name]) * 1e6
+                    if len(v):
+                        breakdowns.append(f"| {name} | {what} | {np.percentile(v, 50):.0f} | {np.percentile(v, 90):.0f} "
+                                          f"| {np.percentile(v, 99):.0f} |")
             if args.viewers:
                 web_rows.append(web_row(path, args.duration, scene, interface, channel, args.viewers, args.repeats))
     for line in breakdowns:

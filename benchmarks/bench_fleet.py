@@ -7,9 +7,9 @@ to a ``mosquitto_sub`` subscriber receiving its DDATA, against a bare paho-mqtt 
     .venv/bin/python benchmarks/bench_fleet.py --nodes-100 8,16,32 --nodes-1k 1,2,4 --duration 10
     .venv/bin/python benchmarks/bench_fleet.py --only latency --latency-duration 60
     .venv/bin/python benchmarks/bench_fleet.py --only fleet --nodes-100 8 --nodes-1k 2 --frame-interval 1
+    .venv/bin/python benchmarks/bench_fleet.py --only fleet --pin --nodes-100 16,32,48,64 --nodes-1k 4,8,16 --duration 20
 
-The nodes: the project's CAN node simulator (``sim/can_node.py``) on python-can's
-virtual buses, playing the slip train of ``bench_bridge.py`` (a still grasp with a
+The nodes: the project's CAN node simulator (``sim/can_node.py``), playing the slip train of ``bench_bridge.py`` (a still grasp with a
 slide every 1.2 s: about 110 state changes a minute per node, each a DDATA at once,
 besides the analog metrics at their minimum interval).  CAN nodes, not ``scene:``
 sources: the frame decode, the routing by ID and the scan assembly are part of what
@@ -18,10 +18,16 @@ a real line: ``--per-bus`` nodes (distinct node ids and base IDs) on each bus, 4
 default (100 Hz classic: 9 frames a scan, 3,600 frames/s a bus; 1 kHz CAN FD: one
 frame a scan, 4,000 frames/s a bus, near what FD at 1/5 Mbit/s carries).
 
-The virtual bus exists in one process only, so the simulators run in the bridge's
-process, one thread a node.  Their CPU is left out of the bridge's (per thread, from
-``/proc/self/task``), but they share the interpreter lock with it: the count of nodes
-one core carries is a lower bound of what a bridge fed by real buses carries.
+The simulators run in processes of their own (``--sender-procs``, 4 by default; a
+bus's nodes in one of them), sending over a loopback datagram bus
+(``benchmarks/udp_bus.py``: one UDP datagram a frame, the sender's time as the frame's
+timestamp) that the bridge opens as a python-can interface like any other: its
+reader threads, routing, assembly, detection and outputs are the product's own, and
+the simulators share neither its interpreter lock nor, with ``--pin``, its CPU (the
+bridge's process on CPU 0; the simulators, the broker and the subscriber on CPU 1).
+``--sender-procs 0`` runs them as before, one thread a node in the bridge's process on
+python-can's virtual buses (whose count of nodes is then a lower bound).  ``--web``
+attaches the web console (no viewer) to the fleet's bridge.
 
 - bridge CPU: the bridge's own threads (readers, loops, paho's network thread, the
   store's), % of one core; per node = that / N.
@@ -45,7 +51,8 @@ one core carries is a lower bound of what a bridge fed by real buses carries.
   more than 0.5 s (the process's interpreter is saturated by bridge and simulators
   together) the step is not carried either, and says so.
 
-Latency (one node, at 100 Hz and 1 kHz): from the arrival of the frame completing
+Latency (one node, at 100 Hz and 1 kHz; its simulator in the bridge's process on a
+virtual bus, as its floor's): from the arrival of the frame completing
 the deciding scan (python-can's message timestamp: the virtual bus stamps at send)
 to the receipt of the DDATA carrying the new state by ``mosquitto_sub`` (its ``%U``
 timestamp, payloads decoded with the ``protobuf`` package from the tests' schema,
@@ -147,7 +154,8 @@ def state_changes(msgs: list[tuple[float, str, bytes]], edge: str, device: str =
 
 # -- the nodes ------------------------------------------------------------------------
 
-def make_nodes(profile: Any, raw: np.ndarray, rate: float, fd: bool, buses: list[tuple[str, int]]) -> list[tuple[threading.Thread, Any]]:
+def make_nodes(profile: Any, raw: np.ndarray, rate: float, fd: bool, buses: list[tuple[str, int]],
+               interface: str = "virtual") -> list[tuple[threading.Thread, Any]]:
     """One simulator thread a node (not started): ``buses`` = (channel, index on that bus)."""
     from eskin_industrial.bus.can.layout import CanLayout
     from eskin_industrial.bus.can.reader import open_bus
@@ -156,7 +164,12 @@ def make_nodes(profile: Any, raw: np.ndarray, rate: float, fd: bool, buses: list
     base = CanLayout.from_profile(profile, fd=fd)
     # one sending bus a channel, shared by its nodes: a virtual bus copies every frame
     # into the queue of each other bus on the channel, and the nodes read none
-    tx = {channel: open_bus("virtual", channel, fd=fd) for channel, _ in buses}
+    if interface == "virtual":
+        tx = {channel: open_bus("virtual", channel, fd=fd) for channel, _ in buses}
+    else:  # a sending end of the loopback datagram bus (udp_bus.py)
+        import can
+
+        tx = {channel: can.Bus(interface=interface, channel=channel, receive=False, fd=fd) for channel, _ in buses}
     left = [len(buses)]
     lock = threading.Lock()
     out = []
@@ -179,6 +192,73 @@ def make_nodes(profile: Any, raw: np.ndarray, rate: float, fd: bool, buses: list
     return out
 
 
+def sender_main(spec_json: str) -> None:
+    """A process of simulated nodes (``--sender``): renders the scene, says ``ready``,
+    starts its nodes at ``go`` on stdin, and prints each node's stats as JSON at the end."""
+    import json
+
+    import udp_bus
+
+    from eskin_industrial import load_profile
+
+    spec = json.loads(spec_json)
+    if spec.get("cpu") is not None:
+        os.sched_setaffinity(0, {int(spec["cpu"])})
+    udp_bus.register()
+    logging.getLogger("can").setLevel(logging.ERROR)
+    profile = load_profile(PROFILE)
+    rate = float(spec["rate"])
+    raw = raw_scans(profile, Path(spec["scene"]), rate)
+    sims = make_nodes(profile, raw, rate, rate > 500, [(str(p), int(k)) for p, k in spec["buses"]], udp_bus.INTERFACE)
+    print("ready", flush=True)
+    sys.stdin.readline()
+    start(sims)
+    for t, _ in sims:
+        t.join()
+    print(json.dumps([{"scans": node.stats.scans, "late_s": node.stats.late_s} for _, node in sims]), flush=True)
+
+
+class Senders:
+    """The simulated nodes in ``procs`` processes of their own, pinned to ``cpu``: the
+    bridge's process runs none of their work (nor shares their interpreter lock)."""
+
+    def __init__(self, rate: float, scene: Path, buses: list[tuple[str, int]], procs: int, cpu: int | None) -> None:
+        import json
+
+        by_bus: dict[str, list[tuple[str, int]]] = {}
+        for channel, k in buses:
+            by_bus.setdefault(channel, []).append((channel, k))
+        groups: list[list[tuple[str, int]]] = [[] for _ in range(min(procs, len(by_bus)))]
+        for i, members in enumerate(by_bus.values()):  # a bus's nodes stay in one process: one sending socket
+            groups[i % len(groups)].extend(members)
+        self.procs = []
+        for g in groups:
+            spec = json.dumps({"rate": rate, "scene": str(scene), "buses": g, "cpu": cpu})
+            self.procs.append(subprocess.Popen([sys.executable, __file__, "--sender", spec], stdin=subprocess.PIPE,
+                                               stdout=subprocess.PIPE, text=True))
+        for p in self.procs:
+            assert p.stdout is not None and p.stdout.readline().strip() == "ready"
+
+    def go(self) -> None:
+        for p in self.procs:
+            assert p.stdin is not None
+            p.stdin.write("go\n")
+            p.stdin.flush()
+
+    def cpu_s(self) -> float:
+        return sum(proc_cpu_s(p.pid) for p in self.procs)
+
+    def finish(self, timeout_s: float) -> list[dict[str, float]]:
+        import json
+
+        out: list[dict[str, float]] = []
+        for p in self.procs:
+            assert p.stdout is not None
+            line, _ = p.communicate(timeout=timeout_s)
+            out += json.loads(line.strip().splitlines()[-1])
+        return out
+
+
 def start(sims: list[tuple[threading.Thread, Any]]) -> list[tuple[threading.Thread, Any]]:
     for t, _ in sims:
         t.start()
@@ -193,49 +273,82 @@ def raw_scans(profile: Any, scene: Path, rate: float) -> np.ndarray:
     return np.rint(Calibrator.from_section(profile.calibration, profile.taxels).to_raw(rec.forces))
 
 
-def bridge_for(n: int, rate: float, per_bus: int, port: int, edge: str, tag: str, frame_interval_s: float = 0.0):
+def bridge_for(n: int, rate: float, per_bus: int, port: int, edge: str, tag: str, frame_interval_s: float = 0.0,
+               interface: str = "virtual", web: bool = False):
+    """``interface`` "virtual": the nodes' buses are python-can's virtual ones (the
+    simulators in this process); else the loopback datagram bus (udp_bus.py), a UDP
+    port a bus.  ``web``: the web console attached too (no viewer)."""
     from eskin_industrial.bridge.config import BridgeConfig, LogSettings, NodeConfig, resolve
     from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
+    from tests.helpers.modbus import free_port
 
     fd = rate > 500
     base = 0x200
     nodes, buses = [], []
+    channels: dict[int, str] = {}
     for i in range(n):
-        channel, k = f"fleet-{os.getpid()}-{tag}-bus{i // per_bus}", i % per_bus
-        nodes.append(NodeConfig.of(f"n{i + 1:02d}", str(PROFILE), "can", interface="virtual", channel=channel, fd=fd,
+        b, k = i // per_bus, i % per_bus
+        if b not in channels:
+            channels[b] = f"fleet-{os.getpid()}-{tag}-bus{b}" if interface == "virtual" else str(free_port())
+        channel = channels[b]
+        nodes.append(NodeConfig.of(f"n{i + 1:02d}", str(PROFILE), "can", interface=interface, channel=channel, fd=fd,
                                    rate_hz=rate, outputs={"plc": {"base_address": 32 * i}}, node_id=k + 1,
                                    base_id=base + 0x10 * k))
         buses.append((channel, k))
-    cfg = BridgeConfig(node=tuple(nodes), outputs={"sparkplug": SparkplugOptions(
-        f"mqtt://127.0.0.1:{port}", GROUP, edge, frame_interval_s=frame_interval_s)}, log=LogSettings(status_every_s=0))
+    outputs: dict[str, Any] = {"sparkplug": SparkplugOptions(f"mqtt://127.0.0.1:{port}", GROUP, edge,
+                                                            frame_interval_s=frame_interval_s)}
+    if web:
+        from eskin_industrial.outputs.web.options import WebOptions
+
+        outputs["web"] = WebOptions(bind=f"127.0.0.1:{free_port()}")
+    cfg = BridgeConfig(node=tuple(nodes), outputs=outputs, log=LogSettings(status_every_s=0))
     return cfg, resolve(cfg), buses
 
 
 # -- the fleet ------------------------------------------------------------------------
 
 def run_step(n: int, rate: float, per_bus: int, port: int, broker_pid: int, scene: Path, duration_s: float,
-             tmp: Path, frame_interval_s: float = 0.0) -> dict[str, Any]:
+             tmp: Path, frame_interval_s: float = 0.0, procs: int = 0, sender_cpu: int | None = None,
+             web: bool = False) -> dict[str, Any]:
+    """``procs`` > 0: the simulators in that many processes of their own (on
+    ``sender_cpu``), over the loopback datagram bus; 0: threads of this process on
+    python-can's virtual bus."""
     from eskin_industrial.bridge.logs import EventLog
     from eskin_industrial.bridge.runtime import Bridge
 
     tag = f"{int(rate)}-{n}-{time.monotonic_ns()}"
-    cfg, nodes, buses = bridge_for(n, rate, per_bus, port, f"fleet{n}x{int(rate)}", tag, frame_interval_s)
-    raw = raw_scans(nodes[0].profile, scene, rate)
+    interface = "virtual" if procs == 0 else "udp-loopback"
+    cfg, nodes, buses = bridge_for(n, rate, per_bus, port, f"fleet{n}x{int(rate)}", tag, frame_interval_s,
+                                   interface, web)
     sub = Subscriber(port, tmp / f"count-{tag}.txt")
-    sims = make_nodes(nodes[0].profile, raw, rate, rate > 500, buses)  # their frames made before rss0
+    sims: list[tuple[threading.Thread, Any]] = []
+    senders: Senders | None = None
+    if procs == 0:
+        raw = raw_scans(nodes[0].profile, scene, rate)
+        sims = make_nodes(nodes[0].profile, raw, rate, rate > 500, buses)  # their frames made before rss0
+    else:
+        senders = Senders(rate, scene, buses, procs, sender_cpu)
+        if sender_cpu is not None:
+            os.sched_setaffinity(sub.proc.pid, {sender_cpu})
     rss0 = rss_kib()
     log = EventLog(open(os.devnull, "w"), "plain", "warning")
     br = Bridge(cfg, nodes, log).open()
     br.start()
     time.sleep(0.5)  # connected, births out
+    if senders is not None:
+        senders.go()
     start(sims)
     time.sleep(1.0)  # the first scans: the loops and the buses warm
+    s0 = senders.cpu_s() if senders is not None else 0.0
     m0, cpu0, b0, t0, w0 = sub.count(), thread_cpu_s(), proc_cpu_s(broker_pid), time.monotonic(), time.time()
     time.sleep(duration_s)
     m1, cpu1, b1, wall, w1 = sub.count(), thread_cpu_s(), proc_cpu_s(broker_pid), time.monotonic() - t0, time.time()
+    s1 = senders.cpu_s() if senders is not None else 0.0
     rss1 = rss_kib()
     for t, _ in sims:
         t.join(timeout=duration_s + 30)
+    stats = senders.finish(duration_s + 30) if senders is not None else [
+        {"scans": node.stats.scans, "late_s": node.stats.late_s} for _, node in sims]
     time.sleep(0.3)
     br.stop()
     log.close()
@@ -243,11 +356,11 @@ def run_step(n: int, rate: float, per_bus: int, port: int, broker_pid: int, scen
     counters = br.counters()
     ours = {k: cpu1.get(k, 0.0) - cpu0.get(k, 0.0) for k in cpu1}
     bridge_cpu = sum(v for k, v in ours.items() if not k.startswith("bench-node") and k != "MainThread") / wall
-    sim_cpu = sum(v for k, v in ours.items() if k.startswith("bench-node")) / wall
+    sim_cpu = (sum(v for k, v in ours.items() if k.startswith("bench-node")) + s1 - s0) / wall
     drops = sum(c.get(k, 0) for c in counters.values() for k in DROP_KEYS)
     scans = sum(c.get("scans", 0) for c in counters.values())
-    sent = sum(node.stats.scans for _, node in sims)
-    late = max(node.stats.late_s for _, node in sims)
+    sent = int(sum(st["scans"] for st in stats))
+    late = max(st["late_s"] for st in stats)
     # a node the loop fell behind on by more than stale_s (2.5 scan periods) is
     # "Sensor Stale" for a moment: the PLC and the plant would see it (counted in the
     # measured span only: every node turns stale when its simulator ends)
@@ -430,19 +543,40 @@ def main() -> None:
                     "(default 0: no taxel frames)")
     ap.add_argument("--go-on", action="store_true", help="every step, even past a drop, the simulators behind "
                     "or the bridge at 90 %% of a core")
+    ap.add_argument("--sender-procs", type=int, default=4, help="the fleet's simulators in this many processes of "
+                    "their own, over a loopback datagram bus (udp_bus.py); 0: threads of the bridge's process on "
+                    "python-can's virtual bus, as before (default 4)")
+    ap.add_argument("--pin", action="store_true", help="the bridge's process on CPU 0, the simulators, broker "
+                    "and subscriber on CPU 1 (os.sched_setaffinity)")
+    ap.add_argument("--web", action="store_true", help="the fleet's bridge with the web console attached too")
+    ap.add_argument("--sender", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.sender:
+        sender_main(args.sender)
+        return
     logging.getLogger("can").setLevel(logging.ERROR)  # python-can's note on a bus closed by the collector
+    import udp_bus
+
+    udp_bus.register()  # the bridge opens the senders' buses by this interface name
     cmd = (".venv/bin/python benchmarks/bench_fleet.py" + (f" --only {args.only}" if args.only else "")
            + (f" --nodes-100 {args.nodes_100} --nodes-1k {args.nodes_1k} --per-bus {args.per_bus} "
               f"--duration {args.duration:g}" if args.only != "latency" else "")
            + (f" --latency-duration {args.latency_duration:g}" if args.only != "fleet" else "")
            + (f" --frame-interval {args.frame_interval:g}" if args.frame_interval else "")
-           + (" --go-on" if args.go_on else ""))
+           + (" --go-on" if args.go_on else "")
+           + (f" --sender-procs {args.sender_procs}" if args.only != "latency" else "")
+           + (" --pin" if args.pin else "") + (" --web" if args.web else ""))
     print(f"# {cmd}")
     print(f"# {time.strftime('%Y-%m-%d', time.gmtime())} on {describe()}")
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         broker = spb.Broker(tmp)
+        sender_cpu = None
+        if args.pin:
+            # this thread first: every thread the bridge starts inherits its CPU
+            os.sched_setaffinity(0, {0})
+            os.sched_setaffinity(broker.proc.pid, {1})
+            sender_cpu = 1
         try:
             if args.only != "fleet":
                 scene = tmp / "slip-train-latency.toml"
@@ -468,7 +602,7 @@ def main() -> None:
                 for rate, counts in ((100.0, args.nodes_100), (1000.0, args.nodes_1k)):
                     for n in (int(x) for x in counts.split(",")):
                         r = run_step(n, rate, args.per_bus, broker.port, broker.proc.pid, scene, args.duration, tmp,
-                                     args.frame_interval)
+                                     args.frame_interval, args.sender_procs, sender_cpu, args.web)
                         behind = r["late"] > 0.5 or r["scans"] < r["sent"]
                         ok = r["drops"] == 0 and r["stale"] == 0 and r["cpu"] < 0.9 and not behind
                         print(f"| one bridge | {rate:g} Hz | {n} | {r['cpu'] * 100:.1f} % | {r['cpu'] * 100 / n:.2f} % "

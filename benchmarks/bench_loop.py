@@ -4,6 +4,8 @@ machine changes; and what a sink that takes taxel frames adds.
 
     .venv/bin/python benchmarks/bench_loop.py               # every case (~2 min)
     .venv/bin/python benchmarks/bench_loop.py --cases none  # one case
+    .venv/bin/python benchmarks/bench_loop.py --profile none  # where a scan's time goes (cProfile, no valgrind)
+    .venv/bin/python benchmarks/bench_loop.py --cases publish --tree ../other   # another checkout's package
 
 Cases (the paper-5x5 profile, its detector, scans from memory with no wait):
 - ``none``: no sink at all: the loop as every command runs it.
@@ -13,6 +15,12 @@ Cases (the paper-5x5 profile, its detector, scans from memory with no wait):
   what the Sparkplug output does with it on the loop's thread: pack the forces as
   little-endian float32 and encode the DDATA (paho's publish left out): the cost of
   one frame, paid once per ``frame_interval_s`` in a real run.
+
+- ``publish``: not a scan: one urgent publication (``NodeLoop.publish_if_due``: the
+  snapshot, the PLC image's render, the client-mode writer's offer, which keeps it
+  pending with no PLC connected): what a decision costs between its detection and
+  the write's send.  ``--tree DIR`` imports the package of another checkout (this
+  script's cases on it, the PLC writer where that tree has it).
 
 Instructions per scan: the difference of two runs' totals (2,000 and 6,000 scans)
 over their difference in scans, so that the interpreter's start-up and the imports
@@ -35,23 +43,30 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from machine import describe  # noqa: E402
 
-CASES = ("none", "off", "every")
+CASES = ("none", "off", "every", "publish")
 
 
 def run_scans(case: str, scans: int) -> None:
     """``scans`` scans through one node's loop, for callgrind to count."""
     import numpy as np
 
+    import eskin_industrial
     from eskin_industrial.bridge.loop import NodeLoop
     from eskin_industrial.bus.source import Source
     from eskin_industrial.calibration import Calibrator
     from eskin_industrial.frames import Frame, RawScan
-    from eskin_industrial.outputs.base import Sink
-    from eskin_industrial.outputs.sparkplug import payload as pb
     from eskin_industrial.profile import load_profile
     from eskin_industrial.scenes import render
 
-    prof = load_profile(str(ROOT / "profiles" / "paper-5x5.toml"))
+    try:
+        from eskin_industrial.outputs.base import Sink
+        from eskin_industrial.outputs.sparkplug import payload as pb
+    except ImportError:  # a tree from before the outputs' move (--tree)
+        from eskin_industrial.plant import payload as pb  # type: ignore[no-redef]
+        from eskin_industrial.sinks.base import Sink  # type: ignore[no-redef]
+
+    # the tree's own profile (a newer tree's may have keys an older one refuses)
+    prof = load_profile(str(Path(eskin_industrial.__file__).parent / "data" / "profiles" / "paper-5x5.toml"))
     rec = render("case2", prof.sensor.rate_hz, 0)
     raw = np.rint(Calibrator.from_section(prof.calibration, prof.taxels).to_raw(rec.forces))
 
@@ -81,6 +96,18 @@ def run_scans(case: str, scans: int) -> None:
             metric = pb.Metric(None, 1050, None, pb.FLOAT_ARRAY, data)
             self.bytes += len(pb.encode(pb.Payload(1_700_000_000_000, (metric,), 7)))
 
+    if case == "publish":
+        try:
+            from eskin_industrial.outputs.plc.client import PlcWriter
+        except ImportError:  # a tree from before the outputs' move
+            from eskin_industrial.plc.client import PlcWriter  # type: ignore[no-redef]
+        loop = NodeLoop(prof, Memory(), [PlcWriter(prof.modbus.plc, "127.0.0.1", 1, poll_commands=False)])
+        for _ in range(400):  # a detector's state to publish
+            loop.step(0.0)
+        publish = loop.publish_if_due
+        for _ in range(scans):
+            publish(True, 1.0)
+        return
     sinks = [] if case == "none" else [Frames(None if case == "off" else 0.0)]
     loop = NodeLoop(prof, Memory(), sinks)
     step = loop.step
@@ -88,24 +115,67 @@ def run_scans(case: str, scans: int) -> None:
         step(0.0)
 
 
-def instructions_per_scan(case: str) -> float:
+def instructions_per_scan(case: str, tree: list[str]) -> float:
     # a fixed hash seed and no address randomisation, as bench_detector.py
     env = {**os.environ, "PYTHONHASHSEED": "0"}
     fixed = ["setarch", "-R"] if shutil.which("setarch") else []
     totals = []
     for scans in (2_000, 6_000):
         res = subprocess.run([*fixed, "valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
-                              sys.executable, __file__, "--count", case, str(scans)],
+                              sys.executable, __file__, "--count", case, str(scans), *tree],
                              capture_output=True, text=True, check=True, env=env)
         totals.append(int(next(ln for ln in res.stderr.splitlines() if "Collected" in ln).split()[-1]))
     return (totals[1] - totals[0]) / 4_000
+
+
+def profile(case: str, scans: int = 4_000, top: int = 20) -> None:
+    """The loop's scans under cProfile: each module's own time and the functions that
+    take most of it, as shares of the whole step (cProfile's overhead weighs every call
+    alike: read the shares, not the microseconds)."""
+    import cProfile
+    import pstats
+
+    run_scans(case, 200)  # imports and first calls out of the way
+    prof = cProfile.Profile()
+    prof.enable()
+    run_scans(case, scans)
+    prof.disable()
+    stats = pstats.Stats(prof).stats  # type: ignore[attr-defined]
+    rows = [(tt, nc, f"{Path(fn).name}:{ln}({name})", fn) for (fn, ln, name), (_, nc, tt, _, _) in stats.items()]
+    total = sum(r[0] for r in rows)
+    by_module: dict[str, float] = {}
+    for tt, _, _, fn in rows:
+        if "eskin_industrial/" in fn:
+            key = fn.split("eskin_industrial/")[-1]
+        else:
+            key = "numpy" if "numpy" in fn else "C calls (numpy's ufuncs, min, max, ...)" if fn == "~" else Path(fn).name
+        by_module[key] = by_module.get(key, 0.0) + tt
+    print(f"# cProfile of {scans} scans, case {case}: {total / scans * 1e6:.0f} us a scan under the profiler")
+    print("| module (own time) | share |")
+    print("|---|---|")
+    for key, tt in sorted(by_module.items(), key=lambda kv: -kv[1])[:top]:
+        print(f"| {key} | {tt / total * 100:.1f} % |")
+    print()
+    print("| function (own time) | calls a scan | share |")
+    print("|---|---|---|")
+    for tt, nc, where, _ in sorted(rows, key=lambda r: -r[0])[:top]:
+        print(f"| {where} | {nc / scans:.2f} | {tt / total * 100:.1f} % |")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default=",".join(CASES), help=f"comma-separated, of {', '.join(CASES)}")
     ap.add_argument("--count", nargs=2, metavar=("CASE", "SCANS"), help=argparse.SUPPRESS)
+    ap.add_argument("--profile", metavar="CASE", help="instead: where a scan's time goes in CASE, by cProfile")
+    ap.add_argument("--tree", metavar="DIR", help="the package of this checkout instead of this script's")
     args = ap.parse_args()
+    if args.tree:
+        sys.path.insert(0, str(Path(args.tree).resolve()))
+    if args.profile:
+        print(f"# .venv/bin/python benchmarks/bench_loop.py --profile {args.profile}")
+        print(f"# on {describe()}")
+        profile(args.profile)
+        return
     if args.count:
         run_scans(args.count[0], int(args.count[1]))
         return
@@ -115,12 +185,13 @@ def main() -> None:
     for c in cases:
         if c not in CASES:
             ap.error(f"--cases: {c!r} is not one of {', '.join(CASES)}")
-    print(f"# .venv/bin/python benchmarks/bench_loop.py --cases {','.join(cases)}")
+    print(f"# .venv/bin/python benchmarks/bench_loop.py --cases {','.join(cases)}"
+          + (f" --tree {args.tree}" if args.tree else ""))
     print(f"# on {describe()}")
     print("| case | instructions per scan |")
     print("|---|---|")
     for c in cases:
-        print(f"| {c} | {instructions_per_scan(c):,.0f} |", flush=True)
+        print(f"| {c} | {instructions_per_scan(c, ['--tree', args.tree] if args.tree else []):,.0f} |", flush=True)
 
 
 if __name__ == "__main__":

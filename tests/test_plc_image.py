@@ -183,3 +183,41 @@ def test_the_offline_image_claims_nothing_and_keeps_the_counters(paper_profile):
     assert Status(field(regs, "STATUS")) == Status.BRIDGE_OFFLINE
     assert field(regs, "STATE") == 0 and field(regs, "FRAME_AGE") == 0xFFFF and field(regs, "F_SUM") == 0
     assert field(regs, "SLIP_EVENTS") == 1 and field(regs, "STATE_CHANGES") == 1
+
+
+@pytest.mark.parametrize("word_order", ["big", "little"])
+def test_the_rendered_words_are_the_named_values_encoded(paper_profile, word_order):
+    """render writes the registers straight (it is on the urgent path): word for word
+    what the named values (``values``, the register table's meaning) encode to, over
+    snapshots with every field at its edges: none, NaN, infinities, overflows, negative
+    values, counters past 32 bits, the offline image."""
+    import random
+
+    from eskin_industrial.outputs.plc.image import PlcImage, encode_registers, encode_tail
+
+    settings = dataclasses.replace(paper_profile.modbus.plc, word_order=word_order)
+    rng = random.Random(7)
+    floats = [None, 0.0, 0.4999, 0.5, 1.5, -0.5, -1.0, 2.5, 655.36, 1e9, -1e9, math.nan, math.inf, -math.inf, 1e300,
+              12.3456, -327.69, 327.675, 4294967.2955]
+    ints = [0, 1, 0xFFFF, 0x10000, 0xFFFFFFFF, 0x1_0000_0001, 2**40 + 3]
+    status = StatusImage(settings)
+    status.observe(upd(1))
+    base = status.snapshot(FRESH)
+    ref = PlcImage(settings)
+    image = PlcImage(settings)
+    offline = status.status.offline_snapshot(FRESH, scans=0, t_event=0.0, wall_time_s=0.0)
+    for i in range(3000):
+        s = (offline if i % 97 == 0 else base)._replace(
+            state=rng.choice([None, 0, 1, 2, 3]), valid=rng.random() < 0.5, stale=rng.random() < 0.2,
+            bus_fault=rng.random() < 0.2, slip_latched=rng.random() < 0.3, enabled=rng.random() < 0.8,
+            r_coe=rng.choice(floats), r_dw=rng.choice(floats), score_a=rng.choice(floats),
+            score_b=rng.choice(floats), f_sum_n=rng.choice(floats), xc_mm=rng.choice(floats),
+            yc_mm=rng.choice(floats), frame_age_s=rng.choice([None, 0.0, 0.0125, 65.5, 1e9, math.nan, math.inf]),
+            slip_events=rng.choice(ints), state_changes=rng.choice(ints), lost_scans=rng.choice(ints),
+            bus_errors=rng.choice(ints), flags=rng.choice([0, 1024, 0x1_0003]), method_code=rng.choice([0, 1, 4]))
+        regs = image.render(s)
+        ref.heartbeat = image.heartbeat  # the heartbeat as render advanced it
+        values = ref.values(s)
+        assert regs == encode_registers(values, word_order), (i, s)
+        assert image.tail == encode_tail(values), (i, s)
+        assert all(type(w) is int and 0 <= w <= 0xFFFF for w in regs + image.tail)
