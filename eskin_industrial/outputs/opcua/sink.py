@@ -38,7 +38,11 @@ _NAME_FORBIDDEN = set("./")
 def need_asyncua(what: str = "the opcua output") -> None:
     """The one missing-extra error of this output (exit 4)."""
     # found, not imported: the bridge's process leaves asyncua to the server's (.process)
-    if importlib.util.find_spec("asyncua") is None:
+    try:
+        found = importlib.util.find_spec("asyncua") is not None
+    except ImportError:  # a finder that refuses it: as missing as not installed
+        found = False
+    if not found:
         raise MissingExtra.of(what, "asyncua", "opcua")
 
 
