@@ -257,6 +257,9 @@ def test_a_dcmd_of_5000_metrics_is_one_bounded_line(tmp_path: Path) -> None:
             wait_for(lambda: c()["sparkplug_commands"] == 5000 and c()["sparkplug_bad_commands"] == 1,
                      what="counted")
             wait_for(lambda: run.bridge.runs[0].loop.status.enabled, what="the loop took them")
+            # the line follows its count: the MQTT thread counts, then logs
+            wait_for(lambda: run.log.events("sparkplug_command") and run.log.events("sparkplug_bad_command"),
+                     what="the two commands' lines")
             c_end = c()
             (line,) = run.log.events("sparkplug_command")
             (bad_line,) = run.log.events("sparkplug_bad_command")
