@@ -60,6 +60,8 @@ def test_a_sweep_has_every_point_with_every_control_and_a_slower_plc_cycle_answe
     (["--closed-loop", "--cell", "nope=1"], "--cell"),
     (["--closed-loop", "--cell", "mass=-1"], "positive"),
     (["--closed-loop", "--cell", "mass"], "--cell"),
+    (["--closed-loop", "--cell", "gripper=big"], "gripper= one of"),
+    (["--closed-loop", "--cell", "force_drop=1.5"], "share below 1"),
     (["--sweep", "rate"], "--closed-loop"),
     (["--cell", "mass=1.2"], "--closed-loop"),
     (["--closed-loop", "--per-family"], "--per-family"),

@@ -142,7 +142,7 @@ def test_specimens_stay_in_their_ranges_and_the_seed_decides_them():
 def test_a_rectangle_is_rendered_as_the_scenes_render_it(name):
     kind = replace(OBJECT[name], sensor=replace(OBJECT[name].sensor, noise_n=0.0))
     r = FrameRenderer(kind, 100.0, 10, np.random.default_rng(0))
-    got = r.frame(0, 0.0, 3.3, 1.7, -0.6, False, (1.0, 0.0))
+    got = r.frame(0, 0.0, 3.3, 1.7, -0.6)
     centre = np.asarray(kind.footprint.centre_mm)[None, :] + [[1.7, -0.6]]
     want = footprint_forces(kind.array, kind.footprint, centre, np.array([3.3]))[0]
     np.testing.assert_allclose(got, want, atol=1e-12)
@@ -156,7 +156,7 @@ def test_a_sampled_shape_is_interpolated_within_a_percent_of_its_force(name):
     foot = kind.footprint
     for _ in range(20):
         d = rng.uniform(-12.0, 12.0, 2)
-        got = r.frame(0, 0.0, 5.0, d[0], d[1], False, (1.0, 0.0))
+        got = r.frame(0, 0.0, 5.0, d[0], d[1])
         want = sampled_forces(kind.array, foot, np.asarray(foot.centre_mm)[None, :] + d, np.array([foot.angle_deg]),
                               np.zeros((1, 2)), np.array([5.0]))[0]
         assert np.abs(got - want).max() <= 0.01 * 5.0
@@ -166,9 +166,9 @@ def test_a_frames_noise_is_its_own_whenever_it_is_rendered():
     kind = OBJECT["part"]
     a = FrameRenderer(kind, 100.0, 50, np.random.default_rng(9))
     b = FrameRenderer(kind, 100.0, 50, np.random.default_rng(9))
-    first = [a.frame(k, k / 100, 20.0, 0.0, 0.0, False, (1.0, 0.0)) for k in range(5)]
-    b.frame(0, 0.0, 25.0, 3.0, 0.0, True, (1.0, 0.0))  # another state first: the same noise per frame
-    again = b.frame(3, 0.03, 20.0, 0.0, 0.0, False, (1.0, 0.0))
+    first = [a.frame(k, k / 100, 20.0, 0.0, 0.0) for k in range(5)]
+    b.frame(0, 0.0, 25.0, 3.0, 0.0)  # another state first: the same noise per frame
+    again = b.frame(3, 0.03, 20.0, 0.0, 0.0)
     np.testing.assert_array_equal(first[3], again)
     assert not np.array_equal(first[3], first[4])
 

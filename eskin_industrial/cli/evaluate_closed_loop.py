@@ -34,20 +34,28 @@ def cell_seeds(value: str, parse: Any) -> tuple[str, tuple[int, ...]]:
 
 def setup_of(rate_hz: float, plc_cycle_ms: float, conditions: tuple[str, ...]) -> Any:
     from ..sim.cell.runner import Setup
-    from ..sim.cell.sweeps import CONDITIONS, apply
+    from ..sim.cell.sweeps import CONDITIONS, NAMED, ZERO_ALLOWED, apply
 
     setup = apply(apply(Setup(), "rate", rate_hz), "plc_cycle", plc_cycle_ms)
     for item in conditions:
         name, _, value = item.partition("=")
+        if name in NAMED:
+            names = NAMED[name][1]
+            if value not in names:
+                raise click.BadParameter(f"{item!r}: expected {name}= one of {', '.join(names)}", param_hint="--cell")
+            setup = apply(setup, name, value)
+            continue
         if name not in CONDITIONS:
-            raise click.BadParameter(f"{item!r}: expected NAME=VALUE with NAME one of {', '.join(CONDITIONS)}",
-                                     param_hint="--cell")
+            raise click.BadParameter(f"{item!r}: expected NAME=VALUE with NAME one of "
+                                     f"{', '.join([*CONDITIONS, *NAMED])}", param_hint="--cell")
         try:
             number = float(value)
         except ValueError:
             raise click.BadParameter(f"{item!r}: expected a number after '='", param_hint="--cell") from None
-        if not (math.isfinite(number) and number >= 0) or (number == 0 and name not in ("latency",)):
+        if not (math.isfinite(number) and number >= 0) or (number == 0 and name not in ZERO_ALLOWED):
             raise click.BadParameter(f"{item!r}: expected a positive number", param_hint="--cell")
+        if name == "force_drop" and number >= 1:
+            raise click.BadParameter(f"{item!r}: expected a share below 1", param_hint="--cell")
         setup = apply(setup, name, number)
     return setup
 
@@ -115,11 +123,16 @@ def _hours(scores: dict[str, Any]) -> float:
 
 
 def _setup_dict(setup: Any) -> dict[str, Any]:
+    from ..sim.cell.physics import VISCOUS_S_PER_M
+
     c, b = setup.chain, setup.batch
     return {"rate_hz": c.rate_hz, "plc_cycle_ms": c.plc_cycle_s * 1000, "actuator_rate_n_per_s": c.actuator.rate_n_per_s,
             "dead_time_ms": c.actuator.dead_s * 1000, "extra_latency_ms": c.extra_latency_s * 1000,
-            "viscous_s_per_m": c.viscous_s_per_m, "mass_scale": b.mass_scale, "friction_scale": b.mu_scale,
-            "accel_scale": b.accel_scale, "scan_to_plc_median_ms": c.scan_to_plc.median_s * 1000,
+            "viscous_s_per_m": c.viscous_s_per_m if c.viscous_s_per_m is not None else VISCOUS_S_PER_M,
+            "stribeck_mm_s": b.stribeck_mm_s, "force_drop": b.force_drop, "gripper_min_n": c.actuator.min_n,
+            "gripper_max_n": c.actuator.max_n, "gripper_step_n": c.actuator.step_n,
+            "gripper_error_share": c.actuator.error_share,
+            "mass_scale": b.mass_scale, "friction_scale": b.mu_scale, "accel_scale": b.accel_scale, "scan_to_plc_median_ms": c.scan_to_plc.median_s * 1000,
             "plc_to_gripper_median_ms": c.plc_to_gripper.median_s * 1000}
 
 
@@ -171,12 +184,14 @@ def _targets(scores: dict[str, Any], default: str) -> None:
 
 
 def _sweep(name: str, controls: tuple[str, ...], label: str, seeds: tuple[int, ...], setup: Any, jobs: int,
-           fmt: str) -> list[tuple[float, dict[str, Any]]]:
+           fmt: str) -> list[tuple[float | str, dict[str, Any]]]:
     from ..sim.cell.runner import run_controls
-    from ..sim.cell.sweeps import CONDITIONS, SWEEPS, apply
+    from ..sim.cell.sweeps import CONDITIONS, NAMED, NAMED_SWEEPS, SWEEPS, apply
 
-    condition, values = SWEEPS[name]
-    desc, unit = CONDITIONS[condition][0], CONDITIONS[condition][1]
+    values: tuple[float | str, ...]
+    condition, values = SWEEPS[name] if name in SWEEPS else NAMED_SWEEPS[name]
+    desc, unit = (CONDITIONS[condition][0], CONDITIONS[condition][1]) if condition in CONDITIONS else \
+        (NAMED[condition][0], "class")
     if "oracle" not in controls:
         controls = (*controls, "oracle")
     out = []
@@ -197,10 +212,14 @@ def _sweep(name: str, controls: tuple[str, ...], label: str, seeds: tuple[int, .
     click.echo("|---|---|---|---|---|---|---|---|---|---|")
     for value, scores in out:
         for s in scores.values():
-            click.echo(f"| {value:g} | {s.control} | {100 * s.held_share:.1f} | {_num(100 * s.of_oracle)} % | "
+            click.echo(f"| {_value(value)} | {s.control} | {100 * s.held_share:.1f} | {_num(100 * s.of_oracle)} % | "
                        f"{s.dropped} | {s.crushed} | {_num(s.slid_p90_mm)} | {s.needless} ({_num(s.needless_per_hour)}) | "
                        f"{_num(100 * s.grip_vs_fixed, '.0f')} % | {_num(s.reaction_p50_s * 1000, '.0f')} |")
     return out
+
+
+def _value(value: float | str) -> str:
+    return value if isinstance(value, str) else format(value, "g")
 
 
 def _charts(out: Path, methods: tuple[str, ...], label: str, seeds: tuple[int, ...], setup: Any, jobs: int,

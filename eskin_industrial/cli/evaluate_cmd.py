@@ -99,9 +99,10 @@ def _seeds(value: str) -> tuple[int, ...]:
               help="With --closed-loop: the PLC's scan cycle (ms).")
 @click.option("--cell", "cell", multiple=True, metavar="NAME=VALUE",
               help="With --closed-loop: change the cell (repeatable): actuator_rate (N/s), dead_time (ms), latency "
-                   "(ms added), mass, friction, accel (x the recipe's), viscous (s/m).")
+                   "(ms added), mass, friction, accel (x the recipe's), viscous (s/m, 0: pure Coulomb), stribeck "
+                   "(mm/s, 0: none), force_drop (share lost at a slide's onset), gripper (ideal, small, coarse).")
 @click.option("--sweep", type=click.Choice(["rate", "plc-cycle", "actuator", "dead-time", "friction", "mass", "latency",
-                                            "viscous"]), default=None,
+                                            "viscous", "stribeck", "force-drop", "gripper"]), default=None,
               help="With --closed-loop: one sweep of docs/evaluation.md (default controls: fixed, none, the default "
                    "method, oracle).")
 @click.option("--jobs", type=click.IntRange(min=1, max=64), default=None,

@@ -3,7 +3,7 @@ for tuning and which are held out (docs/evaluation.md, the seed table)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -30,6 +30,11 @@ class Batch:
     mass_scale: float = 1.0  #: a heavier (or lighter) batch than the recipes were written for
     mu_scale: float = 1.0  #: more (or less) slippery
     accel_scale: float = 1.0  #: a faster (or gentler) program
+    #: the friction law's Stribeck speed (mm/s; 0: friction falls to kinetic at once, no
+    #: stick-slip); a family of the closed loop's conditions
+    stribeck_mm_s: float = 0.0
+    #: the share of the normal force the sensed pad loses at a slide's onset (0: none)
+    force_drop: float = 0.0
 
 
 def episode(seed: int, batch: Batch = Batch()) -> Episode:
@@ -38,5 +43,7 @@ def episode(seed: int, batch: Batch = Batch()) -> Episode:
     rng = np.random.default_rng((seed, 2801))
     kind = batch.objects[seed % len(batch.objects)]
     specimen = Specimen.draw(kind, rng, batch.mass_scale, batch.mu_scale)
+    if batch.stribeck_mm_s or batch.force_drop:
+        specimen = replace(specimen, stribeck_m_per_s=batch.stribeck_mm_s / 1000.0, force_drop=batch.force_drop)
     task = draw_task(kind, specimen, rng, batch.accel_scale)
     return Episode(seed, specimen, task, render_seed=seed)

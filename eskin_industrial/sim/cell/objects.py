@@ -58,7 +58,9 @@ class CellObject:
     pour_kg: Span | None = None
     #: The grip force that breaks it; None: not fragile.
     crush_n: Span | None = None
-    #: Stick-slip while sliding, as in the scenes' slides (position jitter, force ripple).
+    #: Stick-slip where the friction law makes it (physics.py): half the pad's stroke (mm)
+    #: and the force ripple (share of the grip) when the whole static-kinetic difference
+    #: is released, the scenes' slides' amplitudes; less as less is released.
     stick_slip_mm: float = 0.1
     stick_slip_force: float = 0.04
     sensor: SensorEffects = field(default_factory=SensorEffects)
@@ -89,6 +91,10 @@ class Specimen:
     mu_k: float
     pour_kg: float
     crush_n: float  #: inf when not fragile
+    #: the friction law's Stribeck speed (m/s; 0: none): a batch property (``Batch``)
+    stribeck_m_per_s: float = 0.0
+    #: the share of the normal force the sensed pad loses at a slide's onset (0: none)
+    force_drop: float = 0.0
 
     @classmethod
     def draw(cls, kind: CellObject, rng: np.random.Generator, mass_scale: float = 1.0,

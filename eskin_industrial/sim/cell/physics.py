@@ -1,21 +1,30 @@
-"""The object between two fingers, stepped in time: Coulomb friction decides whether it
-sticks or slides, the slide is integrated, the object drops once it has slid off the
-contact and breaks once the grip passes its crush force.
+"""The object between two fingers, stepped in time: friction decides whether it sticks
+or slides, the slide is integrated, the object drops once it has slid off the contact
+and breaks once the grip passes its crush force.
 
 The model (docs/cell.md, *Physics*, with what it leaves out):
 
 - in the gripper's frame the object feels a load in the pads' plane, ``m (g - a)``
   (gravity along x, ``a`` the arm's acceleration); while the table carries it, none;
 - the two pads hold it with ``2 mu_s F`` at most (``F`` the grip force); beyond that it
-  slides, against ``2 F (mu_k + c_v |v|)``: kinetic friction and the pads' velocity
-  strengthening (an elastomer's friction grows with slip speed), which makes a slide
-  under a small excess load a steady one of cm/s; it sticks again when it stops and the
-  load is within ``2 mu_s F``;
-- semi-implicit Euler on a fixed tick (1 ms), the speed-dependent term implicit (it is
-  stiff under a firm grip on a light object).
+  slides, against ``2 F mu(v)``, the friction law of the slip speed ``v``:
+  ``mu(v) = mu_k + (mu_s - mu_k) exp(-v / v_S) + c_v v``: kinetic friction, a Stribeck
+  term (friction falling from static to kinetic over ``v_S``; ``v_S = 0``: at once, the
+  classic Coulomb pair) and the pads' velocity strengthening ``c_v`` (0: pure Coulomb);
+  it sticks again when it stops and the load is within ``2 mu_s F``;
+- stick-slip: where the friction law weakens with speed at the slide's speed (the
+  Stribeck term's fall outweighs ``c_v``), a steady slide is unstable and the pad's
+  surface sticks to the object, is dragged along, and snaps back, once per stroke: a
+  relaxation oscillation whose stroke grows with the friction released
+  (``mu_s - mu(v)``) and whose rate is the slide's speed over the stroke.  Where the
+  law does not weaken (Coulomb with ``v_S = 0``, or ``c_v`` strong enough), slides are
+  smooth: no ripple;
+- semi-implicit Euler on a fixed tick (1 ms), the speed-strengthening term implicit (it
+  is stiff under a firm grip on a light object), the Stribeck term explicit (bounded).
 
 No I/O, no clock: the caller advances it.  Streaming state is the object's displacement
-and velocity in the gripper's frame, and what happened (onsets, distance, drop, crush).
+and velocity in the gripper's frame, the pad's stick-slip phase, and what happened
+(onsets, distance, drop, crush).
 """
 
 from __future__ import annotations
@@ -27,9 +36,11 @@ G = 9.81  #: m/s^2
 #: Slid this far (mm, from where it was gripped) the object has left the fingers'
 #: contact: dropped.  A finger pad is 20-30 mm long; 10-30 mm is the range published.
 DROP_MM = 15.0
-#: The pads' velocity strengthening: friction coefficient gained per m/s of slip
-#: (0.1 at 25 mm/s; an assumption, swept in docs/evaluation.md).
-VISCOUS_S_PER_M = 4.0
+#: The pads' velocity strengthening: friction coefficient gained per m/s of slip (0.025
+#: at 25 mm/s).  An assumption (docs/cell.md, *Physics*: rubber's friction is published
+#: to rise with the logarithm of the speed; no slope for gripper pads was found to
+#: check), swept from 0 (pure Coulomb) to 4 s/m in docs/evaluation.md.
+VISCOUS_S_PER_M = 1.0
 
 
 @dataclass(frozen=True)
@@ -37,11 +48,39 @@ class Friction:
     mu_s: float
     mu_k: float
     viscous_s_per_m: float = VISCOUS_S_PER_M
+    #: the Stribeck speed ``v_S`` (m/s) over which friction falls from static to kinetic;
+    #: 0: at once (no velocity weakening once it slides)
+    stribeck_m_per_s: float = 0.0
     contacts: int = 2  #: two fingers, each pressing with the grip force
 
     def __post_init__(self) -> None:
         if not 0 < self.mu_k <= self.mu_s:
             raise ValueError(f"friction: expected 0 < mu_k <= mu_s, got mu_k {self.mu_k}, mu_s {self.mu_s}")
+        if not (self.viscous_s_per_m >= 0 and self.stribeck_m_per_s >= 0):
+            raise ValueError(f"friction: expected c_v >= 0 and v_S >= 0, got {self.viscous_s_per_m}, "
+                             f"{self.stribeck_m_per_s}")
+
+    def weakening(self, speed: float) -> float:
+        """The Stribeck term at ``speed`` (m/s): what friction has still to lose."""
+        if self.stribeck_m_per_s <= 0.0:
+            return 0.0
+        return (self.mu_s - self.mu_k) * math.exp(-speed / self.stribeck_m_per_s)
+
+    def mu(self, speed: float) -> float:
+        """The friction coefficient of a slide at ``speed`` (m/s, > 0)."""
+        return self.mu_k + self.weakening(speed) + self.viscous_s_per_m * speed
+
+    @property
+    def weakens_below_m_per_s(self) -> float:
+        """The speed below which the friction law falls with speed (``mu'(v) < 0``): a
+        slide slower than this sticks and slips; 0: the law never weakens."""
+        drop, vs, cv = self.mu_s - self.mu_k, self.stribeck_m_per_s, self.viscous_s_per_m
+        if vs <= 0.0 or drop <= 0.0:
+            return 0.0
+        if cv <= 0.0:
+            return math.inf
+        ratio = drop / (vs * cv)
+        return vs * math.log(ratio) if ratio > 1.0 else 0.0
 
 
 @dataclass
@@ -51,6 +90,9 @@ class Contact:
     friction: Friction
     crush_n: float = math.inf
     drop_mm: float = DROP_MM
+    #: the pad's stick-slip stroke (m) where the whole static-kinetic difference is
+    #: released (its shear compliance times the force released; less as less is released)
+    stroke_full_m: float = 0.0002
     t: float = 0.0
     x: float = 0.0  #: displacement from where it was gripped (m), x down
     y: float = 0.0
@@ -62,6 +104,11 @@ class Contact:
     crushed_at: float | None = None
     #: (start, end) of each slide; the last one's end is None while it lasts
     slides: list[tuple[float, float | None]] = field(default_factory=list)
+    #: the pad's surface, dragged by the object since its last snap (m), and the stroke
+    #: at which it snaps back (0: a smooth slide)
+    pad_m: float = 0.0
+    stroke_m: float = 0.0
+    stick_slips: int = 0  #: snaps counted over the episode
 
     @property
     def over(self) -> bool:
@@ -112,7 +159,7 @@ class Contact:
             ux, uy = vx / speed, vy / speed
         else:
             ux, uy = px / load, py / load
-        kin = fr.mu_k * normal
+        kin = (fr.mu_k + fr.weakening(speed)) * normal  # the Stribeck term at the last speed: explicit
         damp = dt * normal * fr.viscous_s_per_m / mass_kg  # implicit: stiff under a firm grip
         nx = (vx + dt * (px - kin * ux) / mass_kg) / (1.0 + damp)
         ny = (vy + dt * (py - kin * uy) / mass_kg) / (1.0 + damp)
@@ -127,11 +174,40 @@ class Contact:
         self.x += nx * dt
         self.y += ny * dt
         self.slid_m += math.hypot(nx, ny) * dt
+        self._pad(math.hypot(nx, ny), dt)
         if math.hypot(self.x, self.y) * 1000.0 >= self.drop_mm:
             self.dropped_at = t
             self._stop(t)
 
+    def _pad(self, speed: float, dt: float) -> None:
+        """The pad's stick-slip over one tick of a slide at ``speed``: dragged along while
+        it sticks to the object, snapped back by a stroke once it holds no more.  Only
+        where the friction law weakens at this speed; elsewhere the slide is smooth."""
+        fr = self.friction
+        released = fr.mu_s - fr.mu(speed) if 0.0 < speed < fr.weakens_below_m_per_s else 0.0
+        if released <= 0.0:
+            self.pad_m = self.stroke_m = 0.0
+            return
+        self.stroke_m = self.stroke_full_m * released / (fr.mu_s - fr.mu_k)
+        self.pad_m += speed * dt
+        if self.pad_m >= self.stroke_m:
+            self.stick_slips += int(self.pad_m // self.stroke_m)
+            self.pad_m %= self.stroke_m
+
+    @property
+    def ripple(self) -> float:
+        """Where the pad is in its stroke, -1 (just snapped back) to 1 (about to), and 0
+        in a smooth slide or at rest."""
+        return 2.0 * self.pad_m / self.stroke_m - 1.0 if self.stroke_m > 0.0 else 0.0
+
+    @property
+    def released(self) -> float:
+        """The share of the static-kinetic difference the current stroke releases (0-1)."""
+        fr = self.friction
+        return self.stroke_m / self.stroke_full_m if self.stroke_full_m > 0 and fr.mu_s > fr.mu_k else 0.0
+
     def _stop(self, t: float) -> None:
         self.sliding = False
+        self.pad_m = self.stroke_m = 0.0
         if self.slides and self.slides[-1][1] is None:
             self.slides[-1] = (self.slides[-1][0], t)

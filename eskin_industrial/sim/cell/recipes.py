@@ -9,6 +9,11 @@ rated crush force.  The policy's forces are shares of the force that holds the o
 at rest (S = 1, a = 0).  Every factor here was chosen on the closed loop's tuning seeds
 (``episodes.TUNING_SEEDS``; docs/evaluation.md, *The closed loop*), never on the
 held-out ones.
+
+Each recipe is for a gripper (``drive``, a gripper class's ``ActuatorSpec``): its
+forces within the drive's range (a grip lighter than the drive's minimum is its
+minimum, whatever that does to a fragile object), and a raise of at least one of its
+force steps (a smaller one would not change the force it holds).
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Literal
 
+from .actuator import ActuatorSpec
 from .objects import CellObject
 from .physics import G
 from .policy import PolicySettings
@@ -60,23 +66,32 @@ def crush_cap_n(kind: CellObject) -> float | None:
     return None if rated is None else rated / CRUSH_MARGIN
 
 
-def fixed_grip_n(kind: CellObject, safety: float = FIXED_SAFETY) -> float:
+def _within(force_n: float, drive: ActuatorSpec | None) -> float:
+    """A force the drive can hold: within its range, on its steps."""
+    return force_n if drive is None else drive.setting_n(force_n)
+
+
+def fixed_grip_n(kind: CellObject, safety: float = FIXED_SAFETY, drive: ActuatorSpec | None = None) -> float:
     """The cautious integrator's grip with no skin: the catalogue rule, capped below
-    the rated crush force."""
+    the rated crush force, within the drive's range."""
     force = kind.design_mass_kg * (G + DESIGN_ACCEL) * safety / (2.0 * kind.nominal_mu)
     cap = crush_cap_n(kind)
-    return force if cap is None else min(force, cap)
+    return _within(force if cap is None else min(force, cap), drive)
 
 
-def policy_settings(kind: CellObject, factors: PolicyFactors = POLICY, safety: float = FIXED_SAFETY) -> PolicySettings:
-    """The grip policy's settings for ``kind``."""
-    fixed = fixed_grip_n(kind, safety)
+def policy_settings(kind: CellObject, factors: PolicyFactors = POLICY, safety: float = FIXED_SAFETY,
+                    drive: ActuatorSpec | None = None) -> PolicySettings:
+    """The grip policy's settings for ``kind`` on ``drive`` (None: the cell's own)."""
+    fixed = fixed_grip_n(kind, safety, drive)
     cap = crush_cap_n(kind)
     light = max(factors.light * rest_force_n(kind.mass_kg.hi, kind.nominal_mu), MIN_GRIP_N)
     step = factors.step * rest_force_n(kind.design_mass_kg, kind.nominal_mu)
     top = factors.max_of_fixed * fixed
     if cap is not None:
         top = min(top, cap)
+    if drive is not None:
+        light, top = _within(light, drive), _within(top, drive)
+        step = max(step, drive.step_n)
     return PolicySettings(light_n=min(light, top), step_n=step, max_n=max(top, light), fallback_n=fixed,
                           mode=factors.mode,
                           repeat_s=factors.repeat_s, quiet_s=factors.quiet_s, relax_share=factors.relax_share,

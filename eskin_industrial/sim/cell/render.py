@@ -1,7 +1,7 @@
 """The taxel frames the node sends, rendered one at a time from the cell's state (the
-grip force, the object's displacement, whether it slides), with the scenes' contact
-model and sensor effects, so that the detector sees the kind of data the open-loop
-scenes give it.
+normal force on the sensed pad, where the contact is), with the scenes' contact model
+and sensor effects, so that the detector sees the kind of data the open-loop scenes
+give it.
 
 - The contact: the scenes' footprint (``scenes/physics.py``) moved by the object's
   displacement.  A rectangle (the hand's soft fingertips, a block) is computed exactly
@@ -9,8 +9,9 @@ scenes give it.
   ``sampled_forces`` at unit force on a 0.5 mm grid of displacements, computed where
   first needed and interpolated (within 1 % of the force of a direct rendering, 0.2 %
   for a sphere).
-- While it slides: the scenes' stick-slip micro-motion (a sawtooth at 25 Hz whose
-  period wanders, and white jitter) along the slide and its force ripple.
+- Nothing of its own while it slides: the stick-slip micro-motion and force ripple,
+  and a normal force lost at a slide's onset, are the physics' (``world.py`` hands
+  them in as the contact's place and force); a smooth slide renders smooth.
 - The sensor: the scenes' effects in their order (``scenes/sensor.py``), per frame,
   with the film's creep as explicit state; the random draws (noise, gains, jitter) are
   made per episode from its seed, one row a frame, so that a frame's noise does not
@@ -32,8 +33,6 @@ from .objects import CellObject
 
 #: Grid step of the sampled shapes' displacement table (mm).
 GRID_MM = 0.5
-#: The stick-slip sawtooth's frequency (Hz), as the scenes' slides.
-STICK_SLIP_HZ = 25.0
 
 
 class _Rectangle:
@@ -97,7 +96,7 @@ class _Sampled:
 
 
 class FrameRenderer:
-    """Frames of one episode: ``frame(k, t, grip_n, dx_mm, dy_mm, sliding, dir)``.
+    """Frames of one episode: ``frame(k, t, force_n, dx_mm, dy_mm)``.
 
     ``frames`` bounds the episode (the draws are made for that many frames at once)."""
 
@@ -116,10 +115,7 @@ class FrameRenderer:
         self.gain = 1.0 + fx.gain_mismatch * rng.standard_normal(n) if fx.gain_mismatch else None
         self.drift_gain = 1.0 + fx.drift_spread * rng.standard_normal(n) if fx.drift_n_per_s else None
         self.noise = fx.noise_n * rng.standard_normal((frames, n)) if fx.noise_n else None
-        self.wander = (1.0 + 0.2 * rng.standard_normal(frames)).clip(0.3)
-        self.jitter = 0.3 * rng.standard_normal((frames, 2))
         self.dropped = rng.random(frames) < fx.drop_rate if fx.drop_rate else None
-        self._phase = 0.0
         self._lag = np.zeros(n)  # the film's creep (first-order lag)
         self._t_prev: float | None = None
         self._key: tuple[float, float, float] | None = None
@@ -129,24 +125,13 @@ class FrameRenderer:
         """Whether frame ``k`` never reaches the host (the scenes' ``drop_rate``)."""
         return self.dropped is not None and bool(self.dropped[k])
 
-    def frame(self, k: int, t: float, grip_n: float, dx_mm: float, dy_mm: float, sliding: bool,
-              direction: tuple[float, float]) -> np.ndarray:
-        """Frame ``k`` at ``t``: the grip force on the footprint moved by (dx, dy) mm;
-        while ``sliding`` (along ``direction``, a unit vector), the stick-slip motion."""
-        kind = self.kind
-        force = grip_n
+    def frame(self, k: int, t: float, force_n: float, dx_mm: float, dy_mm: float) -> np.ndarray:
+        """Frame ``k`` at ``t``: ``force_n`` on the footprint moved by (dx, dy) mm."""
         cx, cy = self.cx0 + dx_mm, self.cy0 + dy_mm
-        if sliding:
-            self._phase += STICK_SLIP_HZ * float(self.wander[k]) * self.dt
-            saw = 2.0 * (self._phase - math.floor(self._phase)) - 1.0
-            wobble = kind.stick_slip_mm * (saw + float(self.jitter[k, 0]))
-            cx += wobble * direction[0]
-            cy += wobble * direction[1]
-            force *= 1.0 + kind.stick_slip_force * (saw + float(self.jitter[k, 1]))
-        key = (cx, cy, force)
+        key = (cx, cy, force_n)
         if key != self._key:  # a still hold renders the same contact frame after frame
             self._key = key
-            self._contact = self.shape.forces(cx, cy, force) if force > 0.0 else np.zeros(self.n)
+            self._contact = self.shape.forces(cx, cy, force_n) if force_n > 0.0 else np.zeros(self.n)
         return self._sense(k, t, self._contact)
 
     def _sense(self, k: int, t: float, f: np.ndarray) -> np.ndarray:

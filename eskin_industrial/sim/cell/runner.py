@@ -13,7 +13,7 @@ from ...profile import Profile, load_profile
 from ...progress import NO_PROGRESS, Progress
 from .episodes import Batch, episode
 from .outcome import EpisodeResult
-from .recipes import POLICY, PolicyFactors, fixed_grip_n, policy_settings
+from .recipes import FIXED_SAFETY, POLICY, PolicyFactors, fixed_grip_n, policy_settings
 from .virtual import ChainSpec, run_episode
 
 #: Episodes per task handed to a worker process.
@@ -44,9 +44,10 @@ def _profile(name: str) -> Profile:
 def run_seed(seed: int, control: str, setup: Setup) -> EpisodeResult:
     ep = episode(seed, setup.batch)
     kind = ep.kind
-    fixed = fixed_grip_n(kind) if setup.fixed_safety is None else fixed_grip_n(kind, setup.fixed_safety)
-    settings = policy_settings(kind, setup.factors) if setup.fixed_safety is None else \
-        policy_settings(kind, setup.factors, setup.fixed_safety)
+    drive = setup.chain.actuator
+    safety = FIXED_SAFETY if setup.fixed_safety is None else setup.fixed_safety
+    fixed = fixed_grip_n(kind, safety, drive)
+    settings = policy_settings(kind, setup.factors, safety, drive)
     return run_episode(ep, control, _profile(kind.profile), setup.chain, settings, fixed)
 
 

@@ -24,6 +24,10 @@ from .task import Task
 TICK_S = 0.001
 #: After a drop or a crush the episode runs this much longer (the skin sees it go).
 TAIL_S = 0.3
+#: A normal force lost at a slide's onset (``Specimen.force_drop``) is all gone this
+#: long after the onset, and back this long after the object sticks again.
+DROP_RISE_S = 0.02
+DROP_RECOVER_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -62,9 +66,13 @@ class CellWorld:
         self._load = np.where(tab.held, np.hypot(np.asarray(tab.mass) * (G - np.asarray(tab.ax)),
                                                  np.asarray(tab.mass) * np.asarray(tab.ay)), 0.0)
         self._held = np.asarray(tab.held)
-        friction = Friction(s.mu_s, s.mu_k) if viscous_s_per_m is None else Friction(s.mu_s, s.mu_k, viscous_s_per_m)
-        self.contact = Contact(friction, s.crush_n)
-        self.actuator = Actuator(actuator)
+        friction = Friction(s.mu_s, s.mu_k, stribeck_m_per_s=s.stribeck_m_per_s) if viscous_s_per_m is None else \
+            Friction(s.mu_s, s.mu_k, viscous_s_per_m, s.stribeck_m_per_s)
+        self.contact = Contact(friction, s.crush_n, stroke_full_m=2.0 * s.kind.stick_slip_mm / 1000.0)
+        # the drive's force error: drawn once per episode, apart from every other draw
+        error = float(np.random.default_rng((episode.seed, 3801)).uniform(-1.0, 1.0)) * actuator.error_share \
+            if actuator.error_share else 0.0
+        self.actuator = Actuator(actuator, error)
         self.rate_hz = rate_hz
         frames = int(math.ceil((episode.task.end_s + TAIL_S) * rate_hz)) + 2
         self.renderer = FrameRenderer(s.kind, rate_hz, frames, np.random.default_rng(episode.render_seed))
@@ -137,13 +145,37 @@ class CellWorld:
 
     def frame(self, index: int, t: float) -> np.ndarray:
         """Frame ``index`` (at ``t``) as the array sees the cell now: nothing once the
-        object has gone (dropped) or given way (crushed)."""
+        object has gone (dropped) or given way (crushed); the pad's stick-slip where the
+        physics has one (its stroke along the slide, the grip's ripple with it), and the
+        normal force the sensed pad loses at a slide's onset."""
         c = self.contact
-        grip = 0.0 if c.over else self.grip_n
+        kind = self.episode.kind
+        force = 0.0 if c.over else self.grip_n
         dx, dy = c.displacement_mm
-        speed = math.hypot(c.vx, c.vy)
-        direction = (c.vx / speed, c.vy / speed) if speed > 0 else (1.0, 0.0)
-        return self.renderer.frame(index, t, grip, dx, dy, c.sliding, direction)
+        ripple = c.ripple
+        if ripple:
+            speed = math.hypot(c.vx, c.vy)
+            ux, uy = (c.vx / speed, c.vy / speed) if speed > 0 else (1.0, 0.0)
+            wobble = kind.stick_slip_mm * c.released * ripple
+            dx += wobble * ux
+            dy += wobble * uy
+            force *= 1.0 + kind.stick_slip_force * c.released * ripple
+        drop = self.episode.specimen.force_drop
+        if drop and force > 0.0:
+            force *= 1.0 - drop * self._drop_level(t)
+        return self.renderer.frame(index, t, force, dx, dy)
+
+    def _drop_level(self, t: float) -> float:
+        """How much of a slide's normal-force loss holds at ``t`` (0-1): all of it
+        ``DROP_RISE_S`` after the onset, gone ``DROP_RECOVER_S`` after the end."""
+        slides = self.contact.slides
+        if not slides:
+            return 0.0
+        start, end = slides[-1]
+        if end is None or t < end:
+            return min(1.0, max(0.0, (t - start) / DROP_RISE_S))
+        at_end = min(1.0, (end - start) / DROP_RISE_S)
+        return at_end * max(0.0, 1.0 - (t - end) / DROP_RECOVER_S)
 
     @property
     def mean_grip_n(self) -> float:
