@@ -4,10 +4,13 @@ or dropped (docs/cell.md).
 - ``objects.py``, ``task.py``: what the cell handles (mass, friction, crush force,
   footprint, drawn per seed) and what the arm does with it (lift, transport, pour,
   bump, place), as tables over time;
-- ``physics.py``: Coulomb friction between two fingers and the object, stepped in time
-  (stick or slide, the distance slid, dropped, crushed); ``actuator.py``: the gripper's
-  force with a dead time and a rate limit; ``render.py``: the taxel frames the node
-  sends, from that state, with the scenes' sensor effects.  No I/O in any of them;
+- ``physics.py``: friction between two fingers and the object (from pure Coulomb to
+  strong velocity strengthening, a Stribeck fall and the pad's stick-slip where the law
+  makes one), stepped in time (stick or slide, the distance slid, dropped, crushed);
+  ``actuator.py``: the gripper's force with a dead time and a rate limit, within a
+  gripper class's range, steps and error (``grippers.py``); ``render.py``: the taxel
+  frames the node sends, from that state, with the scenes' sensor effects.  No I/O in
+  any of them;
 - ``world.py``: those together, advanced tick by tick (what both runs share);
 - ``policy.py``: the PLC program (grip lightly, raise on slip, relax after a quiet
   time; "no verdict" is not "no slip"); ``recipes.py``: its forces per object, and the
