@@ -261,7 +261,7 @@ def _lines(r: Running, event: str, kind: str) -> list[dict]:
 
 
 def _no_other_failure(r: Running) -> None:
-    for event in ("thread_failed", "loop_failed", "supervise_failed", "stop_failed"):
+    for event in ("thread_failed", "loop_failed", "supervise_failed", "stop_failed", "loop_stalled"):
         assert not r.log.events(event), r.log.events(event)
     assert not r.bridge.failure
 
