@@ -17,10 +17,19 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from typing import Protocol
 
-if TYPE_CHECKING:
-    from .runtime import NodeRun
+from .loop import NodeLoop
+
+
+class NodeRun(Protocol):
+    """What the guard reads of a node inside the bridge (``runtime.NodeRun``)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def loop(self) -> NodeLoop: ...
 
 
 class StallGuard:
