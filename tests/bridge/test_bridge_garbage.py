@@ -34,6 +34,7 @@ from tests.helpers.bridge import (
 )
 from tests.helpers.fuzz import fuzz
 from tests.helpers.modbus import free_port
+from tests.helpers.stalls import StallMeter
 
 PROFILE = load_profile(PAPER)
 LAYOUT = CanLayout.from_profile(PROFILE)
@@ -121,7 +122,7 @@ def test_garbage_on_the_bus_of_a_running_bridge(garbage):
     plc = TimedPlc(port).start()
     raw = hold_raw(PROFILE, 150)  # 0.6 s of a still grasp, 0.4 s of silence, 0.5 s again
     try:
-        with running_bridge(client_config(can_node("grip", ch), port=port)) as run, \
+        with StallMeter() as stalls, running_bridge(client_config(can_node("grip", ch), port=port)) as run, \
                 node_thread(PROFILE, ch, raw, RATE_HZ, faults=Faults(silent_at_s=0.6, silent_for_s=0.4)) as node, \
                 open_bus("virtual", ch) as noise:
 
@@ -156,10 +157,14 @@ def test_garbage_on_the_bus_of_a_running_bridge(garbage):
     assert counters["torn_scans"] == counters["late_frames"] == counters["duplicate_frames"] == 0
     assert counters["lost_scans"] == 40 and counters["foreign_frames"] == 0
     assert not any(v["STATUS"] & Status.SLIP for _, v in images)  # a still grasp, whatever the noise
-    silent = [(t, v) for t, v in images if last + INVALID_AFTER_S < t < resumed]
-    assert len(silent) >= 4
+    # a pause of this whole process (bridge and PLC stand-in alike) delays the writes'
+    # arrival, not the bridge's verdict: it is allowed, and nothing more
+    allowed = INVALID_AFTER_S + stalls.longest(last, resumed)
+    silent = [(t, v) for t, v in images if last + allowed < t < resumed]
+    assert len(silent) >= 4 or allowed > 0.25, (allowed, len(silent))
     assert not any(v["STATUS"] & CLAIMS for _, v in silent), [
-        (round(1000 * (t - last), 1), Status(v["STATUS"])) for t, v in images if last - 0.05 < t < resumed]
+        round(allowed, 3), [(round(1000 * (t - last), 1), Status(v["STATUS"])) for t, v in images
+                            if last - 0.05 < t < resumed]]
     # the valid traffic after the silence is a stable grasp again, up to its last frame
     end = node.tx.sent[-1]
     final = [v["STATUS"] for t, v in images if resumed < t <= end][-1]

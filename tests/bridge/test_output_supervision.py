@@ -5,7 +5,8 @@ client polls it every 10 ms on loopback.
 The faults, one after the other on one bridge (the case-2 scene, its slide brought
 forward from 9.4 s to 5 s to keep the run short: pressed at 1 s, a slip at 5 s): (a) an exception from the output's ``publish``, (b) the death of a
 thread of its own (paho's network thread, the PLC writer's, the recorder's handover:
-made to die by a callback that raises; the OPC UA server's process, killed), (c) a
+made to die by a callback that raises; the web console's server thread, interrupted out of
+its event loop; the OPC UA server's process, killed), (c) a
 call that hangs.  Each is one ``output_failed`` line naming the output; the output is
 back (``output_restarted``, a fresh instance) within its back-off; every read of the
 served block is answered within 20 ms, DATA_VALID stays set and the slip is served.
@@ -48,6 +49,7 @@ from eskin_industrial.outputs.plc.image import decode_registers as decode
 from eskin_industrial.outputs.plc.options import PlcOptions
 from eskin_industrial.outputs.recorder.kind import RecorderOptions
 from eskin_industrial.outputs.sparkplug.options import SparkplugOptions
+from eskin_industrial.outputs.web.options import WebOptions
 from tests.helpers import sparkplug as spb
 from tests.helpers.bridge import PAPER, Running, TimedPlc, running_bridge, wait_for
 from tests.helpers.modbus import free_port, need
@@ -85,6 +87,11 @@ LATE_MORE = 5
 
 class Died(BaseException):
     """What kills a handover's thread (its calls' exceptions are caught as failures)."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """What kills a thread out of its asyncio loop (which keeps running past any other
+    exception a callback raises)."""
 
 
 #: The Modbus client, a process of its own (no thread of the bridge's process is
@@ -206,6 +213,12 @@ def _faults(kind: str, release: threading.Event, broker: int | None) -> dict[str
     elif kind == "opcua":
         def thread_dies(sink: SupervisedSink) -> None:  # the server's process
             os.kill(sink.inner.server.pid, signal.SIGKILL)  # type: ignore[attr-defined]
+    elif kind == "web":
+        def thread_dies(sink: SupervisedSink) -> None:  # the server's thread, out of its event loop
+            def die() -> None:
+                raise Interrupted("the web server's thread dies")
+
+            sink.inner.server._loop.call_soon_threadsafe(die)  # type: ignore[attr-defined]
     elif kind == "recorder":
         def thread_dies(sink: SupervisedSink) -> None:  # its handover's thread: it has none other
             sink.inner.on_update = _die  # type: ignore[method-assign]
@@ -262,7 +275,7 @@ def _lines(r: Running, event: str, kind: str) -> list[dict]:
 
 
 def _no_other_failure(r: Running) -> None:
-    for event in ("thread_failed", "loop_failed", "supervise_failed", "stop_failed"):
+    for event in ("thread_failed", "loop_failed", "supervise_failed", "stop_failed", "loop_stalled"):
         assert not r.log.events(event), r.log.events(event)
     assert not r.bridge.failure
 
@@ -329,7 +342,7 @@ class Control:
         return self.poller
 
 
-@pytest.mark.parametrize("kind", ["recorder", "sparkplug", "opcua"])
+@pytest.mark.parametrize("kind", ["recorder", "sparkplug", "opcua", "web"])
 def test_a_failing_output_restarts_while_the_plc_block_is_served(tmp_path: Path, kind: str) -> None:
     release = threading.Event()
     plc_port = free_port()
@@ -348,6 +361,12 @@ def test_a_failing_output_restarts_while_the_plc_block_is_served(tmp_path: Path,
 
             def healthy(sink: SupervisedSink) -> bool:
                 return sink.output.up and bool(sink.health().connected)
+        elif kind == "web":
+            web_port = free_port()
+            outputs["web"] = WebOptions(bind=f"127.0.0.1:{web_port}")
+
+            def healthy(sink: SupervisedSink) -> bool:
+                return sink.output.up and _listens(web_port)
         else:
             opcua_port = free_port()
             outputs["opcua"] = OpcuaOptions(endpoint=f"opc.tcp://127.0.0.1:{opcua_port}", offline_linger_s=0.0)
