@@ -20,10 +20,11 @@ from eskin_industrial.outputs.plc.options import PlcOptions
 from eskin_industrial.outputs.recorder.kind import RecorderOptions
 from tests.helpers.bridge import PAPER, BlockPoller, running_bridge, wait_for
 from tests.helpers.modbus import free_port
+from tests.helpers.paths import ROOT
 from tests.helpers.stalls import StallMeter
 
 STALL_S = 0.3
-CASE2 = Path(__file__).resolve().parents[1] / "eskin_industrial" / "scenes" / "builtin" / "case2.toml"
+CASE2 = ROOT / "eskin_industrial" / "scenes" / "builtin" / "case2.toml"
 
 
 def _config(tmp_path: Path, port: int) -> BridgeConfig:
