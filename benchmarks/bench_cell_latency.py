@@ -17,7 +17,7 @@ Printed: the quantiles of each (the table ``latency.py`` holds), medians and the
 and 99th percentiles, and the node's worst lateness behind its scan deadlines (a
 loaded machine shows here first).  Beside each episode, the same episode in virtual
 time (with the latency tables as they stand): its outcome and the distance slid, the
-agreement ``tests/test_cell_agreement.py`` holds to.
+agreement ``tests/sim/test_cell_closed_loop.py`` holds to.
 """
 
 from __future__ import annotations

@@ -149,6 +149,10 @@ class SupervisionSettings:
     backoff_max_s: float = field(default=30.0, metadata=in_range(0.01, 600))
     #: A call of a non-essential output still in progress after this long is a failure.
     hang_s: float = field(default=5.0, metadata=in_range(0.05, 600))
+    #: A node loop that has not turned for this long (a hung essential output, a
+    #: stuck source call): its nodes' blocks are set offline, nothing claimed, until it
+    #: turns again.  A loop turns at least every 50 ms while it runs.
+    loop_stall_s: float = field(default=0.5, metadata=in_range(0.1, 600))
     #: Output kind -> its own settings, over the ones above.
     output: dict[str, OutputSupervision] = field(default_factory=dict)
 

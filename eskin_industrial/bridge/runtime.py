@@ -43,6 +43,7 @@ from .logs import EventLog
 from .loop import NodeLoop
 from .notify import Notifier
 from .signals import SignalFlags
+from .stall import StallGuard
 from .supervise import Output, Policy, Supervision
 
 #: The interpreter hands the GIL between threads every 5 ms by default; a reader
@@ -226,6 +227,9 @@ class Bridge:
         #: Every output, watched: a failure is logged and restarts it (``[supervision]``).
         self.supervision = Supervision(lambda name, level, **fields: self.log.event(name, level, **fields),
                                        self._output_stops)
+        #: A loop that stops turning leaves no verdict standing (:mod:`.stall`).
+        self._stall = StallGuard(config.supervision.loop_stall_s,
+                                 lambda name, level, **fields: self.log.event(name, level, **fields))
 
     # -- building: everything is opened before anything runs ----------------------
     def open(self) -> Bridge:
@@ -313,10 +317,12 @@ class Bridge:
             run.loop.source.start()  # a shared reader starts once, here: a replayed log does not run ahead
         for feeder, members in self.groups:
             runs = [self.runs[i] for i in members]
+            self._stall.add(f"feed-{'+'.join(r.name for r in runs)}", runs)
             self._spawn(f"feed-{'+'.join(r.name for r in runs)}", self._group_loop, feeder, runs)
         grouped = {i for _, members in self.groups for i in members}
         for i, run in enumerate(self.runs):
             if i not in grouped:
+                self._stall.add(f"node-{run.name}", [run])
                 self._spawn(f"node-{run.name}", self._node_loop, run)
         self.started = True
         self.notifier.ready(f"running: {len(self.runs)} node(s) -> {self.where}")
@@ -412,6 +418,10 @@ class Bridge:
             elif source.failed:
                 self.log.event("source_failed", level="error", node=run.name, error=source.last_error)
                 run.loop.publish_if_due(True)  # BUS_FAULT now, before the loop lets go
+                # ... and handed on before the bridge's end offers its offline image, which
+                # would otherwise replace a BUS_FAULT image still waiting to be written
+                for sink in run.sinks:
+                    sink.drain(0.5)
                 self.failed_sources.append(f"{run.name}: {source.last_error}")
         self._sinks_source_ended(runs)  # a Sparkplug device's DDEATH, after the BUS_FAULT image
 
@@ -456,6 +466,8 @@ class Bridge:
                 next_feed = time.monotonic() + feed_every
                 seen = self._feed_watchdog(seen)
             self._stop.wait(tick_s)
+            if not self._stop.is_set():
+                self._stall.check(self._beats, [t.is_alive() for t in self._threads], tick_s)
             self.check_health()
             if next_status is not None and time.monotonic() >= next_status:
                 next_status += status_every

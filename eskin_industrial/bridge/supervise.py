@@ -28,7 +28,8 @@ sink itself: it holds one :class:`SupervisedSink` per node, and an
   counted) and the source's end in its mailbox, and a thread named ``KIND-output``
   hands them on.  A call there that hangs cannot stall the loop: the supervisor sees
   it past ``hang_s``, abandons that thread (a daemon, counted) and opens a fresh
-  instance.  (A hang in an essential output stalls its loop, as it always did.)
+  instance.  (A hang in an essential output stalls its loop: :mod:`.stall` then sets
+  the loop's nodes offline until it turns again.)
 - The state of each output is in every node's counters: ``KIND_output_up``,
   ``KIND_output_failures``, ``KIND_output_restarts``, ``KIND_output_abandoned``,
   ``KIND_output_superseded``, ``KIND_output_dropped``.
@@ -216,6 +217,15 @@ class GuardedSink(SupervisedSink):
             self.output.failed("counters", self.index, exc)
             out = {}
         return self._own(out)
+
+    def drain(self, timeout_s: float = 0.5) -> bool:
+        if not self.output.up:
+            return False
+        try:
+            return self.inner.drain(timeout_s)
+        except Exception as exc:  # noqa: BLE001
+            self.output.failed("drain", self.index, exc)
+            return False
 
     def flush(self, timeout_s: float = 1.0) -> bool:
         if not self.output.up:

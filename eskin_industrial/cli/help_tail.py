@@ -1,7 +1,7 @@
 """The end of every help page: one or two example command lines, and the command's
 ESKIN_* environment variables (docs/cli.md).  The examples use built-in names and
 files `eskin-bus examples copy` writes, so each runs from an install in any folder
-(tests/test_cli_conventions.py checks their options against the command)."""
+(tests/cli/test_cli_conventions.py checks their options against the command)."""
 
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ per paper hop, over the hop's frames at once: the squared norms and lagged produ
 the frames, the decorrelations, the wavelet detail of the centre of force, and the
 window sums of :mod:`.stream`, in the same order.  So the values agree with
 :class:`~eskin_industrial.detect.paper.PaperDetector` run alone on the same frames (to
-the rounding of a dot product: tests/test_alongside.py), at the paper's own hop.
+the rounding of a dot product: tests/detect/test_alongside.py), at the paper's own hop.
 """
 
 from __future__ import annotations

@@ -68,7 +68,7 @@ def min_hold_hours(per_hour: float) -> float:
     """The shortest holding that can say ``per_hour``: a sixth of the time in which one
     false alarm is allowed (10 minutes at 1 an hour).  Beyond the largest score of that
     long, the safety factor leaves a z-like score's tail far below the rate (on the
-    jittery sensor: none in the held-out half hour, tests/test_profile_tune.py)."""
+    jittery sensor: none in the held-out half hour, tests/profile/test_profile_tune.py)."""
     return 1.0 / (6.0 * per_hour)
 
 

@@ -113,7 +113,7 @@ def fit(config: TrainConfig = TrainConfig()) -> TreeEnsemble:
 
 def trees_from_sklearn(clf: Any) -> TreeEnsemble:
     """Tabulate a fitted multiclass HistGradientBoostingClassifier of depth <= 3 (from
-    its predictors' node arrays; ``tests/test_learned.py`` checks the result against
+    its predictors' node arrays; ``tests/detect/test_learned.py`` checks the result against
     ``predict_proba``)."""
     trees = [nodes for it in clf._predictors for nodes in (p.nodes for p in it)]
     splits = 7

@@ -184,6 +184,12 @@ class Sink:
         handler(name, level, fields)
 
     # -- the end ----------------------------------------------------------------------
+    def drain(self, timeout_s: float = 0.5) -> bool:
+        """Wait, for up to ``timeout_s``, until what was published has been handed on,
+        and go on running; True when it has.  A sink that hands on at once has nothing
+        to wait for."""
+        return True
+
     def flush(self, timeout_s: float = 1.0) -> bool:
         """Write what is still pending, for up to ``timeout_s``; True when nothing is left."""
         return True

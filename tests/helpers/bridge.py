@@ -1,4 +1,4 @@
-"""Shared pieces of the bridge tests (tests/test_bridge_*.py): configurations built in
+"""Shared pieces of the bridge tests (tests/bridge/): configurations built in
 code on python-can virtual buses, a bridge run in-process with its supervisor, a log
 captured as parsed JSON events, a PLC stand-in that timestamps every write, and
 senders that timestamp every frame."""

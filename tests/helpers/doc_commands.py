@@ -11,7 +11,7 @@ mark a block that cannot run from an install in an empty folder, and why
     ```sh needs=long            runs until stopped, or minutes
     ```sh needs=checkout        from a checkout of the sources (scripts/, .venv)
 
-Every other ``sh`` block runs (tests/test_docs_run.py).
+Every other ``sh`` block runs (tests/docs/test_docs_run.py).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Shared settings of the fuzz tests (tests/test_fuzz_*.py).
+"""Shared settings of the fuzz tests (tests/bus/test_fuzz_*.py, tests/outputs/plc/test_fuzz_plc.py).
 
 Every fuzz test runs the same examples on every run (``derandomize``, no example
 database), so a failure in CI reproduces locally; budgets are small enough that all

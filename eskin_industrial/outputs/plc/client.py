@@ -469,6 +469,16 @@ class PlcWriter(Sink):
             self._event(f"plc_{register}_refused", "warning", plc=self.where, value=value, error=str(exc),
                         refused=getattr(self.stats, field_name), held_back=held)
 
+    def drain(self, timeout_s: float = 0.5) -> bool:
+        # Polled: the writer's thread does not signal a write, and this is asked only at
+        # a source's failure, where a few milliseconds do not matter.
+        deadline = time.monotonic() + timeout_s
+        while not self.flushed:
+            if time.monotonic() >= deadline or not self.connected or self._stop:
+                return self.flushed
+            time.sleep(0.002)
+        return True
+
     def flush(self, timeout_s: float = 1.0) -> bool:
         """Stop the writer once the pending image is written (or ``timeout_s`` passed)."""
         self.stop(timeout_s)

@@ -352,7 +352,7 @@ class PlcImage:
         what was written last, so the offline snapshot renders what it must read then,
         never the last "stable".
 
-        The words of :meth:`values` encoded (``tests/test_plc_image.py`` holds them
+        The words of :meth:`values` encoded (``tests/outputs/plc/test_plc_image.py`` holds them
         equal), written straight into the list: this runs on the urgent path, between
         the deciding scan and the PLC's write, where building the named values and
         encoding them took three times as long."""

@@ -13,7 +13,7 @@ after the next births; so do those a lost connection took with it.  One lock ord
 ``bdSeq`` across restarts: :mod:`.bdseq`.
 
 Sparkplug 3.0 to the letter by default (``docs/plant.md``, Conformance, and
-``tests/test_sparkplug_conformance.py``, one test per tck-id): births, data and DDEATH
+``tests/outputs/sparkplug/test_sparkplug_conformance.py``, one test per tck-id): births, data and DDEATH
 at QoS 0, every metric with its timestamp, no datatype after the birth; QoS 1 for them
 only by the opt-in ``nonconforming_qos1``, warned about.
 """
