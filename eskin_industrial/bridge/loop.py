@@ -226,14 +226,18 @@ class NodeLoop:
         """How long the loop may wait for traffic before a publication falls due."""
         return max(min(self.MAX_WAIT_S, self._due_in(time.monotonic() if now is None else now)), 0.0)
 
+    def offline_snapshot(self) -> NodeSnapshot:
+        """This node offline, now: nothing claimed (its counts and centre of force kept)."""
+        return self.status.offline_snapshot(self.health(), scans=self.pipeline.counters.scans,
+                                            t_event=time.perf_counter(), wall_time_s=time.time())
+
     def shutdown(self) -> None:
         """Publish the last snapshot, offline with no state claimed (a client-mode PLC
         writer writes it before it lets go).  Safe to call twice."""
         if self.offline:
             return
         self.offline = True
-        snap = self.status.offline_snapshot(self.health(), scans=self.pipeline.counters.scans,
-                                            t_event=time.perf_counter(), wall_time_s=time.time())
+        snap = self.offline_snapshot()
         self.snapshot = snap
         failed: Exception | None = None
         for sink in self.sinks:

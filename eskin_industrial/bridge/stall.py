@@ -84,8 +84,7 @@ class StallGuard:
 def _publish_offline(runs: Sequence[NodeRun]) -> None:
     for run in runs:
         loop = run.loop
-        snap = loop.status.offline_snapshot(loop.health(), scans=loop.pipeline.counters.scans,
-                                            t_event=time.perf_counter(), wall_time_s=time.time())
+        snap = loop.offline_snapshot()
         for sink in loop.sinks:
             try:
                 sink.publish(snap)
