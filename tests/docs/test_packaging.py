@@ -139,6 +139,29 @@ def test_the_base_install_runs_the_learned_method(installed: tuple[Path, Path], 
     assert ",slip," in found.stdout, found.stdout + found.stderr
 
 
+@pytest.mark.parametrize(("command", "extra"), [
+    (["plot", "-p", "paper-5x5", "case2.csv", "-o", "case2.png"], "plot"),
+    (["bridge", "-p", "paper-5x5", "--source", "scene:case2", "--opcua", "opc.tcp://127.0.0.1:4840", "--check"],
+     "opcua"),
+    (["bridge", "-p", "paper-5x5", "--source", "scene:case2", "--web", "127.0.0.1:8080", "--check"], "web"),
+])
+def test_the_base_install_names_the_extra_a_command_needs(installed: tuple[Path, Path], tmp_path: Path,
+                                                          command: list[str], extra: str) -> None:
+    """In the base install (no extra, nothing borrowed: the extra's package is not
+    importable), a command that needs an extra says which in one line, exit 4, and a
+    ``--check`` finds it before anything starts."""
+    _, bin_dir = installed
+    module = {"plot": "matplotlib", "opcua": "asyncua", "web": "aiohttp"}[extra]
+    assert subprocess.run([str(bin_dir / "python"), "-c", f"import {module}"], capture_output=True).returncode != 0
+    _run([str(bin_dir / "eskin-bus"), "examples", "copy", "case2.csv"], tmp_path)
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    done = subprocess.run([str(bin_dir / "eskin-bus"), *command], cwd=tmp_path, env=env, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 4, done.stdout + done.stderr
+    assert done.stderr.count("\n") == 1 and f"eskin-industrial[{extra}]" in done.stderr, done.stderr
+    assert not list(tmp_path.glob("*.png"))
+
+
 def test_installed_profiles_and_examples_copy_out_and_check(installed: tuple[Path, Path], tmp_path: Path) -> None:
     _, bin_dir = installed
     eskin = str(bin_dir / "eskin-bus")
@@ -152,17 +175,24 @@ def test_installed_profiles_and_examples_copy_out_and_check(installed: tuple[Pat
 
 def test_pipx_installs_the_wheel_with_a_working_command(installed: tuple[Path, Path], tmp_path: Path) -> None:
     """pipx, the way an integrator installs a command-line tool: its own virtualenv,
-    the command on PATH, run from an empty folder."""
+    the command on PATH, run from an empty folder; with the README's extras and
+    ``--include-deps`` (docs/opcua.md), asyncua's command-line tools on PATH too."""
     wheel, bin_dir = installed
     _run([str(bin_dir / "pip"), "install", "-q", "--disable-pip-version-check", "pipx>=1.4,<2"], tmp_path)
     env = {"PIPX_HOME": str(tmp_path / "pipx"), "PIPX_BIN_DIR": str(tmp_path / "bin")}
-    done = subprocess.run([str(bin_dir / "pipx"), "install", "--pip-args", f"-c {ROOT / 'constraints.txt'}",
-                           str(wheel)], cwd=tmp_path, env={**os.environ, **env}, capture_output=True, text=True,
-                          timeout=300)
+    done = subprocess.run([str(bin_dir / "pipx"), "install", "--include-deps", "--pip-args",
+                           f"-c {ROOT / 'constraints.txt'}", f"{wheel}[plot,opcua]"], cwd=tmp_path,
+                          env={**os.environ, **env}, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stdout + done.stderr
-    listed = _run([str(tmp_path / "bin" / "eskin-bus"), "profile", "list"], tmp_path).stdout
+    eskin = str(tmp_path / "bin" / "eskin-bus")
+    listed = _run([eskin, "profile", "list"], tmp_path).stdout
     assert listed.startswith("hand-4x5")
-    checked = _run([str(tmp_path / "bin" / "eskin-bus"), "bridge", "-p", "paper-5x5", "--source", "scene:case2",
+    checked = _run([eskin, "bridge", "-p", "paper-5x5", "--source", "scene:case2",
                     "--plc", f"serve:127.0.0.1:{free_port()}", "--check"], tmp_path).stdout
     assert "case2" in checked
+    for tool in ("uals", "uaread", "uasubscribe", "uacall"):  # docs/opcua.md's first client
+        assert "usage" in _run([str(tmp_path / "bin" / tool), "--help"], tmp_path).stdout.lower(), tool
+    _run([eskin, "examples", "copy", "case2.csv"], tmp_path)
+    _run([eskin, "plot", "-p", "paper-5x5", "case2.csv", "-o", "case2.png"], tmp_path)
+    assert (tmp_path / "case2.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

@@ -1,10 +1,13 @@
 """The package as a wheel, installed into a throw-away virtualenv, for tests that run
 ``eskin-bus`` as an integrator does: from an empty folder, with no checkout in sight.
 
-The wheel is built once per test session from the checkout (pip wheel --no-deps);
-the virtualenv has no pip and borrows this environment's dependencies through a
-``.pth`` line (its own site-packages, with the installed package, comes first), so
-nothing but the build backend is fetched and the install takes seconds.
+The wheel is built once per test session from the checkout (pip wheel --no-deps) and
+installed the way the README's Install section says, into a virtualenv of its own
+with its own pip: the wheel with the extras the pages use (``[plot,opcua,web]``, as
+``pipx install 'eskin-industrial[plot,opcua]'`` plus the web console), its
+dependencies resolved by pip under ``constraints.txt``.  Nothing is borrowed from
+the environment running the tests: a page whose command needs a package the
+documented install does not bring fails here as it fails for a user.
 """
 
 from __future__ import annotations
@@ -13,14 +16,16 @@ import os
 import shutil
 import subprocess
 import sys
-import sysconfig
 from pathlib import Path
 
 from tests.helpers.paths import ROOT
 
+#: The extras of the documented install the pages' commands run under.
+DOCS_EXTRAS = "plot,opcua,web"
 
-def build_and_install(root: Path) -> Path:
-    """The ``bin`` folder of a virtualenv under ``root`` with the checkout's wheel installed."""
+
+def build_wheel(root: Path) -> Path:
+    """The checkout's wheel, built under ``root``."""
     # From a copy of the sources: setuptools builds in the tree, and a build/ folder left
     # there by an earlier build would lend the wheel files the sources no longer have.
     sources = root / "src"
@@ -30,18 +35,30 @@ def build_and_install(root: Path) -> Path:
     subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--disable-pip-version-check",
                     str(sources), "-w", str(dist)], check=True, timeout=600, capture_output=True, cwd=root)
     (wheel,) = dist.glob("eskin_industrial-*.whl")
-    venv = root / "venv"
-    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
-    site = next((venv / "lib").glob("python*/site-packages"))
-    (site / "host_packages.pth").write_text(f"{sysconfig.get_paths()['purelib']}\n")
+    return wheel
+
+
+def clean_install(root: Path, wheel: Path, extras: str = "") -> Path:
+    """The ``bin`` folder of a new virtualenv under ``root`` holding ``wheel`` (with
+    ``extras``) and only what pip resolves for it under constraints.txt."""
+    venv = root / ("venv-" + (extras.replace(",", "-") or "base"))
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
     python = venv / "bin" / "python"
-    # --force-reinstall: this environment's own (editable) eskin-industrial is on the
-    # borrowed path with the same version, which pip would otherwise take as installed.
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "--quiet", "--no-deps",
-                    "--no-index", "--force-reinstall", "--disable-pip-version-check", str(wheel)], check=True,
-                   timeout=300, capture_output=True)
-    assert (site / "eskin_industrial" / "__init__.py").is_file(), "the wheel did not install"
+    target = f"{wheel}[{extras}]" if extras else str(wheel)
+    done = subprocess.run([str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
+                           "-c", str(ROOT / "constraints.txt"), target], timeout=900, capture_output=True, text=True)
+    assert done.returncode == 0, f"pip install {target} failed:\n{done.stdout[-2000:]}{done.stderr[-2000:]}"
+    # the interpreter's own path only: no .pth of another environment, no user site
+    paths = subprocess.run([str(python), "-s", "-c", "import sys; print('\\n'.join(sys.path))"],
+                           check=True, capture_output=True, text=True, timeout=60).stdout.split()
+    assert not any(p.startswith(sys.prefix) for p in paths if p), paths
     return venv / "bin"
+
+
+def build_and_install(root: Path, extras: str = DOCS_EXTRAS) -> Path:
+    """The ``bin`` folder of a clean virtualenv under ``root`` with the checkout's wheel
+    and ``extras`` installed."""
+    return clean_install(root, build_wheel(root), extras)
 
 
 def user_env(bin_dir: Path) -> dict[str, str]:
