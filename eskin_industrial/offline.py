@@ -155,17 +155,24 @@ def detect_live_log(profile: Profile, stream: TextIO, emit: Callable[[Update], N
                     method: str | None = None, name: str = "<stdin>") -> Detected:
     """A candump -L stream read as it comes, each update handed to ``emit`` as soon
     as its scan is complete: the same assembler, checks and pipeline as
-    :func:`detect_can_log`."""
+    :func:`detect_can_log`.  A live stream ends at its end, or when the reader is
+    stopped (Ctrl-C, or SIGTERM as the command line turns it into one): what was
+    read is then the result, as at an end."""
     rate = rate_hz or profile.sensor.rate_hz
     pipeline = Pipeline(profile, rate_hz=rate, method=method)
     scans = LiveLogScans(profile, stream, rate, name)
     updates: list[Update] = []
-    for scan in scans:
-        for u in pipeline.shown(pipeline.push(scan)):
-            updates.append(u)
-            emit(u)
+    stopped = False
+    try:
+        for scan in scans:
+            for u in pipeline.shown(pipeline.push(scan)):
+                updates.append(u)
+                emit(u)
+    except KeyboardInterrupt:
+        stopped = True  # (a scan half read when it came is none)
     counters = _counters(pipeline, scans.counters())
-    require_scans(profile, counters, name)
+    if not stopped:  # (a stop asked before the first scan is no foreign log)
+        require_scans(profile, counters, name)
     return _detected(name, updates, rate, pipeline, counters)
 
 
