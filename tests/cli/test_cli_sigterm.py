@@ -5,6 +5,7 @@ as asked, not click's "Aborted!"."""
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -102,3 +103,20 @@ def test_a_finite_job_cut_short_says_so_in_one_line() -> None:
     _, err = stopped(proc, signal.SIGTERM)
     assert proc.returncode == 130, err
     assert err.strip().splitlines() == ["eskin-bus: interrupted"], err
+
+
+def test_modbus_node_under_sigterm_prints_its_summary() -> None:
+    master, slave = os.openpty()  # a serial line with nobody polling: the node serves, then is stopped
+    try:
+        proc = subprocess.Popen([*EXE, "modbus-node", "-p", PAPER, "--scene", "hold", "--port", os.ttyname(slave)],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        assert proc.stderr is not None
+        start = proc.stderr.readline()
+        assert start.startswith("modbus-node: unit 1 on "), start
+        time.sleep(1.0)  # (the line opened after the start line)
+        _, err = stopped(proc, signal.SIGTERM)
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert proc.returncode == 0, err
+    assert err.splitlines()[-1] == "modbus-node: answered 0 reads", err
