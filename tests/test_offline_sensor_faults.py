@@ -115,3 +115,25 @@ def test_detect_on_a_can_log_of_a_dead_node_gives_the_bridges_verdicts(tmp_path:
     assert res.returncode == 0, res.stderr
     check_faulted(read_updates(out), DEAD, 3.0)
     assert out.read_text() == bridge_rows(paper, np.arange(len(raw)) / RATE_HZ, raw)
+
+
+@pytest.mark.parametrize("engine", ["batch", "stream"])
+def test_filled_gaps_and_refused_times_keep_each_row_on_its_scan(tmp_path: Path, paper: Profile, engine: str) -> None:
+    """Each update takes the fault of the scan that gave it: across a gap the detector
+    fills (decided when the next scan comes) and around times it refuses."""
+    raw = hold_raw(paper, 600, seed=5)
+    raw[350:, 4] = np.nan  # one taxel dead from 3.5 s: held for hold_s, then DEAD_TAXELS
+    t = np.arange(600) / RATE_HZ
+    t[250], t[260] = t[249], t[255]  # a repeated time, a backward one
+    keep = np.ones(600, bool)
+    keep[200:203] = False  # 30 ms missing: filled
+    t, raw = t[keep], raw[keep]
+    path, out = tmp_path / "rec.csv", tmp_path / "out.csv"
+    write_recording(path, t, raw, unit="raw")
+    res = cli("detect", "-p", PAPER, str(path), "--rate", str(RATE_HZ), "--engine", engine, "-o", str(out))
+    assert res.returncode == 0, res.stderr
+    assert "(repeated_time 1, backward_time 1)" in res.stderr
+    rows = read_updates(out)
+    assert (rows["flags"].astype(int) & int(FrameFlag.FILLED)).any()
+    check_faulted(rows, DEAD, 3.5 + paper.output.hold_s)
+    assert out.read_text() == bridge_rows(paper, t, raw)
