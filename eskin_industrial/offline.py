@@ -10,6 +10,13 @@ with the transport (``bus/can/log.py``: records, scan assembly, the log's checks
 log's scans go through the live path's :class:`~eskin_industrial.pipeline.Pipeline`,
 so that a log gives what the receiver gave, counters included.
 
+The verdicts are the bridge's: a recording's frames are judged by the same
+:class:`~eskin_industrial.detect.integrity.IntegrityWatch` as a node's scans
+(:func:`~eskin_industrial.pipeline.frame_faults`), and while a sensor fault is set
+(a dead, frozen or mistimed sensor; a log's stream fault too) an update shows no
+verdict (:func:`~eskin_industrial.node.verdict.shown`), as every output of the bridge
+does.
+
 A rate given by the caller is named ``--rate`` in messages, as the commands take it.
 """
 
@@ -24,13 +31,14 @@ import numpy as np
 
 from .bus.can.log import LiveLogScans, log_scans, require_scans
 from .calibration import Calibrator, full_scale
-from .detect.hygiene import TIME_FAULTS, rate_problem, time_verdicts
+from .detect.hygiene import TIME_FAULTS, TIME_KEPT, rate_problem, time_verdicts
 from .detect.methods import Method
-from .detect.updates import Update, UpdateTable
+from .detect.updates import COLUMNS, Update, UpdateTable
 from .errors import InputFormatError
 from .frames import Frame, RawScan
 from .methods import ready_method
-from .pipeline import Pipeline
+from .node.verdict import shown
+from .pipeline import Pipeline, frame_faults
 from .profile import Profile
 from .progress import NO_PROGRESS, Progress
 from .recording import read_recording
@@ -96,7 +104,33 @@ def detect_recording(profile: Profile, source: str | Path, rate_hz: float | None
             updates += det.feed(rec.t[a:b], forces[a:b], flags[a:b])
             progress.advance(len(rec.t[a:b]))
         table = UpdateTable.from_updates(updates)
+    table = _withdrawn(table, _update_faults(table, rec.t, verdicts,
+                                             frame_faults(profile, rate, rec.t, forces, rec.values)))
     return Detected(rec.name, table, len(rec.t), rate, chosen, time_faults, t=rec.t, forces=forces)
+
+
+def _update_faults(table: UpdateTable, t: np.ndarray, verdicts: np.ndarray, faults: np.ndarray) -> np.ndarray:
+    """Each update's sensor-fault bits: those after the frame whose push gave it, as in
+    the bridge (an update's time is its newest frame's, the first kept frame at or after
+    it: a frame held across a short gap is decided when the next one comes)."""
+    kept = np.flatnonzero(verdicts == TIME_KEPT)
+    if not len(table) or not kept.size:
+        return np.zeros(len(table), np.int64)
+    at = np.minimum(np.searchsorted(t[kept], table.t, side="left"), kept.size - 1)
+    return faults[kept[at]]
+
+
+def _withdrawn(table: UpdateTable, faults: np.ndarray) -> UpdateTable:
+    """The table with each update under a sensor fault shown as the outputs show it."""
+    rows = np.flatnonzero(faults)
+    if not rows.size:
+        return table
+    cols = {c: getattr(table, c).copy() for c in COLUMNS}
+    for i in rows.tolist():  # (only the faulted rows: one rule, the outputs')
+        u = shown(Update(*(cols[c][i] for c in COLUMNS)), int(faults[i]))
+        for c, v in zip(COLUMNS, u):
+            cols[c][i] = v
+    return UpdateTable(**cols)
 
 
 def detect_can_log(profile: Profile, path: str | Path, rate_hz: float | None = None, method: str | None = None,
@@ -121,17 +155,24 @@ def detect_live_log(profile: Profile, stream: TextIO, emit: Callable[[Update], N
                     method: str | None = None, name: str = "<stdin>") -> Detected:
     """A candump -L stream read as it comes, each update handed to ``emit`` as soon
     as its scan is complete: the same assembler, checks and pipeline as
-    :func:`detect_can_log`."""
+    :func:`detect_can_log`.  A live stream ends at its end, or when the reader is
+    stopped (Ctrl-C, or SIGTERM as the command line turns it into one): what was
+    read is then the result, as at an end."""
     rate = rate_hz or profile.sensor.rate_hz
     pipeline = Pipeline(profile, rate_hz=rate, method=method)
     scans = LiveLogScans(profile, stream, rate, name)
     updates: list[Update] = []
-    for scan in scans:
-        for u in pipeline.push(scan):
-            updates.append(u)
-            emit(u)
+    stopped = False
+    try:
+        for scan in scans:
+            for u in pipeline.shown(pipeline.push(scan)):
+                updates.append(u)
+                emit(u)
+    except KeyboardInterrupt:
+        stopped = True  # (a scan half read when it came is none)
     counters = _counters(pipeline, scans.counters())
-    require_scans(profile, counters, name)
+    if not stopped:  # (a stop asked before the first scan is no foreign log)
+        require_scans(profile, counters, name)
     return _detected(name, updates, rate, pipeline, counters)
 
 
@@ -141,7 +182,7 @@ def _replay(scans: list[RawScan], pipeline: Pipeline, progress: Progress, frames
     updates: list[Update] = []
     progress.stage("detecting", len(scans))
     for i, scan in enumerate(scans, start=1):
-        updates += pipeline.push(scan)
+        updates += pipeline.shown(pipeline.push(scan))
         if frames is not None and pipeline.last_frame is not None:  # (every push sets it)
             frames.append(pipeline.last_frame)
         if i % _PROGRESS_EVERY == 0:

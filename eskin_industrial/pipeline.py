@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from .calibration import Calibrator
 from .detect.integrity import IntegrityWatch
 from .detect.learned import Model
@@ -14,6 +16,7 @@ from .detect.protocol import Detector
 from .detect.updates import Update, state_changed
 from .frames import SENSOR_FAULTS, Frame, FrameFlag, RawScan
 from .methods import ready_method
+from .node.verdict import shown
 from .profile import Profile
 
 _INVALID = int(FrameFlag.INVALID)  # plain ints: IntFlag arithmetic costs microseconds per scan
@@ -49,10 +52,8 @@ class Pipeline:
         #: Whichever method decides, only :class:`~eskin_industrial.detect.protocol.Detector`'s surface is used.
         self.detector: Detector = self.method.stream(profile.detector, x, y, self.rate_hz)
         self.counters = Counters()
-        out = profile.output
         #: The sensor's faults (:mod:`~.detect.integrity`); ``fault`` holds the newest scan's bits.
-        self.integrity = IntegrityWatch(profile.taxels, self.rate_hz, hold_s=out.hold_s, hold_share=out.hold_share,
-                                        frozen_s=out.frozen_s, rate_tolerance=out.rate_tolerance)
+        self.integrity = integrity_watch(profile, self.rate_hz)
         self.fault = 0
         self.last_frame: Frame | None = None
         self.last_update: Update | None = None
@@ -98,3 +99,28 @@ class Pipeline:
             self.last_update = u
         c.updates += len(updates)
         return updates
+
+    def shown(self, updates: list[Update]) -> list[Update]:
+        """The updates of the newest :meth:`push` as the outputs show them: themselves,
+        or, under a sensor fault, no verdict (:func:`~.node.verdict.shown`)."""
+        fault = self.fault
+        return [shown(u, fault) for u in updates] if fault else updates
+
+
+def integrity_watch(profile: Profile, rate_hz: float) -> IntegrityWatch:
+    """The judge of one node's scans (its ``[output]`` limits, at the detector's rate)."""
+    out = profile.output
+    return IntegrityWatch(profile.taxels, rate_hz, hold_s=out.hold_s, hold_share=out.hold_share,
+                          frozen_s=out.frozen_s, rate_tolerance=out.rate_tolerance)
+
+
+def frame_faults(profile: Profile, rate_hz: float, t: np.ndarray, forces: np.ndarray, raw: np.ndarray) -> np.ndarray:
+    """Each frame's sensor-fault bits, judged as the pipeline judges a node's scans:
+    every frame in file order (those whose time the detector refuses too), ``forces``
+    in newtons with NaN where a reading is invalid, ``raw`` as read (a recording in
+    newtons: the newtons), at the rate the detector runs at."""
+    watch = integrity_watch(profile, rate_hz)
+    invalid = ~np.isfinite(forces).all(axis=1)
+    push = watch.push
+    return np.fromiter((push(float(t[i]), forces[i], raw[i], bool(invalid[i])) for i in range(len(t))),
+                       dtype=np.int64, count=len(t))

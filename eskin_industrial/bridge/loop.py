@@ -3,10 +3,11 @@
 One loop per sensor node, the same in every command (``bridge``, ``modbus-bridge``,
 ``receive``, ``monitor``, ``demo``).  :meth:`NodeLoop.step` polls the source once,
 runs each scan through the pipeline (calibration, detector), hands every update to
-every sink, applies the commands the sinks took (acknowledge, tare, enable), and
-publishes the node's snapshot (:class:`~eskin_industrial.node.NodeSnapshot`) when
-due: a state change at once, a change of a health condition (stale, bus fault) as
-soon as it happens, otherwise every ``[output] refresh_s``.  A sink that asks for
+every sink (as the snapshot shows it: no verdict under a sensor fault), applies the
+commands the sinks took (acknowledge, tare, enable), and publishes the node's
+snapshot (:class:`~eskin_industrial.node.NodeSnapshot`) when due: a state change at
+once, a change of a health condition (stale, bus fault) as soon as it happens,
+otherwise every ``[output] refresh_s``.  A sink that asks for
 taxel frames (``Sink.frame_every_s``) gets the newest calibrated frame once its
 interval has passed: the loop decides which frames are due, after the publication.
 :meth:`NodeLoop.shutdown` publishes the last snapshot, offline, with no state
@@ -125,13 +126,17 @@ class NodeLoop:
                 and self._due_in(time.monotonic()) > 0):
             return False  # no scan, no command, nothing due: a frame of a scan under way costs little
         published = self.publish_if_due(urgent, t_event)
-        # The PLC first, then whatever else wants each update (a recorder, the logs).
+        # The PLC first, then whatever else wants each update (a recorder, the logs): a
+        # sink as the snapshot shows it (no verdict under a sensor fault), the hook
+        # the detector's own (what a caller measures the detector by).
         hook = self.on_update
-        for u in updates:
-            for on_update in self._update_sinks:
-                on_update(u)
-            if hook is not None:
-                hook(u)
+        if updates:
+            shown = self.pipeline.shown(updates) if self._update_sinks else updates
+            for u, s in zip(updates, shown):
+                for on_update in self._update_sinks:
+                    on_update(s)
+                if hook is not None:
+                    hook(u)
         if self._frame_sinks and scan is not None:
             self._hand_frame(t_event)
         return published

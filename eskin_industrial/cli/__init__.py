@@ -66,6 +66,18 @@ class _Group(click.Group):
             sys.exit(exc.exit_code)
         except BrokenPipeError:
             sys.exit(0)  # `eskin-bus detect ... | head` is not an error
+        except KeyboardInterrupt:
+            # Ctrl-C or SIGTERM in a command with no stop of its own (a finite job:
+            # evaluate, simulate, detect FILE): cut short, its output not whole; one
+            # line and the shell's code for it, not click's "Aborted!" and 1
+            if ctx.obj and ctx.obj.get("debug"):
+                raise
+            click.echo("eskin-bus: interrupted", err=True)
+            sys.exit(INTERRUPTED)
+
+
+#: The exit code of a finite job cut short by Ctrl-C or SIGTERM (128 + SIGINT, as a shell gives it).
+INTERRUPTED = 130
 
 
 _show_warning = warnings.showwarning

@@ -12,7 +12,7 @@ import numpy as np
 from ..detect.state import GraspState
 from ..detect.updates import COLUMNS, Update, UpdateTable
 from ..errors import InputFormatError
-from ..frames import FrameFlag
+from ..frames import SENSOR_FAULTS, FrameFlag
 from ..methods import method_names
 from ..offline import Detected, Engine, detect_can_log, detect_live_log, detect_recording
 from ..profile import Profile
@@ -92,18 +92,21 @@ def _summary(found: Detected, as_json: bool) -> None:
     counts = {s.label: int(np.sum(table.state == s)) for s in GraspState}
     # (WARMUP and TURN_UNSEEN say what the update could not do, not what was wrong with a frame)
     flagged = int(np.sum(table.flags & ~int(FrameFlag.WARMUP | FrameFlag.TURN_UNSEEN) != 0))
+    faulted = int(np.sum(table.flags & SENSOR_FAULTS != 0))  # no verdict: the sensor was no sensor
     unseen = int(np.sum(table.flags & int(FrameFlag.TURN_UNSEEN) != 0))
     valid = int(table.valid.sum())
     refused = sum(time_faults.values())
     if as_json:
         line = json.dumps({"input": name, "frames": frames, "rate_hz": rate, "method": method,
                            "updates": len(table), "valid": valid, "flagged": flagged, "turn_unseen": unseen,
+                           "sensor_fault": faulted,
                            "states": counts,
                            "refused_times": time_faults, **({"transport": transport} if transport else {})})
     else:
         states = ", ".join(f"{k} {v}" for k, v in counts.items())
         line = (f"{name}: {frames} {'scans' if transport else 'frames'} at {rate:.1f} Hz, method {method} -> "
-                f"{len(table)} updates ({valid} valid, {flagged} with flagged frames, {unseen} turn unseen); {states}; "
+                f"{len(table)} updates ({valid} valid, {flagged} with flagged frames, {unseen} turn unseen"
+                + (f", {faulted} under a sensor fault: no verdict" if faulted else "") + f"); {states}; "
                 f"{refused} frames refused for their time" + (f" ({_faults(time_faults)})" if refused else ""))
         if transport:
             line += "; " + ", ".join(f"{k} {v}" for k, v in transport.items()

@@ -19,7 +19,7 @@ from .outputs import kind_options, outputs_from_cli
 @profile_option()
 @bus_options
 @click.option("--rate", "rate_hz", type=float, default=None, help="The node's scan rate in Hz (default: the profile's).")
-@click.option("--method", type=click.Choice(sorted(method_names())), default=None,
+@click.option("-m", "--method", type=click.Choice(sorted(method_names())), default=None,
               help="Detection method (default: the profile's).")
 @click.option("--duration", "duration_s", type=float, default=None, help="Stop after this many seconds.")
 @click.option("--idle-exit", "idle_s", type=float, default=None,

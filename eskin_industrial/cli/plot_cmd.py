@@ -21,7 +21,8 @@ from .plot_figure import PlotData, centre_of_force, state_figure
 @click.option("--can-log", default=None, type=click.Path(dir_okay=False),
               help="Plot a CAN log of the node's traffic instead (candump .log, .asc, .blf, ...).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="PNG file to write.")
-@click.option("--method", type=click.Choice(sorted(method_names())), default=None, help="Detection method (default: the profile's).")
+@click.option("-m", "--method", type=click.Choice(sorted(method_names())), default=None,
+              help="Detection method (default: the profile's).")
 @click.option("--labels", "labels_path", type=click.Path(dir_okay=False, exists=True), default=None,
               help="Ground truth (t,label, from `eskin-bus simulate --labels`) drawn under the states.")
 def plot(profile_path: str, input_path: str | None, can_log: str | None, output: str, method: str | None,

@@ -124,8 +124,9 @@ def serve_scene_rtu(profile: Profile, port: str, t: np.ndarray, forces: np.ndarr
                     *, baudrate: int | None = None, loop: bool = True, duration_s: float | None = None,
                     stop: threading.Event | None = None) -> NodeSimulator:
     """Serve a scene as a Modbus RTU slave on ``port`` until ``stop`` is set or
-    ``duration_s`` has passed (forever when neither is given); returns the stopped
-    simulator (its ``registers.reads`` tells how often it was polled)."""
+    ``duration_s`` has passed (forever when neither is given), or Ctrl-C (SIGTERM, as
+    the command line turns it into one) stops it; returns the stopped simulator (its
+    ``registers.reads`` tells how often it was polled)."""
     if rate_hz is None:
         steps = np.diff(np.asarray(t, dtype=np.float64))
         steps = steps[steps > 0]
@@ -133,5 +134,8 @@ def serve_scene_rtu(profile: Profile, port: str, t: np.ndarray, forces: np.ndarr
     sim = NodeSimulator(profile, port, forces, rate_hz, baudrate=baudrate, loop=loop)
     stop = stop or threading.Event()
     with sim:
-        stop.wait(duration_s)
+        try:
+            stop.wait(duration_s)
+        except KeyboardInterrupt:  # a stop as asked: what was served is still told
+            stop.set()
     return sim

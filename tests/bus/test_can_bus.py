@@ -105,7 +105,7 @@ def test_recorded_traffic_replays_to_the_live_output(paper_profile, tmp_path, su
     source, _ = send_and_receive(paper_profile, raw, Faults(drop=0.005, duplicate=0.005, seed=1), log=log)
     log.stop()
     live = tmp_path / "live.csv"
-    write_updates(live, UpdateTable.from_updates(source.updates))
+    write_updates(live, UpdateTable.from_updates(source.shown))  # (the idle start's identical scans: FROZEN)
     res = cli("detect", "--profile", PAPER, "--can-log", str(log_path), "-o", str(tmp_path / "replay.csv"), "--json")
     assert res.returncode == 0, res.stderr
     assert (tmp_path / "replay.csv").read_text() == live.read_text()

@@ -6,6 +6,8 @@ write fails."""
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -78,3 +80,23 @@ def test_a_read_only_file(tmp_path: Path) -> None:
     out.write_text("")
     out.chmod(0o444)
     one_line(["simulate", "case2", "-o", str(out)], f"-o: {out}: cannot write: permission denied")
+
+
+#: The command run as an unprivileged user: as root, the child drops to nobody once the
+#: interpreter and the command line are loaded (the interpreter may live where nobody
+#: may read); as anyone else, it runs as it is.
+_AS_NOBODY = """
+import os, sys
+from eskin_industrial.cli import main
+if os.geteuid() == 0:
+    os.setgroups([]); os.setgid(65534); os.setuid(65534)
+sys.argv = ["eskin-bus", *sys.argv[1:]]
+main()
+"""
+
+
+def test_a_folder_this_user_may_not_write(tmp_path: Path) -> None:
+    res = subprocess.run([sys.executable, "-c", _AS_NOBODY, "simulate", "case2", "-o", "/proc/x.csv"],
+                         capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert res.returncode == 2, res.stderr
+    assert res.stderr == "eskin-bus: error: -o: /proc/x.csv: folder '/proc' is not writable\n"

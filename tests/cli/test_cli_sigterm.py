@@ -5,6 +5,7 @@ as asked, not click's "Aborted!"."""
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -71,3 +72,51 @@ def test_node_on_ctrl_c_is_a_stop_with_its_summary() -> None:
     assert proc.returncode == 0, err
     assert "Aborted!" not in err and "Traceback" not in err, err
     assert err.splitlines()[-1].startswith("node: "), err
+
+
+def test_a_live_detect_under_sigterm_ends_as_its_stream_would(tmp_path: Path) -> None:
+    log, out = tmp_path / "node.log", tmp_path / "u.csv"
+    subprocess.run([*EXE, "simulate", "case2", "--can-log", str(log), "-p", PAPER], check=True,
+                   capture_output=True, timeout=60)
+    lines = log.read_text().splitlines(keepends=True)[:900]  # about 100 scans; the stream stays open
+    proc = subprocess.Popen([*EXE, "detect", "-p", PAPER, "--can-log", "-", "-o", str(out), "--json"],
+                            stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    assert proc.stdin is not None
+    proc.stdin.write("".join(lines))
+    proc.stdin.flush()
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and (not out.exists() or len(out.read_text().splitlines()) < 50):
+        time.sleep(0.05)
+    _, err = stopped(proc, signal.SIGTERM)
+    proc.stdin.close()
+    assert proc.returncode == 0, err
+    assert "Aborted!" not in err and "Traceback" not in err, err
+    summary = json.loads(err.strip().splitlines()[-1])
+    rows = out.read_text().splitlines()[1:]
+    assert summary["updates"] == len(rows) >= 50, err
+
+
+def test_a_finite_job_cut_short_says_so_in_one_line() -> None:
+    proc = subprocess.Popen([*EXE, "evaluate", "--seeds", "0..39"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    time.sleep(2.0)  # under way: the evaluation takes minutes
+    _, err = stopped(proc, signal.SIGTERM)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["eskin-bus: interrupted"], err
+
+
+def test_modbus_node_under_sigterm_prints_its_summary() -> None:
+    master, slave = os.openpty()  # a serial line with nobody polling: the node serves, then is stopped
+    try:
+        proc = subprocess.Popen([*EXE, "modbus-node", "-p", PAPER, "--scene", "hold", "--port", os.ttyname(slave)],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        assert proc.stderr is not None
+        start = proc.stderr.readline()
+        assert start.startswith("modbus-node: unit 1 on "), start
+        time.sleep(1.0)  # (the line opened after the start line)
+        _, err = stopped(proc, signal.SIGTERM)
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert proc.returncode == 0, err
+    assert err.splitlines()[-1] == "modbus-node: answered 0 reads", err

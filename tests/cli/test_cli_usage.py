@@ -11,6 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import click
 import pytest
 from click.testing import CliRunner
 
@@ -64,6 +65,25 @@ def test_detect_takes_m_for_its_method(tmp_path: Path) -> None:
     res = run("detect", "-p", PAPER, str(rec), "-m", "cof-step", "--changes")
     assert res.exit_code == 0, res.output
     assert "method cof-step" in res.stderr
+
+
+def _commands(cmd: click.Command, path: tuple[str, ...] = ()) -> list[tuple[str, click.Command]]:
+    if isinstance(cmd, click.Group):
+        return [c for name, sub in cmd.commands.items() for c in _commands(sub, (*path, name))]
+    return [(" ".join(path), cmd)]
+
+
+def test_every_method_option_is_m_and_offers_every_method() -> None:
+    found = {}
+    for name, cmd in _commands(main):
+        for p in cmd.params:
+            if isinstance(p, click.Option) and "--method" in p.opts:
+                found[name] = p
+    assert {"detect", "evaluate", "demo", "plot", "monitor"} <= set(found), sorted(found)
+    for name, option in found.items():
+        assert "-m" in option.opts, f"{name}: {option.opts}"
+        if isinstance(option.type, click.Choice):
+            assert set(method_names()) <= set(option.type.choices), name  # (evaluate: the baselines too)
 
 
 def test_demo_offers_every_method() -> None:

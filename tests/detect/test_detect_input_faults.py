@@ -46,7 +46,8 @@ def test_forces_past_full_scale_in_a_newton_csv_are_clamped_and_flagged(tmp_path
     # the update whose hop holds each frame (and no other) says SATURATED
     assert len(flagged) == 2
     assert all(np.any(np.abs(flagged - when) < 0.05) for when in (700 / RATE, 900 / RATE))
-    assert cols["f_sum"].max() < 25 * 10.0 + 1e-6
+    # (the idle start's exact zeros are a frozen sensor's: no verdict and no force there, as in the bridge)
+    assert np.nanmax(cols["f_sum"]) < 25 * 10.0 + 1e-6
 
 
 def test_a_time_of_inf_is_refused_and_counted(tmp_path):

@@ -6,17 +6,32 @@ from eskin_industrial.bridge.loop import NodeLoop
 from eskin_industrial.bus.can.group import CanGroup
 from eskin_industrial.bus.can.layout import ScanAssembler
 from eskin_industrial.bus.can.source import CanSource
+from eskin_industrial.outputs.base import Sink
+
+
+class Kept(Sink):
+    """Every update as the loop hands it to a sink (``receive -o``'s rows)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.updates: list = []
+
+    def on_update(self, update) -> None:
+        self.updates.append(update)
 
 
 class Receiver:
     """What ``eskin-bus receive`` runs: a CAN source (reader, group, assembler) and the
-    per-node loop, with every update kept."""
+    per-node loop, with every update kept: the detector's own (``updates``), and as
+    ``receive -o`` writes them (``shown``: no verdict under a sensor fault)."""
 
     def __init__(self, profile, reader, layout, rate, log=None) -> None:
         group = CanGroup(reader, [layout], log, all_frames=True)
         self.source = CanSource(group, group.queues[0], ScanAssembler(layout, rate))
         self.updates: list = []
-        self.loop = NodeLoop(profile, self.source, [], rate_hz=rate, on_update=self.updates.append)
+        kept = Kept()
+        self.shown = kept.updates
+        self.loop = NodeLoop(profile, self.source, [kept], rate_hz=rate, on_update=self.updates.append)
         self.pipeline, self.assembler, self.reader = self.loop.pipeline, self.source.assembler, reader
 
     def run(self, **until) -> None:
