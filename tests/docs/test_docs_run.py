@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers.doc_commands import NEEDS, Block, all_blocks
+from tests.helpers.doc_commands import NEEDS, Block, all_blocks, unmet
 from tests.helpers.installed import build_and_install, user_env
 
 pytestmark = pytest.mark.slow
@@ -45,3 +45,18 @@ def test_documented_block_runs_from_an_install(block: Block, installed_bin: Path
                           capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
     assert done.returncode == 0, (f"{block.where} exited {done.returncode} in an empty folder:\n{script}\n"
                                   f"--- stdout\n{done.stdout[-3000:]}\n--- stderr\n{done.stderr[-3000:]}")
+    failed = unmet(block.expects, done.stdout + done.stderr, tmp_path)
+    assert not failed, (f"{block.where}: what the page claims it gives, it does not: {'; '.join(failed)}\n"
+                        f"--- stdout\n{done.stdout[-3000:]}\n--- stderr\n{done.stderr[-3000:]}")
+
+
+def test_claims_are_checked_and_a_false_one_is_named(tmp_path: Path) -> None:
+    """The pages' ``expect=`` claims are read (as many as the pages make), and a claim
+    the output or the files do not bear out is reported, one line each."""
+    assert sum(len(b.expects) for b in BLOCKS) >= 20
+    (tmp_path / "out.csv").write_text("t,state\n9.42,slip\n")
+    (tmp_path / "a.png").write_bytes(b"not an image")
+    claims = ("out:slip events 1", "grep:out.csv:,slip", "file:out.csv", "out:found 2", "file:none.csv",
+              "png:a.png", "grep:out.csv:stable")
+    assert unmet(claims, "slip events 1, found 1", tmp_path) == [
+        "output lacks 'found 2'", "none.csv: not written", "a.png: not a PNG image", "out.csv: lacks 'stable'"]

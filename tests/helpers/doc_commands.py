@@ -11,7 +11,14 @@ mark a block that cannot run from an install in an empty folder, and why
     ```sh needs=long            runs until stopped, or minutes
     ```sh needs=checkout        from a checkout of the sources (scripts/, .venv)
 
-Every other ``sh`` block runs (tests/docs/test_docs_run.py).
+Every other ``sh`` block runs (tests/docs/test_docs_run.py).  What its text claims a
+block gives is marked with ``expect=`` (repeatable; quoted with spaces, as in a shell),
+and checked after it ran, in an empty folder, as well as its exit status::
+
+    ```sh expect="out:slip events 1"     the block's output (stdout or stderr) holds this text
+    ```sh expect=file:cell.toml          the block wrote this file, not empty
+    ```sh expect=png:hand.png            the block wrote this PNG image
+    ```sh expect=grep:out.csv:,slip,     this file holds this text
 """
 
 from __future__ import annotations
@@ -32,6 +39,9 @@ NEEDS = {
     "checkout": "needs a checkout of the sources",
 }
 
+#: The kinds of claim an ``expect=`` makes (checked by :func:`unmet`).
+EXPECTS = ("out", "file", "png", "grep")
+
 _FENCE = re.compile(r"^(\s*)```+\s*(\S*)\s*(.*)$")
 _SPAN = re.compile(r"`([^`\n]+)`")
 
@@ -48,6 +58,7 @@ class Block:
     line: int  # 1-based, of the opening fence
     needs: str | None
     commands: tuple[str, ...]
+    expects: tuple[str, ...] = ()
 
     @property
     def where(self) -> str:
@@ -81,13 +92,38 @@ def blocks(page: Path) -> list[Block]:
         lang, rest = m.group(2), m.group(3)
         end = next(j for j in range(i + 1, len(lines)) if _FENCE.match(lines[j]))
         if lang == "sh":
-            marks = dict(w.split("=", 1) for w in rest.split() if "=" in w)
-            needs = marks.get("needs")
+            words = [w.split("=", 1) for w in shlex.split(rest) if "=" in w]
+            needs = next((v for k, v in words if k == "needs"), None)
             if needs is not None and needs not in NEEDS:
                 raise ValueError(f"{page.name}:{i + 1}: needs={needs}: not one of {', '.join(NEEDS)}")
-            found.append(Block(page, i + 1, needs, _commands(lines[i + 1:end])))
+            expects = tuple(v for k, v in words if k == "expect")
+            for e in expects:
+                if e.partition(":")[0] not in EXPECTS or not e.partition(":")[2]:
+                    raise ValueError(f"{page.name}:{i + 1}: expect={e}: not one of {', '.join(EXPECTS)} with a value")
+            found.append(Block(page, i + 1, needs, _commands(lines[i + 1:end]), expects))
         i = end + 1
     return found
+
+
+def unmet(expects: tuple[str, ...], output: str, folder: Path) -> list[str]:
+    """The claims of ``expects`` that the block's ``output`` and the files it left in
+    ``folder`` do not bear out, each said in one line."""
+    failed: list[str] = []
+    for e in expects:
+        kind, _, value = e.partition(":")
+        if kind == "out":
+            if value not in output:
+                failed.append(f"output lacks {value!r}")
+            continue
+        name, _, text = value.partition(":") if kind == "grep" else (value, "", "")
+        path = folder / name
+        if not path.is_file() or path.stat().st_size == 0:
+            failed.append(f"{name}: not written")
+        elif kind == "png" and path.read_bytes()[:8] != b"\x89PNG\r\n\x1a\n":
+            failed.append(f"{name}: not a PNG image")
+        elif kind == "grep" and text not in path.read_text(errors="replace"):
+            failed.append(f"{name}: lacks {text!r}")
+    return failed
 
 
 def all_blocks() -> list[Block]:
