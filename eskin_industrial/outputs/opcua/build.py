@@ -22,10 +22,13 @@ from asyncua.common.instantiate_util import instantiate
 from asyncua.common.structures104 import new_enum
 
 from . import model
-from .model import FOLDERS, FRAME, IDENTIFICATION, METHODS, VARIABLES, Var
+from .companions import DI_URI, MACHINERY_URI
+from .model import FOLDERS, FRAME, IDENTIFICATION, METHODS, STATE_MACHINES, VARIABLES, Var
 from .nodeinfo import NodeInfo
 from .uaconv import node_id
 
+#: OPC 10000-3's HasAddIn (a HasComponent): how OPC 40001-1 adds its building blocks.
+HAS_ADD_IN = ua.ObjectIds.HasAddIn
 _BUILTIN: dict[str, tuple[int, ua.VariantType]] = {
     "Boolean": (ua.ObjectIds.Boolean, ua.VariantType.Boolean),
     "Double": (ua.ObjectIds.Double, ua.VariantType.Double),
@@ -53,6 +56,8 @@ class TypeIds:
     enum: ua.NodeId
     sensor: ua.NodeId
     alarm: ua.NodeId
+    di: int  #: the namespace indexes of OPC 10000-100 (DI) and OPC 40001-1 (Machinery)
+    machinery: int
     methods: dict[str, ua.NodeId] = field(default_factory=dict)  #: the type's method declarations
 
 
@@ -63,7 +68,8 @@ class NodeHandles:
     obj: ua.NodeId
     variables: list[ua.NodeId]  #: in :data:`.model.VARIABLES` order
     frame: ua.NodeId | None
-    machinery_state: ua.NodeId
+    #: each state machine's (CurrentState, CurrentState/Id), by its browse name
+    states: dict[str, tuple[ua.NodeId, ua.NodeId]]
     alarm: ua.NodeId
     methods: dict[str, ua.NodeId]  #: name -> the instance's method node
     alarm_methods: dict[str, ua.NodeId]  #: the condition's own (Acknowledge, ...)
@@ -93,10 +99,11 @@ class _Builder:
         return res.AddedNodeId
 
     async def obj(self, nodeid: ua.NodeId, parent: ua.NodeId, name: str, typedef: int | ua.NodeId,
-                  description: str = "", ref: int = ua.ObjectIds.HasComponent, notifier: bool = False) -> ua.NodeId:
+                  description: str = "", ref: int = ua.ObjectIds.HasComponent, notifier: bool = False,
+                  ns: int | None = None) -> ua.NodeId:
         item = ua.AddNodesItem()
         item.RequestedNewNodeId = nodeid
-        item.BrowseName = ua.QualifiedName(name, self.idx)
+        item.BrowseName = ua.QualifiedName(name, self.idx if ns is None else ns)
         item.NodeClass = ua.NodeClass.Object
         item.ParentNodeId = parent
         item.ReferenceTypeId = node_id(ref)
@@ -185,7 +192,8 @@ async def build_types(server: Server, idx: int, method_callback: Callable[..., A
         "GraspSensorType", idx))
     await sensor.write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(
         ua.LocalizedText("a tactile sensor node on a gripper, with its grasp state"), ua.VariantType.LocalizedText)))
-    types = TypeIds(enum_id, sensor.nodeid, alarm.nodeid)
+    types = TypeIds(enum_id, sensor.nodeid, alarm.nodeid, await server.get_namespace_index(DI_URI),
+                    await server.get_namespace_index(MACHINERY_URI))
     async for _ in _members(b, sensor.nodeid, lambda path: nid(), None, types, method_callback, declare=True):
         pass
     return types
@@ -202,21 +210,36 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
         if declare:
             await b.rule(n, mandatory)
 
-    ident = await b.obj(nid("Identification"), parent, "Identification", ua.ObjectIds.FolderType,
-                        "the node's identification (OPC 40001-1's names)")
+    # OPC 40001-1: the nameplate, an AddIn of the machine (DI:Identification) ...
+    ident = await b.obj(nid("Identification"), parent, "Identification",
+                        node_id(model.MACHINE_IDENTIFICATION_TYPE, types.machinery),
+                        "the node's nameplate (OPC 40001-1, MachineIdentificationType)", ref=HAS_ADD_IN, ns=types.di)
     await rule(ident)
     for name, dtype, doc in IDENTIFICATION:
         text = "" if info is None else info.identification.get(name, "")
         value = ua.LocalizedText(text) if dtype == "LocalizedText" else text
-        p = await b.prop(nid(f"Identification.{name}"), ident, name, _BUILTIN[dtype][0], value, _BUILTIN[dtype][1], description=doc)
+        p = await b.prop(nid(f"Identification.{name}"), ident, name, _BUILTIN[dtype][0], value, _BUILTIN[dtype][1],
+                         ns=types.di, description=doc)
         await rule(p)
-    mstate = await b.obj(nid("MachineryItemState"), parent, "MachineryItemState", ua.ObjectIds.BaseObjectType,
-                         "the node's state in OPC 40001-1's words: " + ", ".join(model.MACHINERY_STATES))
-    await rule(mstate)
-    current = await b.var(nid("MachineryItemState.CurrentState"), mstate, "CurrentState", node_id(ua.ObjectIds.LocalizedText),
-                          ua.Variant(ua.LocalizedText("NotExecuting"), ua.VariantType.LocalizedText))
-    await rule(current)
-    yield "state", current
+    # ... and every building block, the nameplate too, in MachineryBuildingBlocks
+    blocks = await b.obj(nid("MachineryBuildingBlocks"), parent, "MachineryBuildingBlocks", ua.ObjectIds.FolderType,
+                         "the node's OPC 40001-1 building blocks", ns=types.machinery)
+    await rule(blocks)
+    await b.node(blocks).add_reference(ident, HAS_ADD_IN)
+    for machine, (type_id, states) in STATE_MACHINES.items():
+        path = f"MachineryBuildingBlocks.{machine}"
+        first = next(iter(states))
+        sm = await b.obj(nid(path), blocks, machine, node_id(type_id, types.machinery),
+                         f"OPC 40001-1's {machine}: " + ", ".join(states), ref=HAS_ADD_IN, ns=types.machinery)
+        current = await b.var(nid(f"{path}.CurrentState"), sm, "CurrentState", node_id(ua.ObjectIds.LocalizedText),
+                              ua.Variant(ua.LocalizedText(first), ua.VariantType.LocalizedText),
+                              typedef=ua.ObjectIds.FiniteStateVariableType, ns=0)
+        state_id = await b.prop(nid(f"{path}.CurrentState.Id"), current, "Id", ua.ObjectIds.NodeId,
+                                node_id(states[first], types.machinery), ua.VariantType.NodeId, ns=0)
+        for n in (sm, current, state_id):
+            await rule(n)
+        yield f"state:{machine}", current
+        yield f"stateid:{machine}", state_id
     folders = {}
     for folder in FOLDERS:
         folders[folder] = await b.obj(nid(folder), parent, folder, ua.ObjectIds.FolderType)
@@ -274,19 +297,17 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
                                 eu, ua.VariantType.ExtensionObject, ns=0))
 
 
-async def build_machines(server: Server, idx: int) -> ua.NodeId:
-    """``Objects/Machines``, in the Server object's notifier tree (HasNotifier)."""
-    b = _Builder(server, idx)
-    machines = await b.obj(node_id("Machines", idx), node_id(ua.ObjectIds.ObjectsFolder), "Machines",
-                           ua.ObjectIds.FolderType, "the machines of this bridge: one per sensor node",
-                           ref=ua.ObjectIds.Organizes, notifier=True)
-    await b.node(ua.ObjectIds.Server).add_reference(machines, ua.ObjectIds.HasNotifier)
+async def build_machines(server: Server, types: TypeIds) -> ua.NodeId:
+    """OPC 40001-1's ``Objects/Machines`` (loaded with the Machinery NodeSet), in the
+    Server object's notifier tree (HasNotifier)."""
+    machines = node_id(1001, types.machinery)
+    await server.get_node(ua.ObjectIds.Server).add_reference(machines, ua.ObjectIds.HasNotifier)
     return machines
 
 
 async def build_node(server: Server, idx: int, types: TypeIds, machines: ua.NodeId, info: NodeInfo,
                      method_callback: Callable[..., Any]) -> NodeHandles:
-    """One node's object under ``Machines``, its children and its slip alarm."""
+    """One node's object under OPC 40001-1's ``Machines``, its children and its slip alarm."""
     b = _Builder(server, idx)
     base = info.name
     obj = await b.obj(node_id(base, idx), machines, base, types.sensor, f"sensor node {base}",
@@ -299,17 +320,21 @@ async def build_node(server: Server, idx: int, types: TypeIds, machines: ua.Node
 
     variables: dict[str, ua.NodeId] = {}
     methods: dict[str, ua.NodeId] = {}
-    frame = state = None
+    current: dict[str, ua.NodeId] = {}
+    state_ids: dict[str, ua.NodeId] = {}
+    frame = None
     async for what, node in _members(b, obj, nid, info, types, method_callback, declare=False):
-        if what.startswith("var:"):
-            variables[what[4:]] = node
-        elif what.startswith("method:"):
-            methods[what[7:]] = node
-        elif what == "frame":
+        kind, _, name = what.partition(":")
+        if kind == "var":
+            variables[name] = node
+        elif kind == "method":
+            methods[name] = node
+        elif kind == "frame":
             frame = node
-        elif what == "state":
-            state = node
-    assert state is not None
+        elif kind == "state":
+            current[name] = node
+        elif kind == "stateid":
+            state_ids[name] = node
     cond_id = node_id(f"{base}.SlipAlarm", idx)
     # the condition: the mandatory children of AlarmConditionType and ours
     (cond, *_rest) = await instantiate(b.node(obj), b.node(types.alarm), nodeid=cond_id,
@@ -321,8 +346,9 @@ async def build_node(server: Server, idx: int, types: TypeIds, machines: ua.Node
         alarm_methods[str((await child.read_browse_name()).Name)] = child.nodeid
     alarm_vars: dict[str, ua.NodeId] = {}
     await _variables_by_path(cond, "", alarm_vars)
-    return NodeHandles(obj, [variables[v.path] for v in VARIABLES], frame, state, cond.nodeid, methods, alarm_methods,
-                       alarm_vars)
+    states = {name: (current[name], state_ids[name]) for name in STATE_MACHINES}
+    return NodeHandles(obj, [variables[v.path] for v in VARIABLES], frame, states, cond.nodeid, methods,
+                       alarm_methods, alarm_vars)
 
 
 async def _variables_by_path(node: Node, prefix: str, out: dict[str, ua.NodeId]) -> None:

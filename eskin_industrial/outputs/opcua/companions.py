@@ -1,5 +1,5 @@
 """The companion specifications the model is built on, loaded into the server before
-our own nodes: OPC 10000-100 (Devices, DI), OPC 30001 (Industrial Automation, IA,
+our own nodes: OPC 10000-100 (Devices, DI), Industrial Automation (IA,
 which Machinery requires) and OPC 40001-1 (Machinery), the OPC Foundation's NodeSet2
 files as they are published (``eskin_industrial/data/nodesets/``, with their licence).
 

@@ -22,10 +22,12 @@ async def _export(path: Path) -> None:
     from asyncua import Server
 
     from .build import build_types
+    from .companions import load_companions
 
     server = Server()
     await server.init()
     idx = await server.register_namespace(model.NAMESPACE_URI)
+    await load_companions(server)  # the types ours are built on (DI, Machinery)
 
     def no_call(name: str) -> Any:
         async def call(parent: Any, *args: Any) -> Any:  # never called: the server does not run

@@ -236,7 +236,8 @@ class OpcuaServer:
         idx = await server.register_namespace(model.NAMESPACE_URI)
         await load_companions(server)
         self.types = await build_types(server, idx, self.calls.method)
-        machines = await build_machines(server, idx)
+        values.machinery_ns = self.types.machinery
+        machines = await build_machines(server, self.types)
         for i, n in enumerate(self.nodes):
             n.handles = await build_node(server, idx, self.types, machines, n.info, self.calls.method)
             self.calls.by_object[n.handles.obj] = i

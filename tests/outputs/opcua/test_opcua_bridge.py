@@ -18,6 +18,7 @@ import pytest
 
 from eskin_industrial import __version__
 from eskin_industrial.outputs.opcua import model
+from eskin_industrial.outputs.opcua.companions import DI_URI, MACHINERY_URI
 from tests.helpers.modbus import free_port
 from tests.helpers.opcua import NAMESPACE_URI, by_path, node_peer, wait_listening
 from tests.helpers.paths import PROFILES
@@ -61,12 +62,14 @@ def test_a_scada_client_browses_subscribes_calls_and_sees_the_bridge_stop(tmp_pa
             assert ns > 0
 
             # -- the model, as a browse sees it
-            nodes = by_path(peer.ask("browse", nodeId=f"ns={ns};s=Machines", timeout_s=60)["nodes"])
+            machinery = peer.ask("namespace", uri=MACHINERY_URI)["index"]
+            nodes = by_path(peer.ask("browse", nodeId=f"ns={machinery};i=1001", timeout_s=60)["nodes"])  # Machines
             assert nodes["node"]["typeDefinition"] == f"ns={ns};i={model.TYPE_IDS['GraspSensorType']}"
             ident = {k.rpartition("/")[2]: v["value"] for k, v in nodes.items() if k.startswith("node/Identification/")}
             assert ident["Manufacturer"] == "eskin-industrial" and ident["Model"] == "paper-5x5"
             assert ident["SoftwareRevision"] == __version__ and ident["SerialNumber"] == "node"
-            assert nodes["node/MachineryItemState/CurrentState"]["value"] in model.MACHINERY_STATES
+            assert nodes["node/MachineryBuildingBlocks/MachineryItemState/CurrentState"]["value"] in \
+                model.MACHINERY_STATES
             for v in model.VARIABLES:
                 n = nodes[f"node/{v.path}"]
                 assert n["nodeClass"] == "Variable" and n["userAccessLevel"] == 1, n  # CurrentRead only
@@ -161,11 +164,29 @@ def test_the_nodeset_loads_in_an_independent_address_space(tmp_path: Path) -> No
     done = subprocess.run([sys.executable, "-m", "eskin_industrial", "opcua", "nodeset", "-o", str(out)],
                           capture_output=True, text=True, timeout=120, env=_ENV)
     assert done.returncode == 0, done.stderr
-    with node_peer() as peer:
-        loaded = peer.ask("nodeset", file=str(out), uri=NAMESPACE_URI, timeout_s=120)
+    with node_peer() as peer:  # with the companion specifications it requires, as node-opcua ships them
+        loaded = peer.ask("nodeset", file=str(out), uri=NAMESPACE_URI, companions=["di", "ia", "machinery"],
+                          timeout_s=120)
     assert loaded["namespace"] > 0
     assert {v.path.partition("/")[0] for v in model.VARIABLES} <= set(loaded["sensorComponents"])
-    assert {"Identification", "MachineryItemState", "SlipAlarm", "Taxels"} <= set(loaded["sensorComponents"])
+    assert {"MachineryBuildingBlocks", "SlipAlarm", "Taxels"} <= set(loaded["sensorComponents"])
+    # every instance declaration typed as OPC 40001-1 and OPC 10000-100 type it
+    decl = loaded["declarations"]
+    assert all(d["type"] for path, d in decl.items() if path.rpartition("/")[2] not in
+               {name for name, _, _ in model.METHODS}), decl
+    machinery = MACHINERY_URI + "#"
+    assert decl["Identification"] == {"type": machinery + "MachineIdentificationType", "browseNamespace": DI_URI,
+                                      "rule": "Mandatory", "addIn": True}
+    for name, _, _ in model.IDENTIFICATION:
+        assert decl[f"Identification/{name}"]["browseNamespace"] == DI_URI, name
+    assert decl["MachineryBuildingBlocks"]["browseNamespace"] == MACHINERY_URI
+    assert decl["MachineryBuildingBlocks/Identification"]["addIn"] is True
+    for name, type_name in (("MachineryItemState", "MachineryItemState_StateMachineType"),
+                            ("MachineryOperationMode", "MachineryOperationModeStateMachineType")):
+        path = f"MachineryBuildingBlocks/{name}"
+        assert decl[path]["type"] == machinery + type_name and decl[path]["addIn"] is True, name
+        assert decl[f"{path}/CurrentState"]["type"] == "http://opcfoundation.org/UA/#FiniteStateVariableType"
+        assert decl[f"{path}/CurrentState/Id"]["rule"] == "Mandatory"
     assert set(loaded["sensorMethods"]) == {"Tare", "AcknowledgeSlip", "Enable"}
     assert loaded["alarmIsAlarmCondition"] is True
     assert {name for name, _, _ in model.ALARM_FIELDS} <= set(loaded["alarmProperties"])
