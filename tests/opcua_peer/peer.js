@@ -278,6 +278,7 @@ async function handle(req) {
                     let td = null;
                     try { td = child.nodeClass === NodeClass.Method ? null : child.typeDefinitionObj; } catch (err) { td = null; }
                     declarations[p] = {
+                        nodeClass: NodeClass[child.nodeClass],
                         type: td ? uris[td.nodeId.namespace] + "#" + td.browseName.name : null,
                         browseNamespace: uris[child.browseName.namespaceIndex],
                         rule: child.modellingRule || null,

@@ -39,6 +39,8 @@ _BUILTIN: dict[str, tuple[int, ua.VariantType]] = {
     "String": (ua.ObjectIds.String, ua.VariantType.String),
     "LocalizedText": (ua.ObjectIds.LocalizedText, ua.VariantType.LocalizedText),
 }
+_TYPEDEFS = {"AnalogItemType": ua.ObjectIds.AnalogItemType, "TwoStateDiscreteType": ua.ObjectIds.TwoStateDiscreteType,
+             "BaseDataVariableType": ua.ObjectIds.BaseDataVariableType}
 #: The alarm's own fields: their variant types.
 _FIELD_TYPES = {"Double": ua.VariantType.Double, "String": ua.VariantType.String, "UInt32": ua.VariantType.UInt32}
 _FIELD_DEFAULTS: dict[str, Any] = {"Double": 0.0, "String": "", "UInt32": 0}
@@ -261,9 +263,12 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
             dims = [0, 0] if frame_shape is None else list(frame_shape)
         path = v.path.replace("/", ".")
         node = await b.var(nid(path), where, name, datatype, ua.Variant(None, ua.VariantType.Null),
-                           typedef=ua.ObjectIds.AnalogItemType if v.analog else ua.ObjectIds.BaseDataVariableType,
-                           description=doc, display=display, dims=dims)
+                           typedef=_TYPEDEFS[model.variable_type(v)], description=doc, display=display, dims=dims)
         await rule(node, mandatory=v is not FRAME)
+        if v.path in model.FLAG_STATES:  # what a client shows for true and false
+            for prop, text in zip(("TrueState", "FalseState"), model.FLAG_STATES[v.path], strict=True):
+                await rule(await b.prop(nid(f"{path}.{prop}"), node, prop, ua.ObjectIds.LocalizedText,
+                                        ua.LocalizedText(text), ua.VariantType.LocalizedText, ns=0))
         if v.analog:
             rng, eu = _analog_children(info, v)
             p1 = await b.prop(nid(f"{path}.EURange"), node, "EURange", ua.ObjectIds.Range, rng, ua.VariantType.ExtensionObject, ns=0)
@@ -275,18 +280,19 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
             units_only.append((path, v.unit, node))
         yield ("frame" if v is FRAME else f"var:{v.path}"), node
     for name, arg, doc in METHODS:
-        inputs = [] if arg is None else [ua.Argument(Name=arg[0], DataType=node_id(_BUILTIN[arg[1]][0]),
-                                                     ValueRank=-1, Description=ua.LocalizedText(doc))]
-        m = await b.node(parent).add_method(nid(name), ua.QualifiedName(name, b.idx), method_callback(name), inputs, [])
+        m = await b.node(parent).add_method(nid(name), ua.QualifiedName(name, b.idx), method_callback(name), [], [])
         await b.node(m.nodeid).write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(
             ua.LocalizedText(doc), ua.VariantType.LocalizedText)))
         await rule(m.nodeid)
+        if arg is not None:  # made here, not by asyncua: its id from the browse path as every other's
+            inputs = [ua.Argument(Name=arg[0], DataType=node_id(_BUILTIN[arg[1]][0]), ValueRank=-1,
+                                  Description=ua.LocalizedText(doc))]
+            args = await b.prop(nid(f"{name}.InputArguments"), m.nodeid, "InputArguments", ua.ObjectIds.Argument,
+                                inputs, ua.VariantType.ExtensionObject, ns=0)
+            await rule(args)
         if declare:
             types.methods[name] = m.nodeid
         yield f"method:{name}", m.nodeid
-    if declare:
-        cond = await b.obj(nid("SlipAlarm"), parent, "SlipAlarm", types.alarm, "raised at each entry into slip")
-        await rule(cond)
     # a value with a unit says which, as an analog one does (Health/FrameAge); made last,
     # so that the type's other instance declarations keep the numeric ids they had
     for path, unit, node in units_only:
@@ -295,6 +301,17 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
                               Description=ua.LocalizedText(unit_name))
         await rule(await b.prop(nid(f"{path}.EngineeringUnits"), node, "EngineeringUnits", ua.ObjectIds.EUInformation,
                                 eu, ua.VariantType.ExtensionObject, ns=0))
+    if declare:
+        # the alarm's declaration with the mandatory children of its type, as an instance
+        # has them (another server making an object from the NodeSet makes them too);
+        # made last: its children take the numbers after every other declaration's
+        made = await instantiate(b.node(parent), b.node(types.alarm), nodeid=nid("SlipAlarm"),
+                                 bname=ua.QualifiedName("SlipAlarm", b.idx), dname=ua.LocalizedText("SlipAlarm"),
+                                 instantiate_optional=False)
+        await made[0].write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(
+            ua.LocalizedText("raised at each entry into slip"), ua.VariantType.LocalizedText)))
+        for made_node in made:
+            await rule(made_node.nodeid)
 
 
 async def build_machines(server: Server, types: TypeIds) -> ua.NodeId:

@@ -83,6 +83,19 @@ VARIABLES: tuple[Var, ...] = (
     Var("Method", "String", "fact", "the deciding method's name"),
     Var("MethodCode", "UInt16", "fact", "its fixed number (as the PLC's METHOD_ID)"),
 )
+#: Every Boolean variable is a TwoStateDiscreteType (Part 8): its TrueState and
+#: FalseState, what a client shows for true and false.
+FLAG_STATES: dict[str, tuple[str, str]] = {
+    "StateValid": ("verdict", "no verdict"),
+    "Slip": ("slip", "no slip"),
+    "Contact": ("contact", "no contact"),
+    "TurnUnseen": ("turn unseen", "turn seen"),
+    "SlipLatched": ("slip latched", "no slip since acknowledge"),
+    "Enabled": ("enabled", "disabled"),
+    "Health/SensorStale": ("stale", "fresh"),
+    "Health/BusFault": ("bus fault", "bus ok"),
+    "Health/Offline": ("offline", "online"),
+}
 #: The taxel frame: a component only with ``frame_interval_s`` (its ModellingRule: Optional).
 FRAME = Var("Taxels", "Float", "measurement",
             "the calibrated taxel frame, rows x cols (ArrayDimensions), row-major, NaN for a refused reading",
@@ -184,7 +197,7 @@ def model_tree(rows: int = 5, cols: int = 5) -> list[str]:
     """The model as a tree (``docs/opcua.md``): one node's object and what it holds."""
     def kind(v: Var) -> str:
         unit = f", {v.unit}" if v.unit else ""
-        return f"({v.datatype}{unit}, {'AnalogItemType' if v.analog else 'BaseDataVariableType'}, {v.group})"
+        return f"({v.datatype}{unit}, {variable_type(v)}, {v.group})"
 
     # (name, what, children): the node's object's children in the order a browse lists them
     top: list[tuple[str, str, list[str]]] = [
@@ -214,11 +227,20 @@ def model_tree(rows: int = 5, cols: int = 5) -> list[str]:
     return out
 
 
+def variable_type(v: Var) -> str:
+    """The variable's type definition (Part 8's for measurements and flags)."""
+    if v.analog:
+        return "AnalogItemType"
+    return "TwoStateDiscreteType" if v.datatype == "Boolean" else "BaseDataVariableType"
+
+
 def variable_table() -> list[str]:
     """The variables of a node (``docs/opcua.md``; a test keeps the page equal to it)."""
     rows = ["| browse path | data type | unit | status group | meaning |", "|---|---|---|---|---|"]
     for v in (*VARIABLES, FRAME):
         kind = " (AnalogItemType: EURange, EngineeringUnits)" if v.analog else ""
+        if v.path in FLAG_STATES:
+            kind = " (TwoStateDiscreteType: TrueState '{}', FalseState '{}')".format(*FLAG_STATES[v.path])
         dtype = "Float[rows][cols]" if v is FRAME else v.datatype
         rows.append(f"| `{v.path}` | {dtype} | {v.unit or '-'} | {v.group} | {v.doc}{kind} |")
     return rows

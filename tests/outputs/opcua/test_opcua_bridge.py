@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -77,6 +78,10 @@ def test_a_scada_client_browses_subscribes_calls_and_sees_the_bridge_stop(tmp_pa
                 want = (f"ns={ns};i={model.TYPE_IDS['GraspStateEnumeration']}" if v.datatype == "GraspStateEnumeration"
                         else _DATATYPES[v.datatype])
                 assert n["dataTypeId"] == want, n
+                if v.datatype == "Boolean":  # a flag: TwoStateDiscreteType, what true and false read
+                    assert n["typeDefinition"] == "ns=0;i=2373", n
+                    states = (nodes[f"node/{v.path}/TrueState"]["value"], nodes[f"node/{v.path}/FalseState"]["value"])
+                    assert states == model.FLAG_STATES[v.path], v.path
                 if v.analog:
                     assert n["typeDefinition"] == "ns=0;i=2368", n  # AnalogItemType
                     unit = nodes[f"node/{v.path}/EngineeringUnits"]["value"]
@@ -87,6 +92,12 @@ def test_a_scada_client_browses_subscribes_calls_and_sees_the_bridge_stop(tmp_pa
             assert nodes["node/Scores/ScoreB"]["displayName"] == "slow_score"
             assert "Taxels" not in [p.rpartition("/")[2] for p in nodes]  # the frame is off by default
             assert {"node/Tare", "node/AcknowledgeSlip", "node/Enable", "node/SlipAlarm"} <= set(nodes)
+            # every instance node id a string from its browse path, the method's argument list too
+            (args,) = peer.ask("read", nodeIds=[f"ns={ns};s=node.Enable.InputArguments"])["values"]
+            assert args["status"] == "Good" and args["value"][0]["name"] == "Enabled", args
+            assert all(n["nodeId"].startswith(f"ns={ns};s=node.") for p, n in nodes.items()
+                       if p.startswith("node/") and not p.startswith("node/SlipAlarm/")), \
+                [p for p, n in nodes.items() if p.startswith("node/") and ";s=node." not in n["nodeId"]]
             enum = peer.ask("readEnum", nodeId=f"ns={ns};i={model.TYPE_IDS['GraspStateEnumeration']}")
             assert [(f["name"], f["value"]) for f in enum["fields"]] == list(zip(model.STATE_NAMES, range(4)))
 
@@ -172,13 +183,21 @@ def test_the_nodeset_loads_in_an_independent_address_space(tmp_path: Path) -> No
     assert {"MachineryBuildingBlocks", "SlipAlarm", "Taxels"} <= set(loaded["sensorComponents"])
     # every instance declaration typed as OPC 40001-1 and OPC 10000-100 type it
     decl = loaded["declarations"]
-    assert all(d["type"] for path, d in decl.items() if path.rpartition("/")[2] not in
-               {name for name, _, _ in model.METHODS}), decl
+    untyped = [path for path, d in decl.items() if d["nodeClass"] != "Method" and not d["type"]]
+    assert not untyped and len(decl) > 100, untyped
     machinery = MACHINERY_URI + "#"
-    assert decl["Identification"] == {"type": machinery + "MachineIdentificationType", "browseNamespace": DI_URI,
-                                      "rule": "Mandatory", "addIn": True}
+    assert decl["Identification"] == {"nodeClass": "Object", "type": machinery + "MachineIdentificationType",
+                                      "browseNamespace": DI_URI, "rule": "Mandatory", "addIn": True}
     for name, _, _ in model.IDENTIFICATION:
         assert decl[f"Identification/{name}"]["browseNamespace"] == DI_URI, name
+    for path in model.FLAG_STATES:
+        assert decl[path]["type"] == "http://opcfoundation.org/UA/#TwoStateDiscreteType", path
+        assert decl[f"{path}/TrueState"]["rule"] == decl[f"{path}/FalseState"]["rule"] == "Mandatory", path
+    # the alarm's declaration has the children an instance of its type has
+    for child in ("EnabledState", "EnabledState/Id", "ActiveState", "ActiveState/Id", "AckedState", "Retain",
+                  "Severity", "Message", "ConditionName", *(name for name, _, _ in model.ALARM_FIELDS)):
+        assert decl[f"SlipAlarm/{child}"]["rule"] == "Mandatory", child
+    assert decl["SlipAlarm"]["type"] == f"{NAMESPACE_URI}#SlipAlarmType"
     assert decl["MachineryBuildingBlocks"]["browseNamespace"] == MACHINERY_URI
     assert decl["MachineryBuildingBlocks/Identification"]["addIn"] is True
     for name, type_name in (("MachineryItemState", "MachineryItemState_StateMachineType"),
@@ -193,3 +212,9 @@ def test_the_nodeset_loads_in_an_independent_address_space(tmp_path: Path) -> No
     assert loaded["enumStrings"] == loaded["enumFields"] == list(model.STATE_NAMES)
     problems = [w for w in loaded["warnings"] if "error" in w.lower() or "cannot" in w.lower()]
     assert not problems, problems
+    # the model header: ours, requiring the standard model, DI and Machinery
+    ua_ns = "{http://opcfoundation.org/UA/2011/03/UANodeSet.xsd}"
+    (ours,) = ET.parse(out).getroot().iter(ua_ns + "Model")
+    assert ours.get("ModelUri") == NAMESPACE_URI and ours.get("Version") == __version__
+    assert [r.get("ModelUri") for r in ours.iter(ua_ns + "RequiredModel")] == [
+        "http://opcfoundation.org/UA/", DI_URI, MACHINERY_URI]
