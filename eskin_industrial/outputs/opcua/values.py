@@ -1,6 +1,6 @@
 """The snapshots applied to the address space: each variable's value with its status
-and source timestamp (only what changed is written), the machinery state, the taxel
-frame."""
+and source timestamp (only what changed is written), the two OPC 40001-1 state
+machines, the taxel frame."""
 
 from __future__ import annotations
 

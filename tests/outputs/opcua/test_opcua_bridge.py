@@ -71,6 +71,17 @@ def test_a_scada_client_browses_subscribes_calls_and_sees_the_bridge_stop(tmp_pa
             assert ident["SoftwareRevision"] == __version__ and ident["SerialNumber"] == "node"
             assert nodes["node/MachineryBuildingBlocks/MachineryItemState/CurrentState"]["value"] in \
                 model.MACHINERY_STATES
+            # each instance typed as OPC 40001-1 types it, as node-opcua sees it
+            blocks = "node/MachineryBuildingBlocks"
+            assert nodes["node/Identification"]["typeDefinition"] == f"ns={machinery};i=1012"  # MachineIdentificationType
+            assert nodes[f"{blocks}/Identification"]["nodeId"] == nodes["node/Identification"]["nodeId"]  # one nameplate
+            assert nodes[f"{blocks}/MachineryItemState"]["typeDefinition"] == f"ns={machinery};i=1002"
+            assert nodes[f"{blocks}/MachineryOperationMode"]["typeDefinition"] == f"ns={machinery};i=1008"
+            for machine in model.STATE_MACHINES:
+                current = nodes[f"{blocks}/{machine}/CurrentState"]
+                assert current["typeDefinition"] == "ns=0;i=2760", current  # FiniteStateVariableType
+                state_id = nodes[f"{blocks}/{machine}/CurrentState/Id"]["value"]
+                assert state_id == f"ns={machinery};i={model.STATE_MACHINES[machine][1][current['value']]}"
             for v in model.VARIABLES:
                 n = nodes[f"node/{v.path}"]
                 assert n["nodeClass"] == "Variable" and n["userAccessLevel"] == 1, n  # CurrentRead only
