@@ -1,7 +1,8 @@
 """The address space, built from :mod:`.model` in an asyncua server: the type model
 (``GraspStateEnumeration``, ``GraspSensorType``, ``SlipAlarmType``, fixed numeric ids
-in our namespace, exported as NodeSet2 by :mod:`.nodeset`), the ``Machines`` folder
-and one object per node.
+in our namespace, exported as NodeSet2 by :mod:`.nodeset`) and one object per node
+under OPC 40001-1's ``Machines`` folder, on the types of the companion specifications
+:mod:`.companions` loads (the nameplate, the two state machines).
 
 Instances are built here, child by child, from the same lists as the type's instance
 declarations (string node ids ``NODE.Health.SensorStale``, stable across restarts for
@@ -230,7 +231,7 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
     await b.node(blocks).add_reference(ident, HAS_ADD_IN)
     for machine, (type_id, states) in STATE_MACHINES.items():
         path = f"MachineryBuildingBlocks.{machine}"
-        first = next(iter(states))
+        first = model.INITIAL_STATES[machine]
         sm = await b.obj(nid(path), blocks, machine, node_id(type_id, types.machinery),
                          f"OPC 40001-1's {machine}: " + ", ".join(states), ref=HAS_ADD_IN, ns=types.machinery)
         current = await b.var(nid(f"{path}.CurrentState"), sm, "CurrentState", node_id(ua.ObjectIds.LocalizedText),
@@ -293,8 +294,7 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
         if declare:
             types.methods[name] = m.nodeid
         yield f"method:{name}", m.nodeid
-    # a value with a unit says which, as an analog one does (Health/FrameAge); made last,
-    # so that the type's other instance declarations keep the numeric ids they had
+    # a value with a unit says which, as an analog one does (Health/FrameAge)
     for path, unit, node in units_only:
         code, unit_name = model.UNITS[unit]
         eu = ua.EUInformation(NamespaceUri=model.UNECE_NAMESPACE, UnitId=code, DisplayName=ua.LocalizedText(unit),

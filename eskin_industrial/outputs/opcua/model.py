@@ -123,6 +123,8 @@ STATE_MACHINES: dict[str, tuple[int, dict[str, int]]] = {
                                   "Executing": 5006}),
     "MachineryOperationMode": (1008, {"None": 5024, "Maintenance": 5025, "Setup": 5027, "Processing": 5026}),
 }
+#: Before the node's first snapshot is applied: no scan yet, no mode claimed.
+INITIAL_STATES = {"MachineryItemState": "NotExecuting", "MachineryOperationMode": "None"}
 MACHINERY_STATES = ("Executing", "NotExecuting", "OutOfService", "NotAvailable")
 OPERATION_MODES = ("Processing", "Setup", "None")  #: the ones the bridge takes (never Maintenance)
 #: The methods of a node: (name, input argument or None, what it does).
