@@ -64,6 +64,8 @@ def test_wheel_carries_profiles_examples_license_and_metadata(installed: tuple[P
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
     assert any(n.startswith("eskin_industrial/scenes/builtin/") for n in names)
     assert "eskin_industrial/data/models/learned.npz" in names  # the learned method's model
+    for nodeset in ("Opc.Ua.Di.NodeSet2.xml", "Opc.Ua.IA.NodeSet2.xml", "Opc.Ua.Machinery.NodeSet2.xml", "LICENSE"):
+        assert f"eskin_industrial/data/nodesets/{nodeset}" in names  # the OPC UA companion specifications
     # the docs (eskin-bus docs): every page of docs/, the file itself, not a link to one
     pages = sorted((ROOT / "docs").glob("*.md"))
     with zipfile.ZipFile(wheel) as zf:

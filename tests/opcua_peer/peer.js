@@ -257,7 +257,9 @@ async function handle(req) {
             console.warn = (...a) => warnings.push(a.join(" "));
             console.log = (...a) => warnings.push(a.join(" "));
             try {
-                await generateAddressSpace(addressSpace, [nodesets.standard, req.file]);
+                // with the companion specifications it is built on (DI, IA, Machinery)
+                const files = [nodesets.standard, ...(req.companions || []).map((name) => nodesets[name]), req.file];
+                await generateAddressSpace(addressSpace, files);
             } finally {
                 console.warn = warn; console.log = log;
             }
@@ -265,8 +267,31 @@ async function handle(req) {
             const sensor = addressSpace.findObjectType("GraspSensorType", ns);
             const alarm = addressSpace.findObjectType("SlipAlarmType", ns);
             const enumeration = addressSpace.findDataType("GraspStateEnumeration", ns);
+            // every instance declaration of the sensor type, by browse path: its type
+            // definition (namespace URI and browse name) and its modelling rule
+            const uris = addressSpace.getNamespaceArray().map((n) => n.namespaceUri);
+            const declarations = {};
+            const walk = (node, prefix) => {
+                for (const child of node.getAggregates ? node.getAggregates() : []) {
+                    const p = prefix + (prefix ? "/" : "") + child.browseName.name;
+                    if (declarations[p]) continue;
+                    let td = null;
+                    try { td = child.nodeClass === NodeClass.Method ? null : child.typeDefinitionObj; } catch (err) { td = null; }
+                    declarations[p] = {
+                        nodeClass: NodeClass[child.nodeClass],
+                        type: td ? uris[td.nodeId.namespace] + "#" + td.browseName.name : null,
+                        browseNamespace: uris[child.browseName.namespaceIndex],
+                        rule: child.modellingRule || null,
+                        addIn: (node.findReferencesExAsObject ? node.findReferencesExAsObject("HasAddIn") : [])
+                            .some((r) => r === child),
+                    };
+                    walk(child, p);
+                }
+            };
+            if (sensor) walk(sensor, "");
             const result = {
                 namespace: ns,
+                declarations,
                 sensorComponents: sensor ? sensor.getComponents().map((c) => c.browseName.name) : null,
                 sensorMethods: sensor ? sensor.getMethods().map((c) => c.browseName.name) : null,
                 alarmIsAlarmCondition: alarm ? alarm.isSubtypeOf(addressSpace.findEventType("AlarmConditionType")) : false,

@@ -1,7 +1,8 @@
 """The address space, built from :mod:`.model` in an asyncua server: the type model
 (``GraspStateEnumeration``, ``GraspSensorType``, ``SlipAlarmType``, fixed numeric ids
-in our namespace, exported as NodeSet2 by :mod:`.nodeset`), the ``Machines`` folder
-and one object per node.
+in our namespace, exported as NodeSet2 by :mod:`.nodeset`) and one object per node
+under OPC 40001-1's ``Machines`` folder, on the types of the companion specifications
+:mod:`.companions` loads (the nameplate, the two state machines).
 
 Instances are built here, child by child, from the same lists as the type's instance
 declarations (string node ids ``NODE.Health.SensorStale``, stable across restarts for
@@ -22,10 +23,13 @@ from asyncua.common.instantiate_util import instantiate
 from asyncua.common.structures104 import new_enum
 
 from . import model
-from .model import FOLDERS, FRAME, IDENTIFICATION, METHODS, VARIABLES, Var
+from .companions import DI_URI, MACHINERY_URI
+from .model import FOLDERS, FRAME, IDENTIFICATION, METHODS, STATE_MACHINES, VARIABLES, Var
 from .nodeinfo import NodeInfo
 from .uaconv import node_id
 
+#: OPC 10000-3's HasAddIn (a HasComponent): how OPC 40001-1 adds its building blocks.
+HAS_ADD_IN = ua.ObjectIds.HasAddIn
 _BUILTIN: dict[str, tuple[int, ua.VariantType]] = {
     "Boolean": (ua.ObjectIds.Boolean, ua.VariantType.Boolean),
     "Double": (ua.ObjectIds.Double, ua.VariantType.Double),
@@ -36,6 +40,8 @@ _BUILTIN: dict[str, tuple[int, ua.VariantType]] = {
     "String": (ua.ObjectIds.String, ua.VariantType.String),
     "LocalizedText": (ua.ObjectIds.LocalizedText, ua.VariantType.LocalizedText),
 }
+_TYPEDEFS = {"AnalogItemType": ua.ObjectIds.AnalogItemType, "TwoStateDiscreteType": ua.ObjectIds.TwoStateDiscreteType,
+             "BaseDataVariableType": ua.ObjectIds.BaseDataVariableType}
 #: The alarm's own fields: their variant types.
 _FIELD_TYPES = {"Double": ua.VariantType.Double, "String": ua.VariantType.String, "UInt32": ua.VariantType.UInt32}
 _FIELD_DEFAULTS: dict[str, Any] = {"Double": 0.0, "String": "", "UInt32": 0}
@@ -53,6 +59,8 @@ class TypeIds:
     enum: ua.NodeId
     sensor: ua.NodeId
     alarm: ua.NodeId
+    di: int  #: the namespace indexes of OPC 10000-100 (DI) and OPC 40001-1 (Machinery)
+    machinery: int
     methods: dict[str, ua.NodeId] = field(default_factory=dict)  #: the type's method declarations
 
 
@@ -63,7 +71,8 @@ class NodeHandles:
     obj: ua.NodeId
     variables: list[ua.NodeId]  #: in :data:`.model.VARIABLES` order
     frame: ua.NodeId | None
-    machinery_state: ua.NodeId
+    #: each state machine's (CurrentState, CurrentState/Id), by its browse name
+    states: dict[str, tuple[ua.NodeId, ua.NodeId]]
     alarm: ua.NodeId
     methods: dict[str, ua.NodeId]  #: name -> the instance's method node
     alarm_methods: dict[str, ua.NodeId]  #: the condition's own (Acknowledge, ...)
@@ -93,10 +102,11 @@ class _Builder:
         return res.AddedNodeId
 
     async def obj(self, nodeid: ua.NodeId, parent: ua.NodeId, name: str, typedef: int | ua.NodeId,
-                  description: str = "", ref: int = ua.ObjectIds.HasComponent, notifier: bool = False) -> ua.NodeId:
+                  description: str = "", ref: int = ua.ObjectIds.HasComponent, notifier: bool = False,
+                  ns: int | None = None) -> ua.NodeId:
         item = ua.AddNodesItem()
         item.RequestedNewNodeId = nodeid
-        item.BrowseName = ua.QualifiedName(name, self.idx)
+        item.BrowseName = ua.QualifiedName(name, self.idx if ns is None else ns)
         item.NodeClass = ua.NodeClass.Object
         item.ParentNodeId = parent
         item.ReferenceTypeId = node_id(ref)
@@ -185,7 +195,8 @@ async def build_types(server: Server, idx: int, method_callback: Callable[..., A
         "GraspSensorType", idx))
     await sensor.write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(
         ua.LocalizedText("a tactile sensor node on a gripper, with its grasp state"), ua.VariantType.LocalizedText)))
-    types = TypeIds(enum_id, sensor.nodeid, alarm.nodeid)
+    types = TypeIds(enum_id, sensor.nodeid, alarm.nodeid, await server.get_namespace_index(DI_URI),
+                    await server.get_namespace_index(MACHINERY_URI))
     async for _ in _members(b, sensor.nodeid, lambda path: nid(), None, types, method_callback, declare=True):
         pass
     return types
@@ -202,21 +213,36 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
         if declare:
             await b.rule(n, mandatory)
 
-    ident = await b.obj(nid("Identification"), parent, "Identification", ua.ObjectIds.FolderType,
-                        "the node's identification (OPC 40001-1's names)")
+    # OPC 40001-1: the nameplate, an AddIn of the machine (DI:Identification) ...
+    ident = await b.obj(nid("Identification"), parent, "Identification",
+                        node_id(model.MACHINE_IDENTIFICATION_TYPE, types.machinery),
+                        "the node's nameplate (OPC 40001-1, MachineIdentificationType)", ref=HAS_ADD_IN, ns=types.di)
     await rule(ident)
     for name, dtype, doc in IDENTIFICATION:
         text = "" if info is None else info.identification.get(name, "")
         value = ua.LocalizedText(text) if dtype == "LocalizedText" else text
-        p = await b.prop(nid(f"Identification.{name}"), ident, name, _BUILTIN[dtype][0], value, _BUILTIN[dtype][1], description=doc)
+        p = await b.prop(nid(f"Identification.{name}"), ident, name, _BUILTIN[dtype][0], value, _BUILTIN[dtype][1],
+                         ns=types.di, description=doc)
         await rule(p)
-    mstate = await b.obj(nid("MachineryItemState"), parent, "MachineryItemState", ua.ObjectIds.BaseObjectType,
-                         "the node's state in OPC 40001-1's words: " + ", ".join(model.MACHINERY_STATES))
-    await rule(mstate)
-    current = await b.var(nid("MachineryItemState.CurrentState"), mstate, "CurrentState", node_id(ua.ObjectIds.LocalizedText),
-                          ua.Variant(ua.LocalizedText("NotExecuting"), ua.VariantType.LocalizedText))
-    await rule(current)
-    yield "state", current
+    # ... and every building block, the nameplate too, in MachineryBuildingBlocks
+    blocks = await b.obj(nid("MachineryBuildingBlocks"), parent, "MachineryBuildingBlocks", ua.ObjectIds.FolderType,
+                         "the node's OPC 40001-1 building blocks", ns=types.machinery)
+    await rule(blocks)
+    await b.node(blocks).add_reference(ident, HAS_ADD_IN)
+    for machine, (type_id, states) in STATE_MACHINES.items():
+        path = f"MachineryBuildingBlocks.{machine}"
+        first = model.INITIAL_STATES[machine]
+        sm = await b.obj(nid(path), blocks, machine, node_id(type_id, types.machinery),
+                         f"OPC 40001-1's {machine}: " + ", ".join(states), ref=HAS_ADD_IN, ns=types.machinery)
+        current = await b.var(nid(f"{path}.CurrentState"), sm, "CurrentState", node_id(ua.ObjectIds.LocalizedText),
+                              ua.Variant(ua.LocalizedText(first), ua.VariantType.LocalizedText),
+                              typedef=ua.ObjectIds.FiniteStateVariableType, ns=0)
+        state_id = await b.prop(nid(f"{path}.CurrentState.Id"), current, "Id", ua.ObjectIds.NodeId,
+                                node_id(states[first], types.machinery), ua.VariantType.NodeId, ns=0)
+        for n in (sm, current, state_id):
+            await rule(n)
+        yield f"state:{machine}", current
+        yield f"stateid:{machine}", state_id
     folders = {}
     for folder in FOLDERS:
         folders[folder] = await b.obj(nid(folder), parent, folder, ua.ObjectIds.FolderType)
@@ -238,9 +264,12 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
             dims = [0, 0] if frame_shape is None else list(frame_shape)
         path = v.path.replace("/", ".")
         node = await b.var(nid(path), where, name, datatype, ua.Variant(None, ua.VariantType.Null),
-                           typedef=ua.ObjectIds.AnalogItemType if v.analog else ua.ObjectIds.BaseDataVariableType,
-                           description=doc, display=display, dims=dims)
+                           typedef=_TYPEDEFS[model.variable_type(v)], description=doc, display=display, dims=dims)
         await rule(node, mandatory=v is not FRAME)
+        if v.path in model.FLAG_STATES:  # what a client shows for true and false
+            for prop, text in zip(("TrueState", "FalseState"), model.FLAG_STATES[v.path], strict=True):
+                await rule(await b.prop(nid(f"{path}.{prop}"), node, prop, ua.ObjectIds.LocalizedText,
+                                        ua.LocalizedText(text), ua.VariantType.LocalizedText, ns=0))
         if v.analog:
             rng, eu = _analog_children(info, v)
             p1 = await b.prop(nid(f"{path}.EURange"), node, "EURange", ua.ObjectIds.Range, rng, ua.VariantType.ExtensionObject, ns=0)
@@ -252,41 +281,50 @@ async def _members(b: _Builder, parent: ua.NodeId, nid: Callable[[str], ua.NodeI
             units_only.append((path, v.unit, node))
         yield ("frame" if v is FRAME else f"var:{v.path}"), node
     for name, arg, doc in METHODS:
-        inputs = [] if arg is None else [ua.Argument(Name=arg[0], DataType=node_id(_BUILTIN[arg[1]][0]),
-                                                     ValueRank=-1, Description=ua.LocalizedText(doc))]
-        m = await b.node(parent).add_method(nid(name), ua.QualifiedName(name, b.idx), method_callback(name), inputs, [])
+        m = await b.node(parent).add_method(nid(name), ua.QualifiedName(name, b.idx), method_callback(name), [], [])
         await b.node(m.nodeid).write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(
             ua.LocalizedText(doc), ua.VariantType.LocalizedText)))
         await rule(m.nodeid)
+        if arg is not None:  # made here, not by asyncua: its id from the browse path as every other's
+            inputs = [ua.Argument(Name=arg[0], DataType=node_id(_BUILTIN[arg[1]][0]), ValueRank=-1,
+                                  Description=ua.LocalizedText(doc))]
+            args = await b.prop(nid(f"{name}.InputArguments"), m.nodeid, "InputArguments", ua.ObjectIds.Argument,
+                                inputs, ua.VariantType.ExtensionObject, ns=0)
+            await rule(args)
         if declare:
             types.methods[name] = m.nodeid
         yield f"method:{name}", m.nodeid
-    if declare:
-        cond = await b.obj(nid("SlipAlarm"), parent, "SlipAlarm", types.alarm, "raised at each entry into slip")
-        await rule(cond)
-    # a value with a unit says which, as an analog one does (Health/FrameAge); made last,
-    # so that the type's other instance declarations keep the numeric ids they had
+    # a value with a unit says which, as an analog one does (Health/FrameAge)
     for path, unit, node in units_only:
         code, unit_name = model.UNITS[unit]
         eu = ua.EUInformation(NamespaceUri=model.UNECE_NAMESPACE, UnitId=code, DisplayName=ua.LocalizedText(unit),
                               Description=ua.LocalizedText(unit_name))
         await rule(await b.prop(nid(f"{path}.EngineeringUnits"), node, "EngineeringUnits", ua.ObjectIds.EUInformation,
                                 eu, ua.VariantType.ExtensionObject, ns=0))
+    if declare:
+        # the alarm's declaration with the mandatory children of its type, as an instance
+        # has them (another server making an object from the NodeSet makes them too);
+        # made last: its children take the numbers after every other declaration's
+        made = await instantiate(b.node(parent), b.node(types.alarm), nodeid=nid("SlipAlarm"),
+                                 bname=ua.QualifiedName("SlipAlarm", b.idx), dname=ua.LocalizedText("SlipAlarm"),
+                                 instantiate_optional=False)
+        await made[0].write_attribute(ua.AttributeIds.Description, ua.DataValue(ua.Variant(
+            ua.LocalizedText("raised at each entry into slip"), ua.VariantType.LocalizedText)))
+        for made_node in made:
+            await rule(made_node.nodeid)
 
 
-async def build_machines(server: Server, idx: int) -> ua.NodeId:
-    """``Objects/Machines``, in the Server object's notifier tree (HasNotifier)."""
-    b = _Builder(server, idx)
-    machines = await b.obj(node_id("Machines", idx), node_id(ua.ObjectIds.ObjectsFolder), "Machines",
-                           ua.ObjectIds.FolderType, "the machines of this bridge: one per sensor node",
-                           ref=ua.ObjectIds.Organizes, notifier=True)
-    await b.node(ua.ObjectIds.Server).add_reference(machines, ua.ObjectIds.HasNotifier)
+async def build_machines(server: Server, types: TypeIds) -> ua.NodeId:
+    """OPC 40001-1's ``Objects/Machines`` (loaded with the Machinery NodeSet), in the
+    Server object's notifier tree (HasNotifier)."""
+    machines = node_id(1001, types.machinery)
+    await server.get_node(ua.ObjectIds.Server).add_reference(machines, ua.ObjectIds.HasNotifier)
     return machines
 
 
 async def build_node(server: Server, idx: int, types: TypeIds, machines: ua.NodeId, info: NodeInfo,
                      method_callback: Callable[..., Any]) -> NodeHandles:
-    """One node's object under ``Machines``, its children and its slip alarm."""
+    """One node's object under OPC 40001-1's ``Machines``, its children and its slip alarm."""
     b = _Builder(server, idx)
     base = info.name
     obj = await b.obj(node_id(base, idx), machines, base, types.sensor, f"sensor node {base}",
@@ -299,17 +337,21 @@ async def build_node(server: Server, idx: int, types: TypeIds, machines: ua.Node
 
     variables: dict[str, ua.NodeId] = {}
     methods: dict[str, ua.NodeId] = {}
-    frame = state = None
+    current: dict[str, ua.NodeId] = {}
+    state_ids: dict[str, ua.NodeId] = {}
+    frame = None
     async for what, node in _members(b, obj, nid, info, types, method_callback, declare=False):
-        if what.startswith("var:"):
-            variables[what[4:]] = node
-        elif what.startswith("method:"):
-            methods[what[7:]] = node
-        elif what == "frame":
+        kind, _, name = what.partition(":")
+        if kind == "var":
+            variables[name] = node
+        elif kind == "method":
+            methods[name] = node
+        elif kind == "frame":
             frame = node
-        elif what == "state":
-            state = node
-    assert state is not None
+        elif kind == "state":
+            current[name] = node
+        elif kind == "stateid":
+            state_ids[name] = node
     cond_id = node_id(f"{base}.SlipAlarm", idx)
     # the condition: the mandatory children of AlarmConditionType and ours
     (cond, *_rest) = await instantiate(b.node(obj), b.node(types.alarm), nodeid=cond_id,
@@ -321,8 +363,9 @@ async def build_node(server: Server, idx: int, types: TypeIds, machines: ua.Node
         alarm_methods[str((await child.read_browse_name()).Name)] = child.nodeid
     alarm_vars: dict[str, ua.NodeId] = {}
     await _variables_by_path(cond, "", alarm_vars)
-    return NodeHandles(obj, [variables[v.path] for v in VARIABLES], frame, state, cond.nodeid, methods, alarm_methods,
-                       alarm_vars)
+    states = {name: (current[name], state_ids[name]) for name in STATE_MACHINES}
+    return NodeHandles(obj, [variables[v.path] for v in VARIABLES], frame, states, cond.nodeid, methods,
+                       alarm_methods, alarm_vars)
 
 
 async def _variables_by_path(node: Node, prefix: str, out: dict[str, ua.NodeId]) -> None:

@@ -3,8 +3,9 @@ a node with its data type, unit, status group and meaning, and the values of one
 snapshot.  Pure code: :mod:`.build` turns it into nodes, ``docs/opcua.md`` shows it
 (:func:`model_tree`, kept equal to the page by a test).
 
-One object per sensor node under ``Objects/Machines``, of the object type
-``GraspSensorType``; its variables, by browse path (``Health/SensorStale``), are
+One object per sensor node under OPC 40001-1's ``Objects/Machines``, of the object
+type ``GraspSensorType``, with its nameplate and state machines as that specification
+lays them out; its variables, by browse path (``Health/SensorStale``), are
 :data:`VARIABLES`.  Browse names are fixed: a SCADA tag stays valid whichever method
 decides; the scores' display names are the method's own (``onset_score``), as
 ``eskin-bus plc map`` names them.
@@ -82,23 +83,50 @@ VARIABLES: tuple[Var, ...] = (
     Var("Method", "String", "fact", "the deciding method's name"),
     Var("MethodCode", "UInt16", "fact", "its fixed number (as the PLC's METHOD_ID)"),
 )
+#: Every Boolean variable is a TwoStateDiscreteType (Part 8): its TrueState and
+#: FalseState, what a client shows for true and false.
+FLAG_STATES: dict[str, tuple[str, str]] = {
+    "StateValid": ("verdict", "no verdict"),
+    "Slip": ("slip", "no slip"),
+    "Contact": ("contact", "no contact"),
+    "TurnUnseen": ("turn unseen", "turn seen"),
+    "SlipLatched": ("slip latched", "no slip since acknowledge"),
+    "Enabled": ("enabled", "disabled"),
+    "Health/SensorStale": ("stale", "fresh"),
+    "Health/BusFault": ("bus fault", "bus ok"),
+    "Health/Offline": ("offline", "online"),
+}
 #: The taxel frame: a component only with ``frame_interval_s`` (its ModellingRule: Optional).
 FRAME = Var("Taxels", "Float", "measurement",
             "the calibrated taxel frame, rows x cols (ArrayDimensions), row-major, NaN for a refused reading",
             "N", True)
 #: The folders of the variables (objects of FolderType under the node's object).
 FOLDERS: tuple[str, ...] = ("Health", "Indicators", "Scores", "Counters")
-#: Identification (OPC 40001-1's names) and MachineryItemState/CurrentState.
+#: The nameplate: properties of OPC 40001-1's MachineIdentificationType, browse names
+#: in the DI namespace (OPC 10000-100); the first three are the type's mandatory ones.
 IDENTIFICATION: tuple[tuple[str, str, str], ...] = (
     ("Manufacturer", "LocalizedText", "[identity] vendor_name of the bridge configuration"),
-    ("Model", "LocalizedText", "the profile's [sensor] name (model_name when given)"),
-    ("ProductCode", "String", "[identity] product_code of the bridge configuration"),
     ("SerialNumber", "String", "the node's name (its [[node]] name)"),
     ("ProductInstanceUri", "String", "urn:VENDOR:PRODUCT_CODE:SERIAL_NUMBER"),
+    ("Model", "LocalizedText", "the profile's [sensor] name (model_name when given)"),
+    ("ProductCode", "String", "[identity] product_code of the bridge configuration"),
     ("SoftwareRevision", "String", "the package's version"),
     ("ComponentName", "LocalizedText", "the node's name"),
 )
+#: OPC 40001-1's MachineIdentificationType, in the Machinery namespace.
+MACHINE_IDENTIFICATION_TYPE = 1012
+#: The state machines of OPC 40001-1 under the node's ``MachineryBuildingBlocks``:
+#: browse name -> (their type, each state's name and NodeId in the Machinery namespace,
+#: as the specification numbers them; CurrentState/Id is that NodeId).
+STATE_MACHINES: dict[str, tuple[int, dict[str, int]]] = {
+    "MachineryItemState": (1002, {"NotAvailable": 5005, "OutOfService": 5004, "NotExecuting": 5007,
+                                  "Executing": 5006}),
+    "MachineryOperationMode": (1008, {"None": 5024, "Maintenance": 5025, "Setup": 5027, "Processing": 5026}),
+}
+#: Before the node's first snapshot is applied: no scan yet, no mode claimed.
+INITIAL_STATES = {"MachineryItemState": "NotExecuting", "MachineryOperationMode": "None"}
 MACHINERY_STATES = ("Executing", "NotExecuting", "OutOfService", "NotAvailable")
+OPERATION_MODES = ("Processing", "Setup", "None")  #: the ones the bridge takes (never Maintenance)
 #: The methods of a node: (name, input argument or None, what it does).
 METHODS: tuple[tuple[str, tuple[str, str] | None, str], ...] = (
     ("Tare", None, "tare with the gripper open (refused in contact or without a verdict: BadInvalidState)"),
@@ -171,13 +199,18 @@ def model_tree(rows: int = 5, cols: int = 5) -> list[str]:
     """The model as a tree (``docs/opcua.md``): one node's object and what it holds."""
     def kind(v: Var) -> str:
         unit = f", {v.unit}" if v.unit else ""
-        return f"({v.datatype}{unit}, {'AnalogItemType' if v.analog else 'BaseDataVariableType'}, {v.group})"
+        return f"({v.datatype}{unit}, {variable_type(v)}, {v.group})"
 
     # (name, what, children): the node's object's children in the order a browse lists them
     top: list[tuple[str, str, list[str]]] = [
-        ("Identification", "(FolderType)", [f"{name}  ({dtype}, property)" for name, dtype, _ in IDENTIFICATION]),
-        ("MachineryItemState", "(BaseObjectType)",
-         ["CurrentState  (LocalizedText: " + ", ".join(MACHINERY_STATES) + ")"]),
+        ("DI:Identification", "(MachineIdentificationType, HasAddIn)",
+         [f"DI:{name}  ({dtype}, property)" for name, dtype, _ in IDENTIFICATION]),
+        ("Machinery:MachineryBuildingBlocks", "(FolderType)", [
+            "DI:Identification  (HasAddIn: the nameplate above)",
+            "Machinery:MachineryItemState  (MachineryItemState_StateMachineType, HasAddIn): CurrentState, "
+            "CurrentState/Id: " + ", ".join(MACHINERY_STATES),
+            "Machinery:MachineryOperationMode  (MachineryOperationModeStateMachineType, HasAddIn): CurrentState, "
+            "CurrentState/Id: " + ", ".join(OPERATION_MODES)]),
     ]
     for folder in FOLDERS:
         top.append((folder, "(FolderType)", [f"{v.path.rpartition('/')[2]}  {kind(v)}" for v in VARIABLES
@@ -187,7 +220,7 @@ def model_tree(rows: int = 5, cols: int = 5) -> list[str]:
                 []))
     top.append(("SlipAlarm", "(SlipAlarmType, an AlarmConditionType)", []))
     top += [(f"{name}({'' if arg is None else arg[0] + ': ' + arg[1]})", "(method)", []) for name, arg, _ in METHODS]
-    out = ["Objects", "└─ Machines  (FolderType)", "   └─ NODE  (GraspSensorType)  one per [[node]]"]
+    out = ["Objects", "└─ Machinery:Machines  (FolderType, OPC 40001-1)", "   └─ NODE  (GraspSensorType)  one per [[node]]"]
     for k, (name, what, children) in enumerate(top):
         last = k == len(top) - 1
         out.append(f"      {'└' if last else '├'}─ {name}  {what}")
@@ -196,11 +229,20 @@ def model_tree(rows: int = 5, cols: int = 5) -> list[str]:
     return out
 
 
+def variable_type(v: Var) -> str:
+    """The variable's type definition (Part 8's for measurements and flags)."""
+    if v.analog:
+        return "AnalogItemType"
+    return "TwoStateDiscreteType" if v.datatype == "Boolean" else "BaseDataVariableType"
+
+
 def variable_table() -> list[str]:
     """The variables of a node (``docs/opcua.md``; a test keeps the page equal to it)."""
     rows = ["| browse path | data type | unit | status group | meaning |", "|---|---|---|---|---|"]
     for v in (*VARIABLES, FRAME):
         kind = " (AnalogItemType: EURange, EngineeringUnits)" if v.analog else ""
+        if v.path in FLAG_STATES:
+            kind = " (TwoStateDiscreteType: TrueState '{}', FalseState '{}')".format(*FLAG_STATES[v.path])
         dtype = "Float[rows][cols]" if v is FRAME else v.datatype
         rows.append(f"| `{v.path}` | {dtype} | {v.unit or '-'} | {v.group} | {v.doc}{kind} |")
     return rows

@@ -20,7 +20,7 @@ class NodeState:
         self.info = info
         self.handles: NodeHandles | None = None
         self.last: list[tuple[Any, int]] = [(None, -1)] * len(model.VARIABLES)  #: (value, status) written
-        self.machinery = ""
+        self.machinery: dict[str, str] = {}  #: each state machine's state written
         self.snapshot: NodeSnapshot | None = None  #: the newest applied
         self.source_end: status.SourceEnd = ""
         self.alarm = AlarmState()

@@ -35,6 +35,7 @@ from . import callcheck, itemcheck, model
 from .alarm_events import AlarmEvents
 from .build import NodeInfo, TypeIds, build_machines, build_node, build_types
 from .calls import COMMANDS_MAX, Calls
+from .companions import load_companions
 from .handover import Handover, Waker
 from .logins import LoginSecurity
 from .nodestate import NodeState
@@ -230,9 +231,13 @@ class OpcuaServer:
         await _capabilities(server)
         values = self.values = Values(server, o, self.report)
         alarms = self.alarms = AlarmEvents(server, o, self.nodes, self.report)
+        # ours first, so that it keeps index 2 (a SCADA's tags), then the companion
+        # specifications our model is built on
         idx = await server.register_namespace(model.NAMESPACE_URI)
+        await load_companions(server)
         self.types = await build_types(server, idx, self.calls.method)
-        machines = await build_machines(server, idx)
+        values.machinery_ns = self.types.machinery
+        machines = await build_machines(server, self.types)
         for i, n in enumerate(self.nodes):
             n.handles = await build_node(server, idx, self.types, machines, n.info, self.calls.method)
             self.calls.by_object[n.handles.obj] = i

@@ -119,3 +119,13 @@ def machinery_state(s: NodeSnapshot, source: SourceEnd = "") -> str:
     if s.state is None:
         return "NotExecuting"
     return "Executing"
+
+
+def operation_mode(s: NodeSnapshot) -> str:
+    """The node's MachineryOperationMode (OPC 40001-1's names): Processing while
+    detection is enabled, Setup while it is disabled (what an operator does while
+    setting the gripper up: a tare, a changeover), None once the bridge has stopped.
+    The bridge knows nothing of maintenance: never Maintenance."""
+    if s.offline:
+        return "None"
+    return "Processing" if s.enabled else "Setup"

@@ -1,6 +1,6 @@
 """The snapshots applied to the address space: each variable's value with its status
-and source timestamp (only what changed is written), the machinery state, the taxel
-frame."""
+and source timestamp (only what changed is written), the two OPC 40001-1 state
+machines, the taxel frame."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from .build import variant_type
 from .nodestate import NodeState
 from .options import OpcuaOptions
 from .report import Report
-from .uaconv import data_value
+from .uaconv import data_value, node_id
 
 _VALUE = ua.AttributeIds.Value
 _OFFLINE = model.INDEX["Health/Offline"]
@@ -34,6 +34,7 @@ class Values:
         self.server = server
         self.options = options
         self.report = report
+        self.machinery_ns = 0  #: the Machinery namespace's index (its states' NodeIds), set once loaded
 
     async def write_initial(self, n: NodeState) -> None:
         """Before the first snapshot: every variable BadWaitingForInitialData."""
@@ -73,12 +74,23 @@ class Values:
                                                                                   source_ts, now))
             writes += 1
         self.report.counts["writes"] += writes
-        machinery = status.machinery_state(s, n.source_end)
-        if machinery != n.machinery:
-            n.machinery = machinery
-            await server.write_attribute_value(handles.machinery_state, data_value(
-                ua.Variant(ua.LocalizedText(machinery), ua.VariantType.LocalizedText), status.GOOD, source_ts, now))
+        for machine, state in (("MachineryItemState", status.machinery_state(s, n.source_end)),
+                               ("MachineryOperationMode", status.operation_mode(s))):
+            if n.machinery.get(machine) != state:
+                n.machinery[machine] = state
+                await self._write_state(handles.states[machine], state, model.STATE_MACHINES[machine][1][state],
+                                        source_ts, now)
         return n.alarm.observe(s)
+
+    async def _write_state(self, nodes: tuple[ua.NodeId, ua.NodeId], state: str, state_number: int,
+                           source_ts: datetime.datetime, now: datetime.datetime) -> None:
+        """A state machine's CurrentState and its Id (the state's NodeId in the
+        Machinery namespace, which the Id's value names already)."""
+        current, state_id = nodes
+        await self.server.write_attribute_value(current, data_value(
+            ua.Variant(ua.LocalizedText(state), ua.VariantType.LocalizedText), status.GOOD, source_ts, now))
+        await self.server.write_attribute_value(state_id, data_value(
+            ua.Variant(node_id(state_number, self.machinery_ns), ua.VariantType.NodeId), status.GOOD, source_ts, now))
 
     async def write_frame(self, n: NodeState, forces: Any, wall_time_s: float) -> None:
         assert n.handles is not None and n.handles.frame is not None

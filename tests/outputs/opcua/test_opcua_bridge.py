@@ -12,12 +12,14 @@ import os
 import signal
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
 
 from eskin_industrial import __version__
 from eskin_industrial.outputs.opcua import model
+from eskin_industrial.outputs.opcua.companions import DI_URI, MACHINERY_URI
 from tests.helpers.modbus import free_port
 from tests.helpers.opcua import NAMESPACE_URI, by_path, node_peer, wait_listening
 from tests.helpers.paths import PROFILES
@@ -61,12 +63,25 @@ def test_a_scada_client_browses_subscribes_calls_and_sees_the_bridge_stop(tmp_pa
             assert ns > 0
 
             # -- the model, as a browse sees it
-            nodes = by_path(peer.ask("browse", nodeId=f"ns={ns};s=Machines", timeout_s=60)["nodes"])
+            machinery = peer.ask("namespace", uri=MACHINERY_URI)["index"]
+            nodes = by_path(peer.ask("browse", nodeId=f"ns={machinery};i=1001", timeout_s=60)["nodes"])  # Machines
             assert nodes["node"]["typeDefinition"] == f"ns={ns};i={model.TYPE_IDS['GraspSensorType']}"
             ident = {k.rpartition("/")[2]: v["value"] for k, v in nodes.items() if k.startswith("node/Identification/")}
             assert ident["Manufacturer"] == "eskin-industrial" and ident["Model"] == "paper-5x5"
             assert ident["SoftwareRevision"] == __version__ and ident["SerialNumber"] == "node"
-            assert nodes["node/MachineryItemState/CurrentState"]["value"] in model.MACHINERY_STATES
+            assert nodes["node/MachineryBuildingBlocks/MachineryItemState/CurrentState"]["value"] in \
+                model.MACHINERY_STATES
+            # each instance typed as OPC 40001-1 types it, as node-opcua sees it
+            blocks = "node/MachineryBuildingBlocks"
+            assert nodes["node/Identification"]["typeDefinition"] == f"ns={machinery};i=1012"  # MachineIdentificationType
+            assert nodes[f"{blocks}/Identification"]["nodeId"] == nodes["node/Identification"]["nodeId"]  # one nameplate
+            assert nodes[f"{blocks}/MachineryItemState"]["typeDefinition"] == f"ns={machinery};i=1002"
+            assert nodes[f"{blocks}/MachineryOperationMode"]["typeDefinition"] == f"ns={machinery};i=1008"
+            for machine in model.STATE_MACHINES:
+                current = nodes[f"{blocks}/{machine}/CurrentState"]
+                assert current["typeDefinition"] == "ns=0;i=2760", current  # FiniteStateVariableType
+                state_id = nodes[f"{blocks}/{machine}/CurrentState/Id"]["value"]
+                assert state_id == f"ns={machinery};i={model.STATE_MACHINES[machine][1][current['value']]}"
             for v in model.VARIABLES:
                 n = nodes[f"node/{v.path}"]
                 assert n["nodeClass"] == "Variable" and n["userAccessLevel"] == 1, n  # CurrentRead only
@@ -74,6 +89,10 @@ def test_a_scada_client_browses_subscribes_calls_and_sees_the_bridge_stop(tmp_pa
                 want = (f"ns={ns};i={model.TYPE_IDS['GraspStateEnumeration']}" if v.datatype == "GraspStateEnumeration"
                         else _DATATYPES[v.datatype])
                 assert n["dataTypeId"] == want, n
+                if v.datatype == "Boolean":  # a flag: TwoStateDiscreteType, what true and false read
+                    assert n["typeDefinition"] == "ns=0;i=2373", n
+                    states = (nodes[f"node/{v.path}/TrueState"]["value"], nodes[f"node/{v.path}/FalseState"]["value"])
+                    assert states == model.FLAG_STATES[v.path], v.path
                 if v.analog:
                     assert n["typeDefinition"] == "ns=0;i=2368", n  # AnalogItemType
                     unit = nodes[f"node/{v.path}/EngineeringUnits"]["value"]
@@ -84,6 +103,12 @@ def test_a_scada_client_browses_subscribes_calls_and_sees_the_bridge_stop(tmp_pa
             assert nodes["node/Scores/ScoreB"]["displayName"] == "slow_score"
             assert "Taxels" not in [p.rpartition("/")[2] for p in nodes]  # the frame is off by default
             assert {"node/Tare", "node/AcknowledgeSlip", "node/Enable", "node/SlipAlarm"} <= set(nodes)
+            # every instance node id a string from its browse path, the method's argument list too
+            (args,) = peer.ask("read", nodeIds=[f"ns={ns};s=node.Enable.InputArguments"])["values"]
+            assert args["status"] == "Good" and args["value"][0]["name"] == "Enabled", args
+            assert all(n["nodeId"].startswith(f"ns={ns};s=node.") for p, n in nodes.items()
+                       if p.startswith("node/") and not p.startswith("node/SlipAlarm/")), \
+                [p for p, n in nodes.items() if p.startswith("node/") and ";s=node." not in n["nodeId"]]
             enum = peer.ask("readEnum", nodeId=f"ns={ns};i={model.TYPE_IDS['GraspStateEnumeration']}")
             assert [(f["name"], f["value"]) for f in enum["fields"]] == list(zip(model.STATE_NAMES, range(4)))
 
@@ -161,14 +186,46 @@ def test_the_nodeset_loads_in_an_independent_address_space(tmp_path: Path) -> No
     done = subprocess.run([sys.executable, "-m", "eskin_industrial", "opcua", "nodeset", "-o", str(out)],
                           capture_output=True, text=True, timeout=120, env=_ENV)
     assert done.returncode == 0, done.stderr
-    with node_peer() as peer:
-        loaded = peer.ask("nodeset", file=str(out), uri=NAMESPACE_URI, timeout_s=120)
+    with node_peer() as peer:  # with the companion specifications it requires, as node-opcua ships them
+        loaded = peer.ask("nodeset", file=str(out), uri=NAMESPACE_URI, companions=["di", "ia", "machinery"],
+                          timeout_s=120)
     assert loaded["namespace"] > 0
     assert {v.path.partition("/")[0] for v in model.VARIABLES} <= set(loaded["sensorComponents"])
-    assert {"Identification", "MachineryItemState", "SlipAlarm", "Taxels"} <= set(loaded["sensorComponents"])
+    assert {"MachineryBuildingBlocks", "SlipAlarm", "Taxels"} <= set(loaded["sensorComponents"])
+    # every instance declaration typed as OPC 40001-1 and OPC 10000-100 type it
+    decl = loaded["declarations"]
+    untyped = [path for path, d in decl.items() if d["nodeClass"] != "Method" and not d["type"]]
+    assert not untyped and len(decl) > 100, untyped
+    machinery = MACHINERY_URI + "#"
+    assert decl["Identification"] == {"nodeClass": "Object", "type": machinery + "MachineIdentificationType",
+                                      "browseNamespace": DI_URI, "rule": "Mandatory", "addIn": True}
+    for name, _, _ in model.IDENTIFICATION:
+        assert decl[f"Identification/{name}"]["browseNamespace"] == DI_URI, name
+    for path in model.FLAG_STATES:
+        assert decl[path]["type"] == "http://opcfoundation.org/UA/#TwoStateDiscreteType", path
+        assert decl[f"{path}/TrueState"]["rule"] == decl[f"{path}/FalseState"]["rule"] == "Mandatory", path
+    # the alarm's declaration has the children an instance of its type has
+    for child in ("EnabledState", "EnabledState/Id", "ActiveState", "ActiveState/Id", "AckedState", "Retain",
+                  "Severity", "Message", "ConditionName", *(name for name, _, _ in model.ALARM_FIELDS)):
+        assert decl[f"SlipAlarm/{child}"]["rule"] == "Mandatory", child
+    assert decl["SlipAlarm"]["type"] == f"{NAMESPACE_URI}#SlipAlarmType"
+    assert decl["MachineryBuildingBlocks"]["browseNamespace"] == MACHINERY_URI
+    assert decl["MachineryBuildingBlocks/Identification"]["addIn"] is True
+    for name, type_name in (("MachineryItemState", "MachineryItemState_StateMachineType"),
+                            ("MachineryOperationMode", "MachineryOperationModeStateMachineType")):
+        path = f"MachineryBuildingBlocks/{name}"
+        assert decl[path]["type"] == machinery + type_name and decl[path]["addIn"] is True, name
+        assert decl[f"{path}/CurrentState"]["type"] == "http://opcfoundation.org/UA/#FiniteStateVariableType"
+        assert decl[f"{path}/CurrentState/Id"]["rule"] == "Mandatory"
     assert set(loaded["sensorMethods"]) == {"Tare", "AcknowledgeSlip", "Enable"}
     assert loaded["alarmIsAlarmCondition"] is True
     assert {name for name, _, _ in model.ALARM_FIELDS} <= set(loaded["alarmProperties"])
     assert loaded["enumStrings"] == loaded["enumFields"] == list(model.STATE_NAMES)
     problems = [w for w in loaded["warnings"] if "error" in w.lower() or "cannot" in w.lower()]
     assert not problems, problems
+    # the model header: ours, requiring the standard model, DI and Machinery
+    ua_ns = "{http://opcfoundation.org/UA/2011/03/UANodeSet.xsd}"
+    (ours,) = ET.parse(out).getroot().iter(ua_ns + "Model")
+    assert ours.get("ModelUri") == NAMESPACE_URI and ours.get("Version") == __version__
+    assert [r.get("ModelUri") for r in ours.iter(ua_ns + "RequiredModel")] == [
+        "http://opcfoundation.org/UA/", DI_URI, MACHINERY_URI]

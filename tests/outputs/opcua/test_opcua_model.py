@@ -82,6 +82,15 @@ def test_machinery_item_state_names() -> None:
     assert status.machinery_state(_snap(), "failed") == "OutOfService"
     assert status.machinery_state(_snap(offline=True)) == "NotAvailable"
     assert set(model.MACHINERY_STATES) == {"Executing", "NotExecuting", "OutOfService", "NotAvailable"}
+    assert set(model.MACHINERY_STATES) == set(model.STATE_MACHINES["MachineryItemState"][1])
+
+
+def test_machinery_operation_mode_names() -> None:
+    assert status.operation_mode(_snap()) == "Processing"
+    assert status.operation_mode(_snap(seen=False, age=None)) == "Processing"  # enabled, waiting for its first scan
+    assert status.operation_mode(_snap(enabled=False)) == "Setup"
+    assert status.operation_mode(_snap(offline=True)) == "None"
+    assert set(model.OPERATION_MODES) <= set(model.STATE_MACHINES["MachineryOperationMode"][1])
 
 
 def test_values_follow_the_variables_in_order() -> None:

@@ -61,7 +61,7 @@ def test_the_slip_arrives_good_with_the_deciding_scans_time_and_silence_turns_ba
             assert bad["value"] is None
             assert (bad["sourceTimestamp"] - uncertain["sourceTimestamp"]) / 1000 >= 0.5 - 0.1
             read = peer.ask("read", nodeIds=[f"ns={ns};s=grip.Health.SensorStale",
-                                             f"ns={ns};s=grip.MachineryItemState.CurrentState"])["values"]
+                                             f"ns={ns};s=grip.MachineryBuildingBlocks.MachineryItemState.CurrentState"])["values"]
             assert (read[0]["value"], read[0]["status"], read[1]["value"]) == (True, "Good", "OutOfService")
 
             # it speaks again: Good
