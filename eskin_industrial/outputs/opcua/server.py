@@ -45,7 +45,7 @@ from .stacklog import StackLog
 from .uaconv import node_id, status_code
 from .users import Directory, UserEntry
 from .values import Values
-from .wire import GuardedServer
+from .wire import GuardedServer, WireLimits
 
 __all__ = ["COMMANDS_MAX", "START_TIMEOUT_S", "OpcuaServer"]
 
@@ -206,7 +206,8 @@ class OpcuaServer:
         self._attach_log()
         uri = o.application_uri or default_application_uri()
         self.certificate_made = self.security.certificate(uri)
-        server = GuardedServer(user_manager=self.security.user_manager(), on_refused=self._on_wire_refused)
+        server = GuardedServer(user_manager=self.security.user_manager(), on_refused=self._on_wire_refused,
+                               wire=WireLimits(o.max_pending, o.hello_timeout_s))
         server.application_type = ua.ApplicationType.Server  # (asyncua's default: ClientAndServer)
         self.server = server
         iserver = server.iserver
@@ -318,7 +319,7 @@ class OpcuaServer:
         out = {"opcua_connections": connections, "opcua_sessions": sessions}
         for key in ("logins", "logins_refused", "denied", "certificates_rejected", "connections_refused",
                     "activation_timeouts", "sessions_timed_out", "malformed", "service_faults", "stack_warnings",
-                    "stack_errors", "writes", "filters_refused", "calls_refused", "hellos_refused"):
+                    "stack_errors", "writes", "filters_refused", "calls_refused", "hellos_refused", "hello_timeouts"):
             out[f"opcua_{key}"] = c[key]
         for key in ("method_calls", "commands", "commands_refused", "commands_busy", "alarms", "alarm_acks",
                     "alarm_acks_refused", "event_errors"):
