@@ -153,10 +153,12 @@ def _activated(c: OPCUAProtocol) -> bool:
 class _Protocol(OPCUAProtocol):
     """asyncua's connection once its Hello is whole and admitted; until then held here."""
 
-    def __init__(self, *args: Any, on_refused: OnRefused, wire: WireLimits, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, on_refused: OnRefused, wire: WireLimits, held: set[_Protocol],
+                 **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.on_refused = on_refused
         self.wire = wire
+        self.held = held  #: the server's connections still before their Hello (closed at its stop)
         self._socket: asyncio.Transport | None = None  #: until asyncua has it (then ``transport``)
         self._first = b""  #: the bytes until the Hello is whole
         self._chunks: Chunks | None = None  #: once admitted
@@ -166,10 +168,12 @@ class _Protocol(OPCUAProtocol):
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.peer_name = transport.get_extra_info("peername")
         self._socket = transport  # type: ignore[assignment]
+        self.held.add(self)
         self._timer = asyncio.get_running_loop().call_later(self.wire.hello_timeout_s, self._hello_late)
 
     def connection_lost(self, ex: BaseException | None) -> None:
         self._stop_timer()
+        self.held.discard(self)
         self._socket = None
         if self._chunks is not None:
             super().connection_lost(ex)
@@ -220,6 +224,7 @@ class _Protocol(OPCUAProtocol):
         """asyncua's from here: its connection made and the Hello handed over."""
         transport = self._socket
         assert transport is not None
+        self.held.discard(self)
         self._chunks = Chunks(chunk_limit(hello[_HEADER:], self.limits))
         super().connection_made(transport)
         super().data_received(hello)
@@ -231,6 +236,13 @@ class _Protocol(OPCUAProtocol):
         if self._chunks is None and not self._done:
             self._refuse("hello_timeouts", "opcua_hello_timeout", ua.StatusCodes.BadTimeout,
                          f"no complete Hello within hello_timeout_s={self.wire.hello_timeout_s:g}")
+
+    def close(self) -> None:
+        """Closed before its Hello (the server stops)."""
+        self._done = True
+        self._stop_timer()
+        if self._socket is not None:
+            self._socket.close()
 
     def _stop_timer(self) -> None:
         if self._timer is not None:
@@ -253,11 +265,17 @@ class _BinaryServer(BinaryServer):
         super().__init__(*args, **kwargs)
         self._on_refused = on_refused
         self._wire = wire
+        self._held: set[_Protocol] = set()
 
     def _make_protocol(self) -> OPCUAProtocol:
         return _Protocol(iserver=self.iserver, policies=self._policies, clients=self.clients,
                          closing_tasks=self.closing_tasks, limits=self.limits, on_refused=self._on_refused,
-                         wire=self._wire)
+                         wire=self._wire, held=self._held)
+
+    async def stop(self) -> None:
+        for p in list(self._held):
+            p.close()
+        await super().stop()
 
 
 class GuardedServer(Server):
