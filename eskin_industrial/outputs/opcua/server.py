@@ -239,12 +239,19 @@ class OpcuaServer:
             self.calls.by_object[n.handles.obj] = i
             await alarms.attach(n, self.types.alarm)
             await values.write_initial(n)
-        ack = server.get_node(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge)
-        server.link_method(ack, alarms.acknowledge)
-        for n in self.nodes:
-            assert n.handles is not None
-            if "Acknowledge" in n.handles.alarm_methods:
-                server.link_method(server.get_node(n.handles.alarm_methods["Acknowledge"]), alarms.acknowledge)
+        # the condition's methods, as the type declares them (a client may call those on
+        # the condition) and as the condition's own components
+        condition_methods: dict[str, tuple[int, Callable[..., Any]]] = {
+            "Acknowledge": (ua.ObjectIds.AcknowledgeableConditionType_Acknowledge, alarms.acknowledge),
+            "Disable": (ua.ObjectIds.ConditionType_Disable, alarms.disable),
+            "Enable": (ua.ObjectIds.ConditionType_Enable, alarms.enable),
+            "AddComment": (ua.ObjectIds.ConditionType_AddComment, alarms.add_comment)}
+        for name, (declared, callback) in condition_methods.items():
+            server.link_method(server.get_node(declared), callback)
+            for n in self.nodes:
+                assert n.handles is not None
+                if name in n.handles.alarm_methods:
+                    server.link_method(server.get_node(n.handles.alarm_methods[name]), callback)
         try:
             await server.start()
         except OSError as exc:
