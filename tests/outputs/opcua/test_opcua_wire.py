@@ -241,3 +241,61 @@ def test_idle_sockets_keep_no_client_out_and_pending_connections_have_their_own_
     assert refused == (b"ERR", ua.StatusCodes.BadTcpServerTooBusy, True) and refused_after < 0.5
     assert again < 1.0
     assert counters["opcua_hello_timeouts"] == 15 and counters["opcua_connections_refused"] == 1
+
+
+def test_fifty_clients_at_once_are_admitted_or_told_why() -> None:
+    """50 asyncua clients connect at once against ``max_sessions = 16`` (``max_pending``
+    8), each keeping its session, then the refused ones try once more: every client
+    reads or is refused with the Error's code (BadTcpServerTooBusy while 8 are
+    activating their sessions, BadTooManySessions once 16 hold one), none waits out a
+    timeout, and the 16 sessions are had."""
+    from asyncua import Client, ua
+    from asyncua.ua.uaerrors import UaStatusCodeError
+
+    config = opcua_config(NodeConfig.of("grip", PAPER, "scene", scene="idle"), max_sessions=16)
+    url = config.outputs["opcua"].endpoint
+
+    async def scenario() -> tuple[list[list[object]], float]:
+        release = asyncio.Event()
+        tasks: list[asyncio.Task[None]] = []
+
+        async def one(outcomes: list[object]) -> None:
+            """``outcomes`` gets the value read, or the code of the refusal."""
+            try:
+                async with Client(url, timeout=10) as client:
+                    ns = await client.get_namespace_index(NAMESPACE_URI)
+                    outcomes.append(await client.get_node(f"ns={ns};s=grip.Method").read_value())
+                    await release.wait()  # the session kept until the end
+            except UaStatusCodeError as exc:
+                outcomes.append(exc.code)
+            except Exception as exc:  # noqa: BLE001 - what the test must not see, named
+                outcomes.append(f"{type(exc).__name__}: {exc}")
+
+        waves: list[list[object]] = []
+        tries, worst = 50, 0.0
+        for _ in range(2):
+            outcomes: list[object] = []
+            t0 = time.monotonic()
+            tasks += [asyncio.create_task(one(outcomes)) for _ in range(tries)]
+            while len(outcomes) < tries and time.monotonic() - t0 < 20:
+                await asyncio.sleep(0.02)
+            worst = max(worst, time.monotonic() - t0)
+            waves.append(outcomes)
+            tries = sum(1 for o in outcomes if o != "cof-track")
+        release.set()
+        await asyncio.gather(*tasks)
+        return waves, worst
+
+    with running_bridge(config) as run:
+        waves, worst = asyncio.run(asyncio.wait_for(scenario(), 60))
+        counters = run.counters("grip")
+    told = {ua.StatusCodes.BadTcpServerTooBusy, ua.StatusCodes.BadTooManySessions}
+    first, second = waves
+    assert len(first) == 50 and len(second) == 50 - first.count("cof-track")
+    for wave in waves:
+        assert set(wave) <= {"cof-track", *told}, wave
+    assert first.count("cof-track") >= 8  # the first 8 Hellos at least
+    assert first.count("cof-track") + second.count("cof-track") == 16, waves
+    assert worst < 10, worst  # every client knew within a few seconds, none waited out its timeout
+    refused = sum(1 for wave in waves for o in wave if o in told)
+    assert counters["opcua_connections_refused"] == refused
