@@ -150,6 +150,11 @@ def _activated(c: OPCUAProtocol) -> bool:
     return c.processor is not None and c.processor.session is not None and c.processor.session.is_activated()
 
 
+def _kept(task: asyncio.Task[Any]) -> bool:
+    """A done closing task is kept for asyncua's cleanup only when it failed (which logs it)."""
+    return not task.cancelled() and task.exception() is not None
+
+
 class _Protocol(OPCUAProtocol):
     """asyncua's connection once its Hello is whole and admitted; until then held here."""
 
@@ -177,6 +182,10 @@ class _Protocol(OPCUAProtocol):
         self._socket = None
         if self._chunks is not None:
             super().connection_lost(ex)
+            # asyncua keeps every closing task until its cleanup, every 10 s, then awaits
+            # them all in one go: after a connect/close storm, tens of thousands at once,
+            # a stall of the server's loop; the ones done are let go here
+            self.closing_tasks[:] = [t for t in self.closing_tasks if not t.done() or _kept(t)]
 
     def data_received(self, data: bytes) -> None:
         if self._done:
