@@ -7,7 +7,8 @@ whether every refused client was told why.
 One bridge, one node (the idle scene at 100 Hz), the OPC UA output with its default
 limits (``max_sessions`` 16, ``max_pending`` 8, ``hello_timeout_s`` 2).  A reader (an
 asyncua client in a process of its own, its session opened before the storms) reads
-``Counters/Scans`` every 10 ms and notes each read's duration.  Each phase's storm
+``Counters/Scans`` every 10 ms and notes each read's duration, and how late its own
+10 ms sleep woke (its process held up by the machine rather than by the server).  Each phase's storm
 runs in another process for ``--storm-s`` seconds, one after the other, a quiet
 second between:
 
@@ -58,7 +59,9 @@ def _port(url: str) -> int:
 # -- the reader (a process of its own) ------------------------------------------------
 
 def reader_main(url: str) -> None:
-    """Read ``n01.Counters.Scans`` every 10 ms until stdin closes: ``TIME SECONDS`` a read."""
+    """Read ``n01.Counters.Scans`` every 10 ms until stdin closes: ``TIME SECONDS LAG`` a
+    read, LAG how late its own 10 ms sleep before it woke (the reader's process
+    itself held up by the machine, not by the server)."""
     from asyncua import Client
 
     async def main() -> None:
@@ -67,11 +70,14 @@ def reader_main(url: str) -> None:
             node = client.get_node(f"ns={ns};s=n01.Counters.Scans")
             print("ready", flush=True)
             done = asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)
+            lag = 0.0
             while not done.done():
                 t0 = time.perf_counter()
                 await node.read_data_value(raise_on_bad_status=False)
-                print(f"{time.time():.6f} {time.perf_counter() - t0:.6f}", flush=True)
+                t1 = time.perf_counter()
+                print(f"{time.time():.6f} {t1 - t0:.6f} {lag:.6f}", flush=True)
                 await asyncio.sleep(0.01)
+                lag = time.perf_counter() - t1 - 0.01
 
     asyncio.run(main())
 
@@ -260,13 +266,15 @@ def run_storms(tmp: Path, phase_s: float, profile: Path) -> list[dict[str, Any]]
     reads = []
     for line in out.read_text().splitlines():
         parts = line.split()
-        if len(parts) == 2:
-            reads.append((float(parts[0]), float(parts[1])))
+        if len(parts) == 3:
+            reads.append((float(parts[0]), float(parts[1]), float(parts[2])))
     results = []
     for phase, t0, t1, counts in windows:
-        took = [d for t, d in reads if t0 <= t <= t1]
+        took = [d for t, d, _ in reads if t0 <= t <= t1]
+        lags = [lag for t, _, lag in reads if t0 <= t <= t1]
         results.append(dict(phase=phase, reads=len(took), p50=_q(took, 50), p99=_q(took, 99),
-                            worst=max(took) if took else float("nan"), counts=counts))
+                            worst=max(took) if took else float("nan"), lag=max(lags) if lags else float("nan"),
+                            counts=counts))
     return results
 
 
@@ -275,12 +283,12 @@ def _q(values: list[float], p: float) -> float:
 
 
 def print_storms(results: list[dict[str, Any]]) -> None:
-    print("| phase | reads | p50 ms | p99 ms | worst ms | the storm |")
-    print("|---|---|---|---|---|---|")
+    print("| phase | reads | p50 ms | p99 ms | worst ms | reader's own worst lag ms | the storm |")
+    print("|---|---|---|---|---|---|---|")
     for r in results:
         counts = ", ".join(f"{k} {v}" for k, v in r["counts"].items()) or "-"
         print(f"| {r['phase']} | {r['reads']} | {r['p50'] * 1e3:.1f} | {r['p99'] * 1e3:.1f} | "
-              f"{r['worst'] * 1e3:.1f} | {counts} |", flush=True)
+              f"{r['worst'] * 1e3:.1f} | {r['lag'] * 1e3:.1f} | {counts} |", flush=True)
 
 
 if __name__ == "__main__":
