@@ -6,6 +6,7 @@ one bridge.
     .venv/bin/python benchmarks/bench_opcua.py                          # both (~8 min)
     .venv/bin/python benchmarks/bench_opcua.py --only latency --duration 90
     .venv/bin/python benchmarks/bench_opcua.py --only fleet --nodes 8,16 --fleet-duration 20 --repeats 2
+    .venv/bin/python benchmarks/bench_opcua.py --only storms --storm-s 8
 
 Latency (one node, at 100 Hz and 1 kHz): a CAN node of the project's simulator on
 python-can's virtual bus plays the slip train of ``bench_bridge.py`` (a slide every
@@ -25,6 +26,11 @@ OPC UA output (one client subscribed to every node's GraspState, Slip and TotalF
 (its threads, the simulators' left out, from ``/proc/self/task``) of the one minus
 the other, per node: what OPC UA adds, its server thread and the loops' handover.
 Each step repeated ``--repeats`` times, in turn; medians.
+
+Storms (``bench_opcua_storms.py``): a well-behaved client's reads while idle sockets,
+connect/close storms, malformed messages and 50 clients at once hit the server, its
+worst read in each phase (target: at most 50 ms), and whether every refused client
+was told why.
 """
 
 from __future__ import annotations
@@ -51,6 +57,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from bench_bridge import PROFILE, slip_train_toml  # noqa: E402
 from bench_bridge import thread_cpu_s as bridge_thread_cpu_s  # noqa: E402
 from bench_fleet import make_nodes, raw_scans, start  # noqa: E402
+from bench_opcua_storms import print_storms, run_storms  # noqa: E402
 from machine import describe  # noqa: E402
 
 NAMESPACE_URI = "urn:eskin-industrial:opcua:grasp"
@@ -357,12 +364,13 @@ def q(values: list[float], p: float) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--only", choices=["latency", "fleet"], default=None)
+    ap.add_argument("--only", choices=["latency", "fleet", "storms"], default=None)
     ap.add_argument("--duration", type=float, default=75.0, help="Latency: seconds of slip train at each rate.")
     ap.add_argument("--rates", default="100,1000")
     ap.add_argument("--nodes", default="8,16", help="Fleet sizes at 100 Hz.")
     ap.add_argument("--fleet-duration", type=float, default=20.0)
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--storm-s", type=float, default=8.0, help="Storms: seconds of each phase.")
     ap.add_argument("--client", nargs="+", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.client:
@@ -404,6 +412,9 @@ def main() -> None:
                 lost = sum(r["lost"] for rs in runs.values() for r in rs)
                 print(f"| {n} | {null * 100:.1f} | {ours * 100:.1f} | {(ours - null) * 100:.1f} | "
                       f"{(ours - null) / n * 100:.2f} | {server * 100:.1f} | {lost} |", flush=True)
+        if args.only in (None, "storms"):
+            print(f"\n## a well-behaved client's reads under connection storms ({args.storm_s:g} s a phase)")
+            print_storms(run_storms(tmp, args.storm_s, PROFILE))
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,6 +31,10 @@ _READER = frozenset(node_id(t) for t in USER_TYPES
                     if t not in (ua.ObjectIds.CallRequest_Encoding_DefaultBinary,
                                  ua.ObjectIds.WriteRequest_Encoding_DefaultBinary))
 _OPERATOR = frozenset(node_id(t) for t in USER_TYPES)
+#: The user of the request being served (its name, or ``anonymous``): asyncua hands a
+#: method no session, and the alarm's comments name who made them (ClientUserId).  Set
+#: as each request is allowed, in the task that then serves it.
+REQUEST_USER: ContextVar[str] = ContextVar("opcua_request_user", default="")
 
 
 @dataclass
@@ -49,6 +54,7 @@ class Permissions(PermissionRuleset):
         access = getattr(user, "access", None)
         allowed = _OPERATOR if access == "operator" else _READER if access == "reader" else frozenset()
         if action_type_id in allowed:
+            REQUEST_USER.set(getattr(user, "name", None) or "anonymous")
             return True
         self.on_denied(getattr(user, "name", None) or "anonymous", int(action_type_id.Identifier))
         return False

@@ -12,6 +12,15 @@ event of ``SlipAlarmType``.
 - Acknowledge (with the EventId of one of this slip's events) sets AckedState; an
   acknowledged, inactive condition is no longer retained.  Another EventId is
   BadEventIdUnknown; a second acknowledge is BadConditionBranchAlreadyAcked.
+- Disable (ConditionType, Part 9 5.5.4) sets EnabledState false; its event says
+  Retain false, so that a SCADA's alarm list drops it, and the alarm raises nothing
+  while disabled (the slip is followed, not told).  Enable sets it true again, and its
+  event tells the condition as it is then: a slip still on comes back active and
+  unacknowledged.  A second Disable is BadConditionAlreadyDisabled, a second Enable
+  BadConditionAlreadyEnabled; Acknowledge and AddComment on a disabled alarm are
+  BadConditionDisabled.
+- AddComment (with the EventId of one of this condition's events since its last raise,
+  else BadEventIdUnknown) sets Comment and ClientUserId, and is an event of its own.
 
 Acknowledging the alarm is the operator's business in the SCADA: it does not clear
 the slip latch the PLC reads (the method AcknowledgeSlip does that).
@@ -23,11 +32,18 @@ import uuid
 from typing import Literal
 
 from ...node import NodeSnapshot
-from .status import BAD_CONDITION_BRANCH_ALREADY_ACKED, BAD_EVENT_ID_UNKNOWN, GOOD
+from .status import (
+    BAD_CONDITION_ALREADY_DISABLED,
+    BAD_CONDITION_ALREADY_ENABLED,
+    BAD_CONDITION_BRANCH_ALREADY_ACKED,
+    BAD_CONDITION_DISABLED,
+    BAD_EVENT_ID_UNKNOWN,
+    GOOD,
+)
 
 _SLIP = 3  #: GraspState.SLIP
 
-Transition = Literal["raised", "cleared", "acknowledged"]
+Transition = Literal["raised", "cleared", "acknowledged", "disabled", "enabled", "commented"]
 
 
 class AlarmState:
@@ -37,6 +53,7 @@ class AlarmState:
         self.active = False
         self.acked = True
         self.retain = False
+        self.enabled = True
         self.slip_events = 0  #: the node's count at the last raise
         self.event_id = b""  #: of the newest event
         self._ids: set[bytes] = set()  #: this slip's events, any of which may be acknowledged
@@ -46,6 +63,13 @@ class AlarmState:
     def observe(self, s: NodeSnapshot) -> Transition | None:
         """The transition this snapshot makes, if any (then :attr:`event_id` is new)."""
         slip = s.state == _SLIP
+        if not self.enabled:  # followed, not told: Enable tells the state as it is then
+            if slip:
+                self.active = True
+                self.slip_events = s.slip_events
+            elif s.state is not None or s.offline:
+                self.active = False
+            return None
         if slip and (not self.active or s.slip_events > self.slip_events):
             self.active, self.acked, self.retain = True, False, True
             self.slip_events = s.slip_events
@@ -62,6 +86,8 @@ class AlarmState:
 
     def acknowledge(self, event_id: bytes) -> int:
         """An Acknowledge call's result code; on Good the transition is made."""
+        if not self.enabled:
+            return BAD_CONDITION_DISABLED
         if event_id not in self._ids:
             return BAD_EVENT_ID_UNKNOWN
         if self.acked:
@@ -69,6 +95,35 @@ class AlarmState:
         self.acked = True
         self.retain = self.active
         self.acknowledged += 1
+        self._new_id()
+        return GOOD
+
+    def disable(self) -> int:
+        """A Disable call's result code; on Good the transition is made."""
+        if not self.enabled:
+            return BAD_CONDITION_ALREADY_DISABLED
+        self.enabled = False
+        self.retain = False
+        self._new_id()
+        return GOOD
+
+    def enable(self) -> int:
+        """An Enable call's result code; on Good the transition is made."""
+        if self.enabled:
+            return BAD_CONDITION_ALREADY_ENABLED
+        self.enabled = True
+        self.acked = not self.active  # (a slip still on is told as a new one: unacknowledged)
+        self.retain = self.active
+        self._ids.clear()
+        self._new_id()
+        return GOOD
+
+    def comment(self, event_id: bytes) -> int:
+        """An AddComment call's result code; on Good the new event's id is made."""
+        if not self.enabled:
+            return BAD_CONDITION_DISABLED
+        if event_id not in self._ids:
+            return BAD_EVENT_ID_UNKNOWN
         self._new_id()
         return GOOD
 

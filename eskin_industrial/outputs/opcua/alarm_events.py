@@ -1,6 +1,7 @@
 """The slip alarm on the wire: each transition of a node's :class:`.alarm.AlarmState`
 as an event of ``SlipAlarmType`` (on the node's object, then on the Server object,
-where a SCADA subscribes), the condition's own variables, and its Acknowledge."""
+where a SCADA subscribes), the condition's own variables, and its methods:
+Acknowledge, Disable, Enable and AddComment."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from asyncua.common.events import get_event_obj_from_type_node
 
 from ...node import NodeSnapshot
 from . import model, status
+from .access import REQUEST_USER
 from .alarm import Transition
 from .nodestate import NodeState
 from .options import OpcuaOptions
@@ -85,12 +87,23 @@ class AlarmEvents:
         setattr(ev, "ActiveState/Id", a.active)
         ev.AckedState = ua.LocalizedText("Acknowledged" if a.acked else "Unacknowledged")
         setattr(ev, "AckedState/Id", a.acked)
+        ev.EnabledState = ua.LocalizedText("Enabled" if a.enabled else "Disabled")
+        setattr(ev, "EnabledState/Id", a.enabled)
         ev.ReceiveTime = now
-        if transition == "acknowledged":
+        if transition in ("acknowledged", "commented", "disabled", "enabled"):
             ev.Time = now
-            setattr(ev, "AckedState/TransitionTime", now)
-            ev.Comment = ua.LocalizedText(comment)
-            ev.Message = ua.LocalizedText(f"slip on {n.info.name} acknowledged")
+            if transition in ("acknowledged", "commented"):  # (Part 9: Acknowledge's comment is one too)
+                ev.Comment = ua.LocalizedText(comment)
+                ev.ClientUserId = REQUEST_USER.get()
+            if transition == "acknowledged":
+                setattr(ev, "AckedState/TransitionTime", now)
+            elif transition in ("disabled", "enabled"):
+                setattr(ev, "EnabledState/TransitionTime", now)
+            ev.Message = ua.LocalizedText(
+                f"slip on {n.info.name} acknowledged" if transition == "acknowledged"
+                else f"comment on the slip alarm of {n.info.name}" if transition == "commented"
+                else f"slip alarm of {n.info.name} {transition}"
+                + (", a slip on" if transition == "enabled" and a.active else ""))
         else:
             assert s is not None
             ev.Time = datetime.datetime.fromtimestamp(s.wall_time_s, _UTC)
@@ -153,9 +166,12 @@ class AlarmEvents:
             await self.server.write_attribute_value(nodeid, data_value(ua.Variant(value, vtype), status.GOOD,
                                                                          now, now))
 
+    def _condition(self, parent: ua.NodeId) -> int | None:
+        return self._by_condition.get(parent)
+
     async def acknowledge(self, parent: ua.NodeId, *args: Any) -> Any:
         """AcknowledgeableConditionType.Acknowledge(EventId, Comment) on a node's SlipAlarm."""
-        i = self._by_condition.get(parent)
+        i = self._condition(parent)
         if i is None:
             return status_code(ua.StatusCodes.BadNodeIdInvalid)
         if len(args) < 2:
@@ -170,8 +186,53 @@ class AlarmEvents:
             counts["alarm_acks_refused"] += 1
             return status_code(code)
         counts["alarm_acks"] += 1
-        text = comment.Text if isinstance(comment, ua.LocalizedText) else str(comment or "")
-        await self.fire(n, "acknowledged", n.snapshot, text or "")
+        text = _text(comment)
+        await self.fire(n, "acknowledged", n.snapshot, text)
         self.report.event("opcua_alarm", "info", node_event=n.info.name, transition="acknowledged",
                           comment=text or "-")
         return []
+
+    async def disable(self, parent: ua.NodeId, *args: Any) -> Any:
+        """ConditionType.Disable() on a node's SlipAlarm."""
+        return await self._switch(parent, "disabled")
+
+    async def enable(self, parent: ua.NodeId, *args: Any) -> Any:
+        """ConditionType.Enable() on a node's SlipAlarm."""
+        return await self._switch(parent, "enabled")
+
+    async def _switch(self, parent: ua.NodeId, transition: Transition) -> Any:
+        i = self._condition(parent)
+        if i is None:
+            return status_code(ua.StatusCodes.BadNodeIdInvalid)
+        n = self.nodes[i]
+        code = n.alarm.disable() if transition == "disabled" else n.alarm.enable()
+        if code != status.GOOD:
+            return status_code(code)
+        await self.fire(n, transition, n.snapshot)
+        self.report.event("opcua_alarm", "info", node_event=n.info.name, transition=transition,
+                          user=REQUEST_USER.get() or "-")
+        return []
+
+    async def add_comment(self, parent: ua.NodeId, *args: Any) -> Any:
+        """ConditionType.AddComment(EventId, Comment) on a node's SlipAlarm."""
+        i = self._condition(parent)
+        if i is None:
+            return status_code(ua.StatusCodes.BadNodeIdInvalid)
+        if len(args) < 2:
+            return status_code(ua.StatusCodes.BadArgumentsMissing)
+        event_id, comment = args[0].Value, args[1].Value
+        if not isinstance(event_id, bytes):
+            return status_code(ua.StatusCodes.BadTypeMismatch)
+        n = self.nodes[i]
+        code = n.alarm.comment(event_id)
+        if code != status.GOOD:
+            return status_code(code)
+        text = _text(comment)
+        await self.fire(n, "commented", n.snapshot, text)
+        self.report.event("opcua_alarm", "info", node_event=n.info.name, transition="commented", comment=text or "-")
+        return []
+
+
+def _text(comment: Any) -> str:
+    """A Comment argument's text (a LocalizedText; a null one: empty)."""
+    return str(comment.Text or "") if isinstance(comment, ua.LocalizedText) else str(comment or "")

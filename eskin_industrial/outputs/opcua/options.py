@@ -96,6 +96,12 @@ class OpcuaOptions:
     #: take to activate its session after connecting.
     max_sessions: int = field(default=16, metadata=in_range(1, 1000))
     activation_timeout_s: float = field(default=10.0, metadata=in_range(0.5, 600))
+    #: Connections at once that have sent their Hello but not activated a session yet
+    #: (the next is told BadTcpServerTooBusy), and how long a new socket may take to
+    #: send a complete Hello (then BadTimeout): a socket that has not is held apart and
+    #: counts against no limit, so that idle sockets cannot keep a client out.
+    max_pending: int = field(default=8, metadata=in_range(1, 1000))
+    hello_timeout_s: float = field(default=2.0, metadata=in_range(0.1, 60))
     #: The longest session timeout granted (a client that vanishes is dropped after it).
     session_timeout_s: float = field(default=60.0, metadata=in_range(1, 3600))
     max_subscriptions: int = field(default=64, metadata=in_range(1, 10000))

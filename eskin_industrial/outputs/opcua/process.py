@@ -21,6 +21,7 @@ side of the pipe closes, so that a bridge killed leaves no server behind.
 
 from __future__ import annotations
 
+import gc
 import multiprocessing
 import multiprocessing.connection
 import threading
@@ -314,6 +315,11 @@ def _serve(conn: multiprocessing.connection.Connection, options: OpcuaOptions, i
     except BaseException as exc:  # noqa: BLE001 - the bridge's side raises it
         send(("ready", _portable(exc), ""))
         return
+    # the address space (asyncua's standard nodes and ours: hundreds of thousands of
+    # objects) lives as long as the process: out of the collector's generations, so
+    # that the full collections a connect/close storm's garbage sets off do not walk
+    # it each time (a stall of the server's loop of 100 ms and more)
+    gc.freeze()
     applied = [False] * len(infos)
     send(("counters", [server.counters(i) for i in range(len(infos))], 0))  # (there from the start)
     send(("ready", None, server.certificate_made))

@@ -46,7 +46,7 @@ from .stacklog import StackLog
 from .uaconv import node_id, status_code
 from .users import Directory, UserEntry
 from .values import Values
-from .wire import GuardedServer
+from .wire import GuardedServer, WireLimits
 
 __all__ = ["COMMANDS_MAX", "START_TIMEOUT_S", "OpcuaServer"]
 
@@ -207,7 +207,8 @@ class OpcuaServer:
         self._attach_log()
         uri = o.application_uri or default_application_uri()
         self.certificate_made = self.security.certificate(uri)
-        server = GuardedServer(user_manager=self.security.user_manager(), on_refused=self._on_wire_refused)
+        server = GuardedServer(user_manager=self.security.user_manager(), on_refused=self._on_wire_refused,
+                               wire=WireLimits(o.max_pending, o.hello_timeout_s))
         server.application_type = ua.ApplicationType.Server  # (asyncua's default: ClientAndServer)
         self.server = server
         iserver = server.iserver
@@ -243,12 +244,19 @@ class OpcuaServer:
             self.calls.by_object[n.handles.obj] = i
             await alarms.attach(n, self.types.alarm)
             await values.write_initial(n)
-        ack = server.get_node(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge)
-        server.link_method(ack, alarms.acknowledge)
-        for n in self.nodes:
-            assert n.handles is not None
-            if "Acknowledge" in n.handles.alarm_methods:
-                server.link_method(server.get_node(n.handles.alarm_methods["Acknowledge"]), alarms.acknowledge)
+        # the condition's methods, as the type declares them (a client may call those on
+        # the condition) and as the condition's own components
+        condition_methods: dict[str, tuple[int, Callable[..., Any]]] = {
+            "Acknowledge": (ua.ObjectIds.AcknowledgeableConditionType_Acknowledge, alarms.acknowledge),
+            "Disable": (ua.ObjectIds.ConditionType_Disable, alarms.disable),
+            "Enable": (ua.ObjectIds.ConditionType_Enable, alarms.enable),
+            "AddComment": (ua.ObjectIds.ConditionType_AddComment, alarms.add_comment)}
+        for name, (declared, callback) in condition_methods.items():
+            server.link_method(server.get_node(declared), callback)
+            for n in self.nodes:
+                assert n.handles is not None
+                if name in n.handles.alarm_methods:
+                    server.link_method(server.get_node(n.handles.alarm_methods[name]), callback)
         try:
             await server.start()
         except OSError as exc:
@@ -323,7 +331,7 @@ class OpcuaServer:
         out = {"opcua_connections": connections, "opcua_sessions": sessions}
         for key in ("logins", "logins_refused", "denied", "certificates_rejected", "connections_refused",
                     "activation_timeouts", "sessions_timed_out", "malformed", "service_faults", "stack_warnings",
-                    "stack_errors", "writes", "filters_refused", "calls_refused", "hellos_refused"):
+                    "stack_errors", "writes", "filters_refused", "calls_refused", "hellos_refused", "hello_timeouts"):
             out[f"opcua_{key}"] = c[key]
         for key in ("method_calls", "commands", "commands_refused", "commands_busy", "alarms", "alarm_acks",
                     "alarm_acks_refused", "event_errors"):
