@@ -36,6 +36,10 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
            the ramp's rule on the force's level (0.1 s and 0.5 s means): a stick-slip
            ripple about a constant level, which the 30 ms means of the ramp's silence
            follow, leaves it open, so a slide in jumps is seen in frames
+    g    = the onward gate (off by default: onward_open = 0): while the force is not
+           steady, r and j stay open if the centre has moved over the fast horizon by
+           onward_open of a's threshold, onward (its newer half onward_share of the
+           way): a slide whose grip gives way at onset, where a squeeze's centre stays
     slip when a > 1, b > 1, r > 1 or t > 1 (r and t only while the force is steady);
     in the slip state, also while a, b or r stays above 1 - hysteresis (0.8): a slow
     slide's evidence fades in and out as it stops.  (The CoF's step energy was a vote
@@ -85,6 +89,8 @@ class CofTrack(ScoredDetector):
         self.lf = max(1, round(c.fast_s * rate_hz))
         self.ls = max(self.lf + 1, round(c.slow_s * rate_hz))
         self._half = self.ls // 2  # (the half-slow lag)
+        self._half_fast = max(1, self.lf // 2)  # (the onward gate's half-fast lag)
+        self._onward_open, self._onward_share = c.onward_open, c.onward_share
         self.z = c.z
         self.min_fast, self.min_slow = c.min_fast_mm, c.min_slow_mm
         self.force_rate = c.force_rate_per_s
@@ -216,6 +222,8 @@ class CofTrack(ScoredDetector):
         at = hn % ls
         fast = hist[at - lf] if hn >= lf else None  # (a negative index counts from the end)
         half = hist[at - lh] if hn >= lh else None
+        lhf = self._half_fast
+        half_fast = hist[at - lhf] if hn >= lhf else None
         slow = hist[at] if hn >= ls else None
         hist[at] = (mx, my, ms)
         self._hn = hn + 1
@@ -256,6 +264,22 @@ class CofTrack(ScoredDetector):
         # load moves a soft contact's CoF in steps too)
         self._calm_force = calm = 0 if varying else self._calm_force + 1
         steady = calm > self._steady_n
+        noise_d = z * math.sqrt(2.0 * noise / m) / s
+        # the onward gate: while the force is not steady, the ramp and the step stay
+        # open if the centre moves on, steadily, over the fast horizon: a slide whose
+        # grip gives way at onset is still a slide, where a squeeze scales the
+        # distribution in place (its centre stays) and a sway turns back
+        moving_on = False
+        gate = self._onward_open
+        if not steady and gate > 0.0 and fast is not None and half_fast is not None:
+            ux, uy = mx - fast[0], my - fast[1]
+            d2 = ux * ux + uy * uy
+            lim = self.min_fast
+            thr = gate * (noise_d if noise_d > lim else lim)
+            if d2 > thr * thr:
+                on = (mx - half_fast[0]) * ux + (my - half_fast[1]) * uy
+                moving_on = on >= self._onward_share * d2
+        open_ = steady or moving_on
         # the ramp's base must not hold the grab: its centres start once it has settled;
         # a held copy is no sample (repeats would count one noise draw twice)
         ramp, profile, step = self._ramp, self._profile, self._jumps
@@ -266,7 +290,7 @@ class CofTrack(ScoredDetector):
         # as at 100 Hz (docs/evaluation.md); its verdict stands for the hop's other frames
         hop_end = (self._k + 1) % self.hop == 0
         raw = -1.0  # the ripple's evidence, once it is worked out (the ramp's and the step's)
-        if steady and hop_end:
+        if open_ and hop_end:
             # the ramp weighs raw centres, each axis against its own noise (in force
             # units, like q; the floor keeps a constant axis, a strip's y, harmless);
             # silent while the force changes and for a second after, like the
@@ -308,7 +332,7 @@ class CofTrack(ScoredDetector):
                     step.push(xc, yc, s)
                 if profile is not None:
                     profile.push(f)
-            if not steady:
+            if not open_:
                 self._ramp_on = False
         level_open = False
         if step is not None:
@@ -327,7 +351,7 @@ class CofTrack(ScoredDetector):
                 limit = noise2
             self._level_calm = calm_level = self._level_calm + 1 if change * change <= limit else 0
             level_open = calm_level > self._steady_n
-            if hop_end and level_open and self._step_learnt and step.ready:
+            if hop_end and (level_open or moving_on) and self._step_learnt and step.ready:
                 # (the step's score, written out: a call a frame at 100 Hz) against its learnt
                 # noise per axis, never below q's, times the centres' weight; the evidence
                 # added (capped: the step must reach ramp_support_z itself); the
@@ -362,7 +386,6 @@ class CofTrack(ScoredDetector):
         turn = self._turn
         if turn is not None:
             turn.push(f, s, filled, self.projected)
-        noise_d = z * math.sqrt(2.0 * noise / m) / s
         if fast is not None:
             lim = self.min_fast
             a = math.hypot(mx - fast[0], my - fast[1]) / (noise_d if noise_d > lim else lim)

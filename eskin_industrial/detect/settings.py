@@ -94,6 +94,21 @@ class CofTrackSettings:
     #: holds, where 5.5 raised 1.0), and it costs 2.6x the paper method at 100 Hz; it
     #: finds torsional slip, which nothing else does (docs/evaluation.md).
     profile_shift: bool = False
+    #: Onward gate: the ramp and step channels are silent while the force changes and
+    #: for a second after, unless the centre of force moves on: over the fast horizon
+    #: (``fast_s``) its smoothed centre has moved at least ``onward_open`` of the fast
+    #: displacement's threshold (``max(z`` sigma, ``min_fast_mm)``), with the newer
+    #: half of that horizon at least ``onward_share`` of the way, in the same direction.
+    #: A slide whose grip gives way at onset (the force falls 10-30 %) then keeps its
+    #: slip evidence; a squeeze scales the distribution in place and leaves the centre
+    #: where it was.  0: no gate (the channels wait for a steady force).  Off by
+    #: default: at 0.25 the force-drop family's tuning seeds went from 160 / 373 ms to
+    #: 50 / 155 ms (taking the silence away altogether: 50 / 145), but on the hand's
+    #: tuning seeds 10-59 the swaying glass was read as slip 5 times (0 with the gate
+    #: off); a coupling limit or the gate only once the total has stopped changing
+    #: kept 3-4 of them (docs/evaluation.md).
+    onward_open: float = field(default=0.0, metadata=in_range(0.0, 1000.0))
+    onward_share: float = field(default=0.3, metadata=in_range(0.0, 1.0))
     profile_z: float = field(default=6.0, metadata=in_range(0.001, 1000.0))
     #: Torsion channel (detect/torsion.py): the distribution's turn about the normal,
     #: from its rotational derivative, as a ramp over the ramp channel's horizons and
