@@ -260,6 +260,17 @@ class HandedSink(SupervisedSink):
         self.snapshot = snapshot
         self.output.wake.set()
 
+    def drain(self, timeout_s: float = 0.5) -> bool:
+        """Wait until the output's thread has taken the snapshot in the mailbox: what
+        the loop publishes next (the bridge's offline image after a BUS_FAULT one)
+        then follows it instead of replacing it unseen.  False if the output is down or
+        its thread did not come within ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while self.snapshot is not None and self.output.up and time.monotonic() < deadline:
+            self.output.wake.set()
+            time.sleep(0.002)
+        return self.snapshot is None and self.output.up
+
     def on_update(self, update: Update) -> None:
         updates = self.updates
         if len(updates) >= UPDATES_HELD:
