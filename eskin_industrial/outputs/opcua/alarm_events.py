@@ -169,8 +169,9 @@ class AlarmEvents:
     def _condition(self, parent: ua.NodeId) -> int | None:
         return self._by_condition.get(parent)
 
-    async def acknowledge(self, parent: ua.NodeId, *args: Any) -> Any:
-        """AcknowledgeableConditionType.Acknowledge(EventId, Comment) on a node's SlipAlarm."""
+    def _event_call(self, parent: ua.NodeId, args: tuple[Any, ...]) -> tuple[int, bytes, Any] | ua.StatusCode:
+        """The (node index, EventId, Comment) of a method that takes (EventId, Comment),
+        Acknowledge and AddComment alike; or the status that refuses the call."""
         i = self._condition(parent)
         if i is None:
             return status_code(ua.StatusCodes.BadNodeIdInvalid)
@@ -179,6 +180,14 @@ class AlarmEvents:
         event_id, comment = args[0].Value, args[1].Value
         if not isinstance(event_id, bytes):
             return status_code(ua.StatusCodes.BadTypeMismatch)
+        return i, event_id, comment
+
+    async def acknowledge(self, parent: ua.NodeId, *args: Any) -> Any:
+        """AcknowledgeableConditionType.Acknowledge(EventId, Comment) on a node's SlipAlarm."""
+        call = self._event_call(parent, args)
+        if not isinstance(call, tuple):
+            return call
+        i, event_id, comment = call
         n = self.nodes[i]
         counts = self.report.node_counts[i]
         code = n.alarm.acknowledge(event_id)
@@ -215,14 +224,10 @@ class AlarmEvents:
 
     async def add_comment(self, parent: ua.NodeId, *args: Any) -> Any:
         """ConditionType.AddComment(EventId, Comment) on a node's SlipAlarm."""
-        i = self._condition(parent)
-        if i is None:
-            return status_code(ua.StatusCodes.BadNodeIdInvalid)
-        if len(args) < 2:
-            return status_code(ua.StatusCodes.BadArgumentsMissing)
-        event_id, comment = args[0].Value, args[1].Value
-        if not isinstance(event_id, bytes):
-            return status_code(ua.StatusCodes.BadTypeMismatch)
+        call = self._event_call(parent, args)
+        if not isinstance(call, tuple):
+            return call
+        i, event_id, comment = call
         n = self.nodes[i]
         code = n.alarm.comment(event_id)
         if code != status.GOOD:
