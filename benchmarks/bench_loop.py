@@ -6,6 +6,7 @@ machine changes; and what a sink that takes taxel frames adds.
     .venv/bin/python benchmarks/bench_loop.py --cases none  # one case
     .venv/bin/python benchmarks/bench_loop.py --profile none  # where a scan's time goes (cProfile, no valgrind)
     .venv/bin/python benchmarks/bench_loop.py --cases publish --tree ../other   # another checkout's package
+    .venv/bin/python benchmarks/bench_loop.py --gaps 0,1,10 --cases none  # the step's time, scans 0/1/10 ms apart
 
 Cases (the paper-5x5 profile, its detector, scans from memory with no wait):
 - ``none``: no sink at all: the loop as every command runs it.
@@ -35,6 +36,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,8 +48,10 @@ from machine import describe  # noqa: E402
 CASES = ("none", "off", "every", "publish")
 
 
-def run_scans(case: str, scans: int) -> None:
-    """``scans`` scans through one node's loop, for callgrind to count."""
+def run_scans(case: str, scans: int, gap_s: float = 0.0, times: list[tuple[float, float]] | None = None) -> None:
+    """``scans`` scans through one node's loop, for callgrind to count; with
+    ``times``, each step's (wall, CPU) seconds appended, ``gap_s`` of sleep between
+    steps (``--gaps``)."""
     import numpy as np
 
     import eskin_industrial
@@ -111,8 +115,42 @@ def run_scans(case: str, scans: int) -> None:
     sinks = [] if case == "none" else [Frames(None if case == "off" else 0.0)]
     loop = NodeLoop(prof, Memory(), sinks)
     step = loop.step
+    if times is None:
+        for _ in range(scans):
+            step(0.0)
+        return
+    wall, cpu, sleep = time.perf_counter, time.thread_time, time.sleep
     for _ in range(scans):
+        if gap_s:
+            sleep(gap_s)
+        w0, c0 = wall(), cpu()
         step(0.0)
+        times.append((wall() - w0, cpu() - c0))
+
+
+def gaps(case: str, gaps_ms: list[float], scans: int, repeats: int) -> None:
+    """The step's wall and CPU time when the scans come ``gap`` ms apart, the thread
+    asleep in between (as a bridge's between a 100 Hz node's scans), against the same
+    steps back to back in the same run: what the instruction count cannot show, the
+    caches and the branch predictors a sleeping thread finds cold again."""
+    import numpy as np
+
+    run_scans(case, 400, 0.0, [])  # imports and the detector's first calls out of the way
+    runs: dict[float, list[tuple[float, float, float]]] = {g: [] for g in gaps_ms}
+    for _ in range(repeats):
+        for g in gaps_ms:  # alternately, so that the machine's moods fall on each alike
+            times: list[tuple[float, float]] = []
+            run_scans(case, scans, g / 1000.0, times)
+            arr = np.array(times[len(times) // 10:])  # the first tenth: the detector's warm-up
+            runs[g].append((float(np.median(arr[:, 0])), float(np.percentile(arr[:, 0], 90)),
+                            float(np.median(arr[:, 1]))))
+    base = float(np.median([r[0] for r in runs[gaps_ms[0]]]))
+    print(f"| case | scans apart | step wall p50 (us) | p90 (us) | step CPU p50 (us) | wall p50 / at {gaps_ms[0]:g} ms |")
+    print("|---|---|---|---|---|---|")
+    for g in gaps_ms:
+        p50, p90, c50 = (float(np.median([r[i] for r in runs[g]])) for i in range(3))
+        print(f"| {case} | {g:g} ms | {p50 * 1e6:.0f} | {p90 * 1e6:.0f} | {c50 * 1e6:.0f} | {p50 / base:.2f}x |",
+              flush=True)
 
 
 def instructions_per_scan(case: str, tree: list[str]) -> float:
@@ -167,6 +205,10 @@ def main() -> None:
     ap.add_argument("--cases", default=",".join(CASES), help=f"comma-separated, of {', '.join(CASES)}")
     ap.add_argument("--count", nargs=2, metavar=("CASE", "SCANS"), help=argparse.SUPPRESS)
     ap.add_argument("--profile", metavar="CASE", help="instead: where a scan's time goes in CASE, by cProfile")
+    ap.add_argument("--gaps", metavar="MS,...", help="instead: the step's wall time with the scans MS apart "
+                    "(the thread asleep between), against the first (0: back to back); medians of --repeats")
+    ap.add_argument("--scans", type=int, default=1000, help="scans per --gaps run (default 1000)")
+    ap.add_argument("--repeats", type=int, default=3, help="runs of each --gaps gap, alternately (default 3)")
     ap.add_argument("--tree", metavar="DIR", help="the package of this checkout instead of this script's")
     args = ap.parse_args()
     if args.tree:
@@ -175,6 +217,13 @@ def main() -> None:
         print(f"# .venv/bin/python benchmarks/bench_loop.py --profile {args.profile}")
         print(f"# on {describe()}")
         profile(args.profile)
+        return
+    if args.gaps:
+        print(f"# .venv/bin/python benchmarks/bench_loop.py --gaps {args.gaps} --cases {args.cases.split(',')[0]} "
+              f"--scans {args.scans} --repeats {args.repeats}" + (f" --tree {args.tree}" if args.tree else ""))
+        print(f"# {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {describe()}, load average "
+              f"{os.getloadavg()[0]:.1f}")
+        gaps(args.cases.split(",")[0], [float(g) for g in args.gaps.split(",")], args.scans, args.repeats)
         return
     if args.count:
         run_scans(args.count[0], int(args.count[1]))

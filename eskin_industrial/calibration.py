@@ -21,6 +21,10 @@ from .profile import CalibrationSection
 
 _NO_FLAGS = np.zeros((), dtype=np.int64)  # the flags of a clean scan (shared: read-only)
 _NO_FLAGS.flags.writeable = False
+# The reductions themselves: ``a.min()`` goes through a Python wrapper of numpy's
+# (``_methods._amin``) on every call, a frame per reduction per scan on the hot path.
+_MIN = np.minimum.reduce
+_MAX = np.maximum.reduce
 
 
 def full_scale(forces: np.ndarray, full_scale_n: float) -> tuple[np.ndarray, np.ndarray]:
@@ -71,8 +75,8 @@ class Calibrator:
             # One live scan: in range and under full scale is the rule, and three
             # reductions decide it; a bridge at 100 Hz meets each scan with a cold
             # cache, where every numpy call counts (NaN fails both comparisons).
-            if reading.min() >= self.valid_min and reading.max() <= self.valid_max:
-                if forces.max() < self.full_scale_n:
+            if _MIN(reading) >= self.valid_min and _MAX(reading) <= self.valid_max:
+                if _MAX(forces) < self.full_scale_n:
                     return forces, _NO_FLAGS
         bad = ~((reading >= self.valid_min) & (reading <= self.valid_max))  # NaN -> bad
         saturated = forces >= self.full_scale_n

@@ -14,7 +14,7 @@ from .detect.integrity import IntegrityWatch
 from .detect.learned import Model
 from .detect.protocol import Detector
 from .detect.updates import Update, state_changed
-from .frames import SENSOR_FAULTS, Frame, FrameFlag, RawScan
+from .frames import SENSOR_FAULTS, Frame, FrameFlag, RawScan, new_frame
 from .methods import ready_method
 from .node.verdict import shown
 from .profile import Profile
@@ -66,7 +66,7 @@ class Pipeline:
 
     def calibrate(self, scan: RawScan) -> Frame:
         forces, flags = self.calibrator.to_newtons(scan.raw)
-        return Frame(scan.seq, scan.t, forces, scan.flags | int(flags))
+        return new_frame(scan.seq, scan.t, forces, scan.flags | int(flags))
 
     def push(self, scan: RawScan) -> list[Update]:
         c = self.counters

@@ -34,6 +34,9 @@ _SAT = int(FrameFlag.SATURATED)
 #: the frame flagged SATURATED.  No tactile taxel reads a meganewton, and with it the
 #: squares of a sum over 10,000 taxels stay far inside a float's range.
 FORCE_LIMIT_N = 1e6
+# the reductions without numpy's Python wrapper (``a.min()`` adds a frame a call)
+_MIN = np.minimum.reduce
+_MAX = np.maximum.reduce
 #: A time must lie strictly within +-1e10 s (year 2286 as a Unix time) to be one: past
 #: it, a float64 no longer resolves a microsecond, and a single absurd time would
 #: otherwise hold back every frame after it as "not after the previous one".
@@ -143,7 +146,7 @@ class FrameHygiene:
         if f.shape != (self.n,):
             raise ValueError(f"expected {self.n} taxel forces, got shape {f.shape}")
         # two reductions decide the common case (NaN fails both comparisons)
-        if not (f.min() >= 0.0 and f.max() <= FORCE_LIMIT_N):
+        if not (_MIN(f) >= 0.0 and _MAX(f) <= FORCE_LIMIT_N):
             f, flags = self._clean(f, flags)
         else:
             self._last_good = f

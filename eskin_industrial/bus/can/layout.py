@@ -29,7 +29,7 @@ import can
 import numpy as np
 
 from ...errors import DecodeError, ProfileError
-from ...frames import RawScan
+from ...frames import RawScan, new_raw_scan
 from ...profile import Profile
 from .stream import StreamWatch
 
@@ -446,7 +446,7 @@ class ScanAssembler:
         else:
             payload = b"".join(p[HEADER_BYTES:] for p in self._parts)
         raw = lay.unpack_one(payload)
-        return RawScan(self._abs, self._abs / self.rate_hz, raw, self.stream.scan(), rx)
+        return new_raw_scan(self._abs, self._abs / self.rate_hz, raw, self.stream.scan(), rx)
 
     def flush(self) -> None:
         """End of traffic: a scan still incomplete is torn."""
