@@ -2,7 +2,8 @@
 scan cycle, as ``FB_SlipGuard`` (docs/plc.md) reads them.
 
 Grip lightly; on a rising SLIP_LATCHED raise the force request by a step (or to the
-maximum); while SLIP stays set, raise by another step each ``repeat_s`` if the centre
+maximum, or, ``hybrid``, a step first and the maximum if the slide goes on); while
+SLIP stays set, raise by another step each ``repeat_s`` if the centre
 of force (XC, YC) has moved by ``repeat_mm`` over the last ``repeat_s`` and since
 ``settle_s`` after the last raise (a detector's slip state outlasts the slide by some
 tenths of a second: SLIP alone does not say the object still moves; and a soft pad's
@@ -47,8 +48,17 @@ class PolicySettings:
     step_n: float = field(metadata=positive())
     max_n: float = field(metadata=positive())
     fallback_n: float = field(metadata=positive())
-    #: ``step``: a slip raises by ``step_n``; ``max``: straight to ``max_n``
-    mode: Literal["step", "max"] = "step"
+    #: ``step``: a slip raises by ``step_n``; ``max``: straight to ``max_n``; ``hybrid``: a slip
+    #: raises by ``step_n``, and a slide that goes on past it goes to ``max_n``.  Under weak
+    #: velocity strengthening a load past static friction accelerates off the pads instead of
+    #: settling at a few cm/s: a second step 0.2 s later comes when the object has gone, and
+    #: ``max`` on every slip crushes what one step would have held (a weak cup under the cap)
+    mode: Literal["step", "max", "hybrid"] = "step"
+    #: ``hybrid``: the distance the centre of force may move from where it stood at the slip
+    #: alarm before the request goes to ``max_n`` at once, whatever ``repeat_s`` and
+    #: ``settle_s`` say (more than the soft pads' growth under a step, 1-1.5 mm, and the
+    #: light grip's jitter, +-0.5 mm; 0: only the repeat test escalates)
+    escalate_mm: float = field(default=3.0, metadata=non_negative())
     repeat_s: float = field(default=0.2, metadata=positive())
     repeat_mm: float = field(default=1.0, metadata=non_negative())
     #: while SLIP stays set, the distance from where the centre stood ``settle_s`` after the
@@ -100,6 +110,8 @@ class GripPolicy:
         self._path: collections.deque[tuple[float, int, int]] = collections.deque()
         #: where the centre of force stood once the last raise had settled (None: not slipping)
         self._anchor: tuple[float, int, int] | None = None
+        #: where the centre of force stood at the slip alarm (None: not slipping)
+        self._alarm: tuple[float, int, int] | None = None
 
     def grip(self, now: float) -> float:
         """Close on the object with the light grip; returns the request."""
@@ -136,6 +148,8 @@ class GripPolicy:
             path.popleft()
         if not slip:
             self._anchor = None
+            if not latched:
+                self._alarm = None
         elif self._anchor is None and now >= self._last_raise + cfg.settle_s:
             self._anchor = path[-1]
         if not self.gripping:
@@ -145,14 +159,22 @@ class GripPolicy:
             self._trusted_once = True  # the skin's first verdict on this grasp: its warm-up is over
         if latched and not self._latched_before:
             self._slip_force = self.request_n
+            self._alarm = path[-1]
             to = cfg.max_n if cfg.mode == "max" else self.request_n + cfg.step_n
             if self._raise(now, to, "slip"):
                 events.append(f"SLIP: grip force request raised to {self.request_n:.2f} N")
+        elif (cfg.mode == "hybrid" and slip and cfg.escalate_mm > 0 and self._alarm is not None
+              and self.request_n < cfg.max_n and _moved_mm(self._alarm, path[-1]) >= cfg.escalate_mm):
+            # the step did not stop it: the slide is running away, the maximum now
+            self._slip_force = self.request_n
+            if self._raise(now, cfg.max_n, "still slipping"):
+                events.append(f"still slipping: grip force request raised to the maximum, {self.request_n:.2f} N")
         elif slip and now - self._last_raise >= cfg.repeat_s and (
                 _moved_mm(path[0], path[-1]) >= cfg.repeat_mm
                 or (cfg.creep_mm > 0 and self._anchor is not None and _moved_mm(self._anchor, path[-1]) >= cfg.creep_mm)):
             self._slip_force = self.request_n
-            if self._raise(now, self.request_n + cfg.step_n, "still slipping"):
+            to = cfg.max_n if cfg.mode == "hybrid" else self.request_n + cfg.step_n  # hybrid: one step was not enough
+            if self._raise(now, to, "still slipping"):
                 events.append(f"still slipping: grip force request raised to {self.request_n:.2f} N")
         if latched and not slip:
             ack = True  # the latch outlasts the slip: acknowledge once it is over

@@ -24,10 +24,18 @@ SAFETY_CANDIDATES: tuple[float, ...] = (1.5, 1.75, 2.0, 2.25, 2.5)
 
 
 def _grid() -> tuple[PolicyFactors, ...]:
-    out = [replace(POLICY, light=light, step=step, relax_floor=floor)
-           for light in (1.3, 1.6) for step in (0.5, 1.0) for floor in (1.25, 1.5)]
-    out.append(replace(POLICY, mode="max"))
-    out.append(replace(POLICY, relax_floor=100.0))  # never relaxes below the last raise
+    # the former grid: step mode (the choice made on the cell with c_v = 4 s/m), and max mode
+    step = replace(POLICY, mode="step", escalate_mm=0.0)
+    out = [replace(step, light=light, step=size, relax_floor=floor)
+           for light in (1.3, 1.6) for size in (0.5, 1.0) for floor in (1.25, 1.5)]
+    out.append(replace(step, mode="max"))
+    out.append(replace(step, relax_floor=100.0))  # never relaxes below the last raise
+    # hybrid: a step, then the maximum if the slide runs on past it (policy.py), for the
+    # cell whose slides accelerate (c_v = 1 s/m and below)
+    hybrid = replace(POLICY, mode="hybrid", light=1.3, relax_floor=1.5)
+    out += [replace(hybrid, step=size, escalate_mm=mm) for size in (0.5, 1.0) for mm in (2.0, 3.0, 5.0)]
+    out += [replace(hybrid, step=1.0, light=1.6), replace(hybrid, step=1.0, relax_floor=1.25),
+            replace(hybrid, step=0.5, repeat_s=0.1)]
     return tuple(out)
 
 
