@@ -43,7 +43,7 @@ class PolicyFactors:
     """The policy's forces as shares of the rest force (the same for every object),
     and its timing; chosen on the tuning seeds with the default method."""
 
-    light: float = 1.3  #: the light grip, of the rest force at the start mass
+    light: float = 1.6  #: the light grip, of the rest force at the start mass
     step: float = 1.0  #: a raise, of the rest force at the design mass
     max_of_fixed: float = 1.0  #: the most it raises to, of the fixed grip
     mode: Literal["step", "max", "hybrid"] = "hybrid"

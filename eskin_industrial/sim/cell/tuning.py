@@ -25,7 +25,7 @@ SAFETY_CANDIDATES: tuple[float, ...] = (1.5, 1.75, 2.0, 2.25, 2.5)
 
 def _grid() -> tuple[PolicyFactors, ...]:
     # the former grid: step mode (the choice made on the cell with c_v = 4 s/m), and max mode
-    step = replace(POLICY, mode="step", escalate_mm=0.0)
+    step = replace(POLICY, mode="step", escalate_mm=0.0, light=1.3, step=0.5, relax_floor=1.5)
     out = [replace(step, light=light, step=size, relax_floor=floor)
            for light in (1.3, 1.6) for size in (0.5, 1.0) for floor in (1.25, 1.5)]
     out.append(replace(step, mode="max"))
