@@ -204,3 +204,21 @@ def test_hybrid_mode_counts_the_distance_of_each_slip_from_its_own_alarm():
     plc.run(0.5, HELD, moving_mm_s=10.0)  # the hand moves the part 5 mm with no slip: no alarm
     assert plc.run(0.05, SLIP) == 4.0  # a new slip: a new step, not the maximum
     assert [r.why for r in plc.policy.raises] == ["slip", "slip"]
+
+
+def test_a_relax_spread_over_its_time_lowers_the_request_a_little_each_cycle_and_a_slip_stops_it():
+    plc = gripping(replace(SETTINGS, relax_s=0.5))
+    plc.run(0.05, SLIP, moving_mm_s=30.0)
+    plc.run(0.3, SLIP, moving_mm_s=30.0)
+    assert plc.policy.request_n == 4.0
+    assert plc.run(1.0, HELD) == 4.0  # not before quiet_s
+    halfway = plc.run(0.25, HELD)
+    assert 3.0 < halfway < 4.0 and plc.policy.relaxes == 0  # under way: about half of the quarter
+    assert plc.run(0.3, HELD) == pytest.approx(3.0)  # the whole share once relax_s is over
+    assert plc.policy.relaxes == 1
+    again = gripping(replace(SETTINGS, relax_s=0.5))
+    again.run(0.05, SLIP, moving_mm_s=30.0)
+    again.run(0.3, SLIP, moving_mm_s=30.0)
+    again.run(1.1, HELD)
+    stopped = again.run(0.01, SLIP)  # a slip during the relax: it stops there, and the step comes on top
+    assert stopped > 4.0 and again.policy.relaxes == 0

@@ -69,6 +69,11 @@ class PolicySettings:
     relax_share: float = field(default=0.1, metadata=positive())
     #: relax no lower than this multiple of the force the object last slipped at (0: the light grip)
     relax_floor: float = field(default=0.0, metadata=non_negative())
+    #: a relax spread over this long, a little each cycle (0: at once).  A soft pad's contact
+    #: shrinks as the force falls, so the centre of force moves with a relax; at once, on the
+    #: hand's light grip of a glass, that moved it by half a millimetre in a few ms, which a
+    #: detector at 1 kHz read as a slide
+    relax_s: float = field(default=0.0, metadata=non_negative())
     heartbeat_timeout_s: float = field(default=0.5, metadata=positive())
     grace_s: float = field(default=1.2, metadata=non_negative())
 
@@ -105,6 +110,7 @@ class GripPolicy:
         self._latched_before = False
         self._last_raise = float("-inf")
         self._last_calm = 0.0  #: the last moment the grip had a reason not to relax
+        self._relax_from: tuple[float, float] | None = None  #: (start, request) of a relax under way
         self._slip_force = 0.0
         #: (time, XC, YC) of the cycles of the last ``repeat_s``: the centre of force's recent path
         self._path: collections.deque[tuple[float, int, int]] = collections.deque()
@@ -189,13 +195,20 @@ class GripPolicy:
                 events.append(f"no verdict: grip force request raised to {self.request_n:.2f} N")
         if not trusted or slip or latched:
             self._last_calm = now
+            self._relax_from = None  # a relax under way stops where it is
         elif now - max(self._last_calm, self._last_raise) >= cfg.quiet_s:
             floor = max(cfg.light_n, cfg.relax_floor * self._slip_force)
             if self.request_n > floor:
-                self.request_n = max(floor, self.request_n * (1.0 - cfg.relax_share))
-                self.relaxes += 1
-                self._last_calm = now
-                events.append(f"quiet: grip force request relaxed to {self.request_n:.2f} N")
+                if self._relax_from is None or self._relax_from[0] < self._last_raise:
+                    self._relax_from = (now, self.request_n)
+                start, start_n = self._relax_from
+                done = 1.0 if cfg.relax_s <= 0 else min(1.0, (now - start) / cfg.relax_s)
+                self.request_n = max(floor, start_n * (1.0 - cfg.relax_share * done))
+                if done >= 1.0 or self.request_n <= floor:
+                    self._relax_from = None
+                    self.relaxes += 1
+                    self._last_calm = now
+                    events.append(f"quiet: grip force request relaxed to {self.request_n:.2f} N")
         return PlcOutput(self.request_n, ack, no_verdict, tuple(events))
 
 

@@ -52,6 +52,7 @@ class PolicyFactors:
     quiet_s: float = 3.0
     relax_share: float = 0.1
     relax_floor: float = 1.5
+    relax_s: float = 0.0  #: a relax spread over this long (0: at once)
 
 
 POLICY = PolicyFactors()
@@ -96,7 +97,7 @@ def policy_settings(kind: CellObject, factors: PolicyFactors = POLICY, safety: f
     return PolicySettings(light_n=min(light, top), step_n=step, max_n=max(top, light), fallback_n=fixed,
                           mode=factors.mode, escalate_mm=factors.escalate_mm,
                           repeat_s=factors.repeat_s, quiet_s=factors.quiet_s, relax_share=factors.relax_share,
-                          relax_floor=factors.relax_floor)
+                          relax_floor=factors.relax_floor, relax_s=factors.relax_s)
 
 
 def with_factors(**changes: float | str) -> PolicyFactors:
