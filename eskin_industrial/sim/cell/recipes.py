@@ -52,7 +52,7 @@ class PolicyFactors:
     quiet_s: float = 3.0
     relax_share: float = 0.1
     relax_floor: float = 1.5
-    relax_s: float = 0.0  #: a relax spread over this long (0: at once)
+    relax_s: float = 1.0  #: a relax spread over this long (0: at once)
 
 
 POLICY = PolicyFactors()
