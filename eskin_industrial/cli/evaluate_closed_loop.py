@@ -289,14 +289,16 @@ def _tune(method: str, jobs: int) -> None:
             click.echo(f"| {safety:g} | {s.held} | {s.dropped} | {s.crushed} |")
         click.echo(f"# chosen: the smallest with nothing dropped: {chosen_safety(rows)}")
         cands = policy_candidates(method, jobs=jobs, progress=ticker)
-    click.echo(f"| light | step | mode | relax share / floor | {method}: held | needless (per h) | grip / fixed "
-               "| oracle: held | needless | grip / fixed |")
-    click.echo("|---|---|---|---|---|---|---|---|---|---|")
+    click.echo(f"| light | step | mode | escalate (mm) | repeat (s) | relax share / floor / time (s) | {method}: held | dropped "
+               "| crushed | needless (per h) | grip / fixed | oracle: held | dropped | needless | grip / fixed |")
+    click.echo("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for c in cands:
         f, m, o = c.factors, c.method, c.oracle
-        click.echo(f"| {f.light:g} | {f.step:g} | {f.mode} | {f.relax_share:g} / {f.relax_floor:g} | {m.held} | "
-                   f"{m.needless} ({_num(m.needless_per_hour)}) | {_num(100 * m.grip_vs_fixed, '.0f')} % | {o.held} | "
-                   f"{o.needless} | {_num(100 * o.grip_vs_fixed, '.0f')} % |")
+        escalate = f"{f.escalate_mm:g}" if f.mode == "hybrid" else "-"
+        click.echo(f"| {f.light:g} | {f.step:g} | {f.mode} | {escalate} | {f.repeat_s:g} | {f.relax_share:g} / "
+                   f"{f.relax_floor:g} / {f.relax_s:g} | {m.held} | {m.dropped} | {m.crushed} | {m.needless} ({_num(m.needless_per_hour)}) "
+                   f"| {_num(100 * m.grip_vs_fixed, '.0f')} % | {o.held} | {o.dropped} | {o.needless} | "
+                   f"{_num(100 * o.grip_vs_fixed, '.0f')} % |")
     best = chosen(cands)
     click.echo(f"# chosen (the most held, then the fewest needless squeezes, then the lightest grip, gripping at "
                f"most {100 * GRIP_LIMIT:.0f} % of the fixed grip): {best.factors if best else 'none'}")

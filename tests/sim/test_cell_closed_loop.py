@@ -28,7 +28,8 @@ DISTANCE_TOLERANCE_MM = 3.0
 @pytest.mark.parametrize("seed, method", [
     (TUNING_SEEDS[0], "cof-track"),  # a glass filled while held: slides, raises, held
     (TUNING_SEEDS[4], "cof-track"),  # a thin cup filled while held: a line contact
-    (TUNING_SEEDS[6], "cof-track"),  # a heavy oily part: slides at the lift
+    (TUNING_SEEDS[12], "cof-track"),  # a cardboard box: slides once, a raise, held (the part no longer slides
+    #                                    under the light grip of 1.6 times its rest force)
     (TUNING_SEEDS[4], "none"),  # the cup with no slip sensing: it slides out
 ])
 def test_real_time_and_virtual_time_agree_on_the_outcome_and_the_distance_slid(seed, method, paper_profile,
@@ -47,7 +48,10 @@ def test_real_time_and_virtual_time_agree_on_the_outcome_and_the_distance_slid(s
 @pytest.mark.slow
 @pytest.mark.parametrize("method, outcome", [("cof-track", "held"), ("none", "dropped")])
 def test_the_demo_shows_the_hands_glass_held_with_the_default_method_and_dropped_without_sensing(method, outcome):
-    args = [sys.executable, "-m", "eskin_industrial", "demo", "--closed-loop", "--plc-log"]
+    # seed 1: a glass whose pour slides it under the light grip (the demo's default seed, 7,
+    # fills its glass slowly enough that the light grip of 1.6 times its rest force holds it
+    # with no slip sensing at all)
+    args = [sys.executable, "-m", "eskin_industrial", "demo", "--closed-loop", "--plc-log", "--seed", "1"]
     if method != "cof-track":
         args += ["--method", method]
     res = subprocess.run(args, capture_output=True, text=True, timeout=120)

@@ -4,6 +4,8 @@ again only while the part still moves, relax after a quiet time; and "I don't kn
 "no slip"."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from eskin_industrial.outputs.plc.image import Status
@@ -76,15 +78,11 @@ def test_the_centre_of_force_moving_while_the_grip_rises_is_not_taken_for_a_slid
 
 
 def test_max_mode_goes_straight_to_the_maximum():
-    from dataclasses import replace
-
     plc = gripping(replace(SETTINGS, mode="max"))
     assert plc.run(0.05, SLIP) == SETTINGS.max_n
 
 
 def test_after_a_quiet_time_it_relaxes_by_a_share_to_the_light_grip_or_its_floor():
-    from dataclasses import replace
-
     plc = gripping()
     plc.run(0.05, SLIP, moving_mm_s=30.0)
     plc.run(0.3, SLIP, moving_mm_s=30.0)
@@ -162,8 +160,65 @@ def test_a_centre_that_wanders_back_and_forth_under_a_lingering_slip_state_is_no
 
 
 def test_the_creep_test_can_be_switched_off():
-    from dataclasses import replace
-
     plc = gripping(replace(SETTINGS, creep_mm=0.0))
     plc.run(0.05, SLIP, moving_mm_s=4.0)
     assert plc.run(2.0, SLIP, moving_mm_s=4.0) == 3.0
+
+
+HYBRID = replace(SETTINGS, mode="hybrid", escalate_mm=3.0)
+
+
+def test_hybrid_mode_answers_a_slip_with_one_step_and_holds_there_if_the_part_stops():
+    plc = gripping(HYBRID)
+    assert plc.run(0.05, SLIP) == 3.0  # the first answer is a step, as in step mode
+    assert plc.run(0.05, SLIP, moving_mm_s=30.0) == 3.0  # 1.5 mm while the pads grow under it: no more
+    assert plc.run(1.0, SLIP) == 3.0
+    assert [r.why for r in plc.policy.raises] == ["slip"]
+
+
+def test_hybrid_mode_sends_a_slide_that_runs_past_the_step_to_the_maximum_at_once():
+    # 100 mm/s: 3 mm from the alarm within 30 ms, long before the 0.2 s repeat (step mode's
+    # second step would come after the part had slid 20 mm)
+    plc = gripping(HYBRID)
+    assert plc.run(0.01, SLIP, moving_mm_s=100.0) == 3.0
+    assert plc.run(0.03, SLIP, moving_mm_s=100.0) == SETTINGS.max_n
+    assert plc.policy.raises[-1].t < 1.05 and [r.why for r in plc.policy.raises] == ["slip", "still slipping"]
+    stepping = gripping()
+    stepping.run(0.01, SLIP, moving_mm_s=100.0)
+    assert stepping.run(0.03, SLIP, moving_mm_s=100.0) == 3.0  # step mode waits for its repeat
+
+
+def test_hybrid_mode_escalates_a_slow_slide_to_the_maximum_on_the_repeat_test():
+    # with the distance test off, the repeat test's further raise is the maximum, not another step
+    plc = gripping(replace(HYBRID, escalate_mm=0.0))
+    assert plc.run(0.05, SLIP, moving_mm_s=20.0) == 3.0
+    assert plc.run(0.2, SLIP, moving_mm_s=20.0) == SETTINGS.max_n  # 4 mm in 0.2 s: one step was not enough
+    assert [r.why for r in plc.policy.raises] == ["slip", "still slipping"]
+
+
+def test_hybrid_mode_counts_the_distance_of_each_slip_from_its_own_alarm():
+    plc = gripping(HYBRID)
+    plc.run(0.05, SLIP, moving_mm_s=20.0)  # 1 mm, stopped by the step
+    plc.run(0.5, SLIP)
+    plc.run(0.1, HELD)  # over and acknowledged
+    plc.run(0.5, HELD, moving_mm_s=10.0)  # the hand moves the part 5 mm with no slip: no alarm
+    assert plc.run(0.05, SLIP) == 4.0  # a new slip: a new step, not the maximum
+    assert [r.why for r in plc.policy.raises] == ["slip", "slip"]
+
+
+def test_a_relax_spread_over_its_time_lowers_the_request_a_little_each_cycle_and_a_slip_stops_it():
+    plc = gripping(replace(SETTINGS, relax_s=0.5))
+    plc.run(0.05, SLIP, moving_mm_s=30.0)
+    plc.run(0.3, SLIP, moving_mm_s=30.0)
+    assert plc.policy.request_n == 4.0
+    assert plc.run(1.0, HELD) == 4.0  # not before quiet_s
+    halfway = plc.run(0.25, HELD)
+    assert 3.0 < halfway < 4.0 and plc.policy.relaxes == 0  # under way: about half of the quarter
+    assert plc.run(0.3, HELD) == pytest.approx(3.0)  # the whole share once relax_s is over
+    assert plc.policy.relaxes == 1
+    again = gripping(replace(SETTINGS, relax_s=0.5))
+    again.run(0.05, SLIP, moving_mm_s=30.0)
+    again.run(0.3, SLIP, moving_mm_s=30.0)
+    again.run(1.1, HELD)
+    stopped = again.run(0.01, SLIP)  # a slip during the relax: it stops there, and the step comes on top
+    assert stopped > 4.0 and again.policy.relaxes == 0

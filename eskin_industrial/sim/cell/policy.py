@@ -2,7 +2,8 @@
 scan cycle, as ``FB_SlipGuard`` (docs/plc.md) reads them.
 
 Grip lightly; on a rising SLIP_LATCHED raise the force request by a step (or to the
-maximum); while SLIP stays set, raise by another step each ``repeat_s`` if the centre
+maximum, or, ``hybrid``, a step first and the maximum if the slide goes on); while
+SLIP stays set, raise by another step each ``repeat_s`` if the centre
 of force (XC, YC) has moved by ``repeat_mm`` over the last ``repeat_s`` and since
 ``settle_s`` after the last raise (a detector's slip state outlasts the slide by some
 tenths of a second: SLIP alone does not say the object still moves; and a soft pad's
@@ -47,8 +48,17 @@ class PolicySettings:
     step_n: float = field(metadata=positive())
     max_n: float = field(metadata=positive())
     fallback_n: float = field(metadata=positive())
-    #: ``step``: a slip raises by ``step_n``; ``max``: straight to ``max_n``
-    mode: Literal["step", "max"] = "step"
+    #: ``step``: a slip raises by ``step_n``; ``max``: straight to ``max_n``; ``hybrid``: a slip
+    #: raises by ``step_n``, and a slide that goes on past it goes to ``max_n``.  Under weak
+    #: velocity strengthening a load past static friction accelerates off the pads instead of
+    #: settling at a few cm/s: a second step 0.2 s later comes when the object has gone, and
+    #: ``max`` on every slip crushes what one step would have held (a weak cup under the cap)
+    mode: Literal["step", "max", "hybrid"] = "step"
+    #: ``hybrid``: the distance the centre of force may move from where it stood at the slip
+    #: alarm before the request goes to ``max_n`` at once, whatever ``repeat_s`` and
+    #: ``settle_s`` say (more than the soft pads' growth under a step, 1-1.5 mm, and the
+    #: light grip's jitter, +-0.5 mm; 0: only the repeat test escalates)
+    escalate_mm: float = field(default=3.0, metadata=non_negative())
     repeat_s: float = field(default=0.2, metadata=positive())
     repeat_mm: float = field(default=1.0, metadata=non_negative())
     #: while SLIP stays set, the distance from where the centre stood ``settle_s`` after the
@@ -59,6 +69,11 @@ class PolicySettings:
     relax_share: float = field(default=0.1, metadata=positive())
     #: relax no lower than this multiple of the force the object last slipped at (0: the light grip)
     relax_floor: float = field(default=0.0, metadata=non_negative())
+    #: a relax spread over this long, a little each cycle (0: at once).  A soft pad's contact
+    #: shrinks as the force falls, so the centre of force moves with a relax; at once, on the
+    #: hand's light grip of a glass, that moved it by half a millimetre in a few ms, which a
+    #: detector at 1 kHz read as a slide
+    relax_s: float = field(default=0.0, metadata=non_negative())
     heartbeat_timeout_s: float = field(default=0.5, metadata=positive())
     grace_s: float = field(default=1.2, metadata=non_negative())
 
@@ -95,11 +110,14 @@ class GripPolicy:
         self._latched_before = False
         self._last_raise = float("-inf")
         self._last_calm = 0.0  #: the last moment the grip had a reason not to relax
+        self._relax_from: tuple[float, float] | None = None  #: (start, request) of a relax under way
         self._slip_force = 0.0
         #: (time, XC, YC) of the cycles of the last ``repeat_s``: the centre of force's recent path
         self._path: collections.deque[tuple[float, int, int]] = collections.deque()
         #: where the centre of force stood once the last raise had settled (None: not slipping)
         self._anchor: tuple[float, int, int] | None = None
+        #: where the centre of force stood at the slip alarm (None: not slipping)
+        self._alarm: tuple[float, int, int] | None = None
 
     def grip(self, now: float) -> float:
         """Close on the object with the light grip; returns the request."""
@@ -136,6 +154,8 @@ class GripPolicy:
             path.popleft()
         if not slip:
             self._anchor = None
+            if not latched:
+                self._alarm = None
         elif self._anchor is None and now >= self._last_raise + cfg.settle_s:
             self._anchor = path[-1]
         if not self.gripping:
@@ -145,14 +165,22 @@ class GripPolicy:
             self._trusted_once = True  # the skin's first verdict on this grasp: its warm-up is over
         if latched and not self._latched_before:
             self._slip_force = self.request_n
+            self._alarm = path[-1]
             to = cfg.max_n if cfg.mode == "max" else self.request_n + cfg.step_n
             if self._raise(now, to, "slip"):
                 events.append(f"SLIP: grip force request raised to {self.request_n:.2f} N")
+        elif (cfg.mode == "hybrid" and slip and cfg.escalate_mm > 0 and self._alarm is not None
+              and self.request_n < cfg.max_n and _moved_mm(self._alarm, path[-1]) >= cfg.escalate_mm):
+            # the step did not stop it: the slide is running away, the maximum now
+            self._slip_force = self.request_n
+            if self._raise(now, cfg.max_n, "still slipping"):
+                events.append(f"still slipping: grip force request raised to the maximum, {self.request_n:.2f} N")
         elif slip and now - self._last_raise >= cfg.repeat_s and (
                 _moved_mm(path[0], path[-1]) >= cfg.repeat_mm
                 or (cfg.creep_mm > 0 and self._anchor is not None and _moved_mm(self._anchor, path[-1]) >= cfg.creep_mm)):
             self._slip_force = self.request_n
-            if self._raise(now, self.request_n + cfg.step_n, "still slipping"):
+            to = cfg.max_n if cfg.mode == "hybrid" else self.request_n + cfg.step_n  # hybrid: one step was not enough
+            if self._raise(now, to, "still slipping"):
                 events.append(f"still slipping: grip force request raised to {self.request_n:.2f} N")
         if latched and not slip:
             ack = True  # the latch outlasts the slip: acknowledge once it is over
@@ -167,13 +195,20 @@ class GripPolicy:
                 events.append(f"no verdict: grip force request raised to {self.request_n:.2f} N")
         if not trusted or slip or latched:
             self._last_calm = now
+            self._relax_from = None  # a relax under way stops where it is
         elif now - max(self._last_calm, self._last_raise) >= cfg.quiet_s:
             floor = max(cfg.light_n, cfg.relax_floor * self._slip_force)
             if self.request_n > floor:
-                self.request_n = max(floor, self.request_n * (1.0 - cfg.relax_share))
-                self.relaxes += 1
-                self._last_calm = now
-                events.append(f"quiet: grip force request relaxed to {self.request_n:.2f} N")
+                if self._relax_from is None or self._relax_from[0] < self._last_raise:
+                    self._relax_from = (now, self.request_n)
+                start, start_n = self._relax_from
+                done = 1.0 if cfg.relax_s <= 0 else min(1.0, (now - start) / cfg.relax_s)
+                self.request_n = max(floor, start_n * (1.0 - cfg.relax_share * done))
+                if done >= 1.0 or self.request_n <= floor:
+                    self._relax_from = None
+                    self.relaxes += 1
+                    self._last_calm = now
+                    events.append(f"quiet: grip force request relaxed to {self.request_n:.2f} N")
         return PlcOutput(self.request_n, ack, no_verdict, tuple(events))
 
 

@@ -43,14 +43,16 @@ class PolicyFactors:
     """The policy's forces as shares of the rest force (the same for every object),
     and its timing; chosen on the tuning seeds with the default method."""
 
-    light: float = 1.3  #: the light grip, of the rest force at the start mass
-    step: float = 0.5  #: a raise, of the rest force at the design mass
+    light: float = 1.6  #: the light grip, of the rest force at the start mass
+    step: float = 1.0  #: a raise, of the rest force at the design mass
     max_of_fixed: float = 1.0  #: the most it raises to, of the fixed grip
-    mode: Literal["step", "max"] = "step"
+    mode: Literal["step", "max", "hybrid"] = "hybrid"
     repeat_s: float = 0.2
+    escalate_mm: float = 3.0  #: ``hybrid``: the slide past the alarm that sends it to the maximum
     quiet_s: float = 3.0
     relax_share: float = 0.1
     relax_floor: float = 1.5
+    relax_s: float = 1.0  #: a relax spread over this long (0: at once)
 
 
 POLICY = PolicyFactors()
@@ -93,9 +95,9 @@ def policy_settings(kind: CellObject, factors: PolicyFactors = POLICY, safety: f
         light, top = _within(light, drive), _within(top, drive)
         step = max(step, drive.step_n)
     return PolicySettings(light_n=min(light, top), step_n=step, max_n=max(top, light), fallback_n=fixed,
-                          mode=factors.mode,
+                          mode=factors.mode, escalate_mm=factors.escalate_mm,
                           repeat_s=factors.repeat_s, quiet_s=factors.quiet_s, relax_share=factors.relax_share,
-                          relax_floor=factors.relax_floor)
+                          relax_floor=factors.relax_floor, relax_s=factors.relax_s)
 
 
 def with_factors(**changes: float | str) -> PolicyFactors:
