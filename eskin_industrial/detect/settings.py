@@ -109,6 +109,15 @@ class CofTrackSettings:
     #: kept 3-4 of them (docs/evaluation.md).
     onward_open: float = field(default=0.0, metadata=in_range(0.0, 1000.0))
     onward_share: float = field(default=0.3, metadata=in_range(0.0, 1.0))
+    #: The total force as a covariate of the centre: the centre's change over the fast
+    #: horizon is regressed on the total's change over the same horizon, learnt while
+    #: calm like the noise (a soft pad whose footprint grows with its force, a glass
+    #: swaying on it, has its centre follow its total), and the ramp and step channels
+    #: and the onward gate test the centre less the part the total explains,
+    #: ``c - beta S``.  ``beta = cov / (var + force_covariate x`` the change's noise
+    #: variance``): shrunk towards 0 unless the total has varied by more than its
+    #: noise.  0: off (the channels test the raw centre).
+    force_covariate: float = field(default=0.0, metadata=in_range(0.0, 1e6))
     profile_z: float = field(default=6.0, metadata=in_range(0.001, 1000.0))
     #: Torsion channel (detect/torsion.py): the distribution's turn about the normal,
     #: from its rotational derivative, as a ramp over the ramp channel's horizons and
