@@ -120,7 +120,9 @@ class CofTrackSettings:
     #: variance``)``, 0 until the total has varied by more than twice its noise.  0: off
     #: (the channels test the raw centre).  Off by default: with ``onward_open = 0.25``
     #: at 4 it kept the gate's delays on the force-drop family and took the hand's
-    #: false slips on the tuning seeds 10-59 from 5 to 1 (docs/evaluation.md).
+    #: false slips on the tuning seeds 10-59 from 5 to 1, but on fresh held-out seeds
+    #: the hand still had 1 (the defaults none) and force-drop stayed at 50 / 140 ms
+    #: against a target of 40 / 120 (docs/evaluation.md).
     force_covariate: float = field(default=0.0, metadata=in_range(0.0, 1e6))
     profile_z: float = field(default=6.0, metadata=in_range(0.001, 1000.0))
     #: Torsion channel (detect/torsion.py): the distribution's turn about the normal,
