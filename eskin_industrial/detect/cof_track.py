@@ -40,6 +40,10 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
            steady, r and j stay open if the centre has moved over the fast horizon by
            onward_open of a's threshold, onward (its newer half onward_share of the
            way): a slide whose grip gives way at onset, where a squeeze's centre stays
+    beta = the total as a covariate (off by default: force_covariate = 0): the coupling
+           of the centre's change to the total's over the fast horizon, learnt from calm
+           stretches once the force has been steady; r, j and g then test c - beta S (a
+           soft pad's centre that follows its force, a swaying glass, is explained away)
     slip when a > 1, b > 1, r > 1 or t > 1 (r and t only while the force is steady);
     in the slip state, also while a, b or r stays above 1 - hysteresis (0.8): a slow
     slide's evidence fades in and out as it stops.  (The CoF's step energy was a vote
@@ -91,6 +95,7 @@ class CofTrack(ScoredDetector):
         self._half = self.ls // 2  # (the half-slow lag)
         self._half_fast = max(1, self.lf // 2)  # (the onward gate's half-fast lag)
         self._onward_open, self._onward_share = c.onward_open, c.onward_share
+        self._covariate = c.force_covariate  # (0: the channels test the raw centre)
         self.z = c.z
         self.min_fast, self.min_slow = c.min_fast_mm, c.min_slow_mm
         self.force_rate = c.force_rate_per_s
@@ -105,6 +110,8 @@ class CofTrack(ScoredDetector):
         horizons = tuple(max(2, round(h * rate_hz)) for h in c.ramp_horizons_s)
         base = max(2, round(c.ramp_base_s * rate_hz))
         self._ramp = RampBank(horizons, base, c.ramp_z)
+        # force_covariate: the same ramp and step geometry on the total force
+        self._ramp_s = RampBank(horizons, base, c.ramp_z) if c.force_covariate > 0.0 else None
         groups = profile_groups(x_mm, y_mm)  # (its test runs on hop means: horizons in hops)
         self._profile = ProfileShift(
             groups, tuple(max(2, round(h / c.hop_s)) for h in c.ramp_horizons_s), max(2, round(c.ramp_base_s / c.hop_s)),
@@ -121,6 +128,9 @@ class CofTrack(ScoredDetector):
         # as for the ramp: the step must reach ramp_support_z itself
         self._jumps = StepTest(max(1, round(c.step_s * rate_hz)), round(c.step_gap_s * rate_hz),
                               max(1, round(c.step_base_s * rate_hz))) if c.step_s > 0 else None
+        self._jumps_s = StepTest(max(1, round(c.step_s * rate_hz)), round(c.step_gap_s * rate_hz),
+                                max(1, round(c.step_base_s * rate_hz))) \
+            if c.step_s > 0 and c.force_covariate > 0.0 else None
         self._step_z = c.step_z
         self._step_cap = 0.5 * max(0.0, c.step_z ** 2 - c.ramp_support_z ** 2)
         # its learnt noise per axis in force units (N^2 mm^2, like q): d^2 / w, which
@@ -164,11 +174,27 @@ class CofTrack(ScoredDetector):
         self._hn = 0
         self._prev: tuple[float, float, float] | None = None
         self._calm_force = 0
+        # the total as a covariate (force_covariate): the learnt moments of the fast
+        # horizon's changes, (dx dS, dy dS, dS^2), and the coupling beta they give
+        # (dx dS, dy dS, dS^2 over the fast horizon; the frame-to-frame noise's own
+        # dx dS / 2, dy dS / 2), learnt from blocks that were calm and followed by one
+        self._cov = [0.0] * 5
+        self._cov_count = 0  # frames committed
+        self._block = [0.0] * 5  # the current block's sums, its frames learnt, its length so far
+        self._block_learnt = self._block_len = 0
+        self._block_moved = False
+        self._candidate: tuple[list[float], int] | None = None  # (sums, frames learnt)  # the last calm block, not yet committed
+        self._beta_x = self._beta_y = 0.0
+        self._held = False  # the force has been steady once since the grab (not the grab's own change)
         self._ramp_on = False  # the ramp's verdict at the last hop's end
         self._ramp.reset()
         self._level_calm = 0  # frames since the force's level last moved (the step's silence)
         if self._jumps is not None:
             self._jumps.reset()
+        if self._ramp_s is not None:
+            self._ramp_s.reset()
+        if self._jumps_s is not None:
+            self._jumps_s.reset()
         if self._profile is not None:
             self._profile.reset()
         if self._turn is not None:
@@ -192,6 +218,53 @@ class CofTrack(ScoredDetector):
         if energy is None or not rnoise > 0.0:
             return 0.0
         return variance_evidence(energy / rnoise, self._ripple_dof)
+
+    def _covariate_block(self, moving: bool) -> None:
+        """The coupling's learning (force_covariate), a block at a time: a block's
+        moments are committed only once it and the block after it went by with no slip
+        evidence, so that the first frames of a slide whose force drops, before it is
+        found, are not learnt as a centre that follows its total.  Then the coupling
+        of the centre's change to the total's over the fast horizon: their moments
+        less the noise's own (a taxel's noise moves the total and pulls the centre
+        towards it: the frame-to-frame differences' moments, like the total's noise,
+        over m per mean and times 2 per difference), over the total's change's
+        variance plus force_covariate - 1 of its noise's (2 sigma_S^2 / m), from the
+        moments' mean, 0 unless the total's change's variance is more than twice its
+        noise's: until the total has varied with no slide."""
+        if moving:
+            self._block_moved = True
+        self._block_len += 1
+        if self._block_len < self._steady_n // 4:  # (blocks of 0.25 s)
+            return
+        block, learnt = self._block, self._block_learnt
+        if self._block_moved:
+            self._candidate = None
+        else:
+            candidate = self._candidate
+            if candidate is not None and candidate[1]:
+                sums, n = candidate
+                total = self._cov_count = self._cov_count + n
+                gain = n / total
+                if gain < n * self._a_noise:
+                    gain = n * self._a_noise
+                if gain > 1.0:
+                    gain = 1.0
+                cov = self._cov
+                for i in range(5):
+                    cov[i] += gain * (sums[i] / n - cov[i])
+                var = 2.0 * self._fnoise / self.m  # (the total's change's noise variance)
+                if cov[2] > 2.0 * var:  # the total has varied by more than its noise
+                    den = cov[2] + (self._covariate - 1.0) * var
+                    k = 2.0 / self.m
+                    self._beta_x = (cov[0] - k * cov[3]) / den
+                    self._beta_y = (cov[1] - k * cov[4]) / den
+                else:  # (a still grip's noise alone gave couplings of +-0.06 mm/N, which
+                    # a drop of 1.6 N made a ramp of 0.1 mm: no coupling learnt)
+                    self._beta_x = self._beta_y = 0.0
+            self._candidate = (block, learnt)
+        self._block = [0.0] * 5
+        self._block_learnt = self._block_len = 0
+        self._block_moved = False
 
     def score(self, t: float, f: np.ndarray, s: float, xc: float, yc: float) -> tuple[float, float, bool, bool]:
         # (hot path: one call per frame at any rate, ten per paper hop at 100 Hz; so
@@ -264,6 +337,8 @@ class CofTrack(ScoredDetector):
         # load moves a soft contact's CoF in steps too)
         self._calm_force = calm = 0 if varying else self._calm_force + 1
         steady = calm > self._steady_n
+        if steady:
+            self._held = True
         noise_d = z * math.sqrt(2.0 * noise / m) / s
         # the onward gate: while the force is not steady, the ramp and the step stay
         # open if the centre moves on, steadily, over the fast horizon: a slide whose
@@ -271,13 +346,17 @@ class CofTrack(ScoredDetector):
         # distribution in place (its centre stays) and a sway turns back
         moving_on = False
         gate = self._onward_open
+        bx, by = self._beta_x, self._beta_y  # (0 unless force_covariate)
         if not steady and gate > 0.0 and fast is not None and half_fast is not None:
-            ux, uy = mx - fast[0], my - fast[1]
+            # (the centre less the part of its motion the total's change explains)
+            ds = ms - fast[2]
+            ux, uy = mx - fast[0] - bx * ds, my - fast[1] - by * ds
             d2 = ux * ux + uy * uy
             lim = self.min_fast
             thr = gate * (noise_d if noise_d > lim else lim)
             if d2 > thr * thr:
-                on = (mx - half_fast[0]) * ux + (my - half_fast[1]) * uy
+                ds = ms - half_fast[2]
+                on = (mx - half_fast[0] - bx * ds) * ux + (my - half_fast[1] - by * ds) * uy
                 moving_on = on >= self._onward_share * d2
         open_ = steady or moving_on
         # the ramp's base must not hold the grab: its centres start once it has settled;
@@ -290,6 +369,13 @@ class CofTrack(ScoredDetector):
         # as at 100 Hz (docs/evaluation.md); its verdict stands for the hop's other frames
         hop_end = (self._k + 1) % self.hop == 0
         raw = -1.0  # the ripple's evidence, once it is worked out (the ramp's and the step's)
+        # the total as a covariate (force_covariate): banks of the same geometry fed the
+        # total, so that the ramp and the step test the centre less beta times it
+        ramp_s, step_s = self._ramp_s, self._jumps_s
+        if ramp_s is not None and not filled:
+            ramp_s.push(s, 0.0, 1.0)
+            if step_s is not None:
+                step_s.push(s, 0.0, s)
         if open_ and hop_end:
             # the ramp weighs raw centres, each axis against its own noise (in force
             # units, like q; the floor keeps a constant axis, a strip's y, harmless);
@@ -311,9 +397,14 @@ class CofTrack(ScoredDetector):
                 raw = variance_evidence(energy / rnoise, self._ripple_dof)
             evidence = raw if raw < self._evidence_cap else self._evidence_cap
             if filled:
-                r = ramp.score(qx, qy, self.ramp_min, evidence)
+                r = ramp.score(qx, qy, self.ramp_min, evidence) if ramp_s is None else \
+                    ramp.score_less(ramp_s, bx, by, qx, qy, self.ramp_min, evidence)
             else:  # (the push and the test in one pass: at 100 Hz every frame has both)
-                r = ramp.push_score(xc, yc, 1.0 / (s * s), qx, qy, self.ramp_min, evidence)
+                if ramp_s is None:
+                    r = ramp.push_score(xc, yc, 1.0 / (s * s), qx, qy, self.ramp_min, evidence)
+                else:
+                    ramp.push(xc, yc, 1.0 / (s * s))
+                    r = ramp.score_less(ramp_s, bx, by, qx, qy, self.ramp_min, evidence)
                 if step is not None:
                     step.push(xc, yc, s)
                 if profile is not None:
@@ -371,6 +462,10 @@ class CofTrack(ScoredDetector):
                     vy = floor
                 if vx > 0.0:
                     jx, jy = step.dx, step.dy
+                    if step_s is not None and step_s.ready:  # (less the part the total explains)
+                        ju = step_s.dx
+                        jx -= bx * ju
+                        jy -= by * ju
                     if raw > self._step_cap:
                         raw = self._step_cap
                     rs = math.sqrt((jx * jx / vx + jy * jy / vy) / step.weight + 2.0 * raw) / self._step_z
@@ -434,6 +529,17 @@ class CofTrack(ScoredDetector):
             self._fnoise += gain * ((s - prev[2]) ** 2 * 0.5 - self._fnoise)
             if rip_d2 is not None:
                 self._rnoise += gain * (rip_d2 - self._rnoise)
+            if self._covariate > 0.0 and self._held and fast is not None:
+                # the moments of the coupling (force_covariate), into the current block
+                ds = ms - fast[2]
+                d1 = s - prev[2]
+                block = self._block
+                block[0] += (mx - fast[0]) * ds
+                block[1] += (my - fast[1]) * ds
+                block[2] += ds * ds
+                block[3] += dx * d1 * 0.5
+                block[4] += (yc - prev[1]) * d1 * 0.5
+                self._block_learnt += 1
             if level_open and step is not None and step.ready:  # the step's own noise (force units)
                 if not self._step_learnt:  # (white noise's, q, to start from)
                     self._step_vx = self._noise_x
@@ -449,6 +555,8 @@ class CofTrack(ScoredDetector):
                 self._step_vy += g * (jy * jy * inv - self._step_vy)
             if profile is not None:
                 profile.calm()
+        if self._covariate > 0.0:
+            self._covariate_block(moving)
         if tr > r:
             r = tr
         if not slip and self.decision.state == _SLIP:

@@ -109,6 +109,21 @@ class CofTrackSettings:
     #: kept 3-4 of them (docs/evaluation.md).
     onward_open: float = field(default=0.0, metadata=in_range(0.0, 1000.0))
     onward_share: float = field(default=0.3, metadata=in_range(0.0, 1.0))
+    #: The total force as a covariate of the centre: the centre's change over the fast
+    #: horizon is regressed on the total's change over the same horizon (their moments
+    #: less the noise's own), learnt from calm quarter-seconds once the force has been
+    #: steady after the grab, each taken in only once the next one has passed with no
+    #: slip evidence; the ramp and step channels and the onward gate then test the
+    #: centre less the part the total explains, ``c - beta S`` (a soft pad whose
+    #: footprint grows with its force, a glass swaying on it, has its centre follow its
+    #: total).  ``beta = cov / (var + (force_covariate - 1) x`` the change's noise
+    #: variance``)``, 0 until the total has varied by more than twice its noise.  0: off
+    #: (the channels test the raw centre).  Off by default: with ``onward_open = 0.25``
+    #: at 4 it kept the gate's delays on the force-drop family and took the hand's
+    #: false slips on the tuning seeds 10-59 from 5 to 1, but on fresh held-out seeds
+    #: the hand still had 1 (the defaults none) and force-drop stayed at 50 / 140 ms
+    #: against a target of 40 / 120 (docs/evaluation.md).
+    force_covariate: float = field(default=0.0, metadata=in_range(0.0, 1e6))
     profile_z: float = field(default=6.0, metadata=in_range(0.001, 1000.0))
     #: Torsion channel (detect/torsion.py): the distribution's turn about the normal,
     #: from its rotational derivative, as a ramp over the ramp channel's horizons and

@@ -61,6 +61,34 @@ def test_push_score_is_push_then_score() -> None:
     assert (fused._x, fused._y, fused._sums, fused._scale_sum) == (apart._x, apart._y, apart._sums, apart._scale_sum)
 
 
+def test_score_less_is_the_batch_test_of_the_corrected_centre() -> None:
+    """``score_less`` (cof-track's ``force_covariate``) with a bank fed a covariate u is
+    the batch test of c - beta u at the current beta, whatever beta was before (it is
+    applied to the sums, not put into the ring), across the sums' renewal."""
+    k = 1300
+    rng = np.random.default_rng(9)
+    u = 3.0 + np.cumsum(rng.normal(0, 0.02, k))  # a total that wanders
+    c = np.cumsum(rng.normal(0, 0.05, (k, 2)), axis=0) + np.outer(u, [0.4, -0.7])
+    q = (np.abs(rng.normal(0.1, 0.02, (k, 2))) + 0.01) ** 2
+    scale = rng.uniform(0.2, 5.0, k)
+    betas = rng.normal(0.0, 0.5, (k, 2))  # a beta learnt as it goes
+    bank, cov = RampBank(HORIZONS, BASE, z=5.0), RampBank(HORIZONS, BASE, z=5.0)
+    n = max(HORIZONS) + BASE
+    for i in range(k):
+        bank.push(*c[i], scale[i])
+        cov.push(u[i], 0.0, 1.0)
+        got = bank.score_less(cov, *betas[i], *q[i], 0.1)
+        if i < n - 1:
+            assert got == 0.0
+            continue
+        part = slice(i - n + 1, i + 1)
+        want = ramp_batch(c[part] - np.outer(u[part], betas[i]), q[part], HORIZONS, BASE, z=5.0, min_mm=0.1,
+                          scale=scale[part])[-1]
+        assert got == pytest.approx(want, rel=1e-9)
+    # beta = 0 is the plain test
+    assert bank.score_less(cov, 0.0, 0.0, *q[-1], 0.1) == pytest.approx(bank.score(*q[-1], 0.1), rel=1e-12)
+
+
 def test_weights_are_the_least_squares_ramp_against_the_base() -> None:
     """G c, for a ramp of speed v starting L samples ago, is v * sum j^2 per axis: so
     |G c| * disp is the displacement over the horizon."""
