@@ -49,10 +49,11 @@ CASES = ("none", "off", "every", "publish")
 
 
 def run_scans(case: str, scans: int, gap_s: float = 0.0, times: list[tuple[float, float]] | None = None,
-              nodes: int = 1) -> None:
+              nodes: int = 1, spin: bool = False) -> None:
     """``scans`` scans through one node's loop, for callgrind to count; with
     ``times``, each step's (wall, CPU) seconds appended, ``gap_s`` of sleep between
-    rounds (``--gaps``), a round one scan of each of ``nodes`` loops in turn."""
+    rounds (``--gaps``; ``spin``: a busy wait instead), a round one scan of each of
+    ``nodes`` loops in turn."""
     import numpy as np
 
     import eskin_industrial
@@ -124,19 +125,25 @@ def run_scans(case: str, scans: int, gap_s: float = 0.0, times: list[tuple[float
     wall, cpu, sleep = time.perf_counter, time.thread_time, time.sleep
     for k in range(scans):
         if gap_s and k % nodes == 0:
-            sleep(gap_s)
+            if spin:
+                until = wall() + gap_s
+                while wall() < until:
+                    pass
+            else:
+                sleep(gap_s)
         w0, c0 = wall(), cpu()
         steps[k % nodes](0.0)
         times.append((wall() - w0, cpu() - c0))
 
 
-def gaps(case: str, gaps_ms: list[float], scans: int, repeats: int, nodes: int = 1) -> None:
+def gaps(case: str, gaps_ms: list[float], scans: int, repeats: int, nodes: int = 1, spin: bool = False) -> None:
     """The step's wall and CPU time when the scans come ``gap`` ms apart, the thread
     asleep in between (as a bridge's between a 100 Hz node's scans), against the same
     steps back to back in the same run: what the instruction count cannot show, the
     caches and the branch predictors a sleeping thread finds cold again.  With
     ``nodes`` > 1, each round steps that many nodes' loops back to back (a reader
-    serving its bus): their code is shared, their detectors' state is not."""
+    serving its bus): their code is shared, their detectors' state is not.  ``spin``:
+    the thread busy between the rounds instead of asleep."""
     import numpy as np
 
     run_scans(case, 400, 0.0, [])  # imports and the detector's first calls out of the way
@@ -144,12 +151,12 @@ def gaps(case: str, gaps_ms: list[float], scans: int, repeats: int, nodes: int =
     for _ in range(repeats):
         for g in gaps_ms:  # alternately, so that the machine's moods fall on each alike
             times: list[tuple[float, float]] = []
-            run_scans(case, scans, g / 1000.0, times, nodes)
+            run_scans(case, scans, g / 1000.0, times, nodes, spin)
             arr = np.array(times[len(times) // 10:])  # the first tenth: the detector's warm-up
             runs[g].append((float(np.median(arr[:, 0])), float(np.percentile(arr[:, 0], 90)),
                             float(np.median(arr[:, 1]))))
     base = float(np.median([r[0] for r in runs[gaps_ms[0]]]))
-    print(f"| case | nodes a round | rounds apart | step wall p50 (us) | p90 (us) | step CPU p50 (us) | wall p50 / at {gaps_ms[0]:g} ms |")
+    print(f"| case | nodes a round | rounds apart, {'spinning' if spin else 'asleep'} | step wall p50 (us) | p90 (us) | step CPU p50 (us) | wall p50 / at {gaps_ms[0]:g} ms |")
     print("|---|---|---|---|---|---|---|")
     for g in gaps_ms:
         p50, p90, c50 = (float(np.median([r[i] for r in runs[g]])) for i in range(3))
@@ -212,6 +219,7 @@ def main() -> None:
     ap.add_argument("--gaps", metavar="MS,...", help="instead: the step's wall time with the scans MS apart "
                     "(the thread asleep between), against the first (0: back to back); medians of --repeats")
     ap.add_argument("--nodes", type=int, default=1, help="--gaps: nodes stepped back to back a round (default 1)")
+    ap.add_argument("--spin", action="store_true", help="--gaps: a busy wait between the rounds instead of a sleep")
     ap.add_argument("--scans", type=int, default=1000, help="scans per --gaps run (default 1000)")
     ap.add_argument("--repeats", type=int, default=3, help="runs of each --gaps gap, alternately (default 3)")
     ap.add_argument("--tree", metavar="DIR", help="the package of this checkout instead of this script's")
@@ -225,10 +233,10 @@ def main() -> None:
         return
     if args.gaps:
         print(f"# .venv/bin/python benchmarks/bench_loop.py --gaps {args.gaps} --cases {args.cases.split(',')[0]} "
-              f"--nodes {args.nodes} --scans {args.scans} --repeats {args.repeats}" + (f" --tree {args.tree}" if args.tree else ""))
+              f"--nodes {args.nodes}" + (" --spin" if args.spin else "") + f" --scans {args.scans} --repeats {args.repeats}" + (f" --tree {args.tree}" if args.tree else ""))
         print(f"# {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {describe()}, load average "
               f"{os.getloadavg()[0]:.1f}")
-        gaps(args.cases.split(",")[0], [float(g) for g in args.gaps.split(",")], args.scans, args.repeats, args.nodes)
+        gaps(args.cases.split(",")[0], [float(g) for g in args.gaps.split(",")], args.scans, args.repeats, args.nodes, args.spin)
         return
     if args.count:
         run_scans(args.count[0], int(args.count[1]))

@@ -126,11 +126,11 @@ class CofTrack(ScoredDetector):
         # the step channel (detect/step.py): a jump of the CoF against where it was, beside
         # the ramp bank, its noise its own (learnt like q); the evidence is capped for it
         # as for the ramp: the step must reach ramp_support_z itself
-        self._jumps = StepTest(max(1, round(c.step_s * rate_hz)), round(c.step_gap_s * rate_hz),
-                              max(1, round(c.step_base_s * rate_hz))) if c.step_s > 0 else None
-        self._jumps_s = StepTest(max(1, round(c.step_s * rate_hz)), round(c.step_gap_s * rate_hz),
-                                max(1, round(c.step_base_s * rate_hz))) \
-            if c.step_s > 0 and c.force_covariate > 0.0 else None
+        geometry = (max(1, round(c.step_s * rate_hz)), round(c.step_gap_s * rate_hz),
+                    max(1, round(c.step_base_s * rate_hz)))
+        self._jumps = StepTest(*geometry) if c.step_s > 0 else None
+        # force_covariate: the same step on the total force
+        self._jumps_s = StepTest(*geometry) if c.step_s > 0 and c.force_covariate > 0.0 else None
         self._step_z = c.step_z
         self._step_cap = 0.5 * max(0.0, c.step_z ** 2 - c.ramp_support_z ** 2)
         # its learnt noise per axis in force units (N^2 mm^2, like q): d^2 / w, which
@@ -174,16 +174,16 @@ class CofTrack(ScoredDetector):
         self._hn = 0
         self._prev: tuple[float, float, float] | None = None
         self._calm_force = 0
-        # the total as a covariate (force_covariate): the learnt moments of the fast
-        # horizon's changes, (dx dS, dy dS, dS^2), and the coupling beta they give
-        # (dx dS, dy dS, dS^2 over the fast horizon; the frame-to-frame noise's own
-        # dx dS / 2, dy dS / 2), learnt from blocks that were calm and followed by one
+        # the total as a covariate (force_covariate): the learnt moments (dx dS, dy dS,
+        # dS^2 over the fast horizon; the frame-to-frame noise's own dx dS / 2, dy dS / 2)
+        # and the coupling beta they give, learnt from blocks that were calm and followed
+        # by one
         self._cov = [0.0] * 5
         self._cov_count = 0  # frames committed
         self._block = [0.0] * 5  # the current block's sums, its frames learnt, its length so far
         self._block_learnt = self._block_len = 0
         self._block_moved = False
-        self._candidate: tuple[list[float], int] | None = None  # (sums, frames learnt)  # the last calm block, not yet committed
+        self._candidate: tuple[list[float], int] | None = None  # the last calm block, not yet committed: (sums, frames learnt)
         self._beta_x = self._beta_y = 0.0
         self._held = False  # the force has been steady once since the grab (not the grab's own change)
         self._ramp_on = False  # the ramp's verdict at the last hop's end
@@ -397,8 +397,7 @@ class CofTrack(ScoredDetector):
                 raw = variance_evidence(energy / rnoise, self._ripple_dof)
             evidence = raw if raw < self._evidence_cap else self._evidence_cap
             if filled:
-                r = ramp.score(qx, qy, self.ramp_min, evidence) if ramp_s is None else \
-                    ramp.score_less(ramp_s, bx, by, qx, qy, self.ramp_min, evidence)
+                r = ramp.score_less(ramp_s, bx, by, qx, qy, self.ramp_min, evidence)  # (None: score)
             else:  # (the push and the test in one pass: at 100 Hz every frame has both)
                 if ramp_s is None:
                     r = ramp.push_score(xc, yc, 1.0 / (s * s), qx, qy, self.ramp_min, evidence)

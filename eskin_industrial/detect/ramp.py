@@ -158,51 +158,34 @@ class RampBank:
     def score(self, q_x: float, q_y: float, min_mm: float, evidence: float = 0.0) -> float:
         """Largest over the horizons of min(sqrt(T^2 + 2 evidence) / z, d / min_mm); 0
         until N centres."""
+        return self.score_less(None, 0.0, 0.0, q_x, q_y, min_mm, evidence)
+
+    def score_less(self, cov: RampBank | None, beta_x: float, beta_y: float, q_x: float, q_y: float, min_mm: float,
+                   evidence: float = 0.0) -> float:
+        """:meth:`score` of the centre less ``beta`` times a covariate, ``c - beta u``:
+        ``cov`` is a bank of the same horizons and base fed ``u`` as its x (the total
+        force, for ``cof-track``'s ``force_covariate``; None: none, :meth:`score`).  The
+        statistic is linear in the samples, so this is the test of the corrected series
+        at the current ``beta`` (a beta that is learnt as it goes puts no step into the
+        ring)."""
         mean_scale = self._scale_sum / self.n
         if self.count < self.n or not (q_x > 0.0 and q_y > 0.0 and mean_scale > 0.0):
             return 0.0
         inv_x, inv_y = 1.0 / (q_x * mean_scale), 1.0 / (q_y * mean_scale)
         extra = 2.0 * evidence
         z, sqrt = self._z, math.sqrt
-        sums = self._sums
+        sums, other = self._sums, None if cov is None else cov._sums
         best = 0.0
         for h, kb, sd2, disp in self._scores:
             wx, wy, _, _, bx, by = sums[h]
             nx, ny = wx - kb * bx, wy - kb * by
+            if other is not None:
+                wu, _, _, _, bu, _ = other[h]
+                nu = wu - kb * bu
+                nx, ny = nx - beta_x * nu, ny - beta_y * nu
             nx2, ny2 = nx * nx, ny * ny
             r = sqrt((nx2 * inv_x + ny2 * inv_y) / sd2 + extra) / z
             if r > best:  # (else min(r, d) cannot be the largest: d is not needed)
-                if min_mm > 0.0:
-                    d = sqrt(nx2 + ny2) * disp / min_mm
-                    if d < r:
-                        r = d
-                if r > best:
-                    best = r
-        return best
-
-    def score_less(self, cov: RampBank, beta_x: float, beta_y: float, q_x: float, q_y: float, min_mm: float,
-                   evidence: float = 0.0) -> float:
-        """:meth:`score` of the centre less ``beta`` times a covariate, ``c - beta u``:
-        ``cov`` is a bank of the same horizons and base fed ``u`` as its x (the total
-        force, for ``cof-track``'s ``force_covariate``).  The statistic is linear in the
-        samples, so this is the test of the corrected series at the current ``beta``
-        (a beta that is learnt as it goes puts no step into the ring)."""
-        mean_scale = self._scale_sum / self.n
-        if self.count < self.n or not (q_x > 0.0 and q_y > 0.0 and mean_scale > 0.0):
-            return 0.0
-        inv_x, inv_y = 1.0 / (q_x * mean_scale), 1.0 / (q_y * mean_scale)
-        extra = 2.0 * evidence
-        z, sqrt = self._z, math.sqrt
-        sums, other = self._sums, cov._sums
-        best = 0.0
-        for h, kb, sd2, disp in self._scores:
-            wx, wy, _, _, bx, by = sums[h]
-            wu, _, _, _, bu, _ = other[h]
-            nu = wu - kb * bu
-            nx, ny = wx - kb * bx - beta_x * nu, wy - kb * by - beta_y * nu
-            nx2, ny2 = nx * nx, ny * ny
-            r = sqrt((nx2 * inv_x + ny2 * inv_y) / sd2 + extra) / z
-            if r > best:
                 if min_mm > 0.0:
                     d = sqrt(nx2 + ny2) * disp / min_mm
                     if d < r:
