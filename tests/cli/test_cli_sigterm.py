@@ -63,8 +63,11 @@ def test_plc_sim_under_sigterm_prints_its_summary() -> None:
 
 
 def test_node_on_ctrl_c_is_a_stop_with_its_summary() -> None:
+    # Ctrl-C as a terminal's foreground job gets it: a runner that started the suite in the
+    # background (SIGINT ignored, inherited across exec) must not make the node deaf to it
     proc = subprocess.Popen([*EXE, "node", "-p", PAPER, "--scene", "case2", "--can-log", "-", "--duration", "60"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert proc.stdout is not None
     first = proc.stdout.readline()  # candump -L lines, paced: the node runs
     assert first.startswith("("), first
