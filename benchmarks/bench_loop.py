@@ -7,6 +7,7 @@ machine changes; and what a sink that takes taxel frames adds.
     .venv/bin/python benchmarks/bench_loop.py --profile none  # where a scan's time goes (cProfile, no valgrind)
     .venv/bin/python benchmarks/bench_loop.py --cases publish --tree ../other   # another checkout's package
     .venv/bin/python benchmarks/bench_loop.py --gaps 0,1,10 --cases none  # the step's time, scans 0/1/10 ms apart
+    .venv/bin/python benchmarks/bench_loop.py --gaps 10 --warm 0.5 --cases none  # a shadow step 0.5 ms before each
 
 Cases (the paper-5x5 profile, its detector, scans from memory with no wait):
 - ``none``: no sink at all: the loop as every command runs it.
@@ -49,11 +50,12 @@ CASES = ("none", "off", "every", "publish")
 
 
 def run_scans(case: str, scans: int, gap_s: float = 0.0, times: list[tuple[float, float]] | None = None,
-              nodes: int = 1, spin: bool = False) -> None:
+              nodes: int = 1, spin: bool = False, warm_s: float | None = None) -> None:
     """``scans`` scans through one node's loop, for callgrind to count; with
     ``times``, each step's (wall, CPU) seconds appended, ``gap_s`` of sleep between
     rounds (``--gaps``; ``spin``: a busy wait instead), a round one scan of each of
-    ``nodes`` loops in turn."""
+    ``nodes`` loops in turn; ``warm_s``: a shadow loop of its own stepped that long
+    before each round (its code shared, its state not), untimed."""
     import numpy as np
 
     import eskin_industrial
@@ -122,28 +124,37 @@ def run_scans(case: str, scans: int, gap_s: float = 0.0, times: list[tuple[float
             step(0.0)
         return
     steps = [step] + [NodeLoop(prof, Memory(), []).step for _ in range(nodes - 1)]
+    shadow = NodeLoop(prof, Memory(), []).step
     wall, cpu, sleep = time.perf_counter, time.thread_time, time.sleep
     for k in range(scans):
         if gap_s and k % nodes == 0:
+            lead = 0.0 if warm_s is None else min(warm_s, gap_s)
             if spin:
-                until = wall() + gap_s
+                until = wall() + gap_s - lead
                 while wall() < until:
                     pass
             else:
-                sleep(gap_s)
+                sleep(gap_s - lead)
+            if warm_s is not None:
+                shadow(0.0)
+                if lead:
+                    sleep(lead)
         w0, c0 = wall(), cpu()
         steps[k % nodes](0.0)
         times.append((wall() - w0, cpu() - c0))
 
 
-def gaps(case: str, gaps_ms: list[float], scans: int, repeats: int, nodes: int = 1, spin: bool = False) -> None:
+def gaps(case: str, gaps_ms: list[float], scans: int, repeats: int, nodes: int = 1, spin: bool = False,
+         warm_ms: float | None = None) -> None:
     """The step's wall and CPU time when the scans come ``gap`` ms apart, the thread
     asleep in between (as a bridge's between a 100 Hz node's scans), against the same
     steps back to back in the same run: what the instruction count cannot show, the
     caches and the branch predictors a sleeping thread finds cold again.  With
     ``nodes`` > 1, each round steps that many nodes' loops back to back (a reader
     serving its bus): their code is shared, their detectors' state is not.  ``spin``:
-    the thread busy between the rounds instead of asleep."""
+    the thread busy between the rounds instead of asleep.  ``warm_ms``: a shadow
+    loop stepped that long before each round (does a warm-up just before a scan
+    is due bring its step to the hot cost?)."""
     import numpy as np
 
     run_scans(case, 400, 0.0, [])  # imports and the detector's first calls out of the way
@@ -151,12 +162,13 @@ def gaps(case: str, gaps_ms: list[float], scans: int, repeats: int, nodes: int =
     for _ in range(repeats):
         for g in gaps_ms:  # alternately, so that the machine's moods fall on each alike
             times: list[tuple[float, float]] = []
-            run_scans(case, scans, g / 1000.0, times, nodes, spin)
+            run_scans(case, scans, g / 1000.0, times, nodes, spin, None if warm_ms is None else warm_ms / 1000.0)
             arr = np.array(times[len(times) // 10:])  # the first tenth: the detector's warm-up
             runs[g].append((float(np.median(arr[:, 0])), float(np.percentile(arr[:, 0], 90)),
                             float(np.median(arr[:, 1]))))
     base = float(np.median([r[0] for r in runs[gaps_ms[0]]]))
-    print(f"| case | nodes a round | rounds apart, {'spinning' if spin else 'asleep'} | step wall p50 (us) | p90 (us) | step CPU p50 (us) | wall p50 / at {gaps_ms[0]:g} ms |")
+    warmed = "" if warm_ms is None else f", a shadow step {warm_ms:g} ms before"
+    print(f"| case | nodes a round | rounds apart, {'spinning' if spin else 'asleep'}{warmed} | step wall p50 (us) | p90 (us) | step CPU p50 (us) | wall p50 / at {gaps_ms[0]:g} ms |")
     print("|---|---|---|---|---|---|---|")
     for g in gaps_ms:
         p50, p90, c50 = (float(np.median([r[i] for r in runs[g]])) for i in range(3))
@@ -220,6 +232,8 @@ def main() -> None:
                     "(the thread asleep between), against the first (0: back to back); medians of --repeats")
     ap.add_argument("--nodes", type=int, default=1, help="--gaps: nodes stepped back to back a round (default 1)")
     ap.add_argument("--spin", action="store_true", help="--gaps: a busy wait between the rounds instead of a sleep")
+    ap.add_argument("--warm", type=float, metavar="MS", help="--gaps: a shadow loop (its own state, the code "
+                    "shared) stepped MS before each round, untimed")
     ap.add_argument("--scans", type=int, default=1000, help="scans per --gaps run (default 1000)")
     ap.add_argument("--repeats", type=int, default=3, help="runs of each --gaps gap, alternately (default 3)")
     ap.add_argument("--tree", metavar="DIR", help="the package of this checkout instead of this script's")
@@ -233,10 +247,11 @@ def main() -> None:
         return
     if args.gaps:
         print(f"# .venv/bin/python benchmarks/bench_loop.py --gaps {args.gaps} --cases {args.cases.split(',')[0]} "
-              f"--nodes {args.nodes}" + (" --spin" if args.spin else "") + f" --scans {args.scans} --repeats {args.repeats}" + (f" --tree {args.tree}" if args.tree else ""))
+              f"--nodes {args.nodes}" + (" --spin" if args.spin else "") + ("" if args.warm is None else f" --warm {args.warm:g}") + f" --scans {args.scans} --repeats {args.repeats}" + (f" --tree {args.tree}" if args.tree else ""))
         print(f"# {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {describe()}, load average "
               f"{os.getloadavg()[0]:.1f}")
-        gaps(args.cases.split(",")[0], [float(g) for g in args.gaps.split(",")], args.scans, args.repeats, args.nodes, args.spin)
+        gaps(args.cases.split(",")[0], [float(g) for g in args.gaps.split(",")], args.scans, args.repeats, args.nodes,
+             args.spin, args.warm)
         return
     if args.count:
         run_scans(args.count[0], int(args.count[1]))
