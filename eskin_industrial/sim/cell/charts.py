@@ -4,6 +4,7 @@ end-to-end latency, where the physics stops forgiving."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -27,18 +28,39 @@ def held_vs_squeezes(scores: Sequence[ControlScore], path: Path, title: str) -> 
         marker = "s" if s.control in BASELINES else "o"
         colour = "tab:red" if i in front else "tab:gray"
         ax.plot(xs[i], ys[i], marker, color=colour, ms=7)
-        ax.annotate(f"{s.control} ({100 * s.grip_vs_fixed:.0f} %)", (xs[i], ys[i]), textcoords="offset points",
-                    xytext=(6, 4), fontsize=8)
+    # controls that land on one spot (the oracle and the cof methods, two of the paper's)
+    # share one label, a line each, or their names are printed over each other
+    for group in _near(xs, ys):
+        text = "\n".join(f"{scores[i].control} ({100 * scores[i].grip_vs_fixed:.0f} %)" for i in group)
+        ax.annotate(text, (xs[group[0]], ys[group[0]]), textcoords="offset points", xytext=(8, 0), fontsize=8,
+                    va="center")
     ax.plot([xs[i] for i in front], [ys[i] for i in front], "-", color="tab:red", lw=1.0, label="Pareto front")
     ax.set_xscale("symlog", linthresh=1.0)
     ax.set_xlabel("needless squeezes per hour of holding (symlog)")
     ax.set_ylabel("objects held (%)")
     ax.set_title(title + "\n(in brackets: mean grip, % of the fixed grip)", fontsize=10)
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="lower right", fontsize=8)
+    ax.legend(loc="center right", fontsize=8)  # the corners hold points
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _near(xs: Sequence[float], ys: Sequence[float], dx: float = 0.3, dy: float = 1.5) -> list[list[int]]:
+    """The points in groups closer than ``dx`` on the symlog axis (in decades, zero
+    and one a decade apart) and ``dy`` percentage points, highest first in each."""
+    def at(x: float) -> float:
+        return math.log10(x) + 1.0 if x >= 1.0 else x  # symlog with linthresh 1, roughly
+
+    groups: list[list[int]] = []
+    for i in sorted(range(len(xs)), key=lambda i: -ys[i]):
+        for g in groups:
+            if abs(at(xs[g[0]]) - at(xs[i])) < dx and abs(ys[g[0]] - ys[i]) < dy:
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    return groups
 
 
 def held_vs_latency(points: dict[str, list[tuple[float, float]]], path: Path, title: str,
