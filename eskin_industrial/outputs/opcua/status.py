@@ -18,6 +18,7 @@ follows from the node's snapshot and its source (pure code, one place):
 | bus fault | BadNoCommunication | BadNoCommunication | Good |
 | a sensor fault (Flags DEAD_TAXELS, FROZEN, RATE, STREAM) | BadSensorFailure | BadSensorFailure | Good |
 | no scan yet since start | BadWaitingForInitialData | BadWaitingForInitialData | Good |
+| (before any: the server up, the node's first snapshot not yet in) | BadWaitingForInitialData | BadWaitingForInitialData | BadWaitingForInitialData |
 | sensor stale (no scan for ``stale_s``) | UncertainLastUsableValue | UncertainLastUsableValue | Good |
 | ... for ``bad_after_s`` (default 1 s) | BadNoCommunication | BadNoCommunication | Good |
 | detection disabled | BadOutOfService | Good | Good |
