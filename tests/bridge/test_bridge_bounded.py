@@ -90,8 +90,9 @@ def test_a_blocked_log_stream_drops_lines_and_never_blocks_the_caller():
         worst = max(worst, time.perf_counter() - t)
     elapsed = time.perf_counter() - t0
     # A blocking call would wait here for ever (nobody reads the pipe); the bound only
-    # allows for a thread descheduled on a loaded machine.
-    assert worst < 0.5 and elapsed < 10.0
+    # allows for a thread descheduled on a loaded machine (0.64 s once, a CI run beside
+    # three other workers on two cores)
+    assert worst < 2.0 and elapsed < 10.0
     assert log.drops >= extra, log.drops
     drain = _Drain(r)
     drain.start()  # someone reads at last: what was queued is written out
