@@ -124,7 +124,7 @@ def run_scans(case: str, scans: int, gap_s: float = 0.0, times: list[tuple[float
             step(0.0)
         return
     steps = [step] + [NodeLoop(prof, Memory(), []).step for _ in range(nodes - 1)]
-    shadow = NodeLoop(prof, Memory(), []).step
+    shadow = NodeLoop(prof, Memory(), []).step if warm_s is not None else None
     wall, cpu, sleep = time.perf_counter, time.thread_time, time.sleep
     for k in range(scans):
         if gap_s and k % nodes == 0:
@@ -135,7 +135,7 @@ def run_scans(case: str, scans: int, gap_s: float = 0.0, times: list[tuple[float
                     pass
             else:
                 sleep(gap_s - lead)
-            if warm_s is not None:
+            if shadow is not None:
                 shadow(0.0)
                 if lead:
                     sleep(lead)

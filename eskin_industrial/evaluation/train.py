@@ -162,31 +162,35 @@ def write_trained(path: Path, config: TrainConfig = TrainConfig()) -> StoredMode
 
 #: The share of the training rows two models may class otherwise and still be the same
 #: training.  Trained again on another CPU, numpy's vector paths may round a feature's
-#: last bits otherwise, and a split between two near values moves: the shipped file,
-#: trained on an Intel Xeon, and the same training on an AMD EPYC class 1 row of
-#: 168,720 otherwise (one split of 840 reads another feature).  A file the training
-#: has left behind (a feature or a scene changed) differs on far more.
+#: last bits otherwise, and a split between two near values moves (``scripts/train-learned
+#: --check`` says how far: the shipped file, trained on an Intel Xeon, against the same
+#: training on an AMD EPYC, 1 row of 168,720).  A file the training has left behind (a
+#: feature or a scene changed) differs on far more.
 SAME_TRAINING_SHARE = 1e-4
 
 
-def classes(model: TreeEnsemble, x: np.ndarray, chunk: int = 8192) -> np.ndarray:
-    """The class the model gives each row of ``x`` (all rows at once, by chunks)."""
-    pow2 = 1 << np.arange(model.feature.shape[1])
-    rows = np.arange(len(model.table)) * model.table.shape[1]
-    k = len(model.init)
-    by_class = np.arange(len(model.table)) % k == np.arange(k)[:, None]
-    flat = model.table.ravel()
-    out = []
-    for lo in range(0, len(x), chunk):
-        code = (x[lo:lo + chunk, model.feature] > model.threshold) @ pow2  # (rows, trees)
-        out.append((model.init + flat[rows + code] @ by_class.T).argmax(axis=1))
-    return np.concatenate(out) if out else np.zeros(0, np.int64)
+@dataclass(frozen=True)
+class Check:
+    """The shipped model against a training made again."""
+
+    stale: list[str]  #: why the shipped file is not what the training gives; empty: it is
+    rounding: str = ""  #: when the arrays differ by another CPU's rounding alone: how far
 
 
-def disagreement(shipped: StoredModel, trained: StoredModel, config: TrainConfig = TrainConfig()) -> float:
-    """The share of the training rows the two models class otherwise."""
+def check(shipped: StoredModel, trained: StoredModel, config: TrainConfig = TrainConfig()) -> Check:
+    """The same arrays, or the same training in another rounding (the same class on all
+    but :data:`SAME_TRAINING_SHARE` of the training rows), or stale and why."""
+    found = differences(shipped, trained)
+    if not found or shipped.trained != trained.trained:
+        return Check(found)
     x, _ = dataset(config)
-    return float(np.mean(classes(shipped.model, x) != classes(trained.model, x)))
+    share = float(np.mean(shipped.model.classes(x) != trained.model.classes(x)))
+    how = f"{share:.4%} of the {len(x)} training rows classed otherwise"
+    if share > SAME_TRAINING_SHARE:
+        return Check([*found, how])
+    a, b = shipped.model.feature, trained.model.feature
+    moved = f", {int(np.sum(a != b))} of {a.size} splits reading another feature" if a.shape == b.shape else ""
+    return Check([], f"{'; '.join(found)}{moved}, {how}")
 
 
 def differences(shipped: StoredModel, trained: StoredModel) -> list[str]:
@@ -202,5 +206,5 @@ def differences(shipped: StoredModel, trained: StoredModel) -> list[str]:
     return out
 
 
-__all__ = ["FEATURES", "SAME_TRAINING_SHARE", "TrainConfig", "classes", "config_record", "dataset", "differences",
-           "disagreement", "fit", "require_sklearn", "trees_from_sklearn", "write_trained"]
+__all__ = ["FEATURES", "SAME_TRAINING_SHARE", "Check", "TrainConfig", "check", "config_record", "dataset",
+           "differences", "fit", "require_sklearn", "trees_from_sklearn", "write_trained"]
