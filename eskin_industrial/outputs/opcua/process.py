@@ -112,6 +112,7 @@ class OpcuaProcess:
         self._process = ctx.Process(target=_serve, name="opcua-server", daemon=True,
                                     args=(theirs, self.options, self.infos, self.users, self.refresh_s))
         self._process.start()
+        _lower_priority(self._process.pid)
         theirs.close()  # the process's end: its death is our EOF
         self._receiver = threading.Thread(target=self._receive, name="opcua-server-rx", daemon=True)
         self._receiver.start()
@@ -283,15 +284,29 @@ class OpcuaProcess:
 
 
 # -- the server's process -------------------------------------------------------------------
-def _serve(conn: multiprocessing.connection.Connection, options: OpcuaOptions, infos: list[NodeInfo],
-           users: tuple[UserEntry, ...], refresh_s: float) -> None:
-    """The server, fed from the pipe until the bridge says stop or its end closes."""
+def _lower_priority(pid: int | None) -> None:
+    """The server's process (``pid``; None: this one) at NICE above the bridge's niceness.
+
+    Set by the bridge the moment the process exists, not only by the process once it
+    runs: its start (the interpreter, the imports of the bridge's own modules, then
+    asyncua's, about a second of CPU) would otherwise compete at the bridge's priority,
+    on the CPU the bridge's threads run on (a new process starts beside its parent),
+    while the PLC's reads are served through a restart."""
     import os
 
     try:
-        os.nice(NICE)
-    except OSError:
-        pass  # (not on every system)
+        bridge = os.getpriority(os.PRIO_PROCESS, os.getpid() if pid is not None else os.getppid())
+        target = min(bridge + NICE, 19)
+        if os.getpriority(os.PRIO_PROCESS, pid or 0) < target:
+            os.setpriority(os.PRIO_PROCESS, pid or 0, target)
+    except (OSError, AttributeError):
+        pass  # (not on every system; a process already gone)
+
+
+def _serve(conn: multiprocessing.connection.Connection, options: OpcuaOptions, infos: list[NodeInfo],
+           users: tuple[UserEntry, ...], refresh_s: float) -> None:
+    """The server, fed from the pipe until the bridge says stop or its end closes."""
+    _lower_priority(None)  # (the bridge has done it already, unless it could not)
     try:
         from .server import OpcuaServer
     except BaseException as exc:  # noqa: BLE001 - an install asyncua does not import in: the start's error
