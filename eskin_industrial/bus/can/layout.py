@@ -300,7 +300,8 @@ class ScanAssembler:
         self._expect = {layout.data_id(s): (s, layout.frame_length(s)) for s in range(layout.segments)}
         self._lo, self._hi = layout.base_id, layout.base_id + ID_RANGE
         self._full = (1 << layout.segments) - 1
-        self._order = layout.byte_order
+        self._big = layout.byte_order == "big"
+        self._extended = layout.extended_id
         self._cur: int | None = None  # 12-bit counter of the scan being assembled
         self._cur_rx = math.nan  # receipt time of the scan's first frame
         self._have = 0
@@ -321,76 +322,102 @@ class ScanAssembler:
         self._horizon = (SEQ_MODULO / 2) / self.rate_hz
 
     def feed(self, msg: can.Message) -> RawScan | None:
-        c = self.counters
+        # The hot path, nine times a classic scan: a data frame of this node is known
+        # by one lookup of its ID, and its header read from two bytes (no slice); every
+        # other frame takes the checks of _other_frame.  The counters and the outcomes
+        # are those of the checks in their order: _other_frame's, then the header's.
         if msg.is_error_frame:
-            c["error_frames"] += 1
-            bus_off = bool(msg.arbitration_id & _CAN_ERR_BUSOFF)
-            if bus_off:
-                c["bus_off"] += 1
-            if c["frames"] != self._err_mark:  # a frame of the node came since: a new run
-                self._err_mark, self._err_run, self._err_bus_off = c["frames"], 0, False
-            self._err_run += 1
-            self._err_bus_off |= bus_off
+            self._error_frame(msg)
             return None
         can_id = msg.arbitration_id
-        if not (self._lo <= can_id < self._hi) or msg.is_extended_id != self.layout.extended_id:
-            c["foreign_frames"] += 1
-            return None
-        c["frames"] += 1
-        data = msg.data
-        if msg.is_remote_frame or data is None:
-            c["malformed_frames"] += 1
-            return None
-        if can_id == self.layout.status_id:
-            if len(data) != STATUS_LENGTH:
-                c["malformed_frames"] += 1
-                return None
-            c["heartbeats"] += 1
-            self.status = self.layout.decode_status(bytes(data), msg.timestamp)
-            if self.status.node_id != self.layout.node_id:
-                c["node_id_mismatch"] += 1
-            self.stream.heartbeat(self.status.node_id, self.layout.node_id)
-            return None
         expect = self._expect.get(can_id)
-        if expect is None or len(data) != expect[1]:
-            c["malformed_frames"] += 1
+        data = msg.data
+        if (expect is None or msg.is_extended_id != self._extended or msg.is_remote_frame or data is None
+                or len(data) != expect[1]):
+            self._other_frame(msg, can_id, expect)
             return None
-        header = int.from_bytes(data[:2], self._order)
+        c = self.counters
+        c["frames"] += 1
+        header = (data[0] << 8 | data[1]) if self._big else (data[1] << 8 | data[0])
         segment, seq = header >> SEQ_BITS, header & SEQ_MASK
         if segment != expect[0]:
             c["malformed_frames"] += 1
             return None
         rx = msg.timestamp
-        if self._cur is not None and seq != self._cur:
-            if (seq - self._cur) % SEQ_MODULO > SEQ_MODULO // 2:
-                self._late(seq, self._cur)  # older than the scan under way
+        cur = self._cur
+        if cur is not None and seq != cur:
+            if (seq - cur) % SEQ_MODULO > SEQ_MODULO // 2:
+                self._late(seq, cur)  # older than the scan under way
                 return None
             c["torn_scans"] += 1
-            self.stream.event(c["frames"], f"scan {self._cur} torn by scan {seq}")
-            self._cur = None
-        if self._cur is None:
-            if self._last12 is not None and not self._clock_wraps(rx - self._last_rx):
-                d = (seq - self._last12) % SEQ_MODULO
-                if d == 0:
-                    c["duplicate_frames"] += 1
-                    self.stream.event(c["frames"], f"scan {seq} repeated")
-                    return None
-                if d > SEQ_MODULO // 2:
-                    self._late(seq, self._last12)
-                    return None
-                self.stream.counter_ahead(d, rx - self._last_start_rx)
-            self._cur, self._cur_rx, self._have = seq, rx, 0
-            self._started.append(seq)
+            self.stream.event(c["frames"], f"scan {cur} torn by scan {seq}")
+            cur = self._cur = None
+        if cur is None and not self._begin(seq, rx):
+            return None
         bit = 1 << segment
-        if self._have & bit:
+        have = self._have
+        if have & bit:
             c["duplicate_frames"] += 1
             self.stream.event(c["frames"], f"segment {segment} of scan {seq} repeated")
             return None
-        self._have |= bit
+        self._have = have = have | bit
         self._parts[segment] = bytes(data)
-        if self._have != self._full:
+        if have != self._full:
             return None
         return self._emit(seq, rx)
+
+    def _error_frame(self, msg: can.Message) -> None:
+        c = self.counters
+        c["error_frames"] += 1
+        bus_off = bool(msg.arbitration_id & _CAN_ERR_BUSOFF)
+        if bus_off:
+            c["bus_off"] += 1
+        if c["frames"] != self._err_mark:  # a frame of the node came since: a new run
+            self._err_mark, self._err_run, self._err_bus_off = c["frames"], 0, False
+        self._err_run += 1
+        self._err_bus_off |= bus_off
+
+    def _other_frame(self, msg: can.Message, can_id: int, expect: tuple[int, int] | None) -> None:
+        """A frame that is not a well-formed data frame of this node: another node's, a
+        heartbeat, or a malformed one (counted)."""
+        c = self.counters
+        if not (self._lo <= can_id < self._hi) or msg.is_extended_id != self._extended:
+            c["foreign_frames"] += 1
+            return
+        c["frames"] += 1
+        data = msg.data
+        if msg.is_remote_frame or data is None:
+            c["malformed_frames"] += 1
+            return
+        if can_id == self.layout.status_id:
+            if len(data) != STATUS_LENGTH:
+                c["malformed_frames"] += 1
+                return
+            c["heartbeats"] += 1
+            self.status = self.layout.decode_status(bytes(data), msg.timestamp)
+            if self.status.node_id != self.layout.node_id:
+                c["node_id_mismatch"] += 1
+            self.stream.heartbeat(self.status.node_id, self.layout.node_id)
+            return
+        c["malformed_frames"] += 1  # an ID of our range that carries no segment, or a wrong length
+
+    def _begin(self, seq: int, rx: float) -> bool:
+        """The first frame of scan ``seq``: a new scan begins, unless it repeats the
+        last one delivered or is older than it (False: the frame is dropped)."""
+        c = self.counters
+        if self._last12 is not None and not self._clock_wraps(rx - self._last_rx):
+            d = (seq - self._last12) % SEQ_MODULO
+            if d == 0:
+                c["duplicate_frames"] += 1
+                self.stream.event(c["frames"], f"scan {seq} repeated")
+                return False
+            if d > SEQ_MODULO // 2:
+                self._late(seq, self._last12)
+                return False
+            self.stream.counter_ahead(d, rx - self._last_start_rx)
+        self._cur, self._cur_rx, self._have = seq, rx, 0
+        self._started.append(seq)
+        return True
 
     def _late(self, seq: int, newer: int) -> None:
         """A frame of scan ``seq``, older than scan ``newer`` (under way or delivered):
