@@ -128,21 +128,17 @@ def json_alias(f: Callable[..., Any]) -> Callable[..., Any]:
     return click.option("--json", "as_json", is_flag=True, help="JSON: the same as --format json.")(with_json)
 
 
-def add_envvars(root: click.Group, prefix: str) -> None:
-    """Every option of every command also from an environment variable named after
-    the command path and the option's long name, the way click's
+def add_command_envvars(cmd: click.Command, prefix: str) -> None:
+    """Every option of ``cmd`` (and of every command under it) also from an environment
+    variable named after the command path and the option's long name, the way click's
     ``auto_envvar_prefix`` names them, but from the option's name rather than its
     Python parameter: ``--plc`` of ``bridge`` is ``ESKIN_BRIDGE_PLC``, ``-p/--profile``
-    of ``plc map`` is ``ESKIN_PLC_MAP_PROFILE``.  The command line wins over the
-    environment, the environment over the defaults."""
-    for name, sub in root.commands.items():
-        _envvars(sub, f"{prefix}_{_upper(name)}")
-
-
-def _envvars(cmd: click.Command, prefix: str) -> None:
+    of ``plc map`` is ``ESKIN_PLC_MAP_PROFILE`` (``prefix``: ``ESKIN_BRIDGE``,
+    ``ESKIN_PLC``).  The command line wins over the environment, the environment over
+    the defaults."""
     if isinstance(cmd, click.Group):
         for name, sub in cmd.commands.items():
-            _envvars(sub, f"{prefix}_{_upper(name)}")
+            add_command_envvars(sub, f"{prefix}_{_upper(name)}")
         return
     for p in cmd.params:
         if isinstance(p, click.Option) and p.envvar is None and not p.hidden:

@@ -57,23 +57,19 @@ def envvars(cmd: click.Command) -> list[str]:
     return [str(p.envvar) for p in cmd.params if isinstance(p, click.Option) and isinstance(p.envvar, str)]
 
 
-def add_help_tail(root: click.Group) -> None:
-    """Every command's and group's help ends with its examples and its variables
-    (after :func:`~eskin_industrial.cli.console.add_envvars`, which names them)."""
-
-    def visit(cmd: click.Command, path: str) -> None:
-        parts = []
-        if path in EXAMPLES:
-            # \b: click keeps the lines as they are instead of rewrapping them
-            parts.append("\b\nExamples:\n" + "\n".join(f"  {line}" for line in EXAMPLES[path]))
-        names = envvars(cmd)
-        if names:
-            parts.append("Environment: " + ", ".join(names) + " (docs/cli.md).")
-        parts.append(f"\b\n{DOCS_LINE}")  # the pages the text names (docs/X.md): eskin-bus docs X
-        cmd.epilog = "\n\n".join(parts)
-        if isinstance(cmd, click.Group):
-            for name, sub in cmd.commands.items():
-                visit(sub, f"{path} {name}".strip())
-
-    for name, sub in root.commands.items():
-        visit(sub, name)
+def add_command_help_tail(cmd: click.Command, path: str) -> None:
+    """The help of ``cmd`` (command path ``path``: ``bridge``, ``plc map``) and of every
+    command under it ends with its examples and its variables (after
+    :func:`~eskin_industrial.cli.console.add_command_envvars`, which names them)."""
+    parts = []
+    if path in EXAMPLES:
+        # \b: click keeps the lines as they are instead of rewrapping them
+        parts.append("\b\nExamples:\n" + "\n".join(f"  {line}" for line in EXAMPLES[path]))
+    names = envvars(cmd)
+    if names:
+        parts.append("Environment: " + ", ".join(names) + " (docs/cli.md).")
+    parts.append(f"\b\n{DOCS_LINE}")  # the pages the text names (docs/X.md): eskin-bus docs X
+    cmd.epilog = "\n\n".join(parts)
+    if isinstance(cmd, click.Group):
+        for name, sub in cmd.commands.items():
+            add_command_help_tail(sub, f"{path} {name}")
