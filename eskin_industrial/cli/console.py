@@ -128,17 +128,18 @@ def json_alias(f: Callable[..., Any]) -> Callable[..., Any]:
     return click.option("--json", "as_json", is_flag=True, help="JSON: the same as --format json.")(with_json)
 
 
-def add_command_envvars(cmd: click.Command, prefix: str) -> None:
+def add_command_envvars(cmd: click.Command, name: str, prefix: str = "ESKIN") -> None:
     """Every option of ``cmd`` (and of every command under it) also from an environment
     variable named after the command path and the option's long name, the way click's
     ``auto_envvar_prefix`` names them, but from the option's name rather than its
     Python parameter: ``--plc`` of ``bridge`` is ``ESKIN_BRIDGE_PLC``, ``-p/--profile``
-    of ``plc map`` is ``ESKIN_PLC_MAP_PROFILE`` (``prefix``: ``ESKIN_BRIDGE``,
-    ``ESKIN_PLC``).  The command line wins over the environment, the environment over
-    the defaults."""
+    of ``plc map`` is ``ESKIN_PLC_MAP_PROFILE`` (``name``: the command's, ``prefix``:
+    the group's variables').  The command line wins over the environment, the
+    environment over the defaults."""
+    prefix = f"{prefix}_{_upper(name)}"
     if isinstance(cmd, click.Group):
-        for name, sub in cmd.commands.items():
-            add_command_envvars(sub, f"{prefix}_{_upper(name)}")
+        for sub_name, sub in cmd.commands.items():
+            add_command_envvars(sub, sub_name, prefix)
         return
     for p in cmd.params:
         if isinstance(p, click.Option) and p.envvar is None and not p.hidden:

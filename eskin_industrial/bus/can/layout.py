@@ -334,7 +334,7 @@ class ScanAssembler:
         data = msg.data
         if (expect is None or msg.is_extended_id != self._extended or msg.is_remote_frame or data is None
                 or len(data) != expect[1]):
-            self._other_frame(msg, can_id, expect)
+            self._other_frame(msg, can_id)
             return None
         c = self.counters
         c["frames"] += 1
@@ -377,7 +377,7 @@ class ScanAssembler:
         self._err_run += 1
         self._err_bus_off |= bus_off
 
-    def _other_frame(self, msg: can.Message, can_id: int, expect: tuple[int, int] | None) -> None:
+    def _other_frame(self, msg: can.Message, can_id: int) -> None:
         """A frame that is not a well-formed data frame of this node: another node's, a
         heartbeat, or a malformed one (counted)."""
         c = self.counters
