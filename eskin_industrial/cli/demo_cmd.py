@@ -85,12 +85,15 @@ def demo(scene: str, profile_path: str | None, rate_hz: float, seed: int, plain:
     say(f"demo: scene {rec.name} ({rec.spec.scene.description}), {len(rec.t)} scans at {rate_hz:g} Hz on a "
         f"virtual CAN bus -> bridge ({prof.detector.method}) -> Modbus TCP -> PLC stand-in; "
         f"about {rec.t[-1]:.0f} s in real time")
-    if "web" in outputs:
-        say(f"demo: the web console at {outputs['web'].url}node/0")
+    web_line = f"demo: the web console at {outputs['web'].url}node/0" if "web" in outputs else None
     stdout = sys.stdout
     if plain or not stdout.isatty():
-        res = run_demo(prof, rec, say, (lambda line: say(f"    PLC {line}")) if plc_log else None, outputs=outputs)
+        # the address once the console listens: a script or a browser sent there at once finds it up
+        res = run_demo(prof, rec, say, (lambda line: say(f"    PLC {line}")) if plc_log else None, outputs=outputs,
+                       ready=(lambda: say(web_line)) if web_line else None)
     else:
+        if web_line:
+            say(web_line)  # (before the live view takes the screen; the console is up within a second)
         res = _run_live(prof, rec, plc_log, stdout, outputs)
     s, c = res.score, res.counters
     say("summary:")

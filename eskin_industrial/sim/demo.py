@@ -86,7 +86,7 @@ def free_port() -> int:
 def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_echo: Callable[[str], None] | None,
              drain_s: float = 1.0,
              live: Callable[[DemoParts], AbstractContextManager[object]] | None = None,
-             outputs: dict[str, Any] | None = None) -> DemoResult:
+             outputs: dict[str, Any] | None = None, ready: Callable[[], None] | None = None) -> DemoResult:
     """Run the chain until the node has played ``rec`` and ``drain_s`` more.
 
     The bridge side is the product's own: the CAN source and the PLC client sink of a
@@ -94,7 +94,9 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
     when given, is entered once the chain is up and left before it is torn down (also
     on Ctrl-C or an error): a live view that only reads the chain's newest values.
     ``outputs``: more output kinds beside the PLC (``--web``: the web console, shown
-    the scene's own onsets and the registers the PLC stand-in received).
+    the scene's own onsets and the registers the PLC stand-in received).  ``ready`` is
+    called once the outputs listen, before the node sends its first scan (what
+    announces the console's address: a browser sent there at once finds it up).
     """
     layout = CanLayout.from_profile(profile, fd=False)
     raw = np.rint(Calibrator.from_section(profile.calibration, profile.taxels).to_raw(rec.forces))
@@ -122,6 +124,8 @@ def run_demo(profile: Profile, rec: Rendered, say: Callable[[str], None], plc_ec
     writer = cast("PlcWriter", loop.sinks[0])  # the first output: the PLC in client mode
     for web in web_sinks(loop.sinks):
         show_the_scene(web, rec, plc)
+    if ready is not None:
+        ready()
     tx = open_bus("virtual", channel)
     sim = CanNode(layout, tx, raw, rec.rate_hz, profile.can.heartbeat_s, Faults(), False, 1, None)
     node_thread = threading.Thread(target=sim.run, name="demo-node", daemon=True)
