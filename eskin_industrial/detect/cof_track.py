@@ -37,9 +37,11 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
            ripple about a constant level, which the 30 ms means of the ramp's silence
            follow, leaves it open, so a slide in jumps is seen in frames
     g    = the onward gate (off by default: onward_open = 0): while the force is not
-           steady, r and j stay open if the centre has moved over the fast horizon by
-           onward_open of a's threshold, onward (its newer half onward_share of the
-           way): a slide whose grip gives way at onset, where a squeeze's centre stays
+           steady and its total onward_fall (5 %) below its last steady level, r and j
+           stay open if the centre has moved over the fast horizon by onward_open of
+           a's threshold, onward (its newer half onward_share of the way), on no held
+           copy nor the frame after one: a slide whose grip gives way at onset, where
+           a squeeze's centre stays
     beta = the total as a covariate (off by default: force_covariate = 0): the coupling
            of the centre's change to the total's over the fast horizon, learnt from calm
            stretches once the force has been steady; r, j and g then test c - beta S (a
@@ -95,6 +97,7 @@ class CofTrack(ScoredDetector):
         self._half = self.ls // 2  # (the half-slow lag)
         self._half_fast = max(1, self.lf // 2)  # (the onward gate's half-fast lag)
         self._onward_open, self._onward_share = c.onward_open, c.onward_share
+        self._onward_below = 1.0 - c.onward_fall  # (the total's share of its steady level the gate opens under)
         self._covariate = c.force_covariate  # (0: the channels test the raw centre)
         self.z = c.z
         self.min_fast, self.min_slow = c.min_fast_mm, c.min_slow_mm
@@ -186,6 +189,8 @@ class CofTrack(ScoredDetector):
         self._candidate: tuple[list[float], int] | None = None  # the last calm block, not yet committed: (sums, frames learnt)
         self._beta_x = self._beta_y = 0.0
         self._held = False  # the force has been steady once since the grab (not the grab's own change)
+        self._steady_level: float | None = None  # the smoothed total at the last steady frame (the gate's)
+        self._was_filled = False  # the last frame was a held copy
         self._ramp_on = False  # the ramp's verdict at the last hop's end
         self._ramp.reset()
         self._level_calm = 0  # frames since the force's level last moved (the step's silence)
@@ -301,6 +306,8 @@ class CofTrack(ScoredDetector):
         hist[at] = (mx, my, ms)
         self._hn = hn + 1
         filled = self.filled
+        # (a real frame after a held copy moves the centre by the gap's motion at once)
+        after_copy, self._was_filled = self._was_filled, filled
         # the total's change over the ripple's lag (a held copy counts as calm)
         ripple = self._ripple
         rip_d2 = ripple.push(s, self._rnoise if filled else None) if ripple is not None else None
@@ -339,15 +346,21 @@ class CofTrack(ScoredDetector):
         steady = calm > self._steady_n
         if steady:
             self._held = True
+            self._steady_level = ms
         noise_d = z * math.sqrt(2.0 * noise / m) / s
         # the onward gate: while the force is not steady, the ramp and the step stay
         # open if the centre moves on, steadily, over the fast horizon: a slide whose
         # grip gives way at onset is still a slide, where a squeeze scales the
-        # distribution in place (its centre stays) and a sway turns back
+        # distribution in place (its centre stays) and a sway turns back.  Only while
+        # the total is down from its last steady level (a drop is a step down; a sway,
+        # a vibration and a held copy's step go both ways) and never on a held copy or
+        # the frame after one
         moving_on = False
         gate = self._onward_open
         bx, by = self._beta_x, self._beta_y  # (0 unless force_covariate)
-        if not steady and gate > 0.0 and fast is not None and half_fast is not None:
+        level = self._steady_level
+        if (not steady and gate > 0.0 and fast is not None and half_fast is not None and not filled
+                and not after_copy and level is not None and ms <= level * self._onward_below):
             # (the centre less the part of its motion the total's change explains)
             ds = ms - fast[2]
             ux, uy = mx - fast[0] - bx * ds, my - fast[1] - by * ds
