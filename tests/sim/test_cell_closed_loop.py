@@ -15,13 +15,31 @@ import pytest
 from eskin_industrial.sim.can_node import Faults
 from eskin_industrial.sim.cell.demo import demo_episode
 from eskin_industrial.sim.cell.episodes import TUNING_SEEDS, episode
-from eskin_industrial.sim.cell.realtime import run_cell
+from eskin_industrial.sim.cell.outcome import EpisodeResult
+from eskin_industrial.sim.cell.realtime import CellRun, run_cell
 from eskin_industrial.sim.cell.virtual import run_episode
 
 #: How far apart the two runs' distances slid may be: the real chain's latencies are
 #: not the ones drawn in virtual time, and a slide runs on for as long as the grip
 #: takes to rise (docs/cell.md, *Real time and virtual time*).
 DISTANCE_TOLERANCE_MM = 3.0
+#: How much later than in virtual time the real chain may react, or the node's simulator
+#: thread send a scan, before the run says more of the host than of the chain: the
+#: distance is compared on a run that was not held (docs/cell.md, *Real time and virtual time*).
+HELD_S = 0.010
+ATTEMPTS = 3
+
+
+def _held(run: CellRun, virtual: EpisodeResult) -> str | None:
+    """Why ``run`` was held by its host (its node late, a reaction late), or None."""
+    if run.late_s > HELD_S:
+        return f"the node's simulator {run.late_s * 1e3:.0f} ms behind a scan deadline"
+    for r, v in zip(run.result.reactions_s, virtual.reactions_s, strict=False):
+        if v is not None and (r is None or r - v > HELD_S):
+            return "a slide met late" if r is None else f"a reaction {(r - v) * 1e3:.0f} ms later than in virtual time"
+    if run.plc_to_gripper_s and max(run.plc_to_gripper_s) > HELD_S:
+        return f"a force request {max(run.plc_to_gripper_s) * 1e3:.0f} ms on its way to the gripper"
+    return None
 
 
 @pytest.mark.slow
@@ -36,8 +54,18 @@ def test_real_time_and_virtual_time_agree_on_the_outcome_and_the_distance_slid(s
                                                                                hand_profile):
     ep = episode(seed)
     profile = hand_profile if ep.kind.profile == "hand-4x5" else paper_profile
-    real = run_cell(profile, ep, method).result
     virtual = run_episode(ep, method, profile)
+    held: list[str] = []
+    for _ in range(ATTEMPTS):
+        run = run_cell(profile, ep, method)
+        real = run.result
+        why = _held(run, virtual)
+        if why is None:
+            break
+        held.append(why)
+    else:
+        pytest.fail(f"the host held the real chain in each of {ATTEMPTS} runs: {'; '.join(held)}")
+    # (a held run may slide further, even out of the hand: the host's doing, not the chain's)
     assert real.outcome == virtual.outcome, (real, virtual)
     assert real.slid_mm == pytest.approx(virtual.slid_mm, abs=DISTANCE_TOLERANCE_MM), (real, virtual)
     assert real.slides > 0 and virtual.slides > 0  # each of these episodes slides: the loop had work to do

@@ -291,11 +291,12 @@ def test_a_dcmd_flood_stays_off_the_scan_path_while_a_plc_polls_the_block(paper_
     dcmd = spb.Payload(timestamp=1)
     dcmd.metrics.add(name="Device Control/Tare", datatype=11, boolean_value=True)
     dcmd.metrics.add(name="Device Control/Acknowledge Slip", datatype=11, boolean_value=True)
-    # A stale limit of 300 ms: a host as loaded as a shared test machine holds a
-    # process 100 ms now and then; a flood that reaches the scan path holds the loop
+    # A stale limit of 500 ms: a host as loaded as a shared test machine holds a
+    # process 100 ms now and then, once in a while longer (a clean clone's run read
+    # two stale marks at 300 ms); a flood that reaches the scan path holds the loop
     # far longer (seconds of tares, on the code before the mailbox).
     profile = tmp_path / "paper.toml"
-    profile.write_text(Path(PAPER).read_text().replace("[output]\n", "[output]\nstale_s = 0.3\n", 1))
+    profile.write_text(Path(PAPER).read_text().replace("[output]\n", "[output]\nstale_s = 0.5\n", 1))
     with spb.broker(tmp_path) as port:
         config = server_config(dataclasses.replace(can_node("grip", ch), profile=str(profile)))
         config = dataclasses.replace(config, outputs={**config.outputs, "sparkplug": SparkplugOptions(
@@ -330,7 +331,7 @@ def test_a_dcmd_flood_stays_off_the_scan_path_while_a_plc_polls_the_block(paper_
     settled = next(at for at, s, _, _ in reads if s & Status.DATA_VALID)
     window = [(at - start, s, f) for at, s, f, _ in reads if settled < at < end - 0.05]
     assert len(window) > 300  # (a read every few ms, on a loaded host)
-    # Stale while the sensor sent a scan in the last 200 ms (of a 300 ms limit): the
+    # Stale while the sensor sent a scan in the last 200 ms (of a 500 ms limit): the
     # bridge's lateness, not the sensor's silence.  (The node's simulator is a thread
     # of this process: on a host loaded by others it may itself be held that long.)
     sent_at = np.asarray(nt.tx.sent) - start
