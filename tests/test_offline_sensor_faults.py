@@ -68,7 +68,10 @@ def bridge_rows(profile: Profile, t: np.ndarray, raw: np.ndarray) -> str:
         if recorder.records == seen:
             continue
         seen = recorder.records
-        snap = loop.status.snapshot(loop.health(), scans=0, t_event=0.0, wall_time_s=0.0, urgent=False)
+        # fresh: the replay's own frame age is wall-clock time, and a host that holds this
+        # process for the stale limit between the step and here would make it stale
+        health = loop.health()._replace(frame_age_s=0.0)
+        snap = loop.status.snapshot(health, scans=0, t_event=0.0, wall_time_s=0.0, urgent=False)
         row = out.getvalue().splitlines()[-1].split(",")
         fault = int(row[8]) & SENSOR_FAULTS
         assert fault == snap.sensor_fault and int(row[4]) == int(snap.valid), (row, snap)
