@@ -66,6 +66,8 @@ class NodeLoop:
         self._lost_shown = 0
         self._refresh_s = profile.output.refresh_s
         self._stop = threading.Event()
+        #: a stop asked by a signal handler (:meth:`ask_stop`): a plain attribute, no lock
+        self.stop_asked = False
         self.on_update = on_update
         self.on_command = on_command
         self.offline = False
@@ -271,7 +273,7 @@ class NodeLoop:
         start = time.monotonic()
         end = None if duration_s is None else start + duration_s
         source, counters = self.source, self.pipeline.counters
-        while not self._stop.is_set():
+        while not (self.stop_asked or self._stop.is_set()):
             self.step()
             if end is not None and time.monotonic() >= end:
                 return "duration"
@@ -289,6 +291,12 @@ class NodeLoop:
 
     def stop(self) -> None:
         self._stop.set()
+
+    def ask_stop(self) -> None:
+        """Stop at the end of this step: safe in a signal handler on the loop's own
+        thread, where :meth:`stop`'s Event could wait for a lock the interrupted code
+        holds."""
+        self.stop_asked = True
 
     def counters(self) -> dict[str, int]:
         c = self.pipeline.counters

@@ -115,6 +115,34 @@ def _interrupt(_signum: int, _frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
 
+@contextmanager
+def signals_ask(stop: Callable[[], None]) -> Iterator[None]:
+    """Ctrl-C and SIGTERM call ``stop`` (a plain flag's setter, which a loop reads at
+    each step) for the length of the block, in place of a KeyboardInterrupt: an
+    exception raised between two bytecodes may land between an update counted and
+    the same update written, and a stopped ``receive`` then wrote one row fewer
+    than it counted.  A second one is a KeyboardInterrupt, for a stop that does not
+    come.  The previous handlers are back on the way out."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    asked_before = False
+
+    def asked(_signum: int, _frame: FrameType | None) -> None:
+        nonlocal asked_before
+        if asked_before:
+            raise KeyboardInterrupt
+        asked_before = True
+        stop()
+
+    before = {s: signal.signal(s, asked) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, handler)
+
+
 def json_alias(f: Callable[..., Any]) -> Callable[..., Any]:
     """``--json`` beside a command's ``--format`` (its ``fmt`` parameter): the same as
     ``--format json``, so that every command that offers JSON takes ``--json``."""

@@ -10,6 +10,7 @@ import click
 from ..seam import DEFAULT_QUEUE_FRAMES, MAX_QUEUE_FRAMES
 from .can_common import bus_options, nothing_received
 from .common import profile_option
+from .console import signals_ask
 
 if TYPE_CHECKING:
     from ..bus.can.source import CanSource
@@ -60,15 +61,14 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
     single = SingleNode(cfg, resolved, default_output=False, all_frames=True)  # a bus that cannot be opened: one line, exit 3 (5: no SocketCAN)
     loop, source = single.loop, cast("CanSource", single.loop.source)  # the node's source is "can" or "can-log"
     ended, where = "", source.describe_where()
-    with single:
-        try:  # from the start line on, Ctrl-C or SIGTERM end with the counters
-            if not quiet:
-                layout = source.assembler.layout
-                click.echo(f"eskin-bus: receiving {resolved.profile.name} on {where} "
-                           f"({layout.segments} frame{'s' if layout.segments > 1 else ''} per scan)", err=True)
-            ended = loop.run(duration_s=duration_s, idle_timeout_s=idle_s, max_scans=max_scans)
-        except KeyboardInterrupt:
-            pass
+    # from the start line on, Ctrl-C or SIGTERM end the run at the end of a step, with
+    # the counters: every update counted is written
+    with signals_ask(loop.ask_stop), single:
+        if not quiet:
+            layout = source.assembler.layout
+            click.echo(f"eskin-bus: receiving {resolved.profile.name} on {where} "
+                       f"({layout.segments} frame{'s' if layout.segments > 1 else ''} per scan)", err=True)
+        ended = loop.run(duration_s=duration_s, idle_timeout_s=idle_s, max_scans=max_scans)
         source.end_reception(loop.step)  # what the reader had queued is still recorded and decoded
     if not quiet:
         c = loop.pipeline.counters

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from eskin_industrial.cli.console import signals_ask
 from tests.helpers.modbus import free_port
 from tests.helpers.paths import PROFILES
 
@@ -123,3 +124,20 @@ def test_modbus_node_under_sigterm_prints_its_summary() -> None:
         os.close(slave)
     assert proc.returncode == 0, err
     assert err.splitlines()[-1] == "modbus-node: answered 0 reads", err
+
+
+def test_a_stop_asked_by_signal_is_a_flag_and_a_second_signal_interrupts() -> None:
+    """``receive``'s stop: the first Ctrl-C or SIGTERM only asks (no exception that could
+    land between an update counted and the same update written), a second interrupts,
+    and the handlers before are back after the block."""
+    asked: list[int] = []
+    before = signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)
+    with signals_ask(lambda: asked.append(1)):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.01)  # (the handler runs between two bytecodes of this thread)
+        assert asked == [1]
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.5)
+    assert asked == [1]
+    assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)) == before
