@@ -23,6 +23,7 @@ A rate given by the caller is named ``--rate`` in messages, as the commands take
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal, TextIO
@@ -152,12 +153,15 @@ def detect_can_log(profile: Profile, path: str | Path, rate_hz: float | None = N
 
 
 def detect_live_log(profile: Profile, stream: TextIO, emit: Callable[[Update], None], rate_hz: float | None = None,
-                    method: str | None = None, name: str = "<stdin>") -> Detected:
+                    method: str | None = None, name: str = "<stdin>",
+                    whole: Callable[[], AbstractContextManager[object]] = nullcontext) -> Detected:
     """A candump -L stream read as it comes, each update handed to ``emit`` as soon
     as its scan is complete: the same assembler, checks and pipeline as
     :func:`detect_can_log`.  A live stream ends at its end, or when the reader is
     stopped (Ctrl-C, or SIGTERM as the command line turns it into one): what was
-    read is then the result, as at an end."""
+    read is then the result, as at an end.  ``whole``: a block a stop must not cut
+    (each scan's updates, counted and emitted), which the command line's handler
+    makes wait for its end."""
     rate = rate_hz or profile.sensor.rate_hz
     pipeline = Pipeline(profile, rate_hz=rate, method=method)
     scans = LiveLogScans(profile, stream, rate, name)
@@ -165,9 +169,10 @@ def detect_live_log(profile: Profile, stream: TextIO, emit: Callable[[Update], N
     stopped = False
     try:
         for scan in scans:
-            for u in pipeline.shown(pipeline.push(scan)):
-                updates.append(u)
-                emit(u)
+            with whole():
+                for u in pipeline.shown(pipeline.push(scan)):
+                    updates.append(u)
+                    emit(u)
     except KeyboardInterrupt:
         stopped = True  # (a scan half read when it came is none)
     counters = _counters(pipeline, scans.counters())

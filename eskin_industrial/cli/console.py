@@ -143,6 +143,48 @@ def signals_ask(stop: Callable[[], None]) -> Iterator[None]:
             signal.signal(s, handler)
 
 
+class HeldInterrupt:
+    """Ctrl-C and SIGTERM as a KeyboardInterrupt, except inside :meth:`whole`, where
+    the interrupt waits for the block's end: a command blocked on its input
+    (``detect --can-log -``) must be interruptible there, but not between an update
+    counted and the same update written."""
+
+    def __init__(self) -> None:
+        self._inside = False
+        self._pending = False
+
+    def _handler(self, _signum: int, _frame: FrameType | None) -> None:
+        if self._inside:
+            self._pending = True
+        else:
+            raise KeyboardInterrupt
+
+    @contextmanager
+    def whole(self) -> Iterator[None]:
+        self._inside = True
+        try:
+            yield
+        finally:
+            self._inside = False
+            if self._pending:
+                self._pending = False
+                raise KeyboardInterrupt
+
+    @contextmanager
+    def installed(self) -> Iterator[HeldInterrupt]:
+        """The handler on SIGINT and SIGTERM for the length of the block (the main
+        thread only; elsewhere it does nothing), the previous ones back after."""
+        if threading.current_thread() is not threading.main_thread():
+            yield self
+            return
+        before = {s: signal.signal(s, self._handler) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield self
+        finally:
+            for s, handler in before.items():
+                signal.signal(s, handler)
+
+
 def json_alias(f: Callable[..., Any]) -> Callable[..., Any]:
     """``--json`` beside a command's ``--format`` (its ``fmt`` parameter): the same as
     ``--format json``, so that every command that offers JSON takes ``--json``."""

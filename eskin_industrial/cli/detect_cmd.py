@@ -18,7 +18,7 @@ from ..offline import Detected, Engine, detect_can_log, detect_live_log, detect_
 from ..profile import Profile
 from ..recording import update_row, write_updates
 from .common import check_output, open_profile, profile_option, writing
-from .console import PROGRESS_DELAY_S, Counter, Ticker
+from .console import PROGRESS_DELAY_S, Counter, HeldInterrupt, Ticker
 
 
 @click.command()
@@ -133,6 +133,7 @@ def _detect_live(prof: Profile, output: str, rate_hz: float | None, method: str 
             out.write(update_row(u, GraspState(u.state).label))
             out.flush()  # a pipe's reader sees each row as it comes
 
-        found = detect_live_log(prof, sys.stdin, emit, rate_hz, method)
+        with HeldInterrupt().installed() as held:  # a stop never between an update counted and written
+            found = detect_live_log(prof, sys.stdin, emit, rate_hz, method, whole=held.whole)
     if not quiet:
         _summary(found, as_json)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from eskin_industrial.cli.console import signals_ask
+from eskin_industrial.cli.console import HeldInterrupt, signals_ask
 from tests.helpers.modbus import free_port
 from tests.helpers.paths import PROFILES
 
@@ -141,3 +141,20 @@ def test_a_stop_asked_by_signal_is_a_flag_and_a_second_signal_interrupts() -> No
             time.sleep(0.5)
     assert asked == [1]
     assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)) == before
+
+
+def test_a_held_interrupt_waits_for_the_end_of_its_block_and_only_there() -> None:
+    """``detect --can-log -``'s stop: outside a whole block (blocked on its input) a
+    SIGTERM interrupts at once; inside one (an update counted and written) at its end."""
+    held = HeldInterrupt()
+    done: list[str] = []
+    with held.installed():
+        with pytest.raises(KeyboardInterrupt):
+            with held.whole():
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(0.05)
+                done.append("written")  # (the block's own end is reached)
+        assert done == ["written"]
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.5)
