@@ -95,7 +95,9 @@ def test_in_client_mode_the_node_page_shows_the_image_last_written_and_whether_t
         with running_bridge(config, before_start=_registers_to_the_console) as r:
             async def go() -> None:
                 async with browser() as http:
-                    written = await _block(http, base, lambda b: "DATA_VALID" in b["bits"])
+                    # (an image is shown unacknowledged while its first write is in flight, and
+                    # in an outage: on a loaded host, a write past its timeout is one)
+                    written = await _block(http, base, lambda b: "DATA_VALID" in b["bits"] and b["acknowledged"])
                     assert written["source"] == "written" and written["acknowledged"] is True
                     last = plc.last()  # what the PLC holds is what the page says was written
                     assert last is not None and written["values"]["METHOD_ID"] == last["METHOD_ID"] > 0
