@@ -18,7 +18,6 @@ output's wire format.
 from __future__ import annotations
 
 import collections
-import threading
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -65,9 +64,10 @@ class NodeLoop:
         self._last_stale = False
         self._lost_shown = 0
         self._refresh_s = profile.output.refresh_s
-        self._stop = threading.Event()
-        #: a stop asked by a signal handler (:meth:`ask_stop`): a plain attribute, no lock
-        self.stop_asked = False
+        #: a stop asked (:meth:`stop`): a plain attribute, which another thread and a
+        #: signal handler on this one may set alike (an Event's set() takes a lock that
+        #: the code a handler interrupted may hold)
+        self._stopping = False
         self.on_update = on_update
         self.on_command = on_command
         self.offline = False
@@ -273,7 +273,7 @@ class NodeLoop:
         start = time.monotonic()
         end = None if duration_s is None else start + duration_s
         source, counters = self.source, self.pipeline.counters
-        while not (self.stop_asked or self._stop.is_set()):
+        while not self._stopping:
             self.step()
             if end is not None and time.monotonic() >= end:
                 return "duration"
@@ -290,13 +290,8 @@ class NodeLoop:
         return "stopped"
 
     def stop(self) -> None:
-        self._stop.set()
-
-    def ask_stop(self) -> None:
-        """Stop at the end of this step: safe in a signal handler on the loop's own
-        thread, where :meth:`stop`'s Event could wait for a lock the interrupted code
-        holds."""
-        self.stop_asked = True
+        """Stop :meth:`run` at the end of its step (from any thread, or a signal handler)."""
+        self._stopping = True
 
     def counters(self) -> dict[str, int]:
         c = self.pipeline.counters

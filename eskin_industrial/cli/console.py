@@ -123,9 +123,6 @@ def signals_ask(stop: Callable[[], None]) -> Iterator[None]:
     the same update written, and a stopped ``receive`` then wrote one row fewer
     than it counted.  A second one is a KeyboardInterrupt, for a stop that does not
     come.  The previous handlers are back on the way out."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
     asked_before = False
 
     def asked(_signum: int, _frame: FrameType | None) -> None:
@@ -135,12 +132,8 @@ def signals_ask(stop: Callable[[], None]) -> Iterator[None]:
         asked_before = True
         stop()
 
-    before = {s: signal.signal(s, asked) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with _on_stop_signals(asked):
         yield
-    finally:
-        for s, handler in before.items():
-            signal.signal(s, handler)
 
 
 class HeldInterrupt:
@@ -172,17 +165,24 @@ class HeldInterrupt:
 
     @contextmanager
     def installed(self) -> Iterator[HeldInterrupt]:
-        """The handler on SIGINT and SIGTERM for the length of the block (the main
-        thread only; elsewhere it does nothing), the previous ones back after."""
-        if threading.current_thread() is not threading.main_thread():
+        """The handler on SIGINT and SIGTERM for the length of the block."""
+        with _on_stop_signals(self._handler):
             yield self
-            return
-        before = {s: signal.signal(s, self._handler) for s in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            yield self
-        finally:
-            for s, handler in before.items():
-                signal.signal(s, handler)
+
+
+@contextmanager
+def _on_stop_signals(handler: Callable[[int, FrameType | None], None]) -> Iterator[None]:
+    """``handler`` on SIGINT and SIGTERM for the length of the block (the main thread
+    only, as Python requires; elsewhere nothing), the previous handlers back after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, old in before.items():
+            signal.signal(s, old)
 
 
 def json_alias(f: Callable[..., Any]) -> Callable[..., Any]:

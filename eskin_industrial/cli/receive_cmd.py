@@ -63,7 +63,7 @@ def receive(profile_path: str, interface: str | None, channel: str | None, bitra
     ended, where = "", source.describe_where()
     # from the start line on, Ctrl-C or SIGTERM end the run at the end of a step, with
     # the counters: every update counted is written
-    with signals_ask(loop.ask_stop), single:
+    with signals_ask(loop.stop), single:
         if not quiet:
             layout = source.assembler.layout
             click.echo(f"eskin-bus: receiving {resolved.profile.name} on {where} "

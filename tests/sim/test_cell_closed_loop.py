@@ -31,7 +31,7 @@ ATTEMPTS = 3
 
 
 def _held(run: CellRun, virtual: EpisodeResult) -> str | None:
-    """Why ``run`` was held by its host (its node late, a reaction late), or None."""
+    """Why ``run`` was held by its host (its node, a reaction or a force request late), or None."""
     if run.late_s > HELD_S:
         return f"the node's simulator {run.late_s * 1e3:.0f} ms behind a scan deadline"
     for r, v in zip(run.result.reactions_s, virtual.reactions_s, strict=False):

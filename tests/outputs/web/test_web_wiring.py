@@ -98,7 +98,7 @@ def test_in_client_mode_the_node_page_shows_the_image_last_written_and_whether_t
                     # (an image is shown unacknowledged while its first write is in flight, and
                     # in an outage: on a loaded host, a write past its timeout is one)
                     written = await _block(http, base, lambda b: "DATA_VALID" in b["bits"] and b["acknowledged"])
-                    assert written["source"] == "written" and written["acknowledged"] is True
+                    assert written["source"] == "written"
                     last = plc.last()  # what the PLC holds is what the page says was written
                     assert last is not None and written["values"]["METHOD_ID"] == last["METHOD_ID"] > 0
                     assert written["values"]["STATE"] == last["STATE"]
