@@ -87,8 +87,9 @@ def _seeds(value: str) -> tuple[int, ...]:
               help="Leave-one-family-out (repeatable; 'all', 'new'): choose the deciding method's setting on the "
                    "tuning seeds of the other families, report it on this family's held-out seeds.")
 @click.option("--oracle", is_flag=True,
-              help="Also the delay's bound: an oracle that knows each slide's onset and path and its CoF's noise, "
-                   "at the ramp channel's threshold (evaluation/bound.py), as a row of its own.")
+              help="Also the delay's bound: an oracle that knows each slide's onset and path and its noise, "
+                   "at the ramp channel's threshold (evaluation/bound.py), as rows of their own: one watching the "
+                   "centre of force, one the whole distribution (turns too).")
 @click.option("--format", "fmt", type=click.Choice(["md", "json"]), default="md", show_default=True,
               help="Markdown tables, or one JSON document (every figure, per scene too).")
 @click.option("--closed-loop", is_flag=True,
@@ -181,7 +182,8 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
         echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz, "scenes": list(scene_set),
                    "conditions": list(conditions), "holding_h": held, "seconds": time.perf_counter() - start,
                    "methods": [_json_row(r, res, within_ms) for r in res.values()],
-                   **({"oracle": _oracle_json(*bound, settings, within_ms)} if bound else {})})
+                   **({_ORACLE_KEYS[path]: _oracle_json(*b, settings, within_ms) for path, b in bound.items()}
+                      if bound else {})})
         return
     click.echo(f"# eskin-bus evaluate --seeds {seeds} --rate {rate_hz:g}"
                + "".join(f" --condition {c}" for c in conditions) + "  "
@@ -198,9 +200,9 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
             for scene, ss in r.per_scene.items():
                 click.echo(f"|   {scene} | {ss.events} | {ss.found} | {ss.f1:.3f} | {ss.false_alarms} | {ss.vf_as_slip} | "
                            f"{_delays(ss)} | | |")
-    if bound is not None:
-        total, scenes_ = bound
-        rows = [(oracle_label(settings), total)] + ([(f"  {sc}", ss) for sc, ss in scenes_.items()] if per_scene else [])
+    for path, (total, scenes_) in (bound or {}).items():
+        rows = [(oracle_label(settings, path), total)] + ([(f"  {sc}", ss) for sc, ss in scenes_.items()]
+                                                          if per_scene else [])
         for label, ss in rows:
             click.echo(f"| {label} | {ss.events} | {ss.found} | - | - | - | {_delays(ss)} | | |")
     _stability_table(res, per_scene)
@@ -212,18 +214,24 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
         if within_ms:
             shares = ", ".join(f"{_within(r.score, ms):.0f} % within {ms} ms" for ms in within_ms)
             click.echo(f"# {name}: of {r.score.events} slip events, {shares}")
-    if bound is not None and within_ms:
-        shares = ", ".join(f"{_within(bound[0], ms):.0f} % within {ms} ms" for ms in within_ms)
-        click.echo(f"# {oracle_label(settings)}: of {bound[0].events} slip events, {shares}")
+    for path, (total, _) in (bound or {}).items() if within_ms else ():
+        shares = ", ".join(f"{_within(total, ms):.0f} % within {ms} ms" for ms in within_ms)
+        click.echo(f"# {oracle_label(settings, path)}: of {total.events} slip events, {shares}")
 
 
-def oracle_label(settings: Any) -> str:
-    return f"oracle (knows onset and path, z {settings.cof_track.ramp_z:g})"
+#: Each oracle's key in --format json (evaluation/bound.py's PATHS).
+_ORACLE_KEYS = {"cof": "oracle", "distribution": "oracle_distribution"}
+
+
+def oracle_label(settings: Any, path: str = "cof") -> str:
+    watches = "" if path == "cof" else ", whole distribution"
+    return f"oracle{watches} (knows onset and path, z {settings.cof_track.ramp_z:g})"
 
 
 def _oracle(scenes: tuple[str, ...], seeds: tuple[int, ...], rate_hz: float, settings: Any, hook: Any,
-            stream: int | None = None) -> tuple[Any, dict[str, Any]]:
-    """The bound's delays (evaluation/bound.py) at the ramp channel's threshold."""
+            stream: int | None = None) -> dict[str, tuple[Any, dict[str, Any]]]:
+    """The bound's delays (evaluation/bound.py) at the ramp channel's threshold, for
+    each oracle: the one watching the centre of force, the one watching the distribution."""
     from ..evaluation.bound import oracle_score
 
     with Ticker(len(scenes) * len(seeds), "oracle") as ticker:
@@ -265,7 +273,7 @@ def _families(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, rat
     per_family(names, families, seeds, _seeds(seeds), rate_hz, settings, tolerance_s,
                fmt, _figures, _delays, per_scene, shares, _conditions(conditions), conditions,
                (lambda scenes, seed_set, hook, stream: _oracle(scenes, seed_set, rate_hz, settings, hook, stream))
-               if oracle else None, oracle_label(settings))
+               if oracle else None, {path: (key, oracle_label(settings, path)) for path, key in _ORACLE_KEYS.items()})
 
 
 def _figures(s: Any) -> dict[str, Any]:

@@ -55,7 +55,11 @@ def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, se
                rate_hz: float, settings: DetectorSettings, tolerance_s: float, fmt: str,
                figures: Callable[[Any], dict[str, Any]], delays: Callable[[Any], str], per_scene: bool = False,
                within: Callable[[Any], str] | None = None, spec_hook: Any = None, conditions: tuple[str, ...] = (),
-               oracle: Callable[..., Any] | None = None, oracle_label: str = "oracle") -> None:
+               oracle: Callable[..., Any] | None = None,
+               oracle_labels: dict[str, tuple[str, str]] | None = None) -> None:
+    """``oracle(scenes, seeds, hook, stream)`` gives each oracle's bound by its path;
+    ``oracle_labels`` each path's JSON key and row label."""
+    labels = oracle_labels or {}
     start = time.perf_counter()
     with Ticker(sum(len(FAMILIES[f].scenes) for f in families) * len(seed_set) * len(names), "scoring") as ticker:
         res = evaluate_families(by_name(*names), families, seed_set, rate_hz, settings, tolerance_s,
@@ -68,11 +72,15 @@ def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, se
             one = lambda s: {"events": s.events, "found": s.found, "delay_p50_ms": s.delay_percentile(50) * 1000,  # noqa: E731
                              "delay_p90_ms": s.delay_percentile(90) * 1000}
             return {**one(total), "per_scene": {sc: one(ss) for sc, ss in scenes.items()}}
+        oracles: dict[str, dict[str, Any]] = {}  # each oracle's key: its bound per family
+        for f, by_path in bounds.items():
+            for path, b in by_path.items():
+                oracles.setdefault(labels.get(path, (path, path))[0], {})[f] = bound(*b)
         echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz, "conditions": list(conditions),
                    "families": {f: {m: {**figures(r.score),
                                         "per_scene": {sc: figures(ss) for sc, ss in r.per_scene.items()}}
                                     for m, r in by.items()} for f, by in res.items()},
-                   **({"oracle": {f: bound(*b) for f, b in bounds.items()}} if bounds else {})})
+                   **oracles})
         return
     click.echo(f"# eskin-bus evaluate --per-family --seeds {seeds} --rate {rate_hz:g}"
                + "".join(f" --condition {c}" for c in conditions) + "  "
@@ -86,10 +94,9 @@ def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, se
             if per_scene:
                 for scene, ss in r.per_scene.items():
                     click.echo(f"|   | {scene} | {_row(ss, delays)} | {slip_episodes(ss.slip_episodes)} |")
-        if fam in bounds:
-            total, scenes = bounds[fam]
-            rows = [(f"{fam} | {oracle_label}", total)] + ([(f"  | {sc}", ss) for sc, ss in scenes.items()]
-                                                           if per_scene else [])
+        for path, (total, scenes) in bounds.get(fam, {}).items():
+            rows = [(f"{fam} | {labels.get(path, (path, path))[1]}", total)] + (
+                [(f"  | {sc}", ss) for sc, ss in scenes.items()] if per_scene else [])
             for label, ss in rows:
                 click.echo(f"| {label} | {ss.events} | {ss.found} | - | - | - | {delays(ss)} | - |")
     if within is not None:
