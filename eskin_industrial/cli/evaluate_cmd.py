@@ -182,7 +182,7 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
         echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz, "scenes": list(scene_set),
                    "conditions": list(conditions), "holding_h": held, "seconds": time.perf_counter() - start,
                    "methods": [_json_row(r, res, within_ms) for r in res.values()],
-                   **({_ORACLE_KEYS[path]: _oracle_json(*b, settings, within_ms) for path, b in bound.items()}
+                   **({oracle_key(path): _oracle_json(*b, settings, within_ms) for path, b in bound.items()}
                       if bound else {})})
         return
     click.echo(f"# eskin-bus evaluate --seeds {seeds} --rate {rate_hz:g}"
@@ -219,8 +219,9 @@ def evaluate_cmd(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, 
         click.echo(f"# {oracle_label(settings, path)}: of {total.events} slip events, {shares}")
 
 
-#: Each oracle's key in --format json (evaluation/bound.py's PATHS).
-_ORACLE_KEYS = {"cof": "oracle", "distribution": "oracle_distribution"}
+def oracle_key(path: str) -> str:
+    """An oracle's key in --format json, by what it watches (evaluation/bound.py's PATHS)."""
+    return "oracle" if path == "cof" else f"oracle_{path}"
 
 
 def oracle_label(settings: Any, path: str = "cof") -> str:
@@ -273,7 +274,7 @@ def _families(methods: tuple[str, ...], scenes: tuple[str, ...], seeds: str, rat
     per_family(names, families, seeds, _seeds(seeds), rate_hz, settings, tolerance_s,
                fmt, _figures, _delays, per_scene, shares, _conditions(conditions), conditions,
                (lambda scenes, seed_set, hook, stream: _oracle(scenes, seed_set, rate_hz, settings, hook, stream))
-               if oracle else None, {path: (key, oracle_label(settings, path)) for path, key in _ORACLE_KEYS.items()})
+               if oracle else None, lambda path: (oracle_key(path), oracle_label(settings, path)))
 
 
 def _figures(s: Any) -> dict[str, Any]:

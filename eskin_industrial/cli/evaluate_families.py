@@ -56,10 +56,9 @@ def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, se
                figures: Callable[[Any], dict[str, Any]], delays: Callable[[Any], str], per_scene: bool = False,
                within: Callable[[Any], str] | None = None, spec_hook: Any = None, conditions: tuple[str, ...] = (),
                oracle: Callable[..., Any] | None = None,
-               oracle_labels: dict[str, tuple[str, str]] | None = None) -> None:
+               oracle_names: Callable[[str], tuple[str, str]] = lambda path: (path, path)) -> None:
     """``oracle(scenes, seeds, hook, stream)`` gives each oracle's bound by its path;
-    ``oracle_labels`` each path's JSON key and row label."""
-    labels = oracle_labels or {}
+    ``oracle_names(path)`` its JSON key and row label."""
     start = time.perf_counter()
     with Ticker(sum(len(FAMILIES[f].scenes) for f in families) * len(seed_set) * len(names), "scoring") as ticker:
         res = evaluate_families(by_name(*names), families, seed_set, rate_hz, settings, tolerance_s,
@@ -75,7 +74,7 @@ def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, se
         oracles: dict[str, dict[str, Any]] = {}  # each oracle's key: its bound per family
         for f, by_path in bounds.items():
             for path, b in by_path.items():
-                oracles.setdefault(labels.get(path, (path, path))[0], {})[f] = bound(*b)
+                oracles.setdefault(oracle_names(path)[0], {})[f] = bound(*b)
         echo_json({"seeds": seeds, "seed_list": list(seed_set), "rate_hz": rate_hz, "conditions": list(conditions),
                    "families": {f: {m: {**figures(r.score),
                                         "per_scene": {sc: figures(ss) for sc, ss in r.per_scene.items()}}
@@ -95,7 +94,7 @@ def per_family(names: tuple[str, ...], families: tuple[str, ...], seeds: str, se
                 for scene, ss in r.per_scene.items():
                     click.echo(f"|   | {scene} | {_row(ss, delays)} | {slip_episodes(ss.slip_episodes)} |")
         for path, (total, scenes) in bounds.get(fam, {}).items():
-            rows = [(f"{fam} | {labels.get(path, (path, path))[1]}", total)] + (
+            rows = [(f"{fam} | {oracle_names(path)[1]}", total)] + (
                 [(f"  | {sc}", ss) for sc, ss in scenes.items()] if per_scene else [])
             for label, ss in rows:
                 click.echo(f"| {label} | {ss.events} | {ss.found} | - | - | - | {delays(ss)} | - |")
