@@ -52,6 +52,8 @@ def test_node_opcua_is_refused_until_trusted_then_connects_with_each_policy(tmp_
         wait_for(lambda: list((pki / "rejected").glob("*.der")), 5, "the refused certificate kept")
         (kept,) = (pki / "rejected").glob("*.der")
         assert run.counters("grip")["opcua_certificates_rejected"] >= 1
+        # (the bridge counts the refusal, then logs it: the line may be a moment behind)
+        wait_for(lambda: run.log.events("opcua_certificate_rejected"), 5, "the refusal logged")
         rejected = run.log.events("opcua_certificate_rejected")
         assert rejected and rejected[0]["thumbprint"] == kept.stem and rejected[0]["reason"] == "BadCertificateUntrusted"
 
