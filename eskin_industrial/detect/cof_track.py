@@ -36,12 +36,13 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
            the ramp's rule on the force's level (0.1 s and 0.5 s means): a stick-slip
            ripple about a constant level, which the 30 ms means of the ramp's silence
            follow, leaves it open, so a slide in jumps is seen in frames
-    g    = the onward gate (off by default: onward_open = 0): while the force is not
-           steady and its total onward_fall (5 %) below its last steady level, r and j
-           stay open if the centre has moved over the fast horizon by onward_open of
-           a's threshold, onward (its newer half onward_share of the way), on no held
-           copy nor the frame after one: a slide whose grip gives way at onset, where
-           a squeeze's centre stays
+    g    = the onward gate (onward_open = 0.25; 0: none): while the force is not steady
+           and its total onward_fall (5 %) below its last steady level, r and j stay
+           open if the centre has moved over the fast horizon by onward_open of a's
+           threshold, onward (its newer half onward_share of the way), on no held copy
+           nor the frame after one, once the total has fallen onward_fall within
+           onward_fall_s (30 ms) since it was last steady: a slide whose grip gives way
+           at onset, where a squeeze's centre stays and a sway's total falls slowly
     beta = the total as a covariate (off by default: force_covariate = 0): the coupling
            of the centre's change to the total's over the fast horizon, learnt from calm
            stretches once the force has been steady; r, j and g then test c - beta S (a
@@ -98,6 +99,10 @@ class CofTrack(ScoredDetector):
         self._half_fast = max(1, self.lf // 2)  # (the onward gate's half-fast lag)
         self._onward_open, self._onward_share = c.onward_open, c.onward_share
         self._onward_below = 1.0 - c.onward_fall  # (the total's share of its steady level the gate opens under)
+        # (the lag the gate's sudden fall is looked for over, 0: any fall opens it; and
+        # the fall's least square, times the total's learnt noise)
+        self._fall_lag = min(self.ls - 1, max(1, round(c.onward_fall_s * rate_hz))) if c.onward_fall_s > 0 else 0
+        self._fall_z2 = c.onward_fall_z * c.onward_fall_z * 2.0 / self.m
         self._covariate = c.force_covariate  # (0: the channels test the raw centre)
         self.z = c.z
         self.min_fast, self.min_slow = c.min_fast_mm, c.min_slow_mm
@@ -191,6 +196,7 @@ class CofTrack(ScoredDetector):
         self._held = False  # the force has been steady once since the grab (not the grab's own change)
         self._steady_level: float | None = None  # the smoothed total at the last steady frame (the gate's)
         self._was_filled = False  # the last frame was a held copy
+        self._armed = False  # the total fell fast since the force was last steady (onward_fall_s)
         self._ramp_on = False  # the ramp's verdict at the last hop's end
         self._ramp.reset()
         self._level_calm = 0  # frames since the force's level last moved (the step's silence)
@@ -347,6 +353,17 @@ class CofTrack(ScoredDetector):
         if steady:
             self._held = True
             self._steady_level = ms
+            self._armed = False
+        elif self._fall_lag and not self._armed and not filled and not after_copy and hn >= self._fall_lag:
+            # the gate waits for a sudden fall of the total (onward_fall_s): a grip that
+            # gives way at a slide's onset loses 10-30 % in tens of milliseconds, a
+            # swaying glass's total falls over hundreds and a light hold settles slower
+            # still; the fall must also pass onward_fall_z sigma of its own noise (two
+            # means of m frames), which a light grip's noise would reach alone
+            back = hist[at - self._fall_lag][2]
+            fall = back - ms
+            if fall >= (1.0 - self._onward_below) * back and fall * fall > self._fall_z2 * self._fnoise:
+                self._armed = True
         noise_d = z * math.sqrt(2.0 * noise / m) / s
         # the onward gate: while the force is not steady, the ramp and the step stay
         # open if the centre moves on, steadily, over the fast horizon: a slide whose
@@ -360,7 +377,8 @@ class CofTrack(ScoredDetector):
         bx, by = self._beta_x, self._beta_y  # (0 unless force_covariate)
         level = self._steady_level
         if (not steady and gate > 0.0 and fast is not None and half_fast is not None and not filled
-                and not after_copy and level is not None and ms <= level * self._onward_below):
+                and not after_copy and level is not None and ms <= level * self._onward_below
+                and (self._armed or not self._fall_lag)):
             # (the centre less the part of its motion the total's change explains)
             ds = ms - fast[2]
             ux, uy = mx - fast[0] - bx * ds, my - fast[1] - by * ds
