@@ -37,12 +37,15 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
            ripple about a constant level, which the 30 ms means of the ramp's silence
            follow, leaves it open, so a slide in jumps is seen in frames
     g    = the onward gate (onward_open = 0.25; 0: none): while the force is not steady
-           and its total onward_fall (5 %) below its last steady level, r and j stay
-           open if the centre has moved over the fast horizon by onward_open of a's
-           threshold, onward (its newer half onward_share of the way), on no held copy
-           nor the frame after one, once the total has fallen onward_fall within
-           onward_fall_s (30 ms) since it was last steady: a slide whose grip gives way
-           at onset, where a squeeze's centre stays and a sway's total falls slowly
+           and its total onward_fall (5 %) below its last steady level (the level
+           onward_fall_s before the last steady frame: a sudden fall reads as steady
+           for its first frames), r and j stay open if the centre has moved over the
+           fast horizon by onward_open of a's threshold, onward (its newer half
+           onward_share of the way), on no held copy nor the frame after one, once the
+           total has fallen onward_fall within onward_fall_s (30 ms) since it was last
+           steady; once open, open until the force is steady again: a slide whose grip
+           gives way at onset, where a squeeze's centre stays and a sway's total falls
+           slowly
     beta = the total as a covariate (off by default: force_covariate = 0): the coupling
            of the centre's change to the total's over the fast horizon, learnt from calm
            stretches once the force has been steady; r, j and g then test c - beta S (a
@@ -196,6 +199,7 @@ class CofTrack(ScoredDetector):
         self._held = False  # the force has been steady once since the grab (not the grab's own change)
         self._steady_level: float | None = None  # the smoothed total at the last steady frame (the gate's)
         self._was_filled = False  # the last frame was a held copy
+        self._latched = False  # the gate has opened since the force was last steady
         self._armed = False  # the total fell fast since the force was last steady (onward_fall_s)
         self._ramp_on = False  # the ramp's verdict at the last hop's end
         self._ramp.reset()
@@ -352,8 +356,12 @@ class CofTrack(ScoredDetector):
         steady = calm > self._steady_n
         if steady:
             self._held = True
-            self._steady_level = ms
+            # (the level from before the last onward_fall_s: the force reads as steady
+            # for a few frames into a sudden fall, until the change passes its noise)
+            lag = self._fall_lag
+            self._steady_level = hist[at - lag][2] if lag and hn >= lag else ms
             self._armed = False
+            self._latched = False
         elif self._fall_lag and not self._armed and not filled and not after_copy and hn >= self._fall_lag:
             # the gate waits for a sudden fall of the total (onward_fall_s): a grip that
             # gives way at a slide's onset loses 10-30 % in tens of milliseconds, a
@@ -389,6 +397,12 @@ class CofTrack(ScoredDetector):
                 ds = ms - half_fast[2]
                 on = (mx - half_fast[0] - bx * ds) * ux + (my - half_fast[1] - by * ds) * uy
                 moving_on = on >= self._onward_share * d2
+            # (once open, open until the force is steady again: a light grip's centre
+            # is noisy, and its onward test flickers while the slide goes on)
+            if self._latched:
+                moving_on = True
+            elif moving_on:
+                self._latched = True
         open_ = steady or moving_on
         # the ramp's base must not hold the grab: its centres start once it has settled;
         # a held copy is no sample (repeats would count one noise draw twice)

@@ -100,14 +100,16 @@ class CofTrackSettings:
     #: displacement's threshold (``max(z`` sigma, ``min_fast_mm)``), with the newer
     #: half of that horizon at least ``onward_share`` of the way, in the same direction,
     #: while the smoothed total is ``onward_fall`` or more below its level at the last
-    #: steady frame, never on a held copy nor the frame after one, and only once the
-    #: total has fallen suddenly since it was last steady (``onward_fall_s``, below).  A
+    #: steady frame (as it stood ``onward_fall_s`` before that frame), never on a held
+    #: copy nor the frame after one, and only once the total has fallen suddenly since
+    #: it was last steady (``onward_fall_s``, below); once open, it stays open until the
+    #: force is steady again (a light grip's onward test flickers with its noise).  A
     #: slide whose grip gives way at onset (the force falls 10-30 % in tens of
     #: milliseconds) then keeps its slip evidence; a squeeze scales the distribution in
     #: place and leaves the centre where it was; a sway, a vibration and a held copy's
     #: step move the total both ways, and a sway's and a settling hold's fall slowly.
     #: 0: no gate (the channels wait for a steady force).  On the held-out seeds the
-    #: force-drop family from 145-150 / 381-401 ms to 50-60 / 170-200 ms, the closed
+    #: force-drop family from 145-150 / 381-401 ms to 50-60 / 145-191 ms, the closed
     #: loop's force drop from 3 objects dropped to none, every other family, the suite
     #: and the long holds the same as with no gate (docs/evaluation.md).
     onward_open: float = field(default=0.25, metadata=in_range(0.0, 1000.0))
@@ -117,7 +119,8 @@ class CofTrackSettings:
     #: fallen by ``onward_fall`` of itself within ``onward_fall_s``, and by more than
     #: ``onward_fall_z`` standard deviations of that change's noise: a grip that gives
     #: way at a slide's onset falls at several times a second (10-30 % in 30 ms), a
-    #: glass swaying 15 % at 1 Hz at most 0.9 a second, a hold settling slower still.
+    #: glass swaying 15 % at 1 Hz at most 0.9 a second (2.8 % in 30 ms), a hold
+    #: settling slower still.
     #: ``onward_fall_s = 0``: a fall over any time opens it.
     onward_fall_s: float = field(default=0.03, metadata=in_range(0.0, 0.5))
     onward_fall_z: float = field(default=8.0, metadata=in_range(0.0, 1000.0))
