@@ -77,7 +77,10 @@ def test_two_nodes_on_one_bus_each_in_its_own_block(paper_profile):
     assert left_now["STATUS"] & Status.SLIP_LATCHED and not right_now["STATUS"] & Status.SLIP_LATCHED
     # the holding node's block reads a valid stable grasp
     assert any(s & Status.STABLE and s & Status.DATA_VALID for s in seen[RIGHT_BASE])
-    assert right_now["STATUS"] & Status.STABLE and right_now["STATUS"] & Status.DATA_VALID
+    # the holding node's last verdict before its silence: the block read after the nodes
+    # stopped may already be stale (stale_max_s after its last scan, on a loaded host)
+    live = [s for s in seen[RIGHT_BASE] if not s & Status.SENSOR_STALE]
+    assert live and live[-1] & Status.STABLE and live[-1] & Status.DATA_VALID
     # each block has its own heartbeat, frames and counters
     assert left_now["HEARTBEAT"] > 10 and right_now["HEARTBEAT"] > 10
     for c in (c_left, c_right):
