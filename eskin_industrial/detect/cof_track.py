@@ -387,22 +387,21 @@ class CofTrack(ScoredDetector):
         if (not steady and gate > 0.0 and fast is not None and half_fast is not None and not filled
                 and not after_copy and level is not None and ms <= level * self._onward_below
                 and (self._armed or not self._fall_lag)):
-            # (the centre less the part of its motion the total's change explains)
-            ds = ms - fast[2]
-            ux, uy = mx - fast[0] - bx * ds, my - fast[1] - by * ds
-            d2 = ux * ux + uy * uy
-            lim = self.min_fast
-            thr = gate * (noise_d if noise_d > lim else lim)
-            if d2 > thr * thr:
-                ds = ms - half_fast[2]
-                on = (mx - half_fast[0] - bx * ds) * ux + (my - half_fast[1] - by * ds) * uy
-                moving_on = on >= self._onward_share * d2
-            # (once open, open until the force is steady again: a light grip's centre
-            # is noisy, and its onward test flickers while the slide goes on)
             if self._latched:
+                # once open, open until the force is steady again: a light grip's centre
+                # is noisy, and its onward test flickered shut while the slide went on
                 moving_on = True
-            elif moving_on:
-                self._latched = True
+            else:
+                # (the centre less the part of its motion the total's change explains)
+                ds = ms - fast[2]
+                ux, uy = mx - fast[0] - bx * ds, my - fast[1] - by * ds
+                d2 = ux * ux + uy * uy
+                lim = self.min_fast
+                thr = gate * (noise_d if noise_d > lim else lim)
+                if d2 > thr * thr:
+                    ds = ms - half_fast[2]
+                    on = (mx - half_fast[0] - bx * ds) * ux + (my - half_fast[1] - by * ds) * uy
+                    moving_on = self._latched = on >= self._onward_share * d2
         open_ = steady or moving_on
         # the ramp's base must not hold the grab: its centres start once it has settled;
         # a held copy is no sample (repeats would count one noise draw twice)

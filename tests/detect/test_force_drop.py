@@ -26,20 +26,21 @@ COVARIATE = 4.0  # (likewise)
 SETTINGS = [{}, {"onward_open": GATE, "force_covariate": COVARIATE, "onward_fall_s": 0.0}]
 
 
-def gripped(seed: int, speed_mm_s: float, drop: float = 0.2) -> np.ndarray:
-    """An 8 N grip held for 5 s, then losing ``drop`` of its force over 30 ms while its
-    centre of force slides along x at ``speed_mm_s`` (0: a squeeze, nothing moves)."""
+def gripped(seed: int, speed_mm_s: float, drop: float = 0.2, total: float = 8.0, rate: float = RATE) -> np.ndarray:
+    """A grip of ``total`` newtons held for 5 s, then losing ``drop`` of its force over
+    30 ms while its centre of force slides along x at ``speed_mm_s`` (0: a squeeze,
+    nothing moves): 7 s of frames at ``rate``."""
     rng = np.random.default_rng(seed)
-    t = np.arange(700) / RATE
+    t = np.arange(round(7.0 * rate)) / rate
     since = np.clip(t - ONSET_S, 0.0, None)
     centres = np.column_stack([np.minimum(1.0 + speed_mm_s * since, 4.5), np.full(len(t), 2.5)])
-    totals = 8.0 * (1.0 - drop * np.clip(since / 0.03, 0.0, 1.0))
+    totals = total * (1.0 - drop * np.clip(since / 0.03, 0.0, 1.0))
     return frames(centres, totals, rng)
 
 
-def states(f: np.ndarray, **overrides: float) -> tuple[np.ndarray, np.ndarray]:
-    det = CofTrack(DEFAULT_SETTINGS, X, Y, RATE, **overrides)
-    ups = det.feed(np.arange(len(f)) / RATE, f)
+def states(f: np.ndarray, rate: float = RATE, **overrides: float) -> tuple[np.ndarray, np.ndarray]:
+    det = CofTrack(DEFAULT_SETTINGS, X, Y, rate, **overrides)
+    ups = det.feed(np.arange(len(f)) / rate, f)
     return np.array([u.t for u in ups]), np.array([u.state for u in ups])
 
 
@@ -107,11 +108,11 @@ def test_a_slide_whose_force_rises_waits_as_with_no_gate(seed: int) -> None:
     assert first_slip(onward_open=GATE, force_covariate=COVARIATE, onward_fall_s=0.0) == first_slip(onward_open=0.0)
 
 
-def swaying(seed: int, mm_per_n: float = 0.3) -> np.ndarray:
+def swaying(seed: int, mm_per_n: float = 0.3, rate: float = RATE) -> np.ndarray:
     """A 3 N grip held for 4 s, then swaying by 15 % at 1 Hz (a glass moved back and
     forth), its centre of force following its total by ``mm_per_n`` along x."""
     rng = np.random.default_rng(seed)
-    t = np.arange(1000) / RATE
+    t = np.arange(round(10.0 * rate)) / rate
     totals = 3.0 * (1.0 + 0.15 * np.sin(2 * np.pi * np.clip(t - 4.0, 0.0, None)))
     centres = np.column_stack([2.5 + mm_per_n * (totals - 3.0), np.full(len(t), 2.5)])
     return frames(centres, totals, rng)
@@ -148,20 +149,9 @@ def test_the_coupling_learnt_is_the_sways_and_none_on_a_still_grip() -> None:
     assert 0.1 < det._beta_x < 0.3
 
 
-def grip_at(seed: int, rate: float, total: float, drop: float, speed_mm_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """As :func:`gripped`, at ``rate`` and with a grip of ``total`` newtons: its frame
-    times and frames."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(int(7.0 * rate)) / rate
-    since = np.clip(t - ONSET_S, 0.0, None)
-    centres = np.column_stack([np.minimum(1.0 + speed_mm_s * since, 4.5), np.full(len(t), 2.5)])
-    return t, frames(centres, total * (1.0 - drop * np.clip(since / 0.03, 0.0, 1.0)), rng)
-
-
-def first_slip_s(t: np.ndarray, f: np.ndarray, rate: float, **overrides: float) -> float:
+def first_slip_s(f: np.ndarray, rate: float, **overrides: float) -> float:
     """The first slip after the onset, in seconds from it (inf: none); no slip before."""
-    ups = CofTrack(DEFAULT_SETTINGS, X, Y, rate, **overrides).feed(t, f)
-    tt, st = np.array([u.t for u in ups]), np.array([u.state for u in ups])
+    tt, st = states(f, rate, **overrides)
     assert not (st[tt < ONSET_S] == GraspState.SLIP).any()
     slip = tt[(st == GraspState.SLIP) & (tt >= ONSET_S)]
     return float(slip[0] - ONSET_S) if slip.size else float("inf")
@@ -175,10 +165,10 @@ def test_a_light_grips_slow_slide_keeps_the_gate_open_while_its_force_still_vari
     steady for a few frames into the fall) and, once open, stays open until the force
     is steady again: found within 0.3 s (a tree without either took 0.6 s on some of
     these seeds), and never later than with the gate off."""
-    t, f = grip_at(seed, RATE, 1.5, 0.25, 2.0)
-    found = first_slip_s(t, f, RATE)
+    f = gripped(seed, 2.0, drop=0.25, total=1.5)
+    found = first_slip_s(f, RATE)
     assert found <= 0.3 + 1e-9
-    assert found <= first_slip_s(t, f, RATE, onward_open=0.0)
+    assert found <= first_slip_s(f, RATE, onward_open=0.0)
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -188,16 +178,9 @@ def test_at_1_khz_a_drop_opens_the_gate_and_a_sway_does_not(seed: int) -> None:
     glass swaying 15 % at 1 Hz is no slip, where a gate opening on any fall reads it as
     one."""
     rate = 1000.0
-    t, f = grip_at(seed, rate, 2.0, 0.1, 3.0)
-    assert first_slip_s(t, f, rate) <= 0.08 + 1e-9
-    assert first_slip_s(t, f, rate, onward_open=0.0) >= 0.1 - 1e-9
-    rng = np.random.default_rng(seed)
-    t = np.arange(8000) / rate
-    totals = 3.0 * (1.0 + 0.15 * np.sin(2 * np.pi * np.clip(t - 4.0, 0.0, None)))
-    sway = frames(np.column_stack([2.5 + 0.3 * (totals - 3.0), np.full(len(t), 2.5)]), totals, rng)
-
-    def slips(**overrides: float) -> bool:
-        return any(u.state == GraspState.SLIP for u in CofTrack(DEFAULT_SETTINGS, X, Y, rate, **overrides).feed(t, sway))
-
-    assert not slips()
-    assert slips(onward_fall_s=0.0)
+    f = gripped(seed, 3.0, drop=0.1, total=2.0, rate=rate)
+    assert first_slip_s(f, rate) <= 0.08 + 1e-9
+    assert first_slip_s(f, rate, onward_open=0.0) >= 0.1 - 1e-9
+    sway = swaying(seed, rate=rate)
+    assert not (states(sway, rate)[1] == GraspState.SLIP).any()
+    assert (states(sway, rate, onward_fall_s=0.0)[1] == GraspState.SLIP).any()
