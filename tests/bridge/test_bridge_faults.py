@@ -141,7 +141,9 @@ def test_a_failing_bus_reads_bus_fault_and_recovers(paper_profile, monkeypatch):
     ch = channel()
     seen: list[int] = []
     with running_bridge(server_config(can_node("grip", ch))) as run, \
-            node_thread(paper_profile, ch, hold_raw(paper_profile, 300), RATE_HZ) as node:
+            node_thread(paper_profile, ch, hold_raw(paper_profile, 500), RATE_HZ) as node:
+        # (5 s of traffic: the recovery needs about 2.5 s of it, the bus's 1 s down, its retries
+        # and the detector's warm-up after the gap, with room for a loaded host)
         stop = threading.Event()
 
         def watch() -> None:  # what a PLC polling the block every 2 ms reads

@@ -93,7 +93,7 @@ def test_a_replayed_answer_is_no_verdict_from_the_next_poll(paper_profile, tmp_p
     poll with the answer he kept at 0.5 s (no contact, CRC valid).  The PLC reads no
     DATA_VALID of it beyond the first stale answer's poll and the next, FLAGS say
     STREAM, one `sensor_fault why=STREAM` line; 8 N again after."""
-    forces = scene(paper_profile, 500)
+    forces = scene(paper_profile, 700)  # (played once, from before the bridge starts: room for its start)
     (tmp_path / "n").mkdir()
     (tmp_path / "p").mkdir()
     with pty_pair(tmp_path / "n") as (node_end, mitm_node), pty_pair(tmp_path / "p") as (mitm_poller, poller_end), \
