@@ -195,6 +195,8 @@ def main() -> None:
     ap.add_argument("--fleet", metavar="N,...", help="also the fleet's bridge CPU at these counts of 100 Hz nodes")
     ap.add_argument("--fleet-1k", metavar="N,...", default="4", help="with --fleet: 1 kHz node counts (default 4)")
     ap.add_argument("--fleet-duration", type=float, default=15.0, help="with --fleet: seconds a step (default 15)")
+    ap.add_argument("--fleet-rounds", type=int, default=1,
+                    help="with --fleet: runs of each tree, alternately (default 1: a run takes minutes)")
     ap.add_argument("--keep", metavar="DIR", help="build the compiled copy in DIR (new) and keep it")
     args = ap.parse_args()
     if args.worker:
@@ -217,7 +219,7 @@ def main() -> None:
         time_frames(trees, args.rounds)
         time_steps(trees, args.rounds)
         if args.fleet:
-            time_fleet(trees, args.fleet, args.fleet_1k, max(1, args.rounds - 1), args.fleet_duration)
+            time_fleet(trees, args.fleet, args.fleet_1k, args.fleet_rounds, args.fleet_duration)
     finally:
         if not args.keep:
             shutil.rmtree(work, ignore_errors=True)
