@@ -524,18 +524,33 @@ class CofTrack(ScoredDetector):
         turn = self._turn
         if turn is not None:
             turn.push(f, s, filled, self.projected)
+        # (force_covariate: the displacements less the part the total's change over the
+        # same horizon explains, as the ramp, the step and the gate test them; a soft
+        # pad's sway at 1 mm/N otherwise moves its centre past min_slow_mm)
+        coupled = bx != 0.0 or by != 0.0
         if fast is not None:
             lim = self.min_fast
-            a = math.hypot(mx - fast[0], my - fast[1]) / (noise_d if noise_d > lim else lim)
+            if coupled:
+                ds = ms - fast[2]
+                a = math.hypot(mx - fast[0] - bx * ds, my - fast[1] - by * ds)
+            else:
+                a = math.hypot(mx - fast[0], my - fast[1])
+            a /= noise_d if noise_d > lim else lim
         else:
             a = 0.0
         b = 0.0
         if slow is not None and half is not None:  # (a slow lag implies the half one)
             # only while the motion goes on: the newer half of the horizon moved on in
             # the same direction (noise alone points anywhere)
-            ux, uy = mx - slow[0], my - slow[1]
+            if coupled:
+                ds, dh = ms - slow[2], ms - half[2]
+                ux, uy = mx - slow[0] - bx * ds, my - slow[1] - by * ds
+                hx, hy = mx - half[0] - bx * dh, my - half[1] - by * dh
+            else:
+                ux, uy = mx - slow[0], my - slow[1]
+                hx, hy = mx - half[0], my - half[1]
             total = math.hypot(ux, uy)
-            onward = ((mx - half[0]) * ux + (my - half[1]) * uy) / total if total > 0 else 0.0
+            onward = (hx * ux + hy * uy) / total if total > 0 else 0.0
             lim = self.min_slow
             thr = noise_d if noise_d > lim else lim
             # the onward half gets a noise margin of its own (4.5 sigma): half the

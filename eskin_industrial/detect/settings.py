@@ -128,8 +128,9 @@ class CofTrackSettings:
     #: horizon is regressed on the total's change over the same horizon (their moments
     #: less the noise's own), learnt from calm quarter-seconds once the force has been
     #: steady after the grab, each taken in only once the next one has passed with no
-    #: slip evidence; the ramp and step channels and the onward gate then test the
-    #: centre less the part the total explains, ``c - beta S`` (a soft pad whose
+    #: slip evidence; the ramp and step channels, the onward gate and the plain
+    #: displacement tests then test the centre less the part the total explains,
+    #: ``c - beta S`` (a soft pad whose
     #: footprint grows with its force, a glass swaying on it, has its centre follow its
     #: total).  ``beta = cov / (var + (force_covariate - 1) x`` the change's noise
     #: variance``)``, 0 until the total has varied by more than twice its noise.  0: off
