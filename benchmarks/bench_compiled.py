@@ -168,6 +168,7 @@ def time_steps(trees: dict[str, Path], rounds: int) -> None:
 
 def time_fleet(trees: dict[str, Path], nodes_100: str, nodes_1k: str, rounds: int, duration: float) -> None:
     cpu: dict[tuple[str, str, str], list[float]] = {}
+    stale: dict[tuple[str, str, str], list[int]] = {}  # (the stale marks of each run, as bench_fleet counts them)
     for _ in range(rounds):
         for name, tree in trees.items():
             done = subprocess.run([sys.executable, str(tree / "benchmarks" / "bench_fleet.py"), "--only", "fleet",
@@ -179,13 +180,18 @@ def time_fleet(trees: dict[str, Path], nodes_100: str, nodes_1k: str, rounds: in
             for line in done.stdout.splitlines():
                 cells = [c.strip() for c in line.strip("|").split("|")]
                 if len(cells) > 5 and cells[0] == "one bridge":
-                    cpu.setdefault((name, cells[1], cells[2]), []).append(float(cells[3].rstrip(" %")))
-    print("| fleet (bench_fleet.py --only fleet) | interpreted bridge CPU | compiled bridge CPU | "
-          "compiled / interpreted |")
+                    key = (name, cells[1], cells[2])
+                    cpu.setdefault(key, []).append(float(cells[3].rstrip(" %")))
+                    stale.setdefault(key, []).append(int(cells[6]))
+    print("| fleet (bench_fleet.py --only fleet) | interpreted bridge CPU, stale marks | compiled bridge CPU, "
+          "stale marks | CPU compiled / interpreted |")
     print("|---|---|---|---|")
-    for (name, rate, nodes) in sorted(k for k in cpu if k[0] == "interpreted"):
-        a, b = statistics.median(cpu[(name, rate, nodes)]), statistics.median(cpu[("compiled", rate, nodes)])
-        print(f"| {nodes} nodes at {rate} | {a:.1f} % | {b:.1f} % | {b / a:.2f}x |")
+    steps = sorted((k[1:] for k in cpu if k[0] == "interpreted"), key=lambda rn: (float(rn[0].split()[0]), int(rn[1])))
+    for rate, nodes in steps:
+        i, c = ("interpreted", rate, nodes), ("compiled", rate, nodes)
+        a, b = statistics.median(cpu[i]), statistics.median(cpu[c])
+        print(f"| {nodes} nodes at {rate} | {a:.1f} %, {'/'.join(map(str, stale[i]))} | {b:.1f} %, "
+              f"{'/'.join(map(str, stale[c]))} | {b / a:.2f}x |")
 
 
 def main() -> None:

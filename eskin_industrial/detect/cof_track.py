@@ -48,8 +48,9 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
            slowly
     beta = the total as a covariate (off by default: force_covariate = 0): the coupling
            of the centre's change to the total's over the fast horizon, learnt from calm
-           stretches once the force has been steady; r, j and g then test c - beta S (a
-           soft pad's centre that follows its force, a swaying glass, is explained away)
+           stretches once the force has been steady; a, b, r, j and g then test
+           c - beta S (a soft pad's centre that follows its force, a swaying glass, is
+           explained away)
     slip when a > 1, b > 1, r > 1 or t > 1 (r and t only while the force is steady);
     in the slip state, also while a, b or r stays above 1 - hysteresis (0.8): a slow
     slide's evidence fades in and out as it stops.  (The CoF's step energy was a vote
