@@ -45,7 +45,9 @@ and a varying normal force (a squeeze, a glass being moved) scales it in place. 
            total has fallen onward_fall within onward_fall_s (30 ms) since it was last
            steady; once open, open until the force is steady again: a slide whose grip
            gives way at onset, where a squeeze's centre stays and a sway's total falls
-           slowly
+           slowly; and shut, until the force is steady again, once the total is back at
+           its steady level: a drop stays down, a shake (whose lower halves fall as fast
+           as a drop) comes back up
     beta = the total as a covariate (off by default: force_covariate = 0): the coupling
            of the centre's change to the total's over the fast horizon, learnt from calm
            stretches once the force has been steady; a, b, r, j and g then test
@@ -202,6 +204,7 @@ class CofTrack(ScoredDetector):
         self._was_filled = False  # the last frame was a held copy
         self._latched = False  # the gate has opened since the force was last steady
         self._armed = False  # the total fell fast since the force was last steady (onward_fall_s)
+        self._spent = False  # the total has been back at its steady level since (the gate stays shut)
         self._ramp_on = False  # the ramp's verdict at the last hop's end
         self._ramp.reset()
         self._level_calm = 0  # frames since the force's level last moved (the step's silence)
@@ -363,7 +366,18 @@ class CofTrack(ScoredDetector):
             self._steady_level = hist[at - lag][2] if lag and hn >= lag else ms
             self._armed = False
             self._latched = False
-        elif self._fall_lag and not self._armed and not filled and not after_copy and hn >= self._fall_lag:
+            self._spent = False
+        elif self._steady_level is not None and ms >= self._steady_level:
+            # the total back at its steady level: whatever moved it was no grip giving
+            # way (a drop stays down; a sway, a shake and a squeeze come back up), so the
+            # gate shuts and stays shut until the force is steady again; a sway of 2 Hz
+            # falls as fast as a drop in each lower half, and a gate left open through
+            # every one of them read the sway as slip (docs/evaluation.md)
+            self._spent = True
+            self._armed = False
+            self._latched = False
+        elif self._fall_lag and not self._armed and not self._spent and not filled and not after_copy \
+                and hn >= self._fall_lag:
             # the gate waits for a sudden fall of the total (onward_fall_s): a grip that
             # gives way at a slide's onset loses 10-30 % in tens of milliseconds, a
             # swaying glass's total falls over hundreds and a light hold settles slower

@@ -103,7 +103,10 @@ class CofTrackSettings:
     #: steady frame (as it stood ``onward_fall_s`` before that frame), never on a held
     #: copy nor the frame after one, and only once the total has fallen suddenly since
     #: it was last steady (``onward_fall_s``, below); once open, it stays open until the
-    #: force is steady again (a light grip's onward test flickers with its noise).  A
+    #: force is steady again (a light grip's onward test flickers with its noise), and
+    #: once the total is back at its steady level it shuts until the force is steady
+    #: again (a drop stays down; a shake, whose lower halves fall as fast as a drop,
+    #: comes back up: a glass shaken 25 % at 2.5 Hz read as slip 5 times a trial).  A
     #: slide whose grip gives way at onset (the force falls 10-30 % in tens of
     #: milliseconds) then keeps its slip evidence; a squeeze scales the distribution in
     #: place and leaves the centre where it was; a sway, a vibration and a held copy's
@@ -121,7 +124,7 @@ class CofTrackSettings:
     #: way at a slide's onset falls at several times a second (10-30 % in 30 ms), a
     #: glass swaying 15 % at 1 Hz at most 0.9 a second (2.8 % in 30 ms), a hold
     #: settling slower still.
-    #: ``onward_fall_s = 0``: a fall over any time opens it.
+    #: ``onward_fall_s = 0``: a fall over any time opens it, the total back up or not.
     onward_fall_s: float = field(default=0.03, metadata=in_range(0.0, 0.5))
     onward_fall_z: float = field(default=8.0, metadata=in_range(0.0, 1000.0))
     #: The total force as a covariate of the centre: the centre's change over the fast

@@ -50,6 +50,10 @@ def _slides(**changes: Any) -> Hook:
     return lambda s: replace(s, events=tuple(replace(e, **changes) if e.kind == "slide" else e for e in s.events))
 
 
+def _oscillations(**changes: Any) -> Hook:
+    return lambda s: replace(s, events=tuple(replace(e, **changes) if e.kind == "oscillate" else e for e in s.events))
+
+
 def _sensor(**changes: Any) -> Hook:
     return lambda s: replace(s, sensor=replace(s.sensor, **changes))
 
@@ -68,6 +72,12 @@ STEP_REST: tuple[float, float] = (0.5, 0.8)
 #: The force-drop family's loss of normal force at slip onset, drawn per seed and slide
 #: (slides measured elsewhere lose 13-20 % at onset; the range reaches past both ends).
 FORCE_DROP: tuple[float, float] = (0.1, 0.3)
+
+#: The shake family's oscillation of the hand's glass (the scene sways it 15 % at 1 Hz):
+#: a robot that moves a held load briskly, or stops it short, shakes the grip's force
+#: at a few hertz.
+SHAKE_AMPLITUDE = 0.25
+SHAKE_HZ = 2.5
 
 #: Radius at which a turn moves the footprint's edge as far as the slide it replaces
 #: (the 20 mm block's half-width).
@@ -129,6 +139,9 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("force-drop", "the paper's slides losing 10-30 % of their normal force over the first 30 ms "
            "(drawn per seed and slide): a grasp that gives way as the object starts to slide", SLIDES,
            _slides(force_drop=FORCE_DROP)),
+    Family("shake", f"the hand's glass shaken, not swayed: {SHAKE_AMPLITUDE * 100:.0f} % at {SHAKE_HZ:g} Hz (its total falls "
+           "10 % in 30 ms in each lower half, as fast as a grip that gives way)", ("hand",),
+           _oscillations(amplitude=SHAKE_AMPLITUDE, freq_hz=SHAKE_HZ)),
 )}
 
 
