@@ -10,7 +10,15 @@ import numpy as np
 import pytest
 
 from eskin_industrial.evaluation import holdout
-from eskin_industrial.evaluation.families import FAMILIES, FORCE_DROP, STEP_HZ, STEP_REST, get_family
+from eskin_industrial.evaluation.families import (
+    FAMILIES,
+    FORCE_DROP,
+    SHAKE_AMPLITUDE,
+    SHAKE_HZ,
+    STEP_HZ,
+    STEP_REST,
+    get_family,
+)
 from eskin_industrial.evaluation.holdout import CANDIDATES, choose, hold_out
 from eskin_industrial.evaluation.metrics import SceneScore
 from eskin_industrial.evaluation.suite import SUITE
@@ -41,7 +49,7 @@ def test_each_new_family_switches_on_its_effect(name):
         "point-contact": lambda: spec.footprint.shape == "sphere",
         "step-slip": lambda: all(e.step_hz == STEP_HZ and e.step_rest == STEP_REST for e in slides),
         "force-drop": lambda: all(e.force_drop == FORCE_DROP for e in slides),
-        "shake": lambda: [(e.amplitude, e.freq_hz) for e in spec.events if e.kind == "oscillate"] == [(0.25, 2.5)],
+        "shake": lambda: [(e.amplitude, e.freq_hz) for e in spec.events if e.kind == "oscillate"] == [(SHAKE_AMPLITUDE, SHAKE_HZ)],
     }
     assert checks[name]()
     rec = render(spec, 100.0, 0)
